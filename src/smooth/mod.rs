@@ -1,0 +1,135 @@
+//! Pure smoothing kernels. No I/O, no threads: each function works on a [`Topology`] and position
+//! slices, so the same kernel smooths a whole mesh or one patch (with local ids and halo).
+//!
+//! | method | what | reference |
+//! |---|---|---|
+//! | [`Method::Laplacian`] | umbrella Laplacian, forward Euler `p += λ L(p)`, Jacobi | Liu et al. 2002, eq. 3–6 |
+//! | [`Method::Taubin`] | a λ step then a μ step per iteration | Taubin 1995 |
+//! | [`Method::Lem`] | local energy minimisation on edge stencils | Liu et al. §2.3, eq. 7–9 |
+//! | [`Method::Vcs`] | edge stencils + 2-step volume restoration | Liu et al. §3, §3.1 |
+//! | [`Method::VcsTriangle`] | the same on triangle stencils | Liu et al. §3.2 |
+//!
+//! Umbrella operator: `L(v) = (1/deg v) Σ_{u∈N(v)} p_u − p_v`. Fixed vertices (see
+//! [`crate::topology`]) never move; a stencil with a fixed free vertex is skipped and counted.
+
+use std::fmt;
+use std::str::FromStr;
+
+use glam::DVec3;
+
+pub mod laplacian;
+pub mod stencil;
+
+pub use crate::topology::Topology;
+
+/// A smoothing method, selectable by name (`laplacian`, `taubin`, `lem`, `vcs`, `vcs-triangle`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Method {
+    Laplacian,
+    Taubin,
+    Lem,
+    #[default]
+    Vcs,
+    VcsTriangle,
+}
+
+impl Method {
+    /// Every method, in documentation order.
+    pub const ALL: [Method; 5] =
+        [Method::Laplacian, Method::Taubin, Method::Lem, Method::Vcs, Method::VcsTriangle];
+
+    /// The method's command-line name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Laplacian => "laplacian",
+            Method::Taubin => "taubin",
+            Method::Lem => "lem",
+            Method::Vcs => "vcs",
+            Method::VcsTriangle => "vcs-triangle",
+        }
+    }
+
+    /// Whether the method works stencil by stencil (Gauss–Seidel) rather than vertex-wise (Jacobi).
+    pub fn is_stencil(self) -> bool {
+        matches!(self, Method::Lem | Method::Vcs | Method::VcsTriangle)
+    }
+}
+
+impl fmt::Display for Method {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for Method {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Method::ALL.into_iter().find(|m| m.name() == s).ok_or_else(|| {
+            let names: Vec<_> = Method::ALL.iter().map(|m| m.name()).collect();
+            format!("unknown method '{s}' (expected one of: {})", names.join(", "))
+        })
+    }
+}
+
+/// Smoothing options. Defaults: `vcs`, 10 iterations, λ = 0.5, μ = −0.53, no energy rejection.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Options {
+    pub method: Method,
+    /// Iterations; each applies every eligible stencil (or every vertex update) once.
+    pub iterations: usize,
+    /// Laplacian step size λ (`laplacian`, and the first step of `taubin`).
+    pub lambda: f64,
+    /// Taubin's second step size μ (negative).
+    pub mu: f64,
+    /// Skip a stencil whose 2-step result has a higher stencil energy than before (§3.1).
+    pub reject_energy_increase: bool,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            method: Method::Vcs,
+            iterations: 10,
+            lambda: 0.5,
+            mu: -0.53,
+            reject_energy_increase: false,
+        }
+    }
+}
+
+/// What one sweep did, per stencil or vertex.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+pub struct SweepStats {
+    /// Stencils (or vertices, for Jacobi methods) whose result was written.
+    pub applied: u64,
+    /// Stencils with a fixed (boundary or non-manifold) free vertex.
+    pub skipped_fixed: u64,
+    /// Stencils whose normal matrix or volume gradient was too small to solve, or gave a non-finite result.
+    pub skipped_degenerate: u64,
+    /// Stencils rejected because their energy would have increased.
+    pub rejected: u64,
+}
+
+impl SweepStats {
+    /// Add another sweep's counts to these.
+    pub fn add(&mut self, o: &SweepStats) {
+        self.applied += o.applied;
+        self.skipped_fixed += o.skipped_fixed;
+        self.skipped_degenerate += o.skipped_degenerate;
+        self.rejected += o.rejected;
+    }
+
+    /// Stencils considered: applied + skipped + rejected.
+    pub fn considered(&self) -> u64 {
+        self.applied + self.skipped_fixed + self.skipped_degenerate + self.rejected
+    }
+}
+
+/// Sum of neighbour positions per vertex, `S(v) = Σ_{u∈N(v)} p_u`: the cache that makes an umbrella
+/// Laplacian `S(v)/deg(v) − p_v` cost O(1) inside the stencil kernels.
+pub fn neighbor_sums(topo: &Topology, pos: &[DVec3]) -> Vec<DVec3> {
+    (0..topo.len() as u32)
+        .map(|v| topo.neighbors(v).iter().fold(DVec3::ZERO, |s, &u| s + pos[u as usize]))
+        .collect()
+}

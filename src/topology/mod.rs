@@ -1,0 +1,336 @@
+//! Immutable connectivity: CSR vertex→vertex and vertex→face adjacency, the fixed-vertex mask, and
+//! counts of what is unusual about the mesh.
+//!
+//! Conventions:
+//! - `neighbors(v)` is sorted ascending and has no duplicates; `deg(v)` is its length.
+//! - `faces_of(v)` lists the triangles (indices into the triangle array) that use `v`, ascending.
+//! - A vertex is **fixed** (never moved by any method) when it is on the boundary (an edge used by one
+//!   triangle), on a non-manifold edge (used by three or more), is a non-manifold vertex (its link is
+//!   not one cycle or one path), belongs to a degenerate triangle (a repeated index), or is
+//!   unreferenced. Degenerate triangles take no part in the adjacency.
+//!
+//! The same structure describes a whole mesh or one patch with its halo (local ids); kernels only
+//! ever see a `Topology` and a position slice.
+
+use crate::error::{Error, Result};
+
+/// CSR adjacency and fixed-vertex mask of a triangle mesh.
+#[derive(Debug, Clone, Default)]
+pub struct Topology {
+    vv_offsets: Vec<usize>,
+    vv: Vec<u32>,
+    vf_offsets: Vec<usize>,
+    vf: Vec<u32>,
+    fixed: Vec<bool>,
+    /// Counts found while building, for `info` and reports.
+    pub stats: TopologyStats,
+}
+
+/// What the topology build counted.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+pub struct TopologyStats {
+    pub vertices: usize,
+    pub triangles: usize,
+    /// Undirected edges of non-degenerate triangles.
+    pub edges: usize,
+    pub boundary_edges: usize,
+    pub non_manifold_edges: usize,
+    /// Vertices whose link is neither one cycle nor one path (e.g. two cones touching at a tip).
+    pub non_manifold_vertices: usize,
+    /// Triangles with a repeated vertex index.
+    pub degenerate_triangles: usize,
+    /// Vertices used by no triangle.
+    pub unreferenced_vertices: usize,
+    /// Vertices that no method moves (see the module doc).
+    pub fixed_vertices: usize,
+}
+
+impl Topology {
+    /// Build the adjacency of `n_vertices` vertices and `triangles`.
+    ///
+    /// Fails only if a triangle indexes a vertex `>= n_vertices` (readers reject those first).
+    pub fn build(n_vertices: usize, triangles: &[[u32; 3]]) -> Result<Topology> {
+        if n_vertices > u32::MAX as usize {
+            return Err(Error::Config(format!("{n_vertices} vertices exceed the 2^32 limit")));
+        }
+        let mut stats = TopologyStats {
+            vertices: n_vertices,
+            triangles: triangles.len(),
+            ..Default::default()
+        };
+        let mut fixed = vec![false; n_vertices];
+
+        // Vertex → face CSR by counting sort (faces come out ascending per vertex).
+        let mut vf_offsets = vec![0usize; n_vertices + 1];
+        for (t, tri) in triangles.iter().enumerate() {
+            if tri.iter().any(|&v| v as usize >= n_vertices) {
+                return Err(Error::Config(format!(
+                    "triangle {t} indexes a vertex out of range (0..{n_vertices})"
+                )));
+            }
+            if is_degenerate(tri) {
+                stats.degenerate_triangles += 1;
+                for &v in tri {
+                    fixed[v as usize] = true;
+                }
+                continue;
+            }
+            for &v in tri {
+                vf_offsets[v as usize + 1] += 1;
+            }
+        }
+        for v in 0..n_vertices {
+            vf_offsets[v + 1] += vf_offsets[v];
+        }
+        let mut vf = vec![0u32; vf_offsets[n_vertices]];
+        let mut cursor = vf_offsets.clone();
+        for (t, tri) in triangles.iter().enumerate() {
+            if is_degenerate(tri) {
+                continue;
+            }
+            for &v in tri {
+                vf[cursor[v as usize]] = t as u32;
+                cursor[v as usize] += 1;
+            }
+        }
+        drop(cursor);
+
+        // Vertex → vertex CSR, edge classification and link check, one vertex at a time.
+        let mut vv_offsets = Vec::with_capacity(n_vertices + 1);
+        vv_offsets.push(0usize);
+        let mut vv = Vec::with_capacity(vf.len());
+        let mut link: Vec<(u32, u32)> = Vec::new();
+        let mut corners: Vec<u32> = Vec::new();
+        let mut parent: Vec<usize> = Vec::new();
+        for v in 0..n_vertices {
+            let faces = &vf[vf_offsets[v]..vf_offsets[v + 1]];
+            link.clear();
+            corners.clear();
+            for &t in faces {
+                let (b, c) = opposite_edge(&triangles[t as usize], v as u32);
+                link.push((b, c));
+                corners.push(b);
+                corners.push(c);
+            }
+            corners.sort_unstable();
+            let start = vv.len();
+            let mut ends = 0; // neighbours met once: ends of a path-shaped link
+            let mut manifold = true;
+            let mut i = 0;
+            while i < corners.len() {
+                let u = corners[i];
+                let mut count = 0;
+                while i < corners.len() && corners[i] == u {
+                    count += 1;
+                    i += 1;
+                }
+                vv.push(u);
+                match count {
+                    1 => ends += 1,
+                    2 => {}
+                    _ => manifold = false,
+                }
+                if (u as usize) > v {
+                    stats.edges += 1;
+                    match count {
+                        1 => stats.boundary_edges += 1,
+                        2 => {}
+                        _ => stats.non_manifold_edges += 1,
+                    }
+                }
+            }
+            let nbrs = &vv[start..];
+            if nbrs.is_empty() {
+                stats.unreferenced_vertices += 1;
+                fixed[v] = true;
+            } else if ends > 0 || !manifold {
+                // Boundary or non-manifold edge at v.
+                fixed[v] = true;
+                if manifold && (ends != 2 || !link_connected(nbrs, &link, &mut parent)) {
+                    stats.non_manifold_vertices += 1;
+                }
+            } else if !link_connected(nbrs, &link, &mut parent) {
+                fixed[v] = true;
+                stats.non_manifold_vertices += 1;
+            }
+            vv_offsets.push(vv.len());
+        }
+        stats.fixed_vertices = fixed.iter().filter(|&&f| f).count();
+        Ok(Topology { vv_offsets, vv, vf_offsets, vf, fixed, stats })
+    }
+
+    /// Number of vertices.
+    #[inline]
+    pub fn len(&self) -> usize {
+        self.fixed.len()
+    }
+
+    /// True when there are no vertices.
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.fixed.is_empty()
+    }
+
+    /// Neighbours of `v`, ascending.
+    #[inline]
+    pub fn neighbors(&self, v: u32) -> &[u32] {
+        let v = v as usize;
+        &self.vv[self.vv_offsets[v]..self.vv_offsets[v + 1]]
+    }
+
+    /// Number of neighbours of `v`.
+    #[inline]
+    pub fn deg(&self, v: u32) -> usize {
+        let v = v as usize;
+        self.vv_offsets[v + 1] - self.vv_offsets[v]
+    }
+
+    /// Triangles using `v` (indices into the triangle array the topology was built from), ascending.
+    #[inline]
+    pub fn faces_of(&self, v: u32) -> &[u32] {
+        let v = v as usize;
+        &self.vf[self.vf_offsets[v]..self.vf_offsets[v + 1]]
+    }
+
+    /// Whether `v` is fixed (see the module doc).
+    #[inline]
+    pub fn is_fixed(&self, v: u32) -> bool {
+        self.fixed[v as usize]
+    }
+
+    /// The fixed-vertex mask, one entry per vertex.
+    pub fn fixed_mask(&self) -> &[bool] {
+        &self.fixed
+    }
+
+    /// Every undirected edge once, as `(i, j)` with `i < j`, in ascending `(i, j)` order: the edge
+    /// stencil order of the stencil methods.
+    pub fn edges(&self) -> impl Iterator<Item = [u32; 2]> + '_ {
+        (0..self.len() as u32).flat_map(move |i| {
+            let nbrs = self.neighbors(i);
+            let first_above = nbrs.partition_point(|&j| j <= i);
+            nbrs[first_above..].iter().map(move |&j| [i, j])
+        })
+    }
+
+    /// Bytes held by the adjacency arrays (for memory reports).
+    pub fn heap_bytes(&self) -> usize {
+        (self.vv_offsets.len() + self.vf_offsets.len()) * std::mem::size_of::<usize>()
+            + (self.vv.len() + self.vf.len()) * 4
+            + self.fixed.len()
+    }
+}
+
+fn is_degenerate(t: &[u32; 3]) -> bool {
+    t[0] == t[1] || t[1] == t[2] || t[0] == t[2]
+}
+
+/// The two other corners of triangle `t` around `v`, in the triangle's cyclic order.
+#[inline]
+fn opposite_edge(t: &[u32; 3], v: u32) -> (u32, u32) {
+    if t[0] == v {
+        (t[1], t[2])
+    } else if t[1] == v {
+        (t[2], t[0])
+    } else {
+        (t[0], t[1])
+    }
+}
+
+/// Whether the link edges of a vertex connect all its neighbours (one component).
+fn link_connected(nbrs: &[u32], link: &[(u32, u32)], parent: &mut Vec<usize>) -> bool {
+    parent.clear();
+    parent.extend(0..nbrs.len());
+    fn find(parent: &mut [usize], mut x: usize) -> usize {
+        while parent[x] != x {
+            parent[x] = parent[parent[x]];
+            x = parent[x];
+        }
+        x
+    }
+    let mut components = nbrs.len();
+    for &(b, c) in link {
+        // Neighbours are sorted, so local ids come from a binary search.
+        let (Ok(lb), Ok(lc)) = (nbrs.binary_search(&b), nbrs.binary_search(&c)) else {
+            return false;
+        };
+        let (rb, rc) = (find(parent, lb), find(parent, lc));
+        if rb != rc {
+            parent[rb] = rc;
+            components -= 1;
+        }
+    }
+    components == 1
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Octahedron: closed, 6 vertices of degree 4.
+    fn octahedron() -> Vec<[u32; 3]> {
+        vec![
+            [0, 2, 4],
+            [2, 1, 4],
+            [1, 3, 4],
+            [3, 0, 4],
+            [2, 0, 5],
+            [1, 2, 5],
+            [3, 1, 5],
+            [0, 3, 5],
+        ]
+    }
+
+    #[test]
+    fn closed_octahedron_has_no_fixed_vertex() {
+        let t = Topology::build(6, &octahedron()).unwrap();
+        assert_eq!(t.stats.edges, 12);
+        assert_eq!(t.stats.boundary_edges, 0);
+        assert_eq!(t.stats.fixed_vertices, 0);
+        assert!((0..6).all(|v| t.deg(v) == 4 && t.faces_of(v).len() == 4));
+        assert_eq!(t.edges().count(), 12);
+        assert!(t.edges().all(|[i, j]| i < j));
+    }
+
+    #[test]
+    fn open_fan_fixes_its_rim_only() {
+        // Centre 0 with rim 1..=5 closed around it: the rim is boundary, the centre is interior.
+        let tris: Vec<[u32; 3]> = (1..=5).map(|k| [0, k, k % 5 + 1]).collect();
+        let t = Topology::build(6, &tris).unwrap();
+        assert!(!t.is_fixed(0));
+        assert!((1..=5).all(|v| t.is_fixed(v)));
+        assert_eq!(t.stats.boundary_edges, 5);
+    }
+
+    #[test]
+    fn non_manifold_edge_and_vertex_are_fixed() {
+        // Three triangles on edge (0,1).
+        let t = Topology::build(5, &[[0, 1, 2], [1, 0, 3], [0, 1, 4]]).unwrap();
+        assert_eq!(t.stats.non_manifold_edges, 1);
+        assert!(t.is_fixed(0) && t.is_fixed(1));
+
+        // Two closed octahedra sharing vertex 0 (a bow-tie of two closed fans): 0 is non-manifold.
+        let mut tris = octahedron();
+        let shift = |v: u32| if v == 0 { 0 } else { v + 5 };
+        tris.extend(octahedron().iter().map(|t| t.map(shift)));
+        let t = Topology::build(11, &tris).unwrap();
+        assert_eq!(t.stats.non_manifold_vertices, 1);
+        assert!(t.is_fixed(0));
+        assert_eq!(t.stats.fixed_vertices, 1);
+    }
+
+    #[test]
+    fn degenerate_and_unreferenced_vertices_are_fixed_and_counted() {
+        let mut tris = octahedron();
+        tris.push([0, 0, 1]);
+        let t = Topology::build(7, &tris).unwrap();
+        assert_eq!(t.stats.degenerate_triangles, 1);
+        assert_eq!(t.stats.unreferenced_vertices, 1);
+        assert!(t.is_fixed(0) && t.is_fixed(1) && t.is_fixed(6) && !t.is_fixed(2));
+    }
+
+    #[test]
+    fn out_of_range_index_is_an_error() {
+        assert!(Topology::build(3, &[[0, 1, 3]]).is_err());
+    }
+}
