@@ -87,7 +87,9 @@ fn run(
     opts: &Options,
     observer: &mut dyn Observer,
 ) -> Result<Vec<IterationRecord>> {
-    let v_in = metrics::volume(pos, triangles);
+    // A fixed reference point, so that the volume of an open mesh is followed consistently.
+    let origin = metrics::centroid(pos);
+    let v_in = metrics::volume_about(pos, triangles, origin);
     let a_in = metrics::area(pos, triangles);
     let movable = topo.fixed_mask().iter().filter(|&&f| !f).count().max(1);
     let mut prev = pos.to_vec();
@@ -125,7 +127,7 @@ fn run(
                 (d, d)
             })
             .reduce(|| (0.0, 0.0), |x, y| (x.0.max(y.0), x.1 + y.1));
-        let volume = metrics::volume(pos, triangles);
+        let volume = metrics::volume_about(pos, triangles, origin);
         let record = IterationRecord {
             iteration: it,
             volume,
@@ -163,4 +165,24 @@ fn jacobi(topo: &Topology, src: &[DVec3], dst: &mut [DVec3], lambda: f64) -> Swe
 
 fn percent(x: f64, reference: f64) -> f64 {
     if reference == 0.0 { 100.0 } else { 100.0 * x / reference }
+}
+
+/// Smooth a whole in-memory mesh: builds its topology and runs [`smooth_positions`].
+///
+/// ```no_run
+/// let mut mesh = vcsmooth::generate::icosphere(3);
+/// vcsmooth::generate::add_normal_noise(&mut mesh, 0.3, 7);
+/// let opts = vcsmooth::Options::default(); // vcs, 10 iterations
+/// let records = vcsmooth::driver::smooth_mesh(&mut mesh, &opts, None, &mut vcsmooth::driver::Quiet)?;
+/// assert!((records.last().unwrap().volume_pct - 100.0).abs() < 1e-6);
+/// # Ok::<(), vcsmooth::Error>(())
+/// ```
+pub fn smooth_mesh(
+    mesh: &mut crate::Mesh,
+    opts: &Options,
+    threads: Option<usize>,
+    observer: &mut dyn Observer,
+) -> Result<Vec<IterationRecord>> {
+    let topo = Topology::build(mesh.positions.len(), &mesh.triangles)?;
+    smooth_positions(&topo, &mesh.triangles, &mut mesh.positions, opts, threads, observer)
 }

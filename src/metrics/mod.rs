@@ -6,9 +6,17 @@
 use glam::DVec3;
 
 /// Signed volume `(1/6) Σ det(p_a, p_b, p_c)` by the divergence theorem, summed in f64 relative to
-/// the centroid of the positions (which makes it translation-invariant for closed meshes).
+/// the centroid of the positions (which keeps the determinants well conditioned far from the origin).
+///
+/// For an open mesh the result depends on the reference point: use [`volume_about`] with one fixed
+/// point to follow the volume of an open mesh through a run.
 pub fn volume(pos: &[DVec3], triangles: &[[u32; 3]]) -> f64 {
-    let c = centroid(pos);
+    volume_about(pos, triangles, centroid(pos))
+}
+
+/// Signed volume of the cone from `origin` over the triangles (for a closed mesh, its volume).
+pub fn volume_about(pos: &[DVec3], triangles: &[[u32; 3]], origin: DVec3) -> f64 {
+    let c = origin;
     triangles
         .iter()
         .map(|t| {

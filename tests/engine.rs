@@ -1,0 +1,239 @@
+//! The engine's invariants (DESIGN.md), on the real scans in ../shared/meshes and on generated meshes:
+//! volume preservation, fixed boundaries, orientation, rigid-motion invariance, determinism, and the
+//! paper's sphere experiment.
+
+use std::path::{Path, PathBuf};
+
+use glam::{DMat3, DVec3};
+use vcsmooth::driver::{self, IterationRecord, Quiet};
+use vcsmooth::{Mesh, Method, Options, Topology, generate, io, metrics};
+
+fn shared_meshes() -> Vec<PathBuf> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/meshes");
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap_or_else(|e| panic!("{}: {e} (the tests need ../shared beside the checkout)", dir.display()))
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "ply"))
+        .collect();
+    files.sort();
+    assert_eq!(files.len(), 6, "expected the six scans of ../shared/meshes");
+    files
+}
+
+fn shared(name: &str) -> Mesh {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/meshes").join(name);
+    io::read_mesh(&path).unwrap()
+}
+
+fn noisy_sphere(k: u32, sigma: f64, seed: u64) -> Mesh {
+    let mut m = generate::icosphere(k);
+    generate::add_normal_noise(&mut m, sigma, seed);
+    m
+}
+
+fn run(mesh: &mut Mesh, method: Method, iterations: usize) -> Vec<IterationRecord> {
+    let opts = Options { method, iterations, ..Options::default() };
+    driver::smooth_mesh(mesh, &opts, Some(1), &mut Quiet).unwrap()
+}
+
+/// Volume about a fixed point (the input's centroid), so that open meshes are measured consistently.
+fn volume_about(mesh: &Mesh, origin: DVec3) -> f64 {
+    metrics::volume_about(&mesh.positions, &mesh.triangles, origin)
+}
+
+fn rel(a: f64, b: f64) -> f64 {
+    ((a - b) / b).abs()
+}
+
+#[test]
+fn vcs_preserves_volume_on_every_scan_in_f64_and_after_float_ply_round_trip() {
+    let tmp = tempfile::tempdir().unwrap();
+    for path in shared_meshes() {
+        for method in [Method::Vcs, Method::VcsTriangle] {
+            let mut mesh = io::read_mesh(&path).unwrap();
+            let origin = metrics::centroid(&mesh.positions);
+            let v0 = volume_about(&mesh, origin);
+            let records = run(&mut mesh, method, 20);
+            let v1 = volume_about(&mesh, origin);
+            let name = path.file_name().unwrap().to_string_lossy();
+            assert!(rel(v1, v0) <= 1e-9, "{name} {method}: f64 relative volume change {:e}", rel(v1, v0));
+            let last = records.last().unwrap();
+            assert!(last.stencils.applied > 0, "{name} {method}: nothing applied");
+            assert!(last.max_displacement > 0.0, "{name} {method}: nothing moved");
+
+            let out = tmp.path().join(format!("{name}-{method}.ply"));
+            io::write_mesh(&out, &mesh).unwrap();
+            let back = io::read_mesh(&out).unwrap();
+            let v2 = volume_about(&back, origin);
+            assert!(rel(v2, v0) <= 1e-6, "{name} {method}: after float PLY {:e}", rel(v2, v0));
+            assert!(back.positions.iter().all(|p| p.is_finite()));
+        }
+    }
+}
+
+#[test]
+fn vcs_preserves_volume_on_generated_meshes_where_laplacian_shrinks() {
+    let mut torus = generate::torus(3);
+    generate::add_normal_noise(&mut torus, 0.4, 5);
+    for (name, mesh) in [("sphere", noisy_sphere(4, 0.4, 3)), ("torus", torus)] {
+        let v0 = metrics::volume(&mesh.positions, &mesh.triangles);
+        for method in [Method::Vcs, Method::VcsTriangle] {
+            let mut m = mesh.clone();
+            run(&mut m, method, 20);
+            let v1 = metrics::volume(&m.positions, &m.triangles);
+            assert!(rel(v1, v0) <= 1e-9, "{name} {method}: {:e}", rel(v1, v0));
+        }
+        // The unconstrained method does shrink the same mesh, so the check above is not vacuous.
+        let mut m = mesh.clone();
+        run(&mut m, Method::Laplacian, 20);
+        assert!(metrics::volume(&m.positions, &m.triangles) < 0.99 * v0, "{name}: laplacian kept volume");
+    }
+}
+
+/// Liu et al. §3.1, Fig. 4: a noisy 162-vertex sphere, 6 iterations, with the paper's λ dt = 1.
+#[test]
+fn paper_sphere_experiment_volume_curves_and_roughness() {
+    let input = noisy_sphere(2, 0.3, 2002);
+    assert_eq!(input.positions.len(), 162);
+    let topo = Topology::build(162, &input.triangles).unwrap();
+    let rough0 = metrics::roughness(&input.positions, &input.triangles, &topo);
+    let mut volume_pct = std::collections::BTreeMap::new();
+    for method in [Method::Laplacian, Method::Lem, Method::Vcs, Method::VcsTriangle, Method::Taubin] {
+        let mut m = input.clone();
+        let opts = Options { method, iterations: 6, lambda: 1.0, ..Options::default() };
+        let opts = if method == Method::Taubin { Options { lambda: 0.5, ..opts } } else { opts };
+        let rec = driver::smooth_mesh(&mut m, &opts, Some(1), &mut Quiet).unwrap();
+        let rough = metrics::roughness(&m.positions, &m.triangles, &topo);
+        assert!(rough < rough0, "{method}: roughness {rough} not below input {rough0}");
+        volume_pct.insert(method.name(), rec.last().unwrap().volume_pct);
+    }
+    let (lap, lem, vcs) = (volume_pct["laplacian"], volume_pct["lem"], volume_pct["vcs"]);
+    assert!(lap < 60.0, "laplacian kept {lap} %");
+    assert!(lap < lem && lem < 100.0, "lem {lem} % not between laplacian {lap} % and 100 %");
+    assert!((vcs - 100.0).abs() < 1e-7, "vcs {vcs} %");
+    assert!((volume_pct["vcs-triangle"] - 100.0).abs() < 1e-7);
+}
+
+#[test]
+fn open_scans_keep_boundary_vertices_bit_identical() {
+    for name in ["stanford-bunny.ply", "demosthenes-17k.ply"] {
+        let input = shared(name);
+        let topo = Topology::build(input.positions.len(), &input.triangles).unwrap();
+        assert!(topo.stats.boundary_edges > 0, "{name} should be open");
+        for method in Method::ALL {
+            let mut m = input.clone();
+            run(&mut m, method, 3);
+            let mut moved = 0;
+            for v in 0..m.positions.len() {
+                if topo.is_fixed(v as u32) {
+                    assert_eq!(m.positions[v], input.positions[v], "{name} {method}: fixed vertex {v} moved");
+                } else if m.positions[v] != input.positions[v] {
+                    moved += 1;
+                }
+            }
+            assert!(moved > m.positions.len() / 2, "{name} {method}: only {moved} vertices moved");
+        }
+    }
+}
+
+#[test]
+fn inward_oriented_horse_keeps_its_negative_volume() {
+    let mut horse = shared("horse.ply");
+    let v0 = metrics::volume(&horse.positions, &horse.triangles);
+    assert!(v0 < 0.0);
+    let rec = run(&mut horse, Method::Vcs, 5);
+    let v1 = metrics::volume(&horse.positions, &horse.triangles);
+    assert!(v1 < 0.0 && rel(v1, v0) <= 1e-9, "{v0} -> {v1}");
+    assert!((rec.last().unwrap().volume_pct - 100.0).abs() < 1e-7);
+}
+
+#[test]
+fn rigidly_moved_input_gives_rigidly_moved_output() {
+    let rot = DMat3::from_axis_angle(DVec3::new(1.0, 2.0, -0.5).normalize(), 0.7);
+    let shift = DVec3::new(3.0, -7.5, 12.0);
+    let input = noisy_sphere(3, 0.3, 11);
+    for method in Method::ALL {
+        let mut a = input.clone();
+        let mut b = input.clone();
+        b.positions.iter_mut().for_each(|p| *p = rot * *p + shift);
+        run(&mut a, method, 4);
+        run(&mut b, method, 4);
+        for (pa, pb) in a.positions.iter().zip(&b.positions) {
+            let expect = rot * *pa + shift;
+            assert!((expect - *pb).length() <= 1e-9 * (1.0 + shift.length()), "{method}: {expect} vs {pb}");
+        }
+    }
+}
+
+#[test]
+fn output_is_bit_identical_for_any_thread_count() {
+    let input = noisy_sphere(5, 0.3, 4);
+    for method in Method::ALL {
+        let opts = Options { method, iterations: 3, ..Options::default() };
+        let outputs: Vec<Vec<DVec3>> = [1, 2, 8]
+            .iter()
+            .map(|&t| {
+                let mut m = input.clone();
+                driver::smooth_mesh(&mut m, &opts, Some(t), &mut Quiet).unwrap();
+                m.positions
+            })
+            .collect();
+        assert!(outputs.windows(2).all(|w| w[0] == w[1]), "{method}: threads change the result");
+    }
+}
+
+#[test]
+fn every_stencil_is_accounted_for_each_iteration() {
+    let mut mesh = shared("stanford-bunny.ply");
+    let topo = Topology::build(mesh.positions.len(), &mesh.triangles).unwrap();
+    let edges = topo.edges().count() as u64;
+    for rec in run(&mut mesh, Method::Vcs, 2) {
+        assert_eq!(rec.stencils.considered(), edges);
+        assert!(rec.stencils.skipped_fixed > 0 && rec.stencils.applied > rec.stencils.skipped_fixed);
+    }
+    let mut mesh = shared("kitten-25k.ply");
+    for rec in run(&mut mesh, Method::VcsTriangle, 1) {
+        assert_eq!(rec.stencils.considered(), mesh.triangles.len() as u64);
+        assert_eq!(rec.stencils.skipped_fixed, 0, "kitten is closed");
+    }
+}
+
+#[test]
+fn energy_rejection_counts_rejections_and_still_preserves_volume() {
+    let mut mesh = noisy_sphere(3, 0.05, 9);
+    let v0 = metrics::volume(&mesh.positions, &mesh.triangles);
+    let opts = Options { iterations: 10, reject_energy_increase: true, ..Options::default() };
+    let rec = driver::smooth_mesh(&mut mesh, &opts, Some(1), &mut Quiet).unwrap();
+    let rejected: u64 = rec.iter().map(|r| r.stencils.rejected).sum();
+    assert!(rejected > 0, "a nearly smooth sphere must see some energy-increasing stencils");
+    assert!(rel(metrics::volume(&mesh.positions, &mesh.triangles), v0) <= 1e-9);
+}
+
+mod props {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(24))]
+        /// Random noise and placement never give NaN and keep the volume.
+        #[test]
+        fn noisy_meshes_never_give_nan_and_keep_volume(
+            seed in 0u64..1_000_000,
+            sigma in 0.0f64..2.0,
+            offset in prop::array::uniform3(-1e3f64..1e3),
+            torus in any::<bool>(),
+            triangle in any::<bool>(),
+        ) {
+            let mut m = if torus { generate::torus(1) } else { generate::icosphere(2) };
+            generate::add_normal_noise(&mut m, sigma, seed);
+            let o = DVec3::from_array(offset);
+            m.positions.iter_mut().for_each(|p| *p += o);
+            let v0 = metrics::volume(&m.positions, &m.triangles);
+            let method = if triangle { Method::VcsTriangle } else { Method::Vcs };
+            run(&mut m, method, 5);
+            prop_assert!(m.positions.iter().all(|p| p.is_finite()));
+            let v1 = metrics::volume(&m.positions, &m.triangles);
+            prop_assert!(rel(v1, v0) <= 1e-9, "{:e}", rel(v1, v0));
+        }
+    }
+}
