@@ -13,7 +13,10 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
+use crate::mesh::{Buf, Storage};
 use crate::metrics;
+use crate::partition::{self, Patch, Reordered};
+use crate::schedule::{self, Schedule, SharedField};
 use crate::smooth::{
     self, Method, Options, SweepStats, laplacian,
     stencil::{self, StencilParams, Workspace},
@@ -64,11 +67,7 @@ pub fn smooth_positions(
             topo.len()
         )));
     }
-    for (name, x) in [("lambda", opts.lambda), ("mu", opts.mu)] {
-        if !x.is_finite() {
-            return Err(Error::Config(format!("--{name} must be a finite number, got {x}")));
-        }
-    }
+    validate(opts)?;
     let mut builder = rayon::ThreadPoolBuilder::new();
     if let Some(n) = threads {
         if n == 0 {
@@ -76,7 +75,9 @@ pub fn smooth_positions(
         }
         builder = builder.num_threads(n);
     }
-    let pool = builder.build().map_err(|e| Error::Config(format!("thread pool: {e}")))?;
+    let pool = builder
+        .build()
+        .map_err(|e| Error::Config(format!("thread pool: {e}")))?;
     pool.install(|| run(topo, triangles, pos, opts, observer))
 }
 
@@ -91,7 +92,7 @@ fn run(
     let origin = metrics::centroid(pos);
     let v_in = metrics::volume_about(pos, triangles, origin);
     let a_in = metrics::area(pos, triangles);
-    let movable = topo.fixed_mask().iter().filter(|&&f| !f).count().max(1);
+    let movable = (topo.len() - topo.stats.fixed_vertices).max(1);
     let mut prev = pos.to_vec();
     let mut ws = Workspace::default();
     let mut records = Vec::with_capacity(opts.iterations);
@@ -108,14 +109,14 @@ fn run(
             }
             Method::Lem | Method::Vcs => {
                 let params = stencil_params(opts);
-                let mut sums = smooth::neighbor_sums(topo, pos);
-                stencil::sweep_edges(topo, triangles, pos, &mut sums, topo.edges(), params, &mut ws)
+                let sums = &mut smooth::neighbor_sums(topo, pos)[..];
+                stencil::sweep_edges(topo, triangles, pos, sums, topo.edges(), params, &mut ws)
             }
             Method::VcsTriangle => {
                 let params = stencil_params(opts);
-                let mut sums = smooth::neighbor_sums(topo, pos);
+                let sums = &mut smooth::neighbor_sums(topo, pos)[..];
                 let faces = 0..triangles.len() as u32;
-                stencil::sweep_triangles(topo, triangles, pos, &mut sums, faces, params, &mut ws)
+                stencil::sweep_triangles(topo, triangles, pos, sums, faces, params, &mut ws)
             }
         };
         let seconds = start.elapsed().as_secs_f64();
@@ -160,11 +161,19 @@ fn jacobi(topo: &Topology, src: &[DVec3], dst: &mut [DVec3], lambda: f64) -> Swe
         .map(|(c, out)| laplacian::jacobi_step(topo, src, out, c * CHUNK, lambda))
         .sum::<u64>();
     let skipped_fixed = topo.len() as u64 - applied;
-    SweepStats { applied, skipped_fixed, ..Default::default() }
+    SweepStats {
+        applied,
+        skipped_fixed,
+        ..Default::default()
+    }
 }
 
 fn percent(x: f64, reference: f64) -> f64 {
-    if reference == 0.0 { 100.0 } else { 100.0 * x / reference }
+    if reference == 0.0 {
+        100.0
+    } else {
+        100.0 * x / reference
+    }
 }
 
 /// Smooth a whole in-memory mesh: builds its topology and runs [`smooth_positions`].
@@ -184,5 +193,236 @@ pub fn smooth_mesh(
     observer: &mut dyn Observer,
 ) -> Result<Vec<IterationRecord>> {
     let topo = Topology::build(mesh.positions.len(), &mesh.triangles)?;
-    smooth_positions(&topo, &mesh.triangles, &mut mesh.positions, opts, threads, observer)
+    smooth_positions(
+        &topo,
+        &mesh.triangles,
+        &mut mesh.positions,
+        opts,
+        threads,
+        observer,
+    )
+}
+
+/// A mesh prepared for patch-parallel smoothing: reordered along the Morton curve, with its
+/// topology, patches and colouring (the reusable plan of repeated runs and benchmarks).
+#[derive(Debug)]
+pub struct Prepared {
+    pub reordered: Reordered,
+    pub topology: Topology,
+    pub patches: Vec<Patch>,
+    pub schedule: Schedule,
+    /// Seconds spent in each preparation phase.
+    pub timings: PrepTimings,
+}
+
+/// Seconds spent preparing.
+#[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+pub struct PrepTimings {
+    pub reorder: f64,
+    pub topology: f64,
+    pub partition: f64,
+}
+
+impl Prepared {
+    /// Reorder, build the topology, cut patches of `patch_size` vertices and colour them, placing
+    /// the large arrays as `storage` says. Run inside the rayon pool that will smooth.
+    pub fn new(
+        storage: &Storage,
+        positions: &[DVec3],
+        triangles: &[[u32; 3]],
+        patch_size: usize,
+    ) -> Result<Prepared> {
+        if patch_size == 0 {
+            return Err(Error::Config("--patch-size must be at least 1".into()));
+        }
+        let t = Instant::now();
+        let reordered = partition::reorder(storage, positions, triangles)?;
+        let reorder_s = t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        let topology = Topology::build_in(storage, positions.len(), &reordered.triangles)?;
+        let topology_s = t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        let patches = partition::patches(positions.len(), &reordered.triangles, patch_size);
+        let schedule = schedule::schedule(&topology, &patches);
+        let timings = PrepTimings {
+            reorder: reorder_s,
+            topology: topology_s,
+            partition: t.elapsed().as_secs_f64(),
+        };
+        Ok(Prepared {
+            reordered,
+            topology,
+            patches,
+            schedule,
+            timings,
+        })
+    }
+
+    /// Copy the (smoothed) positions back into the input's vertex order.
+    pub fn positions_in_input_order(&self, out: &mut [DVec3]) {
+        for (new, &old) in self.reordered.order.iter().enumerate() {
+            out[old as usize] = self.reordered.positions[new];
+        }
+    }
+
+    /// Smooth the reordered positions in place, patch-parallel on the current rayon pool.
+    ///
+    /// Stencil methods run colour after colour; within a colour the patches run in parallel, each
+    /// applying the stencils it owns in ascending order (see [`crate::schedule`]). Jacobi methods
+    /// update fixed-size vertex chunks in parallel. The result is bit-identical for any number of
+    /// threads and any storage placement, for a given patch size.
+    pub fn smooth(
+        &mut self,
+        storage: &Storage,
+        opts: &Options,
+        observer: &mut dyn Observer,
+    ) -> Result<Vec<IterationRecord>> {
+        validate(opts)?;
+        let Prepared {
+            reordered,
+            topology: topo,
+            patches,
+            schedule,
+            ..
+        } = self;
+        let tris: &[[u32; 3]] = &reordered.triangles;
+        let pos: &mut [DVec3] = &mut reordered.positions;
+        let origin = metrics::centroid(pos);
+        let v_in = volume_par(pos, tris, origin);
+        let a_in = area_par(pos, tris);
+        let movable = (topo.len() - topo.stats.fixed_vertices).max(1);
+        let mut prev: Buf<DVec3> = storage.zeroed(pos.len())?;
+        let mut scratch: Buf<DVec3> = storage.zeroed(pos.len())?;
+        let mut records = Vec::with_capacity(opts.iterations);
+        for it in 1..=opts.iterations {
+            let start = Instant::now();
+            prev.copy_from_slice(pos);
+            let stencils = match opts.method {
+                Method::Laplacian => jacobi(topo, &prev, pos, opts.lambda),
+                Method::Taubin => {
+                    let mut s = jacobi(topo, &prev, &mut scratch, opts.lambda);
+                    s.add(&jacobi(topo, &scratch, pos, opts.mu));
+                    s
+                }
+                Method::Lem | Method::Vcs | Method::VcsTriangle => {
+                    // `scratch` holds the neighbour sums, fresh each iteration.
+                    const CHUNK: usize = 1 << 14;
+                    scratch
+                        .par_chunks_mut(CHUNK)
+                        .enumerate()
+                        .for_each(|(c, out)| smooth::neighbor_sums_into(topo, pos, out, c * CHUNK));
+                    sweep_colours(topo, tris, pos, &mut scratch, patches, schedule, opts)
+                }
+            };
+            let seconds = start.elapsed().as_secs_f64();
+            let (max_d, sum_d) = displacement_par(pos, &prev);
+            let volume = volume_par(pos, tris, origin);
+            let record = IterationRecord {
+                iteration: it,
+                volume,
+                volume_pct: percent(volume, v_in),
+                area_pct: percent(area_par(pos, tris), a_in),
+                max_displacement: max_d,
+                mean_displacement: sum_d / movable as f64,
+                stencils,
+                seconds,
+            };
+            observer.iteration(&record, opts.iterations);
+            records.push(record);
+        }
+        Ok(records)
+    }
+}
+
+/// One Gauss–Seidel pass of the stencil method over all patches, colour by colour.
+fn sweep_colours(
+    topo: &Topology,
+    tris: &[[u32; 3]],
+    pos: &mut [DVec3],
+    sums: &mut [DVec3],
+    patches: &[Patch],
+    schedule: &Schedule,
+    opts: &Options,
+) -> SweepStats {
+    let params = stencil_params(opts);
+    // SAFETY: the views are used only by the patches of one colour at a time, which touch disjoint
+    // positions and sums (the colouring invariant of `schedule`); `pos` and `sums` are not used
+    // otherwise while the views live.
+    let (pos_view, sums_view) = unsafe { (SharedField::new(pos), SharedField::new(sums)) };
+    let mut total = SweepStats::default();
+    for colour in &schedule.colours {
+        let stats = colour
+            .par_iter()
+            .map_init(Workspace::default, |ws, &p| {
+                let (mut pv, mut sv) = (pos_view, sums_view);
+                let patch = &patches[p as usize];
+                if opts.method == Method::VcsTriangle {
+                    let faces = patch.triangles.clone();
+                    stencil::sweep_triangles(topo, tris, &mut pv, &mut sv, faces, params, ws)
+                } else {
+                    stencil::sweep_edges(
+                        topo,
+                        tris,
+                        &mut pv,
+                        &mut sv,
+                        patch.edges(topo),
+                        params,
+                        ws,
+                    )
+                }
+            })
+            .reduce(SweepStats::default, |mut a, b| {
+                a.add(&b);
+                a
+            });
+        total.add(&stats);
+    }
+    total
+}
+
+/// Fixed-size chunks make the parallel sums below independent of the thread count.
+const SUM_CHUNK: usize = 1 << 15;
+
+fn volume_par(pos: &[DVec3], tris: &[[u32; 3]], origin: DVec3) -> f64 {
+    let parts: Vec<f64> = tris
+        .par_chunks(SUM_CHUNK)
+        .map(|c| metrics::volume_about(pos, c, origin))
+        .collect();
+    parts.iter().sum()
+}
+
+fn area_par(pos: &[DVec3], tris: &[[u32; 3]]) -> f64 {
+    let parts: Vec<f64> = tris
+        .par_chunks(SUM_CHUNK)
+        .map(|c| metrics::area(pos, c))
+        .collect();
+    parts.iter().sum()
+}
+
+/// Largest and summed vertex displacement between `a` and `b`.
+fn displacement_par(a: &[DVec3], b: &[DVec3]) -> (f64, f64) {
+    let parts: Vec<(f64, f64)> = a
+        .par_chunks(SUM_CHUNK)
+        .zip(b.par_chunks(SUM_CHUNK))
+        .map(|(x, y)| {
+            x.iter().zip(y).fold((0.0f64, 0.0), |(m, s), (p, q)| {
+                let d = p.distance(*q);
+                (m.max(d), s + d)
+            })
+        })
+        .collect();
+    parts
+        .iter()
+        .fold((0.0, 0.0), |(m, s), &(pm, ps)| (m.max(pm), s + ps))
+}
+
+fn validate(opts: &Options) -> Result<()> {
+    for (name, x) in [("lambda", opts.lambda), ("mu", opts.mu)] {
+        if !x.is_finite() {
+            return Err(Error::Config(format!(
+                "--{name} must be a finite number, got {x}"
+            )));
+        }
+    }
+    Ok(())
 }

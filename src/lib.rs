@@ -8,12 +8,15 @@
 //! [`io`] writes atomically → [`metrics`] report volume, area and per-iteration statistics.
 //! [`driver`] is the one place that wires them together.
 
+pub mod cli;
 pub mod driver;
 pub mod error;
 pub mod generate;
 pub mod io;
 pub mod mesh;
 pub mod metrics;
+pub mod partition;
+pub mod schedule;
 pub mod smooth;
 pub mod topology;
 

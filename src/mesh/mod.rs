@@ -22,6 +22,13 @@ pub struct Mesh {
 impl Mesh {
     /// A mesh with no source layout: written as a plain `x y z` + triangle list.
     pub fn new(positions: Vec<DVec3>, triangles: Vec<[u32; 3]>) -> Self {
-        Mesh { positions, triangles, source: Default::default() }
+        Mesh {
+            positions,
+            triangles,
+            source: Default::default(),
+        }
     }
 }
+
+pub mod storage;
+pub use storage::{Buf, Storage};

@@ -19,7 +19,13 @@ pub fn umbrella(topo: &Topology, pos: &[DVec3], v: u32) -> DVec3 {
 ///
 /// Fixed vertices are copied unchanged. Each output depends only on `src`, so any split of the vertex
 /// range over threads gives bit-identical results. Returns the number of vertices moved.
-pub fn jacobi_step(topo: &Topology, src: &[DVec3], dst: &mut [DVec3], first: usize, lambda: f64) -> u64 {
+pub fn jacobi_step(
+    topo: &Topology,
+    src: &[DVec3],
+    dst: &mut [DVec3],
+    first: usize,
+    lambda: f64,
+) -> u64 {
     let mut moved = 0;
     for (k, out) in dst.iter_mut().enumerate() {
         let v = (first + k) as u32;

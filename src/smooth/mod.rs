@@ -36,8 +36,13 @@ pub enum Method {
 
 impl Method {
     /// Every method, in documentation order.
-    pub const ALL: [Method; 5] =
-        [Method::Laplacian, Method::Taubin, Method::Lem, Method::Vcs, Method::VcsTriangle];
+    pub const ALL: [Method; 5] = [
+        Method::Laplacian,
+        Method::Taubin,
+        Method::Lem,
+        Method::Vcs,
+        Method::VcsTriangle,
+    ];
 
     /// The method's command-line name.
     pub fn name(self) -> &'static str {
@@ -65,10 +70,16 @@ impl fmt::Display for Method {
 impl FromStr for Method {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        Method::ALL.into_iter().find(|m| m.name() == s).ok_or_else(|| {
-            let names: Vec<_> = Method::ALL.iter().map(|m| m.name()).collect();
-            format!("unknown method '{s}' (expected one of: {})", names.join(", "))
-        })
+        Method::ALL
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| {
+                let names: Vec<_> = Method::ALL.iter().map(|m| m.name()).collect();
+                format!(
+                    "unknown method '{s}' (expected one of: {})",
+                    names.join(", ")
+                )
+            })
     }
 }
 
@@ -126,10 +137,41 @@ impl SweepStats {
     }
 }
 
+/// Per-vertex vector storage as the stencil kernels see it: a plain slice for one thread, or a
+/// shared view (see [`crate::schedule::SharedField`]) when patches of one colour run in parallel.
+pub trait Field {
+    /// The value at vertex `v`.
+    fn get(&self, v: u32) -> DVec3;
+    /// Add `d` to the value at vertex `v`.
+    fn add(&mut self, v: u32, d: DVec3);
+}
+
+impl Field for [DVec3] {
+    #[inline]
+    fn get(&self, v: u32) -> DVec3 {
+        self[v as usize]
+    }
+    #[inline]
+    fn add(&mut self, v: u32, d: DVec3) {
+        self[v as usize] += d;
+    }
+}
+
 /// Sum of neighbour positions per vertex, `S(v) = Σ_{u∈N(v)} p_u`: the cache that makes an umbrella
 /// Laplacian `S(v)/deg(v) − p_v` cost O(1) inside the stencil kernels.
 pub fn neighbor_sums(topo: &Topology, pos: &[DVec3]) -> Vec<DVec3> {
-    (0..topo.len() as u32)
-        .map(|v| topo.neighbors(v).iter().fold(DVec3::ZERO, |s, &u| s + pos[u as usize]))
-        .collect()
+    let mut sums = vec![DVec3::ZERO; topo.len()];
+    neighbor_sums_into(topo, pos, &mut sums, 0);
+    sums
+}
+
+/// [`neighbor_sums`] for the vertices `first .. first + out.len()`, into `out`.
+pub fn neighbor_sums_into(topo: &Topology, pos: &[DVec3], out: &mut [DVec3], first: usize) {
+    for (k, s) in out.iter_mut().enumerate() {
+        let v = (first + k) as u32;
+        *s = topo
+            .neighbors(v)
+            .iter()
+            .fold(DVec3::ZERO, |s, &u| s + pos[u as usize]);
+    }
 }

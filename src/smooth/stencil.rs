@@ -19,7 +19,7 @@
 
 use glam::DVec3;
 
-use super::{SweepStats, Topology};
+use super::{Field, SweepStats, Topology};
 
 /// What a stencil kernel does after the energy minimisation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -74,14 +74,15 @@ pub struct Workspace {
 const DEGENERATE: f64 = 1e-10;
 
 /// Apply one stencil with free vertices `free` to `pos`, updating the neighbour-sum cache `sums`.
+/// It reads positions of F ∪ N(F) and sums of F ∪ N(F); it writes positions of F and sums of N(F).
 ///
 /// `triangles` is the array the topology was built from (its faces give the stencil volume).
 /// Positions and sums are written only when the outcome is [`Outcome::Applied`].
-pub fn apply<const N: usize>(
+pub fn apply<const N: usize, P: Field + ?Sized, S: Field + ?Sized>(
     topo: &Topology,
     triangles: &[[u32; 3]],
-    pos: &mut [DVec3],
-    sums: &mut [DVec3],
+    pos: &mut P,
+    sums: &mut S,
     free: [u32; N],
     params: StencilParams,
     ws: &mut Workspace,
@@ -94,9 +95,21 @@ pub fn apply<const N: usize>(
     let rows = &mut ws.rows;
     rows.clear();
     for (fi, &f) in free.iter().enumerate() {
-        rows.push(Row { v: f, self_mask: 1 << fi, nbr_mask: 0, inv_deg: 0.0, lap: DVec3::ZERO });
+        rows.push(Row {
+            v: f,
+            self_mask: 1 << fi,
+            nbr_mask: 0,
+            inv_deg: 0.0,
+            lap: DVec3::ZERO,
+        });
         for &u in topo.neighbors(f) {
-            rows.push(Row { v: u, self_mask: 0, nbr_mask: 1 << fi, inv_deg: 0.0, lap: DVec3::ZERO });
+            rows.push(Row {
+                v: u,
+                self_mask: 0,
+                nbr_mask: 1 << fi,
+                inv_deg: 0.0,
+                lap: DVec3::ZERO,
+            });
         }
     }
     rows.sort_unstable_by_key(|r| r.v);
@@ -115,9 +128,8 @@ pub fn apply<const N: usize>(
     let mut rhs = [DVec3::ZERO; N];
     let mut energy_before = 0.0;
     for r in rows.iter_mut() {
-        let v = r.v as usize;
         r.inv_deg = 1.0 / topo.deg(r.v) as f64;
-        r.lap = sums[v] * r.inv_deg - pos[v];
+        r.lap = sums.get(r.v) * r.inv_deg - pos.get(r.v);
         energy_before += r.lap.length_squared();
         let k: [f64; N] = std::array::from_fn(|f| r.k(f));
         for f in 0..N {
@@ -153,9 +165,9 @@ pub fn apply<const N: usize>(
     }
 
     for (fi, &f) in free.iter().enumerate() {
-        pos[f as usize] += d[fi];
+        pos.add(f, d[fi]);
         for &u in topo.neighbors(f) {
-            sums[u as usize] += d[fi];
+            sums.add(u, d[fi]);
         }
     }
     Outcome::Applied
@@ -163,10 +175,10 @@ pub fn apply<const N: usize>(
 
 /// Step 2: the common translation w of the free vertices (already displaced by `d`) that restores
 /// the volume of the faces touching them. `None` when the volume gradient is degenerate.
-fn volume_translation<const N: usize>(
+fn volume_translation<const N: usize, P: Field + ?Sized>(
     topo: &Topology,
     triangles: &[[u32; 3]],
-    pos: &[DVec3],
+    pos: &P,
     free: &[u32; N],
     d: &[DVec3; N],
     faces: &mut Vec<u32>,
@@ -178,12 +190,12 @@ fn volume_translation<const N: usize>(
     faces.sort_unstable();
     faces.dedup();
 
-    let origin = free.iter().fold(DVec3::ZERO, |s, &f| s + pos[f as usize]) / N as f64;
+    let origin = free.iter().fold(DVec3::ZERO, |s, &f| s + pos.get(f)) / N as f64;
     let (mut v0, mut v1, mut area2) = (0.0, 0.0, 0.0);
     let mut n = DVec3::ZERO;
     for &t in faces.iter() {
         let tri = triangles[t as usize];
-        let old = tri.map(|v| pos[v as usize] - origin);
+        let old = tri.map(|v| pos.get(v) - origin);
         let mut new = old;
         let mut is_free = [false; 3];
         for c in 0..3 {
@@ -248,11 +260,11 @@ pub fn count(stats: &mut SweepStats, outcome: Outcome) {
 }
 
 /// Apply the edge stencils `edges`, in the given order, Gauss–Seidel (each sees the latest positions).
-pub fn sweep_edges(
+pub fn sweep_edges<P: Field + ?Sized, S: Field + ?Sized>(
     topo: &Topology,
     triangles: &[[u32; 3]],
-    pos: &mut [DVec3],
-    sums: &mut [DVec3],
+    pos: &mut P,
+    sums: &mut S,
     edges: impl IntoIterator<Item = [u32; 2]>,
     params: StencilParams,
     ws: &mut Workspace,
@@ -266,11 +278,11 @@ pub fn sweep_edges(
 
 /// Apply the triangle stencils (indices into `triangles`), in the given order, Gauss–Seidel.
 /// A triangle with a repeated index has fixed vertices and is counted as skipped.
-pub fn sweep_triangles(
+pub fn sweep_triangles<P: Field + ?Sized, S: Field + ?Sized>(
     topo: &Topology,
     triangles: &[[u32; 3]],
-    pos: &mut [DVec3],
-    sums: &mut [DVec3],
+    pos: &mut P,
+    sums: &mut S,
     faces: impl IntoIterator<Item = u32>,
     params: StencilParams,
     ws: &mut Workspace,
@@ -278,7 +290,10 @@ pub fn sweep_triangles(
     let mut stats = SweepStats::default();
     for t in faces {
         let free = triangles[t as usize];
-        count(&mut stats, apply(topo, triangles, pos, sums, free, params, ws));
+        count(
+            &mut stats,
+            apply(topo, triangles, pos, sums, free, params, ws),
+        );
     }
     stats
 }
@@ -330,8 +345,19 @@ mod tests {
             let topo = Topology::build(6, &tris).unwrap();
             let mut sums = neighbor_sums(&topo, &pos);
             let before = volume(&pos, &tris);
-            let p = StencilParams { volume: true, reject_energy_increase: false };
-            let out = apply(&topo, &tris, &mut pos, &mut sums, [0, 2], p, &mut Workspace::default());
+            let p = StencilParams {
+                volume: true,
+                reject_energy_increase: false,
+            };
+            let out = apply(
+                &topo,
+                &tris,
+                &mut pos[..],
+                &mut sums[..],
+                [0, 2],
+                p,
+                &mut Workspace::default(),
+            );
             assert_eq!(out, Outcome::Applied);
             let rel = ((volume(&pos, &tris) - before) / before).abs();
             assert!(rel < 1e-9, "offset {offset}: relative volume change {rel}");
@@ -349,8 +375,19 @@ mod tests {
         let rows: Vec<u32> = (0..6).collect(); // every vertex is in F ∪ N(F) of edge (0, 2)
         let mut pos = pos0.clone();
         let mut sums = neighbor_sums(&topo, &pos);
-        let p = StencilParams { volume: false, reject_energy_increase: false };
-        apply(&topo, &tris, &mut pos, &mut sums, [0, 2], p, &mut Workspace::default());
+        let p = StencilParams {
+            volume: false,
+            reject_energy_increase: false,
+        };
+        apply(
+            &topo,
+            &tris,
+            &mut pos[..],
+            &mut sums[..],
+            [0, 2],
+            p,
+            &mut Workspace::default(),
+        );
         let e1 = energy(&topo, &pos, &rows);
         assert!(e1 < energy(&topo, &pos0, &rows));
         // Any small perturbation of a free vertex raises the energy: the solve found the minimum.
@@ -369,8 +406,19 @@ mod tests {
         let topo = Topology::build(6, &tris).unwrap();
         let mut sums = neighbor_sums(&topo, &pos);
         let before = volume(&pos, &tris);
-        let p = StencilParams { volume: true, reject_energy_increase: false };
-        let stats = sweep_triangles(&topo, &tris, &mut pos, &mut sums, 0..8, p, &mut Workspace::default());
+        let p = StencilParams {
+            volume: true,
+            reject_energy_increase: false,
+        };
+        let stats = sweep_triangles(
+            &topo,
+            &tris,
+            &mut pos[..],
+            &mut sums[..],
+            0..8,
+            p,
+            &mut Workspace::default(),
+        );
         assert_eq!(stats.applied, 8);
         assert!(((volume(&pos, &tris) - before) / before).abs() < 1e-9);
     }
@@ -382,9 +430,20 @@ mod tests {
         let topo = Topology::build(6, &tris).unwrap();
         let mut pos: Vec<DVec3> = (0..6).map(|k| DVec3::new(k as f64, 0.0, 0.0)).collect();
         let mut sums = neighbor_sums(&topo, &pos);
-        let p = StencilParams { volume: true, reject_energy_increase: false };
+        let p = StencilParams {
+            volume: true,
+            reject_energy_increase: false,
+        };
         let before = pos.clone();
-        let out = apply(&topo, &tris, &mut pos, &mut sums, [0, 1], p, &mut Workspace::default());
+        let out = apply(
+            &topo,
+            &tris,
+            &mut pos[..],
+            &mut sums[..],
+            [0, 1],
+            p,
+            &mut Workspace::default(),
+        );
         assert_eq!(out, Outcome::SkippedFixed);
         assert_eq!(pos, before);
 
@@ -393,7 +452,15 @@ mod tests {
         let topo = Topology::build(6, &tris).unwrap();
         let mut pos = vec![DVec3::splat(3.0); 6];
         let mut sums = neighbor_sums(&topo, &pos);
-        let out = apply(&topo, &tris, &mut pos, &mut sums, [0, 2], p, &mut Workspace::default());
+        let out = apply(
+            &topo,
+            &tris,
+            &mut pos[..],
+            &mut sums[..],
+            [0, 2],
+            p,
+            &mut Workspace::default(),
+        );
         assert_eq!(out, Outcome::SkippedDegenerate);
         assert!(pos.iter().all(|p| *p == DVec3::splat(3.0)));
     }
@@ -403,7 +470,10 @@ mod tests {
         let (mut pos, tris) = bumpy_octahedron(DVec3::ZERO);
         let topo = Topology::build(6, &tris).unwrap();
         let mut sums = neighbor_sums(&topo, &pos);
-        let p = StencilParams { volume: true, reject_energy_increase: true };
+        let p = StencilParams {
+            volume: true,
+            reject_energy_increase: true,
+        };
         let mut ws = Workspace::default();
         let all: Vec<u32> = (0..6).collect();
         for _ in 0..20 {
@@ -411,7 +481,9 @@ mod tests {
                 let before = pos.clone();
                 let rows: Vec<u32> = all.clone();
                 let e0 = energy(&topo, &before, &rows);
-                if apply(&topo, &tris, &mut pos, &mut sums, e, p, &mut ws) == Outcome::Applied {
+                if apply(&topo, &tris, &mut pos[..], &mut sums[..], e, p, &mut ws)
+                    == Outcome::Applied
+                {
                     assert!(energy(&topo, &pos, &rows) <= e0 * (1.0 + 1e-12));
                 }
             }
@@ -421,7 +493,11 @@ mod tests {
     #[test]
     fn cholesky_solves_small_systems() {
         let m = [[4.0, 1.0, 0.5], [1.0, 3.0, 0.2], [0.5, 0.2, 2.0]];
-        let x = [DVec3::new(1.0, -2.0, 0.5), DVec3::new(0.0, 1.0, 3.0), DVec3::new(2.0, 2.0, -1.0)];
+        let x = [
+            DVec3::new(1.0, -2.0, 0.5),
+            DVec3::new(0.0, 1.0, 3.0),
+            DVec3::new(2.0, 2.0, -1.0),
+        ];
         let b: [DVec3; 3] =
             std::array::from_fn(|i| (0..3).fold(DVec3::ZERO, |s, j| s + m[i][j] * x[j]));
         let got = solve_spd(m, b).unwrap();

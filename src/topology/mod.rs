@@ -12,16 +12,19 @@
 //! The same structure describes a whole mesh or one patch with its halo (local ids); kernels only
 //! ever see a `Topology` and a position slice.
 
+use rayon::prelude::*;
+
 use crate::error::{Error, Result};
+use crate::mesh::{Buf, Storage};
 
 /// CSR adjacency and fixed-vertex mask of a triangle mesh.
 #[derive(Debug, Clone, Default)]
 pub struct Topology {
-    vv_offsets: Vec<usize>,
-    vv: Vec<u32>,
-    vf_offsets: Vec<usize>,
-    vf: Vec<u32>,
-    fixed: Vec<bool>,
+    vv_offsets: Buf<usize>,
+    vv: Buf<u32>,
+    vf_offsets: Buf<usize>,
+    vf: Buf<u32>,
+    fixed: Buf<u8>,
     /// Counts found while building, for `info` and reports.
     pub stats: TopologyStats,
 }
@@ -45,23 +48,59 @@ pub struct TopologyStats {
     pub fixed_vertices: usize,
 }
 
+impl TopologyStats {
+    fn add(mut self, o: TopologyStats) -> TopologyStats {
+        self.edges += o.edges;
+        self.boundary_edges += o.boundary_edges;
+        self.non_manifold_edges += o.non_manifold_edges;
+        self.non_manifold_vertices += o.non_manifold_vertices;
+        self.unreferenced_vertices += o.unreferenced_vertices;
+        self.fixed_vertices += o.fixed_vertices;
+        self
+    }
+}
+
+/// Vertices per parallel work item of the build.
+const CHUNK: usize = 1 << 13;
+
+/// Reusable per-thread buffers of the per-vertex analysis.
+#[derive(Default)]
+struct VertexScratch {
+    link: Vec<(u32, u32)>,
+    corners: Vec<u32>,
+    parent: Vec<usize>,
+}
+
 impl Topology {
-    /// Build the adjacency of `n_vertices` vertices and `triangles`.
+    /// Build the adjacency of `n_vertices` vertices and `triangles`, on the heap.
     ///
     /// Fails only if a triangle indexes a vertex `>= n_vertices` (readers reject those first).
     pub fn build(n_vertices: usize, triangles: &[[u32; 3]]) -> Result<Topology> {
-        if n_vertices > u32::MAX as usize {
-            return Err(Error::Config(format!("{n_vertices} vertices exceed the 2^32 limit")));
+        Topology::build_in(&Storage::heap(), n_vertices, triangles)
+    }
+
+    /// Build as [`Topology::build`], placing the arrays as `storage` says. Parallel over vertices
+    /// on the current rayon pool; the result does not depend on the number of threads.
+    pub fn build_in(
+        storage: &Storage,
+        n_vertices: usize,
+        triangles: &[[u32; 3]],
+    ) -> Result<Topology> {
+        if n_vertices > u32::MAX as usize || triangles.len() > u32::MAX as usize {
+            return Err(Error::Config(format!(
+                "{n_vertices} vertices / {} triangles exceed the 2^32 limit",
+                triangles.len()
+            )));
         }
         let mut stats = TopologyStats {
             vertices: n_vertices,
             triangles: triangles.len(),
             ..Default::default()
         };
-        let mut fixed = vec![false; n_vertices];
+        let mut fixed: Buf<u8> = storage.zeroed(n_vertices)?;
 
         // Vertex → face CSR by counting sort (faces come out ascending per vertex).
-        let mut vf_offsets = vec![0usize; n_vertices + 1];
+        let mut vf_offsets: Buf<usize> = storage.zeroed(n_vertices + 1)?;
         for (t, tri) in triangles.iter().enumerate() {
             if tri.iter().any(|&v| v as usize >= n_vertices) {
                 return Err(Error::Config(format!(
@@ -71,7 +110,7 @@ impl Topology {
             if is_degenerate(tri) {
                 stats.degenerate_triangles += 1;
                 for &v in tri {
-                    fixed[v as usize] = true;
+                    fixed[v as usize] = 1;
                 }
                 continue;
             }
@@ -82,81 +121,86 @@ impl Topology {
         for v in 0..n_vertices {
             vf_offsets[v + 1] += vf_offsets[v];
         }
-        let mut vf = vec![0u32; vf_offsets[n_vertices]];
-        let mut cursor = vf_offsets.clone();
-        for (t, tri) in triangles.iter().enumerate() {
-            if is_degenerate(tri) {
-                continue;
-            }
-            for &v in tri {
-                vf[cursor[v as usize]] = t as u32;
-                cursor[v as usize] += 1;
+        let mut vf: Buf<u32> = storage.zeroed(vf_offsets[n_vertices])?;
+        {
+            let mut cursor: Buf<usize> = storage.copy_of(&vf_offsets[..n_vertices])?;
+            for (t, tri) in triangles.iter().enumerate() {
+                if is_degenerate(tri) {
+                    continue;
+                }
+                for &v in tri {
+                    vf[cursor[v as usize]] = t as u32;
+                    cursor[v as usize] += 1;
+                }
             }
         }
-        drop(cursor);
 
-        // Vertex → vertex CSR, edge classification and link check, one vertex at a time.
-        let mut vv_offsets = Vec::with_capacity(n_vertices + 1);
-        vv_offsets.push(0usize);
-        let mut vv = Vec::with_capacity(vf.len());
-        let mut link: Vec<(u32, u32)> = Vec::new();
-        let mut corners: Vec<u32> = Vec::new();
-        let mut parent: Vec<usize> = Vec::new();
-        for v in 0..n_vertices {
-            let faces = &vf[vf_offsets[v]..vf_offsets[v + 1]];
-            link.clear();
-            corners.clear();
-            for &t in faces {
-                let (b, c) = opposite_edge(&triangles[t as usize], v as u32);
-                link.push((b, c));
-                corners.push(b);
-                corners.push(c);
-            }
-            corners.sort_unstable();
-            let start = vv.len();
-            let mut ends = 0; // neighbours met once: ends of a path-shaped link
-            let mut manifold = true;
-            let mut i = 0;
-            while i < corners.len() {
-                let u = corners[i];
-                let mut count = 0;
-                while i < corners.len() && corners[i] == u {
-                    count += 1;
-                    i += 1;
-                }
-                vv.push(u);
-                match count {
-                    1 => ends += 1,
-                    2 => {}
-                    _ => manifold = false,
-                }
-                if (u as usize) > v {
-                    stats.edges += 1;
-                    match count {
-                        1 => stats.boundary_edges += 1,
-                        2 => {}
-                        _ => stats.non_manifold_edges += 1,
+        // Pass 1: per vertex, the number of distinct neighbours, edge counts and the fixed flag.
+        let mut vv_offsets: Buf<usize> = storage.zeroed(n_vertices + 1)?;
+        let found = vv_offsets[1..]
+            .par_chunks_mut(CHUNK)
+            .zip(fixed.par_chunks_mut(CHUNK))
+            .enumerate()
+            .map_init(VertexScratch::default, |scratch, (c, (degs, fixed))| {
+                let mut st = TopologyStats::default();
+                for (k, (deg, fix)) in degs.iter_mut().zip(fixed.iter_mut()).enumerate() {
+                    let v = (c * CHUNK + k) as u32;
+                    let faces = &vf[vf_offsets[v as usize]..vf_offsets[v as usize + 1]];
+                    let a = analyse_vertex(v, faces, triangles, scratch, None);
+                    *deg = a.degree;
+                    st.edges += a.edges;
+                    st.boundary_edges += a.boundary_edges;
+                    st.non_manifold_edges += a.non_manifold_edges;
+                    st.non_manifold_vertices += a.non_manifold_vertex as usize;
+                    st.unreferenced_vertices += (a.degree == 0) as usize;
+                    if a.fixed {
+                        *fix = 1;
                     }
+                    st.fixed_vertices += (*fix != 0) as usize;
                 }
-            }
-            let nbrs = &vv[start..];
-            if nbrs.is_empty() {
-                stats.unreferenced_vertices += 1;
-                fixed[v] = true;
-            } else if ends > 0 || !manifold {
-                // Boundary or non-manifold edge at v.
-                fixed[v] = true;
-                if manifold && (ends != 2 || !link_connected(nbrs, &link, &mut parent)) {
-                    stats.non_manifold_vertices += 1;
-                }
-            } else if !link_connected(nbrs, &link, &mut parent) {
-                fixed[v] = true;
-                stats.non_manifold_vertices += 1;
-            }
-            vv_offsets.push(vv.len());
+                st
+            })
+            .reduce(TopologyStats::default, TopologyStats::add);
+        stats = stats.add(found);
+        for v in 0..n_vertices {
+            vv_offsets[v + 1] += vv_offsets[v];
         }
-        stats.fixed_vertices = fixed.iter().filter(|&&f| f).count();
-        Ok(Topology { vv_offsets, vv, vf_offsets, vf, fixed, stats })
+
+        // Pass 2: fill the neighbour lists, each chunk of vertices into its own slice.
+        let mut vv: Buf<u32> = storage.zeroed(vv_offsets[n_vertices])?;
+        let mut pieces = Vec::with_capacity(n_vertices.div_ceil(CHUNK));
+        let mut rest: &mut [u32] = &mut vv;
+        for c in 0..n_vertices.div_ceil(CHUNK) {
+            let (lo, hi) = (c * CHUNK, ((c + 1) * CHUNK).min(n_vertices));
+            let (piece, tail) = rest.split_at_mut(vv_offsets[hi] - vv_offsets[lo]);
+            pieces.push((lo..hi, piece));
+            rest = tail;
+        }
+        pieces
+            .into_par_iter()
+            .for_each_init(VertexScratch::default, |scratch, (range, out)| {
+                let mut at = 0;
+                for v in range {
+                    let faces = &vf[vf_offsets[v]..vf_offsets[v + 1]];
+                    let deg = vv_offsets[v + 1] - vv_offsets[v];
+                    analyse_vertex(
+                        v as u32,
+                        faces,
+                        triangles,
+                        scratch,
+                        Some(&mut out[at..at + deg]),
+                    );
+                    at += deg;
+                }
+            });
+        Ok(Topology {
+            vv_offsets,
+            vv,
+            vf_offsets,
+            vf,
+            fixed,
+            stats,
+        })
     }
 
     /// Number of vertices.
@@ -195,11 +239,11 @@ impl Topology {
     /// Whether `v` is fixed (see the module doc).
     #[inline]
     pub fn is_fixed(&self, v: u32) -> bool {
-        self.fixed[v as usize]
+        self.fixed[v as usize] != 0
     }
 
-    /// The fixed-vertex mask, one entry per vertex.
-    pub fn fixed_mask(&self) -> &[bool] {
+    /// The fixed-vertex mask, one entry per vertex (1 = fixed).
+    pub fn fixed_mask(&self) -> &[u8] {
         &self.fixed
     }
 
@@ -219,6 +263,87 @@ impl Topology {
             + (self.vv.len() + self.vf.len()) * 4
             + self.fixed.len()
     }
+}
+
+/// What the build learns about one vertex from its faces.
+struct VertexAnalysis {
+    degree: usize,
+    /// Edges to higher-numbered neighbours (each undirected edge counted once), by kind.
+    edges: usize,
+    boundary_edges: usize,
+    non_manifold_edges: usize,
+    non_manifold_vertex: bool,
+    fixed: bool,
+}
+
+/// Classify vertex `v` from its (non-degenerate) faces; writes its sorted neighbours to `out` if given.
+fn analyse_vertex(
+    v: u32,
+    faces: &[u32],
+    triangles: &[[u32; 3]],
+    s: &mut VertexScratch,
+    out: Option<&mut [u32]>,
+) -> VertexAnalysis {
+    s.link.clear();
+    s.corners.clear();
+    for &t in faces {
+        let (b, c) = opposite_edge(&triangles[t as usize], v);
+        s.link.push((b, c));
+        s.corners.push(b);
+        s.corners.push(c);
+    }
+    s.corners.sort_unstable();
+    let mut a = VertexAnalysis {
+        degree: 0,
+        edges: 0,
+        boundary_edges: 0,
+        non_manifold_edges: 0,
+        non_manifold_vertex: false,
+        fixed: false,
+    };
+    let mut ends = 0; // neighbours met once: ends of a path-shaped link
+    let mut manifold = true;
+    let mut i = 0;
+    // Distinct neighbours are compacted to the front of `corners`.
+    while i < s.corners.len() {
+        let u = s.corners[i];
+        let mut count = 0;
+        while i < s.corners.len() && s.corners[i] == u {
+            count += 1;
+            i += 1;
+        }
+        s.corners[a.degree] = u;
+        a.degree += 1;
+        match count {
+            1 => ends += 1,
+            2 => {}
+            _ => manifold = false,
+        }
+        if u > v {
+            a.edges += 1;
+            match count {
+                1 => a.boundary_edges += 1,
+                2 => {}
+                _ => a.non_manifold_edges += 1,
+            }
+        }
+    }
+    let nbrs = &s.corners[..a.degree];
+    if nbrs.is_empty() {
+        a.fixed = true; // unreferenced
+    } else if ends > 0 || !manifold {
+        // Boundary or non-manifold edge at v.
+        a.fixed = true;
+        a.non_manifold_vertex =
+            manifold && (ends != 2 || !link_connected(nbrs, &s.link, &mut s.parent));
+    } else if !link_connected(nbrs, &s.link, &mut s.parent) {
+        a.fixed = true;
+        a.non_manifold_vertex = true;
+    }
+    if let Some(out) = out {
+        out.copy_from_slice(nbrs);
+    }
+    a
 }
 
 fn is_degenerate(t: &[u32; 3]) -> bool {

@@ -1,0 +1,248 @@
+//! Where large arrays live: on the heap, or in memory-mapped scratch files when the mesh is larger
+//! than the memory budget. File-backed pages are the kernel's page cache, not the process's
+//! anonymous memory, so a mesh far larger than the budget streams through without being swapped.
+//!
+//! Scratch files are unlinked as soon as they are mapped: the mapping keeps them alive, and they
+//! vanish when the array is dropped, when the process ends, or when it is killed. No run leaves
+//! scratch behind.
+
+use std::fs::OpenOptions;
+use std::marker::PhantomData;
+use std::ops::{Deref, DerefMut};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+
+use glam::DVec3;
+use memmap2::MmapMut;
+
+use crate::error::{Error, Result};
+
+/// Plain data that may be stored as raw bytes in a scratch file.
+///
+/// # Safety
+/// Implementors must be `repr(C)`/primitive types without padding or pointers, for which every bit
+/// pattern (in particular all zeros) is a valid value.
+pub unsafe trait Pod: Copy + Send + Sync + 'static {}
+// SAFETY: primitive numbers and arrays of them: every bit pattern is valid, no padding.
+unsafe impl Pod for u8 {}
+unsafe impl Pod for u32 {}
+unsafe impl Pod for u64 {}
+unsafe impl Pod for usize {}
+unsafe impl Pod for f32 {}
+unsafe impl Pod for f64 {}
+unsafe impl Pod for [u32; 2] {}
+unsafe impl Pod for [u32; 3] {}
+unsafe impl Pod for [u64; 2] {}
+// SAFETY: glam's DVec3 is `#[repr(C)] { x: f64, y: f64, z: f64 }`: three f64s, no padding.
+unsafe impl Pod for DVec3 {}
+
+/// Chooses where new arrays go: the heap, or a scratch directory.
+#[derive(Debug)]
+pub struct Storage {
+    scratch: Option<PathBuf>,
+    /// Bytes of arrays placed in scratch files so far (for reports).
+    mapped_bytes: AtomicU64,
+    counter: AtomicUsize,
+}
+
+impl Storage {
+    /// All arrays on the heap.
+    pub fn heap() -> Self {
+        Storage {
+            scratch: None,
+            mapped_bytes: AtomicU64::new(0),
+            counter: AtomicUsize::new(0),
+        }
+    }
+
+    /// Large arrays in scratch files under `dir` (which must exist and be writable).
+    pub fn scratch(dir: &Path) -> Result<Self> {
+        let meta = std::fs::metadata(dir).map_err(|e| Error::io(dir, e))?;
+        if !meta.is_dir() {
+            return Err(Error::Config(format!(
+                "{}: scratch path is not a directory",
+                dir.display()
+            )));
+        }
+        Ok(Storage {
+            scratch: Some(dir.to_path_buf()),
+            mapped_bytes: AtomicU64::new(0),
+            counter: AtomicUsize::new(0),
+        })
+    }
+
+    /// Whether arrays go to scratch files.
+    pub fn is_mapped(&self) -> bool {
+        self.scratch.is_some()
+    }
+
+    /// Total bytes placed in scratch files.
+    pub fn mapped_bytes(&self) -> u64 {
+        self.mapped_bytes.load(Ordering::Relaxed)
+    }
+
+    /// A zero-filled array of `len` elements.
+    pub fn zeroed<T: Pod>(&self, len: usize) -> Result<Buf<T>> {
+        let Some(dir) = &self.scratch else {
+            // SAFETY-free path: zeroed Vec through a value; every Pod is valid as zeros.
+            return Ok(Buf::from_vec(vec![zero::<T>(); len]));
+        };
+        let bytes = len.checked_mul(std::mem::size_of::<T>()).ok_or_else(|| {
+            Error::Config(format!(
+                "array of {len} elements overflows the address space"
+            ))
+        })?;
+        let n = self.counter.fetch_add(1, Ordering::Relaxed);
+        let path = dir.join(format!(".vcsmooth-scratch-{}-{n}", std::process::id()));
+        let file = OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create_new(true)
+            .open(&path)
+            .map_err(|e| Error::io(&path, e))?;
+        // Unlink at once: the mapping keeps the data alive, and nothing is left behind on any exit.
+        let removed = std::fs::remove_file(&path);
+        file.set_len(bytes as u64)
+            .map_err(|e| Error::io(&path, e))?;
+        removed.map_err(|e| Error::io(&path, e))?;
+        if bytes == 0 {
+            return Ok(Buf::from_vec(Vec::new()));
+        }
+        // SAFETY: the file was just created by us, is unlinked (no other process can open it by
+        // name), and is only accessed through this mapping, so nobody truncates or changes it
+        // underneath; `Buf` ties the slice's lifetime to the mapping.
+        let map = unsafe { MmapMut::map_mut(&file) }.map_err(|e| Error::io(&path, e))?;
+        self.mapped_bytes.fetch_add(bytes as u64, Ordering::Relaxed);
+        Ok(Buf {
+            inner: Inner::Map(map),
+            len,
+            _t: PhantomData,
+        })
+    }
+
+    /// An array holding a copy of `data`.
+    pub fn copy_of<T: Pod>(&self, data: &[T]) -> Result<Buf<T>> {
+        if !self.is_mapped() {
+            return Ok(Buf::from_vec(data.to_vec()));
+        }
+        let mut b = self.zeroed(data.len())?;
+        b.copy_from_slice(data);
+        Ok(b)
+    }
+}
+
+fn zero<T: Pod>() -> T {
+    // SAFETY: `Pod` guarantees that the all-zero bit pattern is a valid `T`.
+    unsafe { std::mem::zeroed() }
+}
+
+enum Inner<T> {
+    Heap(Vec<T>),
+    Map(MmapMut),
+}
+
+/// An array on the heap or in a mapped scratch file; derefs to a slice either way.
+pub struct Buf<T: Pod> {
+    inner: Inner<T>,
+    len: usize,
+    _t: PhantomData<T>,
+}
+
+impl<T: Pod> Buf<T> {
+    /// Wrap a heap vector.
+    pub fn from_vec(v: Vec<T>) -> Self {
+        let len = v.len();
+        Buf {
+            inner: Inner::Heap(v),
+            len,
+            _t: PhantomData,
+        }
+    }
+
+    /// Whether the array lives in a scratch file.
+    pub fn is_mapped(&self) -> bool {
+        matches!(self.inner, Inner::Map(_))
+    }
+}
+
+impl<T: Pod> Default for Buf<T> {
+    fn default() -> Self {
+        Buf::from_vec(Vec::new())
+    }
+}
+
+impl<T: Pod> Deref for Buf<T> {
+    type Target = [T];
+    fn deref(&self) -> &[T] {
+        match &self.inner {
+            Inner::Heap(v) => v,
+            // SAFETY: the mapping is page-aligned (so aligned for any T), holds exactly
+            // `len * size_of::<T>()` bytes, and `Pod` makes every bit pattern a valid T.
+            Inner::Map(m) => unsafe {
+                std::slice::from_raw_parts(m.as_ptr().cast::<T>(), self.len)
+            },
+        }
+    }
+}
+
+impl<T: Pod> DerefMut for Buf<T> {
+    fn deref_mut(&mut self) -> &mut [T] {
+        match &mut self.inner {
+            Inner::Heap(v) => v,
+            // SAFETY: as in `deref`; `&mut self` makes the access exclusive.
+            Inner::Map(m) => unsafe {
+                std::slice::from_raw_parts_mut(m.as_mut_ptr().cast::<T>(), self.len)
+            },
+        }
+    }
+}
+
+impl<T: Pod + std::fmt::Debug> std::fmt::Debug for Buf<T> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "Buf<{}>[{}; {}]",
+            std::any::type_name::<T>(),
+            self.len,
+            if self.is_mapped() { "mapped" } else { "heap" }
+        )
+    }
+}
+
+impl<T: Pod> Clone for Buf<T> {
+    /// Clones onto the heap.
+    fn clone(&self) -> Self {
+        Buf::from_vec(self.to_vec())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn mapped_arrays_work_like_heap_ones_and_leave_no_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let s = Storage::scratch(dir.path()).unwrap();
+        let mut a: Buf<DVec3> = s.zeroed(1000).unwrap();
+        assert!(a.is_mapped());
+        assert!(a.iter().all(|p| *p == DVec3::ZERO));
+        a[999] = DVec3::new(1.0, 2.0, 3.0);
+        let b = s.copy_of(&a[..]).unwrap();
+        assert_eq!(b[999], DVec3::new(1.0, 2.0, 3.0));
+        assert_eq!(s.mapped_bytes(), 2 * 1000 * 24);
+        assert_eq!(
+            std::fs::read_dir(dir.path()).unwrap().count(),
+            0,
+            "scratch files must be unlinked"
+        );
+        let h: Buf<u32> = Storage::heap().zeroed(5).unwrap();
+        assert!(!h.is_mapped() && h.len() == 5);
+    }
+
+    #[test]
+    fn scratch_must_be_a_directory() {
+        let f = tempfile::NamedTempFile::new().unwrap();
+        assert!(Storage::scratch(f.path()).is_err());
+    }
+}

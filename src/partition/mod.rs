@@ -1,0 +1,193 @@
+//! Spatial reordering and patches.
+//!
+//! - [`reorder`] sorts vertices along a Morton (Z-order) curve of their positions, so that a
+//!   spatial patch is a contiguous range of vertex ids and a memory-mapped array is read in
+//!   nearby pages; triangles are renumbered, rotated so that their smallest vertex comes first
+//!   (a cyclic rotation keeps the orientation), and sorted. The permutation is kept so that the
+//!   output can be written in the input's vertex order.
+//! - [`patches`] cuts the reordered vertices into ranges of `patch_size` and assigns each stencil
+//!   to exactly one patch, the one holding its smallest vertex: an edge stencil `(i, j)`, `i < j`,
+//!   belongs to the patch of `i`; a triangle stencil to the patch of its first (smallest) vertex.
+//!   So every stencil, including those crossing patches, is applied exactly once per iteration.
+
+use std::ops::Range;
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+use crate::error::Result;
+use crate::mesh::{Buf, Storage};
+use crate::topology::Topology;
+
+/// A mesh renumbered along the Morton curve.
+#[derive(Debug)]
+pub struct Reordered {
+    /// `order[new] = old`: the input vertex at each new position.
+    pub order: Buf<u32>,
+    /// Positions in the new order.
+    pub positions: Buf<DVec3>,
+    /// Triangles in new ids, smallest vertex first, sorted ascending.
+    pub triangles: Buf<[u32; 3]>,
+}
+
+/// Reorder `positions` and `triangles` along the Morton curve (see the module doc). Deterministic:
+/// ties in the curve key are broken by the input vertex id.
+pub fn reorder(
+    storage: &Storage,
+    positions: &[DVec3],
+    triangles: &[[u32; 3]],
+) -> Result<Reordered> {
+    let n = positions.len();
+    let (lo, hi) = positions
+        .iter()
+        .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), p| {
+            (lo.min(*p), hi.max(*p))
+        });
+    let extent = (hi - lo).max_element();
+    let scale = if extent > 0.0 {
+        ((1u64 << 21) - 1) as f64 / extent
+    } else {
+        0.0
+    };
+
+    let mut keys: Buf<[u64; 2]> = storage.zeroed(n)?;
+    keys.par_iter_mut().enumerate().for_each(|(v, k)| {
+        let q = ((positions[v] - lo) * scale).as_u64vec3();
+        *k = [morton3(q.x, q.y, q.z), v as u64];
+    });
+    keys.par_sort_unstable();
+
+    let mut order: Buf<u32> = storage.zeroed(n)?;
+    let mut rank: Buf<u32> = storage.zeroed(n)?;
+    for (new, k) in keys.iter().enumerate() {
+        order[new] = k[1] as u32;
+        rank[k[1] as usize] = new as u32;
+    }
+    drop(keys);
+
+    let mut new_pos: Buf<DVec3> = storage.zeroed(n)?;
+    new_pos
+        .par_iter_mut()
+        .zip(order.par_iter())
+        .for_each(|(p, &old)| *p = positions[old as usize]);
+
+    let mut tris: Buf<[u32; 3]> = storage.zeroed(triangles.len())?;
+    tris.par_iter_mut()
+        .zip(triangles.par_iter())
+        .for_each(|(t, old)| {
+            let r = old.map(|v| rank[v as usize]);
+            let first = (0..3).min_by_key(|&k| r[k]).unwrap_or(0);
+            *t = [r[first], r[(first + 1) % 3], r[(first + 2) % 3]];
+        });
+    tris.par_sort_unstable();
+    Ok(Reordered {
+        order,
+        positions: new_pos,
+        triangles: tris,
+    })
+}
+
+/// Interleave the low 21 bits of x, y, z into a 63-bit Morton key.
+fn morton3(x: u64, y: u64, z: u64) -> u64 {
+    fn spread(mut v: u64) -> u64 {
+        v &= 0x1f_ffff;
+        v = (v | v << 32) & 0x1f_0000_0000_ffff;
+        v = (v | v << 16) & 0x1f_0000_ff00_00ff;
+        v = (v | v << 8) & 0x100f_00f0_0f00_f00f;
+        v = (v | v << 4) & 0x10c3_0c30_c30c_30c3;
+        v = (v | v << 2) & 0x1249_2492_4924_9249;
+        v
+    }
+    spread(x) | spread(y) << 1 | spread(z) << 2
+}
+
+/// One patch: a contiguous range of (reordered) vertices and the stencils it owns.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Patch {
+    /// Owned vertices; the patch owns the edge stencils `(i, j)`, `i < j`, with `i` in this range.
+    pub vertices: Range<u32>,
+    /// Owned triangle stencils: indices into the sorted triangles whose first vertex is owned.
+    pub triangles: Range<u32>,
+}
+
+impl Patch {
+    /// The owned edge stencils, in ascending `(i, j)` order.
+    pub fn edges<'a>(&self, topo: &'a Topology) -> impl Iterator<Item = [u32; 2]> + 'a {
+        self.vertices.clone().flat_map(move |i| {
+            let nbrs = topo.neighbors(i);
+            let first_above = nbrs.partition_point(|&j| j <= i);
+            nbrs[first_above..].iter().map(move |&j| [i, j])
+        })
+    }
+}
+
+/// Cut `n_vertices` reordered vertices into patches of `patch_size` (the last may be smaller).
+/// `triangles` must be sorted with their smallest vertex first, as [`reorder`] leaves them.
+pub fn patches(n_vertices: usize, triangles: &[[u32; 3]], patch_size: usize) -> Vec<Patch> {
+    let size = patch_size.max(1);
+    let first_triangle = |v: usize| triangles.partition_point(|t| (t[0] as usize) < v) as u32;
+    (0..n_vertices.div_ceil(size))
+        .map(|p| {
+            let (lo, hi) = (p * size, ((p + 1) * size).min(n_vertices));
+            Patch {
+                vertices: lo as u32..hi as u32,
+                triangles: first_triangle(lo)..first_triangle(hi),
+            }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn morton_interleaves_bits() {
+        assert_eq!(morton3(1, 0, 0), 1);
+        assert_eq!(morton3(0, 1, 0), 2);
+        assert_eq!(morton3(0, 0, 1), 4);
+        assert_eq!(morton3(3, 0, 0), 0b1001);
+        assert_eq!(morton3(0x1f_ffff, 0x1f_ffff, 0x1f_ffff), (1u64 << 63) - 1);
+    }
+
+    #[test]
+    fn reorder_is_a_permutation_that_keeps_triangles_and_orientation() {
+        let pos: Vec<DVec3> = (0..6)
+            .map(|k| DVec3::new((5 - k) as f64, (k % 2) as f64, 0.0))
+            .collect();
+        let tris = vec![[0, 1, 2], [2, 1, 3], [3, 4, 5], [5, 4, 0]];
+        let r = reorder(&Storage::heap(), &pos, &tris).unwrap();
+        let mut seen = r.order.to_vec();
+        seen.sort();
+        assert_eq!(seen, (0..6).collect::<Vec<u32>>());
+        for (new, &old) in r.order.iter().enumerate() {
+            assert_eq!(r.positions[new], pos[old as usize]);
+        }
+        // Each reordered triangle maps back to an input triangle up to a cyclic rotation.
+        let back = |t: &[u32; 3]| t.map(|v| r.order[v as usize]);
+        for t in r.triangles.iter() {
+            let b = back(t);
+            assert!(t[0] < t[1] && t[0] < t[2]);
+            assert!(
+                tris.iter()
+                    .any(|o| (0..3).any(|k| [o[k], o[(k + 1) % 3], o[(k + 2) % 3]] == b))
+            );
+        }
+        assert!(r.triangles.windows(2).all(|w| w[0] <= w[1]));
+    }
+
+    #[test]
+    fn patches_cover_vertices_and_triangles_once() {
+        let tris: Vec<[u32; 3]> = vec![[0, 1, 2], [0, 2, 3], [1, 4, 2], [3, 5, 6], [4, 5, 6]];
+        let ps = patches(7, &tris, 3);
+        assert_eq!(ps.len(), 3);
+        assert_eq!(ps[0].vertices, 0..3);
+        assert_eq!(ps[2].vertices, 6..7);
+        assert_eq!(
+            ps.iter().map(|p| p.triangles.len()).sum::<usize>(),
+            tris.len()
+        );
+        assert_eq!(ps[0].triangles, 0..3);
+        assert_eq!(ps[1].triangles, 3..5);
+    }
+}

@@ -1,0 +1,188 @@
+//! Which patches may run at the same time.
+//!
+//! A stencil with free vertices F reads positions and neighbour sums of F ∪ N(F) (and, for the
+//! Laplacians, their neighbours' positions through the sums), and writes positions of F and sums of
+//! N(F). Two stencils whose free vertices are 3 or more rings apart therefore touch disjoint data.
+//! A patch's free vertices lie within one ring of its owned range, so two patches whose owned
+//! ranges are more than 4 rings apart never conflict; closer ones are joined in the conflict graph,
+//! which is coloured with DSatur (petgraph). Colours run one after another, in ascending colour
+//! number; the patches of one colour run in parallel, and because they touch disjoint data, the
+//! result equals running them one by one in ascending patch order, whatever the thread count.
+
+use std::collections::HashSet;
+use std::marker::PhantomData;
+
+use glam::DVec3;
+use petgraph::graph::UnGraph;
+use rayon::prelude::*;
+
+use crate::partition::Patch;
+use crate::smooth::Field;
+use crate::topology::Topology;
+
+/// Rings around a patch's owned range within which another patch's owned vertices conflict.
+const CONFLICT_RINGS: usize = 4;
+/// Rings of halo a patch reads outside its owned range (F ∪ N(F) with F one ring out).
+const HALO_RINGS: usize = 2;
+
+/// The colouring of the patches.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Schedule {
+    /// Patch indices of each colour, ascending; colours in execution order.
+    pub colours: Vec<Vec<u32>>,
+    /// Per patch: vertices outside its owned range that its stencils read.
+    pub halo: Vec<u32>,
+}
+
+/// Colour the conflict graph of `patches` on `topo` (runs on the current rayon pool; the result
+/// does not depend on the thread count).
+pub fn schedule(topo: &Topology, patches: &[Patch]) -> Schedule {
+    let patch_size = patches.first().map_or(1, |p| p.vertices.len().max(1)) as u32;
+    let owner = |v: u32| v / patch_size;
+    let near: Vec<(Vec<u32>, u32)> = patches
+        .par_iter()
+        .enumerate()
+        .map(|(a, p)| {
+            let rings = rings_outside(topo, p, CONFLICT_RINGS);
+            let halo = rings.iter().take(HALO_RINGS).map(|r| r.len() as u32).sum();
+            let mut others: Vec<u32> = rings.iter().flatten().map(|&v| owner(v)).collect();
+            others.sort_unstable();
+            others.dedup();
+            others.retain(|&b| b as usize > a);
+            (others, halo)
+        })
+        .collect();
+
+    let mut graph = UnGraph::<(), ()>::with_capacity(patches.len(), 0);
+    let nodes: Vec<_> = (0..patches.len()).map(|_| graph.add_node(())).collect();
+    for (a, (others, _)) in near.iter().enumerate() {
+        for &b in others {
+            graph.add_edge(nodes[a], nodes[b as usize], ());
+        }
+    }
+    let (colouring, count) = petgraph::algo::dsatur_coloring(&graph);
+    let mut colours = vec![Vec::new(); count];
+    for (p, node) in nodes.iter().enumerate() {
+        colours[colouring[node]].push(p as u32);
+    }
+    colours.retain(|c| !c.is_empty());
+    Schedule {
+        colours,
+        halo: near.into_iter().map(|(_, h)| h).collect(),
+    }
+}
+
+/// The vertices outside `p`'s owned range, ring by ring (ring 1 first), up to `depth` rings.
+fn rings_outside(topo: &Topology, p: &Patch, depth: usize) -> Vec<Vec<u32>> {
+    let inside = |v: u32| p.vertices.contains(&v);
+    let mut seen = HashSet::new();
+    let mut ring: Vec<u32> = Vec::new();
+    for v in p.vertices.clone() {
+        for &u in topo.neighbors(v) {
+            if !inside(u) && seen.insert(u) {
+                ring.push(u);
+            }
+        }
+    }
+    let mut rings = vec![ring];
+    while rings.len() < depth {
+        let mut next = Vec::new();
+        for &v in rings.last().into_iter().flatten() {
+            for &u in topo.neighbors(v) {
+                if !inside(u) && seen.insert(u) {
+                    next.push(u);
+                }
+            }
+        }
+        rings.push(next);
+    }
+    rings
+}
+
+/// A per-vertex array shared by the threads that run the patches of one colour.
+///
+/// Each thread gets its own copy and accesses the array through raw pointers; soundness rests on
+/// the schedule: no element is touched by two threads when one of them writes.
+#[derive(Clone, Copy)]
+pub struct SharedField<'a> {
+    ptr: *mut DVec3,
+    len: usize,
+    _borrow: PhantomData<&'a mut [DVec3]>,
+}
+
+// SAFETY: access is through `Field` only, whose users (see `SharedField::new`) guarantee that
+// threads touch disjoint elements.
+unsafe impl Send for SharedField<'_> {}
+unsafe impl Sync for SharedField<'_> {}
+
+impl<'a> SharedField<'a> {
+    /// Share `data` between threads.
+    ///
+    /// # Safety
+    /// While any copy of the view is in use from several threads, no element may be accessed by
+    /// two threads where one of them writes (the colouring of [`schedule`] guarantees this for
+    /// the stencils of the patches of one colour), and `data` is not used except through the view.
+    pub unsafe fn new(data: &'a mut [DVec3]) -> Self {
+        SharedField {
+            ptr: data.as_mut_ptr(),
+            len: data.len(),
+            _borrow: PhantomData,
+        }
+    }
+}
+
+impl Field for SharedField<'_> {
+    #[inline]
+    fn get(&self, v: u32) -> DVec3 {
+        assert!((v as usize) < self.len, "vertex {v} out of range");
+        // SAFETY: in bounds (checked above); no concurrent writer by the contract of `new`.
+        unsafe { self.ptr.add(v as usize).read() }
+    }
+    #[inline]
+    fn add(&mut self, v: u32, d: DVec3) {
+        assert!((v as usize) < self.len, "vertex {v} out of range");
+        // SAFETY: in bounds; this thread is the only one touching element v (contract of `new`).
+        unsafe {
+            let p = self.ptr.add(v as usize);
+            p.write(p.read() + d);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::partition;
+
+    /// A strip of 2 × n vertices (triangulated ladder), so ring distance is easy to reason about.
+    fn ladder(n: u32) -> Vec<[u32; 3]> {
+        (0..n - 1)
+            .flat_map(|k| {
+                [
+                    [2 * k, 2 * k + 1, 2 * k + 2],
+                    [2 * k + 1, 2 * k + 3, 2 * k + 2],
+                ]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn neighbouring_patches_get_different_colours_distant_ones_may_share() {
+        let tris = ladder(100);
+        let topo = Topology::build(200, &tris).unwrap();
+        let ps = partition::patches(200, &tris, 20);
+        let s = schedule(&topo, &ps);
+        let colour_of = |p: u32| s.colours.iter().position(|c| c.contains(&p)).unwrap();
+        for p in 0..ps.len() as u32 - 1 {
+            assert_ne!(colour_of(p), colour_of(p + 1));
+        }
+        assert!(
+            s.colours.len() < ps.len(),
+            "distant patches should share colours"
+        );
+        assert_eq!(s.colours.iter().map(Vec::len).sum::<usize>(), ps.len());
+        // Each patch's halo: 2 rings on each side of a ladder, 2 vertices per ring.
+        assert_eq!(s.halo[3], 8);
+        assert_eq!(s.halo[0], 4);
+    }
+}
