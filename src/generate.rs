@@ -1,25 +1,429 @@
 //! Generated test meshes: closed icospheres and tori, with seeded Gaussian noise along vertex normals.
-// STUB: to be implemented (helper "generate+metrics").
+//!
+//! Every generator returns a closed, outward-oriented (positive volume) manifold mesh without
+//! duplicate vertices, with `source.input_faces` set to its triangle count and no other source
+//! layout (it is written as a plain `x y z` + triangle list). The noise uses its own tiny seeded
+//! generator (splitmix64 + Box–Muller), so a seed gives the same mesh on every run.
+
+use glam::DVec3;
 
 use crate::mesh::Mesh;
+use crate::metrics::mean_edge_length;
+use crate::topology::Topology;
+
+/// Largest subdivision level [`icosphere`] accepts: `20·4^12` ≈ 335 M triangles, the last level
+/// whose vertex and triangle counts fit the crate's 32-bit indices with room to spare.
+pub const ICOSPHERE_MAX_SUBDIVISIONS: u32 = 12;
+
+/// Largest subdivision level [`torus`] accepts: `256·4^10` ≈ 268 M triangles.
+pub const TORUS_MAX_SUBDIVISIONS: u32 = 10;
 
 /// Unit icosphere centred at the origin, outward-oriented: `10·4^k + 2` vertices, `20·4^k` triangles
 /// (k = 2 gives the paper's 162-vertex sphere).
+///
+/// Built from the regular icosahedron by `k` rounds of midpoint subdivision (every triangle split
+/// into four, new vertices pushed onto the sphere), so every vertex is at radius 1 up to rounding.
+/// Vertex order: the 12 icosahedron corners, then each level's edge midpoints in ascending
+/// `(lower id, higher id)` order of their edge.
+///
+/// # Panics
+/// If `subdivisions > ICOSPHERE_MAX_SUBDIVISIONS`.
 pub fn icosphere(subdivisions: u32) -> Mesh {
-    let _ = subdivisions;
-    todo!()
+    assert!(
+        subdivisions <= ICOSPHERE_MAX_SUBDIVISIONS,
+        "icosphere: {subdivisions} subdivisions exceed the maximum of {ICOSPHERE_MAX_SUBDIVISIONS}"
+    );
+    let t = (1.0 + 5f64.sqrt()) / 2.0;
+    let corners = [
+        [-1.0, t, 0.0],
+        [1.0, t, 0.0],
+        [-1.0, -t, 0.0],
+        [1.0, -t, 0.0],
+        [0.0, -1.0, t],
+        [0.0, 1.0, t],
+        [0.0, -1.0, -t],
+        [0.0, 1.0, -t],
+        [t, 0.0, -1.0],
+        [t, 0.0, 1.0],
+        [-t, 0.0, -1.0],
+        [-t, 0.0, 1.0],
+    ];
+    let mut positions: Vec<DVec3> = corners
+        .iter()
+        .map(|&c| DVec3::from_array(c).normalize())
+        .collect();
+    let mut triangles: Vec<[u32; 3]> = vec![
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ];
+    for _ in 0..subdivisions {
+        triangles = subdivide_on_sphere(&mut positions, &triangles);
+    }
+    generated(positions, triangles)
+}
+
+/// One round of midpoint subdivision of a closed, consistently oriented mesh whose vertices lie
+/// on the unit sphere: appends one vertex per edge (projected onto the sphere) to `positions` and
+/// returns the four children of every triangle, in the parent's order and orientation.
+///
+/// Edge ids come from a CSR of the half-edges `a → b` with `a < b`: in a closed oriented manifold
+/// every undirected edge is exactly one such half-edge, so no hash map is needed.
+fn subdivide_on_sphere(positions: &mut Vec<DVec3>, triangles: &[[u32; 3]]) -> Vec<[u32; 3]> {
+    let n = positions.len();
+    let mut offsets = vec![0usize; n + 1];
+    for t in triangles {
+        for e in 0..3 {
+            let (a, b) = (t[e], t[(e + 1) % 3]);
+            if a < b {
+                offsets[a as usize + 1] += 1;
+            }
+        }
+    }
+    for v in 0..n {
+        offsets[v + 1] += offsets[v];
+    }
+    let mut upper = vec![0u32; offsets[n]];
+    let mut cursor = offsets.clone();
+    for t in triangles {
+        for e in 0..3 {
+            let (a, b) = (t[e], t[(e + 1) % 3]);
+            if a < b {
+                upper[cursor[a as usize]] = b;
+                cursor[a as usize] += 1;
+            }
+        }
+    }
+    drop(cursor);
+    for v in 0..n {
+        upper[offsets[v]..offsets[v + 1]].sort_unstable();
+    }
+
+    positions.reserve(upper.len());
+    for a in 0..n {
+        for &b in &upper[offsets[a]..offsets[a + 1]] {
+            let m = (positions[a] + positions[b as usize]).normalize();
+            positions.push(m);
+        }
+    }
+
+    let midpoint = |a: u32, b: u32| -> u32 {
+        let (lo, hi) = if a < b {
+            (a as usize, b)
+        } else {
+            (b as usize, a)
+        };
+        let row = &upper[offsets[lo]..offsets[lo + 1]];
+        let k = row.binary_search(&hi).expect(
+            "icosphere subdivision: every edge of a closed oriented mesh has an a<b half-edge",
+        );
+        (n + offsets[lo] + k) as u32
+    };
+    let mut out = Vec::with_capacity(triangles.len() * 4);
+    for &[a, b, c] in triangles {
+        let (ab, bc, ca) = (midpoint(a, b), midpoint(b, c), midpoint(c, a));
+        out.push([a, ab, ca]);
+        out.push([b, bc, ab]);
+        out.push([c, ca, bc]);
+        out.push([ab, bc, ca]);
+    }
+    out
 }
 
 /// Closed torus around the z axis (major radius 1, minor radius 0.4), outward-oriented, a regular
 /// grid whose resolution doubles with each subdivision level.
+///
+/// The grid has `16·2^k` vertices around the z axis and `8·2^k` around the tube: `128·4^k`
+/// vertices and `256·4^k` triangles. Vertex `i·(8·2^k) + j` sits at angle `2πi/(16·2^k)` around
+/// z and `2πj/(8·2^k)` around the tube (angle 0 on the outer equator).
+///
+/// # Panics
+/// If `subdivisions > TORUS_MAX_SUBDIVISIONS`.
 pub fn torus(subdivisions: u32) -> Mesh {
-    let _ = subdivisions;
-    todo!()
+    assert!(
+        subdivisions <= TORUS_MAX_SUBDIVISIONS,
+        "torus: {subdivisions} subdivisions exceed the maximum of {TORUS_MAX_SUBDIVISIONS}"
+    );
+    const MAJOR: f64 = 1.0;
+    const MINOR: f64 = 0.4;
+    let nu = 16u32 << subdivisions; // around the z axis
+    let nv = 8u32 << subdivisions; // around the tube
+    let tau = std::f64::consts::TAU;
+    let mut positions = Vec::with_capacity(nu as usize * nv as usize);
+    for i in 0..nu {
+        let (st, ct) = (tau * i as f64 / nu as f64).sin_cos();
+        for j in 0..nv {
+            let (sp, cp) = (tau * j as f64 / nv as f64).sin_cos();
+            let rho = MAJOR + MINOR * cp;
+            positions.push(DVec3::new(rho * ct, rho * st, MINOR * sp));
+        }
+    }
+    let id = |i: u32, j: u32| (i % nu) * nv + (j % nv);
+    let mut triangles = Vec::with_capacity(2 * positions.len());
+    for i in 0..nu {
+        for j in 0..nv {
+            // (∂/∂θ) × (∂/∂φ) points out of the tube, so (θ, φ) counter-clockwise is outward.
+            let (a, b, c, d) = (id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1));
+            triangles.push([a, b, c]);
+            triangles.push([a, c, d]);
+        }
+    }
+    generated(positions, triangles)
+}
+
+/// A generated mesh: no source layout except the face count.
+fn generated(positions: Vec<DVec3>, triangles: Vec<[u32; 3]>) -> Mesh {
+    let mut mesh = Mesh::new(positions, triangles);
+    mesh.source.input_faces = mesh.triangles.len();
+    mesh
 }
 
 /// Displace every vertex along its (area-weighted) normal by Gaussian noise of standard deviation
 /// `sigma` × the mean edge length; deterministic for a seed.
+///
+/// - Normals: the sum of the (unnormalised, i.e. area-weighted) normals of a vertex's triangles,
+///   normalised; a vertex whose sum is zero or not finite (unreferenced, or cancelling) keeps its
+///   position, so no NaN is ever produced.
+/// - One N(0, 1) sample is drawn per vertex in vertex order (also for vertices that do not move),
+///   from splitmix64(`seed`) through Box–Muller; the same seed gives a bit-identical mesh.
+/// - `sigma == 0` (or a non-finite `sigma`, or a mesh whose triangles index vertices out of range)
+///   leaves the positions bit-identical.
 pub fn add_normal_noise(mesh: &mut Mesh, sigma: f64, seed: u64) {
-    let _ = (mesh, sigma, seed);
-    todo!()
+    if sigma == 0.0 || !sigma.is_finite() || mesh.positions.is_empty() {
+        return;
+    }
+    let Ok(topo) = Topology::build(mesh.positions.len(), &mesh.triangles) else {
+        return;
+    };
+    let scale = sigma * mean_edge_length(&mesh.positions, &topo);
+    if scale == 0.0 || !scale.is_finite() {
+        return;
+    }
+
+    let pos = &mut mesh.positions;
+    let mut normals = vec![DVec3::ZERO; pos.len()];
+    for t in &mesh.triangles {
+        let [a, b, c] = t.map(|v| pos[v as usize]);
+        let n = (b - a).cross(c - a); // |n| = 2 × area
+        for &v in t {
+            normals[v as usize] += n;
+        }
+    }
+    let mut rng = Gaussian::new(seed);
+    for (p, n) in pos.iter_mut().zip(&normals) {
+        let z = rng.sample();
+        if let Some(n) = n.try_normalize() {
+            let moved = *p + n * (scale * z);
+            if moved.is_finite() {
+                *p = moved;
+            }
+        }
+    }
+}
+
+/// Standard normal samples from splitmix64 through the Box–Muller transform (both outputs used).
+struct Gaussian {
+    state: u64,
+    spare: Option<f64>,
+}
+
+impl Gaussian {
+    fn new(seed: u64) -> Self {
+        Gaussian {
+            state: seed,
+            spare: None,
+        }
+    }
+
+    /// splitmix64 (Steele, Lea, Flood 2014).
+    fn next_u64(&mut self) -> u64 {
+        self.state = self.state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in (0, 1]: never 0, so its logarithm is finite.
+    fn uniform_open0(&mut self) -> f64 {
+        ((self.next_u64() >> 11) + 1) as f64 * (1.0 / (1u64 << 53) as f64)
+    }
+
+    fn sample(&mut self) -> f64 {
+        if let Some(z) = self.spare.take() {
+            return z;
+        }
+        let r = (-2.0 * self.uniform_open0().ln()).sqrt();
+        let (s, c) = (std::f64::consts::TAU * self.uniform_open0()).sin_cos();
+        self.spare = Some(r * s);
+        r * c
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::metrics::{info, volume};
+    use std::f64::consts::PI;
+
+    fn topo(m: &Mesh) -> Topology {
+        Topology::build(m.positions.len(), &m.triangles).unwrap()
+    }
+
+    fn bits(m: &Mesh) -> Vec<[u64; 3]> {
+        m.positions
+            .iter()
+            .map(|p| p.to_array().map(f64::to_bits))
+            .collect()
+    }
+
+    #[test]
+    fn icosphere_counts_and_closed_genus_zero() {
+        for k in 0..=3 {
+            let m = icosphere(k);
+            let t = topo(&m);
+            let (v, f) = (m.positions.len(), m.triangles.len());
+            assert_eq!(v, 10 * 4usize.pow(k) + 2);
+            assert_eq!(f, 20 * 4usize.pow(k));
+            assert_eq!(t.stats.edges, 3 * f / 2);
+            assert_eq!(
+                v as i64 - t.stats.edges as i64 + f as i64,
+                2,
+                "genus 0 at k = {k}"
+            );
+            let i = info(&m, &t);
+            assert!(i.closed, "closed at k = {k}");
+            assert_eq!(i.components, 1);
+            assert_eq!(i.non_manifold_vertices, 0);
+            assert_eq!(t.stats.fixed_vertices, 0);
+            assert_eq!(m.source.input_faces, f);
+        }
+    }
+
+    #[test]
+    fn icosphere_2_is_the_papers_sphere() {
+        let m = icosphere(2);
+        assert_eq!(m.positions.len(), 162);
+        assert_eq!(m.triangles.len(), 320);
+        assert!(m.positions.iter().all(|p| (p.length() - 1.0).abs() < 1e-12));
+        // Inscribed in the unit ball: below 4π/3, by 3.4 % at k = 2 (4.047), 0.9 % at k = 3.
+        let exact = 4.0 * PI / 3.0;
+        let v = volume(&m.positions, &m.triangles);
+        assert!(v > 0.0, "outward orientation gives positive volume");
+        assert!(
+            v < exact && (exact - v) / exact < 0.04,
+            "volume {v} vs {exact}"
+        );
+        let m3 = icosphere(3);
+        let v3 = volume(&m3.positions, &m3.triangles);
+        assert!(
+            v3 > v && v3 < exact && (exact - v3) / exact < 0.01,
+            "volume {v3} vs {exact}"
+        );
+        // Every triangle outward: its normal points away from the centre.
+        for t in &m.triangles {
+            let [a, b, c] = t.map(|i| m.positions[i as usize]);
+            assert!((b - a).cross(c - a).dot(a + b + c) > 0.0);
+        }
+    }
+
+    #[test]
+    fn torus_is_closed_genus_one_outward() {
+        let m = torus(2);
+        let t = topo(&m);
+        let i = info(&m, &t);
+        assert_eq!(m.positions.len(), 64 * 32);
+        assert_eq!(m.triangles.len(), 2 * 64 * 32);
+        assert!(i.closed);
+        assert_eq!(i.components, 1);
+        assert_eq!(t.stats.non_manifold_vertices, 0);
+        assert_eq!(t.stats.fixed_vertices, 0);
+        let chi = m.positions.len() as i64 - t.stats.edges as i64 + m.triangles.len() as i64;
+        assert_eq!(chi, 0, "Euler characteristic of a torus");
+        let exact = 2.0 * PI * PI * 1.0 * 0.4 * 0.4;
+        assert!(i.volume > 0.0);
+        assert!(
+            (i.volume - exact).abs() / exact < 0.03,
+            "volume {} vs {exact}",
+            i.volume
+        );
+        // No duplicate vertices.
+        let mut b = bits(&m);
+        b.sort_unstable();
+        b.dedup();
+        assert_eq!(b.len(), m.positions.len());
+    }
+
+    #[test]
+    fn noise_is_deterministic_per_seed() {
+        let mut a = icosphere(2);
+        let mut b = icosphere(2);
+        let mut c = icosphere(2);
+        add_normal_noise(&mut a, 0.3, 7);
+        add_normal_noise(&mut b, 0.3, 7);
+        add_normal_noise(&mut c, 0.3, 8);
+        assert_eq!(bits(&a), bits(&b));
+        assert_ne!(bits(&a), bits(&c));
+        assert_ne!(bits(&a), bits(&icosphere(2)));
+        assert!(a.positions.iter().all(|p| p.is_finite()));
+        // The displacement is along the radius (the sphere's normal) with roughly the asked size.
+        let h = mean_edge_length(&icosphere(2).positions, &topo(&a));
+        let r2: f64 = a
+            .positions
+            .iter()
+            .map(|p| (p.length() - 1.0).powi(2))
+            .sum::<f64>();
+        let rms = (r2 / a.positions.len() as f64).sqrt();
+        assert!(rms > 0.15 * h && rms < 0.45 * h, "rms {rms} vs 0.3 × {h}");
+    }
+
+    #[test]
+    fn zero_sigma_leaves_positions_bit_identical() {
+        let mut m = torus(1);
+        let before = bits(&m);
+        add_normal_noise(&mut m, 0.0, 42);
+        assert_eq!(bits(&m), before);
+    }
+
+    #[test]
+    fn zero_normal_means_no_displacement() {
+        // An unreferenced vertex and a doubled (cancelling) pair of triangles: no normal, no move.
+        let mut m = Mesh::new(
+            vec![DVec3::ZERO, DVec3::X, DVec3::Y, DVec3::splat(5.0)],
+            vec![[0, 1, 2], [0, 2, 1]],
+        );
+        let before = bits(&m);
+        add_normal_noise(&mut m, 1.0, 3);
+        assert_eq!(bits(&m), before);
+    }
+
+    #[test]
+    fn gaussian_has_unit_variance() {
+        let mut g = Gaussian::new(1);
+        let n = 100_000;
+        let xs: Vec<f64> = (0..n).map(|_| g.sample()).collect();
+        let mean = xs.iter().sum::<f64>() / n as f64;
+        let var = xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n as f64;
+        assert!(
+            mean.abs() < 0.02 && (var - 1.0).abs() < 0.02,
+            "mean {mean} var {var}"
+        );
+    }
 }

@@ -16,6 +16,7 @@ pub mod io;
 pub mod mesh;
 pub mod metrics;
 pub mod partition;
+pub mod resources;
 pub mod schedule;
 pub mod smooth;
 pub mod topology;

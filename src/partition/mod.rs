@@ -121,6 +121,13 @@ impl Patch {
     }
 }
 
+impl Patch {
+    /// Owned edge stencils whose second vertex lies in another patch (stencils crossing the seam).
+    pub fn crossing_edges(&self, topo: &Topology) -> u64 {
+        self.edges(topo).filter(|[_, j]| !self.vertices.contains(j)).count() as u64
+    }
+}
+
 /// Cut `n_vertices` reordered vertices into patches of `patch_size` (the last may be smaller).
 /// `triangles` must be sorted with their smallest vertex first, as [`reorder`] leaves them.
 pub fn patches(n_vertices: usize, triangles: &[[u32; 3]], patch_size: usize) -> Vec<Patch> {

@@ -1,0 +1,173 @@
+//! Memory: the budget, the process's anonymous memory, and the choice between heap and scratch.
+//!
+//! "Anonymous memory" is `RssAnon` of `/proc/self/status`: heap and stacks, excluding file-backed
+//! pages (the memory-mapped input and scratch files, which the kernel can drop and re-read).
+//! This is the figure `--memory-budget` limits.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use crate::error::{Error, Result};
+
+/// The smallest budget the tool accepts: room for the process itself, its thread stacks and the
+/// per-patch working buffers, with everything large in scratch files.
+pub const MIN_BUDGET: u64 = 64 << 20;
+
+/// Parse a size such as `1G`, `512M`, `64K`, `1.5G` or `123456` (bytes); binary units.
+pub fn parse_size(s: &str) -> std::result::Result<u64, String> {
+    let t = s.trim();
+    let (num, mult) = match t.char_indices().last() {
+        Some((i, c)) if c.is_ascii_alphabetic() => {
+            let m = match c.to_ascii_uppercase() {
+                'K' => 1u64 << 10,
+                'M' => 1 << 20,
+                'G' => 1 << 30,
+                'T' => 1 << 40,
+                'B' => 1,
+                _ => return Err(format!("'{s}': unknown size suffix '{c}' (use K, M, G or T)")),
+            };
+            (&t[..i], m)
+        }
+        _ => (t, 1),
+    };
+    let x: f64 = num.trim().parse().map_err(|_| format!("'{s}' is not a size (e.g. 512M, 1G)"))?;
+    if !x.is_finite() || x < 0.0 {
+        return Err(format!("'{s}' is not a size (e.g. 512M, 1G)"));
+    }
+    let bytes = x * mult as f64;
+    if bytes >= u64::MAX as f64 {
+        return Err(format!("'{s}' is too large"));
+    }
+    Ok(bytes as u64)
+}
+
+/// Format a byte count with a binary unit, e.g. `1.50 GiB`.
+pub fn format_size(bytes: u64) -> String {
+    const UNITS: [&str; 5] = ["B", "KiB", "MiB", "GiB", "TiB"];
+    let mut x = bytes as f64;
+    let mut u = 0;
+    while x >= 1024.0 && u < UNITS.len() - 1 {
+        x /= 1024.0;
+        u += 1;
+    }
+    if u == 0 { format!("{bytes} B") } else { format!("{x:.2} {}", UNITS[u]) }
+}
+
+fn read_kib(file: &str, key: &str) -> Option<u64> {
+    let text = std::fs::read_to_string(file).ok()?;
+    let line = text.lines().find(|l| l.starts_with(key))?;
+    let kib: u64 = line[key.len()..].trim().trim_end_matches("kB").trim().parse().ok()?;
+    Some(kib * 1024)
+}
+
+/// The process's anonymous resident memory in bytes (`RssAnon`), if the OS tells.
+pub fn rss_anon() -> Option<u64> {
+    read_kib("/proc/self/status", "RssAnon:")
+}
+
+/// The memory the system can give without swapping (`MemAvailable`), if the OS tells.
+pub fn mem_available() -> Option<u64> {
+    read_kib("/proc/meminfo", "MemAvailable:")
+}
+
+/// The default budget: three quarters of the available memory (1 GiB if unknown).
+pub fn default_budget() -> u64 {
+    mem_available().map_or(1 << 30, |m| m / 4 * 3).max(MIN_BUDGET)
+}
+
+/// Check a user-given budget.
+pub fn check_budget(budget: u64) -> Result<()> {
+    if budget < MIN_BUDGET {
+        return Err(Error::Config(format!(
+            "--memory-budget {} is below the minimum of {}",
+            format_size(budget),
+            format_size(MIN_BUDGET)
+        )));
+    }
+    Ok(())
+}
+
+/// Anonymous bytes the in-core engine needs for a mesh, per vertex and per triangle: positions
+/// (working, previous, sums: 3 × 24), reorder permutations and keys (4 + 4 + 16), CSR offsets
+/// (2 × 8), fixed mask (1); triangles (12, input and reordered), vertex→face (12) and
+/// vertex→vertex (≈ 12) adjacency. Used to decide between heap and scratch.
+pub fn in_core_estimate(vertices: u64, triangles: u64) -> u64 {
+    vertices * (72 + 24 + 16 + 1) + triangles * (24 + 12 + 12)
+}
+
+/// Samples `RssAnon` in the background and keeps the peak.
+pub struct PeakSampler {
+    peak: Arc<AtomicU64>,
+    stop: Arc<AtomicBool>,
+    handle: Option<JoinHandle<()>>,
+}
+
+impl PeakSampler {
+    /// Start sampling every `interval`.
+    pub fn start(interval: Duration) -> PeakSampler {
+        let peak = Arc::new(AtomicU64::new(rss_anon().unwrap_or(0)));
+        let stop = Arc::new(AtomicBool::new(false));
+        let (p, s) = (peak.clone(), stop.clone());
+        let handle = std::thread::Builder::new()
+            .name("rss-sampler".into())
+            .spawn(move || {
+                while !s.load(Ordering::Relaxed) {
+                    if let Some(r) = rss_anon() {
+                        p.fetch_max(r, Ordering::Relaxed);
+                    }
+                    std::thread::sleep(interval);
+                }
+            })
+            .ok();
+        PeakSampler { peak, stop, handle }
+    }
+
+    /// The largest `RssAnon` seen so far (including now).
+    pub fn peak(&self) -> u64 {
+        if let Some(r) = rss_anon() {
+            self.peak.fetch_max(r, Ordering::Relaxed);
+        }
+        self.peak.load(Ordering::Relaxed)
+    }
+}
+
+impl Drop for PeakSampler {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(h) = self.handle.take() {
+            let _ = h.join();
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sizes_parse_with_binary_suffixes() {
+        assert_eq!(parse_size("1G"), Ok(1 << 30));
+        assert_eq!(parse_size("512m"), Ok(512 << 20));
+        assert_eq!(parse_size("64K"), Ok(64 << 10));
+        assert_eq!(parse_size("1.5G"), Ok(3 << 29));
+        assert_eq!(parse_size("1000"), Ok(1000));
+        assert!(parse_size("lots").is_err());
+        assert!(parse_size("-1G").is_err());
+        assert!(parse_size("5X").is_err());
+        assert!(check_budget(1 << 20).is_err());
+        assert!(check_budget(1 << 30).is_ok());
+        assert_eq!(format_size(3 << 29), "1.50 GiB");
+    }
+
+    #[test]
+    fn rss_is_measured_and_the_sampler_sees_an_allocation() {
+        let s = PeakSampler::start(Duration::from_millis(1));
+        let before = s.peak();
+        assert!(before > 0);
+        let v = vec![1u8; 64 << 20];
+        std::hint::black_box(&v);
+        assert!(s.peak() >= before + (60 << 20));
+    }
+}
