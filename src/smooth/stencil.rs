@@ -63,11 +63,10 @@ impl Row {
     }
 }
 
-/// Scratch buffers reused across stencils, so that no stencil allocates.
+/// Scratch buffer reused across stencils, so that no stencil allocates.
 #[derive(Debug, Default)]
 pub struct Workspace {
     rows: Vec<Row>,
-    faces: Vec<u32>,
 }
 
 /// Relative size below which a pivot of `KᵀK`, or `|n|` against the stencil's area, counts as degenerate.
@@ -92,36 +91,43 @@ pub fn apply<const N: usize, P: Field + ?Sized, S: Field + ?Sized>(
     }
 
     // Rows F ∪ N(F), merged by vertex.
+    // Rows F ∪ N(F): the free vertices of an edge or triangle stencil are neighbours of each
+    // other, so the rows are exactly the merge of their sorted neighbour lists.
     let rows = &mut ws.rows;
     rows.clear();
-    for (fi, &f) in free.iter().enumerate() {
+    let lists: [&[u32]; N] = free.map(|f| topo.neighbors(f));
+    let mut at = [0usize; N];
+    loop {
+        let mut v = u32::MAX;
+        for f in 0..N {
+            if let Some(&u) = lists[f].get(at[f]) {
+                v = v.min(u);
+            }
+        }
+        if v == u32::MAX {
+            break;
+        }
+        let mut nbr_mask = 0u8;
+        for f in 0..N {
+            if lists[f].get(at[f]) == Some(&v) {
+                nbr_mask |= 1 << f;
+                at[f] += 1;
+            }
+        }
+        let self_mask = free.iter().position(|&f| f == v).map_or(0, |k| 1u8 << k);
         rows.push(Row {
-            v: f,
-            self_mask: 1 << fi,
-            nbr_mask: 0,
+            v,
+            self_mask,
+            nbr_mask,
             inv_deg: 0.0,
             lap: DVec3::ZERO,
         });
-        for &u in topo.neighbors(f) {
-            rows.push(Row {
-                v: u,
-                self_mask: 0,
-                nbr_mask: 1 << fi,
-                inv_deg: 0.0,
-                lap: DVec3::ZERO,
-            });
-        }
     }
-    rows.sort_unstable_by_key(|r| r.v);
-    rows.dedup_by(|later, kept| {
-        if later.v == kept.v {
-            kept.self_mask |= later.self_mask;
-            kept.nbr_mask |= later.nbr_mask;
-            true
-        } else {
-            false
-        }
-    });
+    debug_assert_eq!(
+        rows.iter().filter(|r| r.self_mask != 0).count(),
+        N,
+        "free vertices of a stencil must be mutual neighbours"
+    );
 
     // Normal equations (KᵀK) d = −Kᵀ L, and the energy before the stencil.
     let mut m = [[0.0f64; N]; N];
@@ -130,7 +136,9 @@ pub fn apply<const N: usize, P: Field + ?Sized, S: Field + ?Sized>(
     for r in rows.iter_mut() {
         r.inv_deg = 1.0 / topo.deg(r.v) as f64;
         r.lap = sums.get(r.v) * r.inv_deg - pos.get(r.v);
-        energy_before += r.lap.length_squared();
+        if params.reject_energy_increase {
+            energy_before += r.lap.length_squared();
+        }
         let k: [f64; N] = std::array::from_fn(|f| r.k(f));
         for f in 0..N {
             if k[f] != 0.0 {
@@ -146,7 +154,7 @@ pub fn apply<const N: usize, P: Field + ?Sized, S: Field + ?Sized>(
     };
 
     if params.volume {
-        match volume_translation(topo, triangles, pos, &free, &d, &mut ws.faces) {
+        match volume_translation(topo, triangles, pos, &free, &d) {
             Some(w) => d.iter_mut().for_each(|x| *x += w),
             None => return Outcome::SkippedDegenerate,
         }
@@ -181,44 +189,65 @@ fn volume_translation<const N: usize, P: Field + ?Sized>(
     pos: &P,
     free: &[u32; N],
     d: &[DVec3; N],
-    faces: &mut Vec<u32>,
 ) -> Option<DVec3> {
-    faces.clear();
-    for &f in free {
-        faces.extend_from_slice(topo.faces_of(f));
-    }
-    faces.sort_unstable();
-    faces.dedup();
-
     let origin = free.iter().fold(DVec3::ZERO, |s, &f| s + pos.get(f)) / N as f64;
-    let (mut v0, mut v1, mut area2) = (0.0, 0.0, 0.0);
+    // ΔV = V(P¹) − V(P⁰) and n = ∂V/∂w at P¹, both times 6 (the factor cancels in w).
+    let (mut dv, mut scale) = (0.0, 0.0);
     let mut n = DVec3::ZERO;
-    for &t in faces.iter() {
-        let tri = triangles[t as usize];
-        let old = tri.map(|v| pos.get(v) - origin);
-        let mut new = old;
-        let mut is_free = [false; 3];
-        for c in 0..3 {
-            if let Some(fi) = free.iter().position(|&f| f == tri[c]) {
-                new[c] += d[fi];
-                is_free[c] = true;
+    for (fi, &f) in free.iter().enumerate() {
+        for &t in topo.faces_of(f) {
+            let tri = triangles[t as usize];
+            // Which corners are free; a face holding an earlier free vertex was already counted.
+            let mut slot = [usize::MAX; 3];
+            let mut free_corners = 0;
+            let mut seen = false;
+            for c in 0..3 {
+                for (g, &fg) in free.iter().enumerate() {
+                    if tri[c] == fg {
+                        slot[c] = g;
+                        free_corners += 1;
+                        seen |= g < fi;
+                    }
+                }
             }
-        }
-        v0 += old[0].dot(old[1].cross(old[2]));
-        v1 += new[0].dot(new[1].cross(new[2]));
-        area2 += (new[1] - new[0]).cross(new[2] - new[0]).length();
-        for a in 0..3 {
-            if is_free[a] {
-                n += new[(a + 1) % 3].cross(new[(a + 2) % 3]);
+            if seen {
+                continue;
             }
+            let nt = if free_corners == 1 {
+                // Most faces: only f moves, so ΔV_t = d·(p_b × p_c) and n_t = p_b × p_c.
+                let c = slot.iter().position(|&g| g == fi).unwrap_or(0);
+                let pb = pos.get(tri[(c + 1) % 3]) - origin;
+                let pc = pos.get(tri[(c + 2) % 3]) - origin;
+                let nt = pb.cross(pc);
+                dv += d[fi].dot(nt);
+                nt
+            } else {
+                let old = tri.map(|v| pos.get(v) - origin);
+                let mut new = old;
+                for c in 0..3 {
+                    if slot[c] != usize::MAX {
+                        new[c] += d[slot[c]];
+                    }
+                }
+                dv += new[0].dot(new[1].cross(new[2])) - old[0].dot(old[1].cross(old[2]));
+                let mut nt = DVec3::ZERO;
+                for a in 0..3 {
+                    if slot[a] != usize::MAX {
+                        nt += new[(a + 1) % 3].cross(new[(a + 2) % 3]);
+                    }
+                }
+                nt
+            };
+            n += nt;
+            scale += nt.length_squared();
         }
     }
-    // Both sides carry the same factor 6, which cancels in w.
+    // A gradient that cancels out against its faces' own (|n|² ≪ Σ|n_t|²) is degenerate.
     let nn = n.length_squared();
-    if !(nn > (DEGENERATE * area2) * (DEGENERATE * area2)) {
+    if !(nn > DEGENERATE * DEGENERATE * scale) {
         return None;
     }
-    Some(n * ((v0 - v1) / nn))
+    Some(n * (-dv / nn))
 }
 
 /// Solve the small SPD system `m x = b` by Cholesky; `None` if a pivot is not clearly positive.
