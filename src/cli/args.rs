@@ -1,0 +1,273 @@
+//! Raw command-line flags (clap). Only parsing and per-flag validation live here (numbers parse,
+//! `--threads ≥ 1`, λ and μ finite); checks that need several flags or the file system are made
+//! when the flags are resolved into a [`super::Config`].
+
+use std::path::PathBuf;
+
+use clap::builder::PossibleValue;
+use clap::{Args as ClapArgs, Parser, Subcommand, ValueEnum};
+
+use crate::smooth::Method;
+
+/// vcsmooth: smooth triangle meshes without shrinking them (volume-constrained smoothing, Liu et al. 2002).
+#[derive(Debug, Clone, Parser)]
+#[command(name = "vcsmooth", version, about, long_about = None, propagate_version = true)]
+pub struct Args {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The subcommands. Their names and flags are a contract: scripts depend on them.
+#[derive(Debug, Clone, Subcommand)]
+pub enum Command {
+    /// Smooth a mesh file and write the result (format chosen by OUT's extension).
+    Smooth(SmoothArgs),
+    /// Print vertices, faces, edges, boundary, components, volume, area, bounding box of a mesh.
+    Info(InfoArgs),
+    /// Compare two meshes with the same connectivity (distances, normals, volume and area ratios).
+    Compare(CompareArgs),
+    /// Write a closed test mesh (icosphere or torus), optionally with Gaussian noise along normals.
+    Generate(GenerateArgs),
+    /// Run several methods from the same input and plot volume % per iteration (the paper's Fig. 4).
+    Curves(CurvesArgs),
+}
+
+/// `vcsmooth smooth IN OUT ...`
+#[derive(Debug, Clone, ClapArgs)]
+pub struct SmoothArgs {
+    /// Input mesh (PLY, OBJ, OFF or STL).
+    #[arg(value_name = "IN")]
+    pub input: PathBuf,
+    /// Output mesh; .ply, .obj, .off or .stl. Written atomically, never on failure.
+    #[arg(value_name = "OUT")]
+    pub output: PathBuf,
+    /// Smoothing method.
+    #[arg(long, value_enum, default_value_t = Method::Vcs)]
+    pub method: Method,
+    /// Number of iterations; 0 only converts the file's format.
+    #[arg(
+        long,
+        value_name = "N",
+        default_value_t = 10,
+        allow_negative_numbers = true
+    )]
+    pub iterations: usize,
+    #[command(flatten)]
+    pub params: MethodParams,
+    #[command(flatten)]
+    pub engine: EngineArgs,
+    /// Write a JSON report (options, input/output statistics, timings, per-iteration table).
+    #[arg(long, value_name = "FILE.json")]
+    pub report: Option<PathBuf>,
+    /// Write an SVG plot of volume % per iteration.
+    #[arg(long, value_name = "FILE.svg")]
+    pub plot: Option<PathBuf>,
+}
+
+/// Step sizes and stencil options shared by `smooth` and `curves`.
+#[derive(Debug, Clone, ClapArgs)]
+pub struct MethodParams {
+    /// Laplacian step size λ (laplacian, and the first step of taubin).
+    #[arg(long, value_name = "X", default_value_t = 0.5, value_parser = finite_f64, allow_negative_numbers = true)]
+    pub lambda: f64,
+    /// Taubin's second step size μ (negative).
+    #[arg(long, value_name = "Y", default_value_t = -0.53, value_parser = finite_f64, allow_negative_numbers = true)]
+    pub mu: f64,
+    /// Skip a stencil whose result has a higher stencil energy than before (lem, vcs, vcs-triangle) [default: off].
+    #[arg(long)]
+    pub reject_energy_increase: bool,
+}
+
+/// How the engine runs. The out-of-core flags (`--memory-budget`, `--patch-size`, `--scratch`) join
+/// these when patch-parallel smoothing lands.
+#[derive(Debug, Clone, ClapArgs)]
+pub struct EngineArgs {
+    /// Worker threads [default: all cores].
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..), allow_negative_numbers = true)]
+    pub threads: Option<u32>,
+}
+
+/// `vcsmooth info IN [--json]`
+#[derive(Debug, Clone, ClapArgs)]
+pub struct InfoArgs {
+    /// Mesh to describe.
+    #[arg(value_name = "IN")]
+    pub input: PathBuf,
+    /// Print JSON instead of a table [default: table].
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// `vcsmooth compare A B [--json]`
+#[derive(Debug, Clone, ClapArgs)]
+pub struct CompareArgs {
+    /// Reference mesh.
+    #[arg(value_name = "A")]
+    pub a: PathBuf,
+    /// Mesh compared against A (same vertex count and triangles).
+    #[arg(value_name = "B")]
+    pub b: PathBuf,
+    /// Print JSON instead of a table [default: table].
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Shapes `generate` can write.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Shape {
+    /// Unit icosphere: 10·4^K + 2 vertices, 20·4^K triangles.
+    Sphere,
+    /// Torus around the z axis (radii 1 and 0.4); the grid resolution doubles with each level.
+    Torus,
+}
+
+/// `vcsmooth generate sphere|torus OUT --subdivisions K ...`
+#[derive(Debug, Clone, ClapArgs)]
+pub struct GenerateArgs {
+    /// Shape to generate.
+    #[arg(value_enum)]
+    pub shape: Shape,
+    /// Output mesh; .ply, .obj, .off or .stl.
+    #[arg(value_name = "OUT")]
+    pub output: PathBuf,
+    /// Subdivision level K (sphere: 20·4^K triangles; K = 2 is the paper's 162-vertex sphere).
+    #[arg(long, value_name = "K")]
+    pub subdivisions: u32,
+    /// Gaussian noise along vertex normals, standard deviation relative to the mean edge length.
+    #[arg(long, value_name = "SIGMA", default_value_t = 0.0, value_parser = finite_f64)]
+    pub noise: f64,
+    /// Random seed of the noise (same seed, same mesh).
+    #[arg(long, value_name = "S", default_value_t = 1)]
+    pub seed: u64,
+}
+
+/// `vcsmooth curves IN --plot FILE.svg ...`
+#[derive(Debug, Clone, ClapArgs)]
+pub struct CurvesArgs {
+    /// Input mesh (PLY, OBJ, OFF or STL).
+    #[arg(value_name = "IN")]
+    pub input: PathBuf,
+    /// Comma-separated methods to run, each from the same input.
+    #[arg(long, value_enum, value_delimiter = ',', value_name = "M,M,...",
+          default_values_t = [Method::Vcs, Method::Lem, Method::Laplacian])]
+    pub methods: Vec<Method>,
+    /// Iterations per method (at least 1).
+    #[arg(long, value_name = "N", default_value_t = 10, allow_negative_numbers = true,
+          value_parser = clap::value_parser!(u32).range(1..))]
+    pub iterations: u32,
+    #[command(flatten)]
+    pub params: MethodParams,
+    #[command(flatten)]
+    pub engine: EngineArgs,
+    /// SVG file for the volume curves, one line per method with a legend.
+    #[arg(long, value_name = "FILE.svg", required = true)]
+    pub plot: PathBuf,
+    /// Print JSON instead of a table [default: table].
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// A float that must be finite (clap value parser).
+fn finite_f64(s: &str) -> Result<f64, String> {
+    let x: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{s}' is not a number"))?;
+    if x.is_finite() {
+        Ok(x)
+    } else {
+        Err(format!("'{s}' is not a finite number"))
+    }
+}
+
+impl ValueEnum for Method {
+    fn value_variants<'a>() -> &'a [Self] {
+        &Method::ALL
+    }
+
+    fn to_possible_value(&self) -> Option<PossibleValue> {
+        let help = match self {
+            Method::Laplacian => "umbrella Laplacian, p += λ L(p) (shrinks)",
+            Method::Taubin => "λ|μ: a λ step then a μ step (Taubin 1995)",
+            Method::Lem => "local energy minimisation on edge stencils, no volume constraint",
+            Method::Vcs => "volume-constrained smoothing on edge stencils (Liu et al. 2002)",
+            Method::VcsTriangle => "volume-constrained smoothing on triangle stencils",
+        };
+        Some(PossibleValue::new(self.name()).help(help))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    #[test]
+    fn clap_definition_is_consistent() {
+        Args::command().debug_assert();
+    }
+
+    #[test]
+    fn defaults_match_the_contract() {
+        let a = Args::try_parse_from(["vcsmooth", "smooth", "in.ply", "out.ply"]).unwrap();
+        let Command::Smooth(s) = a.command else {
+            panic!("not smooth")
+        };
+        assert_eq!(s.method, Method::Vcs);
+        assert_eq!(s.iterations, 10);
+        assert_eq!(s.params.lambda, 0.5);
+        assert_eq!(s.params.mu, -0.53);
+        assert!(!s.params.reject_energy_increase);
+        assert_eq!(s.engine.threads, None);
+
+        let a = Args::try_parse_from(["vcsmooth", "curves", "in.ply", "--plot", "c.svg"]).unwrap();
+        let Command::Curves(c) = a.command else {
+            panic!("not curves")
+        };
+        assert_eq!(c.methods, vec![Method::Vcs, Method::Lem, Method::Laplacian]);
+    }
+
+    #[test]
+    fn rejects_bad_values() {
+        for argv in [
+            &[
+                "vcsmooth",
+                "smooth",
+                "a.ply",
+                "b.ply",
+                "--iterations",
+                "abc",
+            ][..],
+            &["vcsmooth", "smooth", "a.ply", "b.ply", "--method", "median"],
+            &["vcsmooth", "smooth", "a.ply", "b.ply", "--lambda", "nan"],
+            &["vcsmooth", "smooth", "a.ply", "b.ply", "--mu", "inf"],
+            &["vcsmooth", "smooth", "a.ply", "b.ply", "--threads", "0"],
+            &[
+                "vcsmooth",
+                "curves",
+                "a.ply",
+                "--plot",
+                "c.svg",
+                "--iterations",
+                "0",
+            ],
+            &["vcsmooth", "curves", "a.ply"],
+            &[
+                "vcsmooth",
+                "generate",
+                "cube",
+                "a.ply",
+                "--subdivisions",
+                "1",
+            ],
+        ] {
+            assert!(Args::try_parse_from(argv).is_err(), "{argv:?} accepted");
+        }
+        let a = Args::try_parse_from(["vcsmooth", "smooth", "a", "b", "--mu", "-0.6"]).unwrap();
+        let Command::Smooth(s) = a.command else {
+            panic!("not smooth")
+        };
+        assert_eq!(s.params.mu, -0.6);
+    }
+}

@@ -1,0 +1,305 @@
+//! Resolved, validated configuration: what [`super::run`] executes. Built from [`super::Args`] by
+//! [`Config::from_args`], which makes the checks clap cannot (output formats by extension, plot
+//! files are SVG, directories of the files to write exist), so that a run fails before reading
+//! or smoothing anything rather than after.
+
+use std::path::{Path, PathBuf};
+
+use super::args::{Args, Command, EngineArgs, MethodParams, Shape};
+use crate::error::{Error, Result};
+use crate::io::Format;
+use crate::smooth::{Method, Options};
+
+/// One resolved command.
+#[derive(Debug, Clone)]
+pub enum Config {
+    Smooth(SmoothConfig),
+    Info(InfoConfig),
+    Compare(CompareConfig),
+    Generate(GenerateConfig),
+    Curves(CurvesConfig),
+}
+
+/// How the engine runs: threads now; the out-of-core settings (memory budget, patch size, scratch
+/// directory) are added here, so every command that smooths picks them up.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+pub struct EngineConfig {
+    /// Worker threads; `None`: all cores.
+    pub threads: Option<usize>,
+}
+
+/// `vcsmooth smooth`.
+#[derive(Debug, Clone)]
+pub struct SmoothConfig {
+    pub input: PathBuf,
+    pub output: PathBuf,
+    pub options: Options,
+    pub engine: EngineConfig,
+    pub report: Option<PathBuf>,
+    pub plot: Option<PathBuf>,
+    /// The command line as given, recorded in the report.
+    pub argv: Vec<String>,
+}
+
+/// `vcsmooth info`.
+#[derive(Debug, Clone)]
+pub struct InfoConfig {
+    pub input: PathBuf,
+    pub json: bool,
+}
+
+/// `vcsmooth compare`.
+#[derive(Debug, Clone)]
+pub struct CompareConfig {
+    pub a: PathBuf,
+    pub b: PathBuf,
+    pub json: bool,
+}
+
+/// `vcsmooth generate`.
+#[derive(Debug, Clone)]
+pub struct GenerateConfig {
+    pub shape: Shape,
+    pub output: PathBuf,
+    pub subdivisions: u32,
+    /// Noise standard deviation relative to the mean edge length (≥ 0).
+    pub noise: f64,
+    pub seed: u64,
+}
+
+/// `vcsmooth curves`.
+#[derive(Debug, Clone)]
+pub struct CurvesConfig {
+    pub input: PathBuf,
+    /// Distinct methods, in the order given.
+    pub methods: Vec<Method>,
+    /// Options shared by every method (`method` is replaced per run).
+    pub options: Options,
+    pub engine: EngineConfig,
+    pub plot: PathBuf,
+    pub json: bool,
+}
+
+impl Config {
+    /// Resolve and validate parsed flags. `argv` is the command line, kept for reports.
+    pub fn from_args(args: Args, argv: Vec<String>) -> Result<Config> {
+        Ok(match args.command {
+            Command::Smooth(a) => {
+                mesh_output(&a.output)?;
+                if let Some(r) = &a.report {
+                    parent_exists(r)?;
+                }
+                if let Some(p) = &a.plot {
+                    svg_output(p)?;
+                }
+                Config::Smooth(SmoothConfig {
+                    options: options(a.method, a.iterations, &a.params),
+                    engine: engine(&a.engine),
+                    input: a.input,
+                    output: a.output,
+                    report: a.report,
+                    plot: a.plot,
+                    argv,
+                })
+            }
+            Command::Info(a) => Config::Info(InfoConfig {
+                input: a.input,
+                json: a.json,
+            }),
+            Command::Compare(a) => Config::Compare(CompareConfig {
+                a: a.a,
+                b: a.b,
+                json: a.json,
+            }),
+            Command::Generate(a) => {
+                mesh_output(&a.output)?;
+                if a.noise < 0.0 {
+                    return Err(Error::Config(format!(
+                        "--noise must be at least 0, got {}",
+                        a.noise
+                    )));
+                }
+                Config::Generate(GenerateConfig {
+                    shape: a.shape,
+                    output: a.output,
+                    subdivisions: a.subdivisions,
+                    noise: a.noise,
+                    seed: a.seed,
+                })
+            }
+            Command::Curves(a) => {
+                svg_output(&a.plot)?;
+                let mut methods: Vec<Method> = Vec::new();
+                for m in a.methods {
+                    if !methods.contains(&m) {
+                        methods.push(m);
+                    }
+                }
+                if methods.is_empty() {
+                    return Err(Error::Config("--methods names no method".into()));
+                }
+                Config::Curves(CurvesConfig {
+                    options: options(methods[0], a.iterations as usize, &a.params),
+                    engine: engine(&a.engine),
+                    input: a.input,
+                    methods,
+                    plot: a.plot,
+                    json: a.json,
+                })
+            }
+        })
+    }
+}
+
+fn options(method: Method, iterations: usize, p: &MethodParams) -> Options {
+    Options {
+        method,
+        iterations,
+        lambda: p.lambda,
+        mu: p.mu,
+        reject_energy_increase: p.reject_energy_increase,
+    }
+}
+
+fn engine(e: &EngineArgs) -> EngineConfig {
+    EngineConfig {
+        threads: e.threads.map(|t| t as usize),
+    }
+}
+
+/// The mesh format written for `path`, from its extension (case-insensitive), as the writer sees it.
+pub fn output_format(path: &Path) -> Option<Format> {
+    Format::from_extension(path)
+}
+
+/// Check that a mesh can be written to `path`: known extension, existing directory.
+fn mesh_output(path: &Path) -> Result<()> {
+    if output_format(path).is_none() {
+        let what = match path.extension() {
+            Some(e) => format!("unknown output format '.{}'", e.to_string_lossy()),
+            None => "output file has no extension".to_string(),
+        };
+        return Err(Error::invalid(
+            path,
+            format!("{what} (expected .ply, .obj, .off or .stl)"),
+        ));
+    }
+    parent_exists(path)
+}
+
+/// Check that a plot can be written to `path`: `.svg`, existing directory.
+fn svg_output(path: &Path) -> Result<()> {
+    let ok = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("svg"));
+    if !ok {
+        return Err(Error::invalid(
+            path,
+            "plots are written as SVG: the file name must end in .svg",
+        ));
+    }
+    parent_exists(path)
+}
+
+/// Check that the directory `path` would be created in exists.
+fn parent_exists(path: &Path) -> Result<()> {
+    if path.as_os_str().is_empty() {
+        return Err(Error::Config("an output file name is empty".into()));
+    }
+    match path.parent() {
+        Some(dir) if !dir.as_os_str().is_empty() && !dir.is_dir() => Err(Error::invalid(
+            path,
+            format!("directory '{}' does not exist", dir.display()),
+        )),
+        _ => Ok(()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    fn resolve(argv: &[&str]) -> Result<Config> {
+        Config::from_args(Args::try_parse_from(argv).unwrap(), vec![])
+    }
+
+    #[test]
+    fn output_extensions() {
+        assert_eq!(output_format(Path::new("a/b.PLY")), Some(Format::Ply));
+        assert_eq!(output_format(Path::new("b.stl")), Some(Format::Stl));
+        assert_eq!(output_format(Path::new("b.xyz")), None);
+        assert_eq!(output_format(Path::new("b")), None);
+        let e = resolve(&["vcsmooth", "smooth", "a.ply", "b.xyz"])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("b.xyz") && e.contains("unknown output format"),
+            "{e}"
+        );
+        assert!(
+            resolve(&[
+                "vcsmooth",
+                "generate",
+                "torus",
+                "t.vtk",
+                "--subdivisions",
+                "1"
+            ])
+            .is_err()
+        );
+    }
+
+    #[test]
+    fn plot_must_be_svg_and_directory_must_exist() {
+        assert!(resolve(&["vcsmooth", "smooth", "a.ply", "b.ply", "--plot", "v.png"]).is_err());
+        assert!(resolve(&["vcsmooth", "curves", "a.ply", "--plot", "v.pdf"]).is_err());
+        let e = resolve(&["vcsmooth", "smooth", "a.ply", "/no/such/dir/b.ply"]).unwrap_err();
+        assert!(e.to_string().contains("does not exist"), "{e}");
+        assert!(resolve(&["vcsmooth", "smooth", "a.ply", "b.ply", "--plot", "v.svg"]).is_ok());
+    }
+
+    #[test]
+    fn curves_methods_deduplicated_and_options_carried() {
+        let c = resolve(&[
+            "vcsmooth",
+            "curves",
+            "a.ply",
+            "--plot",
+            "c.svg",
+            "--methods",
+            "vcs,lem,vcs",
+            "--lambda",
+            "0.3",
+            "--iterations",
+            "6",
+            "--threads",
+            "2",
+        ])
+        .unwrap();
+        let Config::Curves(c) = c else {
+            panic!("not curves")
+        };
+        assert_eq!(c.methods, vec![Method::Vcs, Method::Lem]);
+        assert_eq!(c.options.lambda, 0.3);
+        assert_eq!(c.options.iterations, 6);
+        assert_eq!(c.engine.threads, Some(2));
+    }
+
+    #[test]
+    fn negative_noise_refused() {
+        assert!(
+            resolve(&[
+                "vcsmooth",
+                "generate",
+                "sphere",
+                "s.ply",
+                "--subdivisions",
+                "1",
+                "--noise=-1"
+            ])
+            .is_err()
+        );
+    }
+}

@@ -1,0 +1,334 @@
+//! What the commands print and record: the JSON report of `smooth`, the JSON documents of `info`,
+//! `compare` and `curves`, and their human-readable tables.
+
+use std::io::Write;
+use std::path::Path;
+
+use serde::Serialize;
+
+use super::config::EngineConfig;
+use super::output::stdout_error;
+use crate::driver::IterationRecord;
+use crate::error::Result;
+use crate::io::Format;
+use crate::metrics::{Comparison, MeshInfo};
+use crate::smooth::{Method, Options, SweepStats};
+
+/// The program that wrote a report.
+#[derive(Debug, Clone, Serialize)]
+pub struct Tool {
+    pub name: &'static str,
+    pub version: &'static str,
+}
+
+impl Tool {
+    pub fn this() -> Tool {
+        Tool {
+            name: env!("CARGO_PKG_NAME"),
+            version: env!("CARGO_PKG_VERSION"),
+        }
+    }
+}
+
+/// A mesh file and what was measured on it.
+#[derive(Debug, Clone, Serialize)]
+pub struct FileStats {
+    pub path: String,
+    /// `ply`, `obj`, `off`, `stl`; absent when unknown.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub format: Option<String>,
+    pub stats: MeshInfo,
+}
+
+impl FileStats {
+    pub fn new(path: &Path, format: Option<Format>, stats: MeshInfo) -> Self {
+        FileStats {
+            path: path.display().to_string(),
+            format: format.map(format_name),
+            stats,
+        }
+    }
+}
+
+/// Wall-clock seconds per phase of `smooth`.
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct Timings {
+    pub read: f64,
+    pub topology: f64,
+    pub smoothing: f64,
+    pub write: f64,
+    /// Measuring input and output statistics for the report.
+    pub metrics: f64,
+    pub total: f64,
+}
+
+/// Totals over all iterations of a run.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Summary {
+    /// Final volume and area as a percentage of the input's (100 after 0 iterations).
+    pub volume_pct: f64,
+    pub area_pct: f64,
+    pub stencils: SweepStats,
+    /// Sum of the per-iteration smoothing seconds.
+    pub seconds: f64,
+}
+
+impl Summary {
+    pub fn of(records: &[IterationRecord]) -> Summary {
+        let mut stencils = SweepStats::default();
+        for r in records {
+            stencils.add(&r.stencils);
+        }
+        Summary {
+            volume_pct: records.last().map_or(100.0, |r| r.volume_pct),
+            area_pct: records.last().map_or(100.0, |r| r.area_pct),
+            stencils,
+            seconds: records.iter().map(|r| r.seconds).sum(),
+        }
+    }
+}
+
+/// The JSON report of `vcsmooth smooth --report FILE.json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct SmoothReport {
+    pub tool: Tool,
+    pub command: &'static str,
+    /// The command line as given.
+    pub argv: Vec<String>,
+    pub options: Options,
+    pub engine: EngineConfig,
+    pub input: FileStats,
+    /// Statistics of the smoothed f64 positions (before the output format's rounding).
+    pub output: FileStats,
+    pub timings: Timings,
+    pub summary: Summary,
+    /// One row per iteration.
+    pub iterations: Vec<IterationRecord>,
+}
+
+/// The JSON of `vcsmooth info --json`: the path, the format and every [`MeshInfo`] field.
+#[derive(Debug, Clone, Serialize)]
+pub struct InfoDoc {
+    pub path: String,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub format: Option<String>,
+    #[serde(flatten)]
+    pub info: MeshInfo,
+}
+
+/// The JSON of `vcsmooth compare --json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct CompareDoc {
+    pub a: String,
+    pub b: String,
+    #[serde(flatten)]
+    pub comparison: Comparison,
+}
+
+/// One method's run in `vcsmooth curves`.
+#[derive(Debug, Clone, Serialize)]
+pub struct CurveDoc {
+    pub method: Method,
+    /// Volume % at iterations 0 (100), 1, …, N.
+    pub volume_pct: Vec<f64>,
+    pub seconds: f64,
+    pub iterations: Vec<IterationRecord>,
+}
+
+/// The JSON of `vcsmooth curves --json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct CurvesDoc {
+    pub tool: Tool,
+    pub input: String,
+    pub iterations: usize,
+    pub lambda: f64,
+    pub mu: f64,
+    pub reject_energy_increase: bool,
+    pub plot: String,
+    pub curves: Vec<CurveDoc>,
+}
+
+/// Lower-case name of a format, as in file extensions.
+pub fn format_name(f: Format) -> String {
+    format!("{f:?}").to_ascii_lowercase()
+}
+
+/// Print the per-iteration table of a run.
+pub fn print_iterations(out: &mut dyn Write, records: &[IterationRecord]) -> Result<()> {
+    let mut text = format!(
+        "{:>5} {:>12} {:>10} {:>11} {:>11} {:>10} {:>9} {:>10} {:>9} {:>9}\n",
+        "iter",
+        "volume %",
+        "area %",
+        "max disp",
+        "mean disp",
+        "applied",
+        "fixed",
+        "degenerate",
+        "rejected",
+        "seconds"
+    );
+    for r in records {
+        let s = &r.stencils;
+        text += &format!(
+            "{:>5} {:>12.6} {:>10.4} {:>11.4e} {:>11.4e} {:>10} {:>9} {:>10} {:>9} {:>9.3}\n",
+            r.iteration,
+            r.volume_pct,
+            r.area_pct,
+            r.max_displacement,
+            r.mean_displacement,
+            s.applied,
+            s.skipped_fixed,
+            s.skipped_degenerate,
+            s.rejected,
+            r.seconds
+        );
+    }
+    out.write_all(text.as_bytes()).map_err(stdout_error)
+}
+
+/// Print `info` as aligned `key  value` lines.
+pub fn print_info(out: &mut dyn Write, doc: &InfoDoc) -> Result<()> {
+    let i = &doc.info;
+    let mut rows: Vec<(&str, String)> = vec![("file", doc.path.clone())];
+    if let Some(f) = &doc.format {
+        rows.push(("format", f.clone()));
+    }
+    rows.push(("vertices", i.vertices.to_string()));
+    let faces = if i.polygons_triangulated > 0 {
+        format!(
+            "{} triangles from {} ({} fan-triangulated)",
+            i.triangles,
+            count(i.input_faces, "input face"),
+            count(i.polygons_triangulated, "polygon")
+        )
+    } else {
+        format!("{} triangles", i.triangles)
+    };
+    rows.push(("faces", faces));
+    rows.push(("edges", i.edges.to_string()));
+    rows.push(("boundary edges", i.boundary_edges.to_string()));
+    rows.push(("non-manifold edges", i.non_manifold_edges.to_string()));
+    rows.push(("non-manifold vertices", i.non_manifold_vertices.to_string()));
+    rows.push(("degenerate triangles", i.degenerate_triangles.to_string()));
+    rows.push(("components", i.components.to_string()));
+    rows.push(("unreferenced vertices", i.unreferenced_vertices.to_string()));
+    rows.push(("closed", if i.closed { "yes" } else { "no" }.to_string()));
+    rows.push(("signed volume", num(i.volume)));
+    rows.push(("area", num(i.area)));
+    rows.push(("bbox min", vec3(i.bbox_min)));
+    rows.push(("bbox max", vec3(i.bbox_max)));
+    rows.push(("bbox diagonal", num(i.bbox_diagonal)));
+    rows.push(("mean edge length", num(i.mean_edge_length)));
+    rows.push((
+        "roughness",
+        format!("{:.4} deg (mean dihedral angle)", i.roughness_deg),
+    ));
+    print_rows(out, &rows)
+}
+
+/// Print a comparison as aligned `key  value` lines.
+pub fn print_comparison(out: &mut dyn Write, doc: &CompareDoc) -> Result<()> {
+    let c = &doc.comparison;
+    let rows: Vec<(&str, String)> = vec![
+        ("a", doc.a.clone()),
+        ("b", doc.b.clone()),
+        (
+            "rms distance",
+            format!(
+                "{} ({} of the bbox diagonal of a)",
+                num(c.rms_distance),
+                num(c.rms_relative)
+            ),
+        ),
+        (
+            "max distance",
+            format!(
+                "{} ({} of the bbox diagonal of a)",
+                num(c.max_distance),
+                num(c.max_relative)
+            ),
+        ),
+        (
+            "mean normal angle",
+            format!("{:.6} deg", c.mean_normal_angle_deg),
+        ),
+        ("volume ratio b/a", format!("{:.9}", c.volume_ratio)),
+        ("area ratio b/a", format!("{:.9}", c.area_ratio)),
+    ];
+    print_rows(out, &rows)
+}
+
+/// Print the iteration × method table of volume percentages.
+pub fn print_curves(out: &mut dyn Write, doc: &CurvesDoc) -> Result<()> {
+    let mut text = format!("{:>5}", "iter");
+    for c in &doc.curves {
+        text += &format!(" {:>14}", format!("{} %", c.method.name()));
+    }
+    text.push('\n');
+    for it in 0..=doc.iterations {
+        text += &format!("{it:>5}");
+        for c in &doc.curves {
+            match c.volume_pct.get(it) {
+                Some(v) => text += &format!(" {v:>14.6}"),
+                None => text += &format!(" {:>14}", "-"),
+            }
+        }
+        text.push('\n');
+    }
+    text += &format!("{:>5}", "secs");
+    for c in &doc.curves {
+        text += &format!(" {:>14.3}", c.seconds);
+    }
+    text.push('\n');
+    out.write_all(text.as_bytes()).map_err(stdout_error)
+}
+
+fn vec3(v: [f64; 3]) -> String {
+    format!("{} {} {}", num(v[0]), num(v[1]), num(v[2]))
+}
+
+/// `n word` or `n words`.
+pub fn count(n: usize, word: &str) -> String {
+    if n == 1 {
+        format!("1 {word}")
+    } else {
+        format!("{n} {word}s")
+    }
+}
+
+/// A number for people: 9 significant digits, fixed-point between 1e-3 and 1e7, else scientific.
+fn num(x: f64) -> String {
+    let a = x.abs();
+    if x == 0.0 || !x.is_finite() {
+        format!("{x}")
+    } else if (1e-3..1e7).contains(&a) {
+        let decimals = (8 - a.log10().floor() as i32).clamp(0, 11) as usize;
+        format!("{x:.decimals$}")
+    } else {
+        format!("{x:.8e}")
+    }
+}
+
+fn print_rows(out: &mut dyn Write, rows: &[(&str, String)]) -> Result<()> {
+    let width = rows.iter().map(|(k, _)| k.len()).max().unwrap_or(0);
+    let mut text = String::new();
+    for (k, v) in rows {
+        text += &format!("{k:<width$}  {v}\n");
+    }
+    out.write_all(text.as_bytes()).map_err(stdout_error)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::num;
+
+    #[test]
+    fn numbers_for_people() {
+        assert_eq!(num(4.186713092382924), "4.18671309");
+        assert_eq!(num(-1.07786905), "-1.07786905");
+        assert_eq!(num(0.0), "0");
+        assert_eq!(num(123456.789), "123456.789");
+        assert_eq!(num(2.5e-7), "2.50000000e-7");
+    }
+}

@@ -1,0 +1,521 @@
+//! End-to-end tests of the `vcsmooth` binary: every command on generated meshes, the JSON and SVG
+//! it writes, and the one-line errors (with no output file) on bad input.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use serde_json::Value;
+
+const METHODS: [&str; 5] = ["vcs", "vcs-triangle", "lem", "laplacian", "taubin"];
+
+fn vcsmooth<I, S>(args: I) -> Output
+where
+    I: IntoIterator<Item = S>,
+    S: AsRef<std::ffi::OsStr>,
+{
+    Command::new(env!("CARGO_BIN_EXE_vcsmooth"))
+        .args(args)
+        .output()
+        .expect("run vcsmooth")
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Assert success and return stdout.
+fn ok(o: Output) -> String {
+    assert!(
+        o.status.success(),
+        "exit {:?}, stderr: {}",
+        o.status.code(),
+        stderr(&o)
+    );
+    stdout(&o)
+}
+
+/// Assert a failure with exit code `code` and exactly one stderr line `vcsmooth: error: …`
+/// that contains each of `mentions`.
+fn fails(o: &Output, code: i32, mentions: &[&str]) {
+    let err = stderr(o);
+    assert_eq!(o.status.code(), Some(code), "stderr: {err}");
+    let lines: Vec<&str> = err.trim_end().lines().collect();
+    assert_eq!(lines.len(), 1, "not one line: {err:?}");
+    assert!(lines[0].starts_with("vcsmooth: error: "), "{err}");
+    for m in mentions {
+        assert!(lines[0].contains(m), "'{m}' not in: {err}");
+    }
+    assert!(
+        !err.contains("panicked") && !err.contains("RUST_BACKTRACE"),
+        "{err}"
+    );
+}
+
+fn json(text: &str) -> Value {
+    serde_json::from_str(text).unwrap_or_else(|e| panic!("not JSON ({e}): {text}"))
+}
+
+fn read_json(path: &Path) -> Value {
+    json(&std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())))
+}
+
+fn svg_texts(path: &Path) -> Vec<String> {
+    let svg = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    assert!(
+        svg.contains("<svg") && svg.contains("</svg>"),
+        "not an SVG: {}",
+        path.display()
+    );
+    svg.lines().map(|l| l.trim().to_string()).collect()
+}
+
+/// Files in `dir`, sorted.
+fn listing(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+/// A noisy 642-vertex sphere (`--subdivisions 3`) in a fresh directory.
+fn noisy_sphere() -> (tempfile::TempDir, PathBuf) {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("noisy.ply");
+    ok(vcsmooth([
+        "generate".as_ref(),
+        "sphere".as_ref(),
+        path.as_os_str(),
+        "--subdivisions".as_ref(),
+        "3".as_ref(),
+        "--noise".as_ref(),
+        "0.3".as_ref(),
+        "--seed".as_ref(),
+        "7".as_ref(),
+    ]));
+    assert!(path.is_file());
+    (dir, path)
+}
+
+#[test]
+fn info_json_of_generated_sphere() {
+    let (_dir, sphere) = noisy_sphere();
+    let info = json(&ok(vcsmooth([
+        "info".as_ref(),
+        sphere.as_os_str(),
+        "--json".as_ref(),
+    ])));
+    assert_eq!(info["vertices"], 642);
+    assert_eq!(info["triangles"], 1280);
+    assert_eq!(info["closed"], true);
+    assert_eq!(info["boundary_edges"], 0);
+    assert!(info["volume"].as_f64().unwrap() > 3.0, "{info}");
+
+    let table = ok(vcsmooth(["info".as_ref(), sphere.as_os_str()]));
+    assert!(table.contains("642") && table.contains("closed"), "{table}");
+}
+
+#[test]
+fn generate_torus_is_closed() {
+    let dir = tempfile::tempdir().unwrap();
+    let torus = dir.path().join("torus.obj");
+    ok(vcsmooth([
+        "generate".as_ref(),
+        "torus".as_ref(),
+        torus.as_os_str(),
+        "--subdivisions".as_ref(),
+        "1".as_ref(),
+    ]));
+    let info = json(&ok(vcsmooth([
+        "info".as_ref(),
+        torus.as_os_str(),
+        "--json".as_ref(),
+    ])));
+    assert_eq!(info["closed"], true);
+    assert_eq!(info["triangles"], 1024);
+}
+
+#[test]
+fn smooth_with_each_method_writes_mesh_report_and_plot() {
+    let (dir, sphere) = noisy_sphere();
+    let iterations = 4;
+    for method in METHODS {
+        let out = dir.path().join(format!("{method}.ply"));
+        let report = dir.path().join(format!("{method}.json"));
+        let plot = dir.path().join(format!("{method}.svg"));
+        let text = ok(vcsmooth([
+            "smooth".as_ref(),
+            sphere.as_os_str(),
+            out.as_os_str(),
+            "--method".as_ref(),
+            method.as_ref(),
+            "--iterations".as_ref(),
+            iterations.to_string().as_ref(),
+            "--report".as_ref(),
+            report.as_os_str(),
+            "--plot".as_ref(),
+            plot.as_os_str(),
+        ]));
+        assert!(out.is_file(), "{method}: no output mesh");
+        assert!(
+            text.contains("volume %"),
+            "{method}: no table on stdout: {text}"
+        );
+
+        let r = read_json(&report);
+        assert_eq!(r["options"]["method"], method);
+        assert_eq!(r["options"]["iterations"], iterations);
+        assert!(r["tool"]["version"].is_string());
+        assert_eq!(r["input"]["stats"]["vertices"], 642);
+        assert_eq!(r["output"]["stats"]["vertices"], 642);
+        assert_eq!(r["output"]["stats"]["closed"], true);
+        for phase in ["read", "topology", "smoothing", "write"] {
+            assert!(
+                r["timings"][phase].as_f64().unwrap() >= 0.0,
+                "{method}: timing {phase}"
+            );
+        }
+        let rows = r["iterations"].as_array().unwrap();
+        assert_eq!(rows.len(), iterations, "{method}: iteration rows");
+        for (i, row) in rows.iter().enumerate() {
+            assert_eq!(row["iteration"], i + 1);
+            for key in [
+                "volume_pct",
+                "area_pct",
+                "max_displacement",
+                "mean_displacement",
+                "seconds",
+            ] {
+                assert!(
+                    row[key].as_f64().unwrap().is_finite(),
+                    "{method}: {key} in {row}"
+                );
+            }
+            assert!(
+                row["stencils"]["applied"].as_u64().unwrap() > 0,
+                "{method}: {row}"
+            );
+        }
+        let last = rows.last().unwrap()["volume_pct"].as_f64().unwrap();
+        if method.starts_with("vcs") {
+            assert!(
+                (last - 100.0).abs() < 1e-6,
+                "{method} lost volume: {last} %"
+            );
+        }
+        if method == "laplacian" {
+            assert!(last < 95.0, "laplacian should shrink: {last} %");
+        }
+
+        let texts = svg_texts(&plot);
+        assert!(
+            texts.iter().any(|t| t == method),
+            "{method} not named in its plot"
+        );
+        assert!(texts.iter().any(|t| t == "iteration"), "no x axis label");
+
+        // The smoothed file reads back with the same connectivity.
+        let cmp = json(&ok(vcsmooth([
+            "compare".as_ref(),
+            sphere.as_os_str(),
+            out.as_os_str(),
+            "--json".as_ref(),
+        ])));
+        assert!(
+            cmp["rms_distance"].as_f64().unwrap() > 0.0,
+            "{method} moved nothing"
+        );
+        if method.starts_with("vcs") {
+            assert!(
+                (cmp["volume_ratio"].as_f64().unwrap() - 1.0).abs() < 1e-5,
+                "{method}: {cmp}"
+            );
+        }
+    }
+}
+
+#[test]
+fn smooth_defaults_and_other_formats() {
+    let (dir, sphere) = noisy_sphere();
+    for ext in ["obj", "off", "stl"] {
+        let out = dir.path().join(format!("out.{ext}"));
+        let text = ok(vcsmooth([
+            "smooth".as_ref(),
+            sphere.as_os_str(),
+            out.as_os_str(),
+        ]));
+        assert!(out.is_file(), "no .{ext} output");
+        // Default: vcs, 10 iterations.
+        assert!(text.contains("vcs, 10 iterations"), "{text}");
+    }
+}
+
+#[test]
+fn compare_with_itself_is_zero() {
+    let (_dir, sphere) = noisy_sphere();
+    let c = json(&ok(vcsmooth([
+        "compare".as_ref(),
+        sphere.as_os_str(),
+        sphere.as_os_str(),
+        "--json".as_ref(),
+    ])));
+    for key in [
+        "rms_distance",
+        "max_distance",
+        "rms_relative",
+        "max_relative",
+        "mean_normal_angle_deg",
+    ] {
+        assert_eq!(c[key].as_f64(), Some(0.0), "{key}: {c}");
+    }
+    assert_eq!(c["volume_ratio"].as_f64(), Some(1.0));
+    assert_eq!(c["area_ratio"].as_f64(), Some(1.0));
+    let table = ok(vcsmooth([
+        "compare".as_ref(),
+        sphere.as_os_str(),
+        sphere.as_os_str(),
+    ]));
+    assert!(table.contains("rms distance"), "{table}");
+}
+
+#[test]
+fn curves_plot_names_every_method() {
+    let (dir, sphere) = noisy_sphere();
+    let plot = dir.path().join("curves.svg");
+    let out = ok(vcsmooth([
+        "curves".as_ref(),
+        sphere.as_os_str(),
+        "--methods".as_ref(),
+        "vcs,lem,laplacian".as_ref(),
+        "--iterations".as_ref(),
+        "6".as_ref(),
+        "--plot".as_ref(),
+        plot.as_os_str(),
+        "--json".as_ref(),
+    ]));
+    let doc = json(&out);
+    let curves = doc["curves"].as_array().unwrap();
+    let names: Vec<&str> = curves
+        .iter()
+        .map(|c| c["method"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["vcs", "lem", "laplacian"]);
+    let last = |i: usize| {
+        let v = curves[i]["volume_pct"].as_array().unwrap();
+        assert_eq!(v.len(), 7, "iterations 0..=6");
+        assert_eq!(v[0].as_f64(), Some(100.0));
+        v[6].as_f64().unwrap()
+    };
+    let (vcs, lem, lap) = (last(0), last(1), last(2));
+    assert!((vcs - 100.0).abs() < 1e-6, "vcs {vcs}");
+    assert!(lap < lem && lem < 100.0, "laplacian {lap}, lem {lem}");
+
+    let texts = svg_texts(&plot);
+    for name in [
+        "vcs",
+        "lem",
+        "laplacian",
+        "iteration",
+        "volume (% of input)",
+    ] {
+        assert!(texts.iter().any(|t| t == name), "'{name}' not in the SVG");
+    }
+
+    // The table form: a header naming each method and rows 0..=6.
+    let table = ok(vcsmooth([
+        "curves".as_ref(),
+        sphere.as_os_str(),
+        "--iterations".as_ref(),
+        "6".as_ref(),
+        "--plot".as_ref(),
+        plot.as_os_str(),
+    ]));
+    let header = table.lines().next().unwrap();
+    for name in ["vcs", "lem", "laplacian"] {
+        assert!(header.contains(name), "{header}");
+    }
+    assert!(
+        table.lines().any(|l| l.trim_start().starts_with("6 ")),
+        "{table}"
+    );
+}
+
+#[test]
+fn missing_input_fails_cleanly_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let (missing, out) = (dir.path().join("missing.ply"), dir.path().join("out.ply"));
+    let (report, plot) = (dir.path().join("r.json"), dir.path().join("p.svg"));
+    let o = vcsmooth([
+        "smooth".as_ref(),
+        missing.as_os_str(),
+        out.as_os_str(),
+        "--report".as_ref(),
+        report.as_os_str(),
+        "--plot".as_ref(),
+        plot.as_os_str(),
+    ]);
+    fails(&o, 1, &["missing.ply"]);
+    assert!(
+        listing(dir.path()).is_empty(),
+        "left files: {:?}",
+        listing(dir.path())
+    );
+
+    fails(
+        &vcsmooth(["info".as_ref(), missing.as_os_str()]),
+        1,
+        &["missing.ply"],
+    );
+    fails(
+        &vcsmooth(["compare".as_ref(), missing.as_os_str(), missing.as_os_str()]),
+        1,
+        &["missing.ply"],
+    );
+    let o = vcsmooth([
+        "curves".as_ref(),
+        missing.as_os_str(),
+        "--plot".as_ref(),
+        plot.as_os_str(),
+    ]);
+    fails(&o, 1, &["missing.ply"]);
+    assert!(listing(dir.path()).is_empty());
+}
+
+#[test]
+fn corrupt_input_fails_cleanly_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.ply");
+    std::fs::write(&bad, b"ply\nformat binary_little_endian 1.0\nelement vertex 100\nproperty float x\nend_header\n\x01\x02").unwrap();
+    let (out, report, plot) = (
+        dir.path().join("out.ply"),
+        dir.path().join("r.json"),
+        dir.path().join("p.svg"),
+    );
+    let o = vcsmooth([
+        "smooth".as_ref(),
+        bad.as_os_str(),
+        out.as_os_str(),
+        "--report".as_ref(),
+        report.as_os_str(),
+        "--plot".as_ref(),
+        plot.as_os_str(),
+    ]);
+    fails(&o, 1, &["bad.ply"]);
+    assert_eq!(listing(dir.path()), ["bad.ply"]);
+}
+
+#[test]
+fn usage_errors_fail_cleanly_and_write_nothing() {
+    let (dir, sphere) = noisy_sphere();
+    let out = dir.path().join("out.ply");
+    let cases: Vec<(Vec<&str>, &[&str])> = vec![
+        (vec!["--method", "median"], &["median"]),
+        (vec!["--iterations", "abc"], &["--iterations", "abc"]),
+        (vec!["--iterations", "-1"], &["--iterations"]),
+        (vec!["--lambda", "nan"], &["--lambda"]),
+        (vec!["--threads", "0"], &["--threads"]),
+        (vec!["--plot", "volume.png"], &["volume.png", "svg"]),
+        (vec!["--bogus"], &["--bogus"]),
+    ];
+    for (extra, mentions) in cases {
+        let mut args: Vec<&std::ffi::OsStr> =
+            vec!["smooth".as_ref(), sphere.as_os_str(), out.as_os_str()];
+        args.extend(extra.iter().map(std::ffi::OsStr::new));
+        fails(&vcsmooth(&args), 2, mentions);
+        assert!(!out.exists(), "{extra:?} wrote the output");
+    }
+
+    let xyz = dir.path().join("out.xyz");
+    fails(
+        &vcsmooth(["smooth".as_ref(), sphere.as_os_str(), xyz.as_os_str()]),
+        2,
+        &["out.xyz", "format"],
+    );
+    let nodir = dir.path().join("no").join("such").join("out.ply");
+    fails(
+        &vcsmooth(["smooth".as_ref(), sphere.as_os_str(), nodir.as_os_str()]),
+        2,
+        &["does not exist"],
+    );
+    fails(
+        &vcsmooth(["smooth".as_ref(), sphere.as_os_str()]),
+        2,
+        &["OUT"],
+    );
+    fails(&vcsmooth(["frobnicate"]), 2, &["frobnicate"]);
+    let big = dir.path().join("big.ply");
+    let o = vcsmooth([
+        "generate".as_ref(),
+        "sphere".as_ref(),
+        big.as_os_str(),
+        "--subdivisions".as_ref(),
+        "30".as_ref(),
+    ]);
+    fails(&o, 1, &["--subdivisions 30"]);
+    let o = vcsmooth([
+        "generate".as_ref(),
+        "sphere".as_ref(),
+        xyz.as_os_str(),
+        "--subdivisions".as_ref(),
+        "1".as_ref(),
+    ]);
+    fails(&o, 2, &["out.xyz"]);
+    let svg = dir.path().join("c.svg");
+    let o = vcsmooth([
+        "curves".as_ref(),
+        sphere.as_os_str(),
+        "--plot".as_ref(),
+        svg.as_os_str(),
+        "--methods".as_ref(),
+        "vcs,nope".as_ref(),
+    ]);
+    fails(&o, 2, &["nope"]);
+    assert_eq!(listing(dir.path()), ["noisy.ply"]);
+}
+
+#[test]
+fn compare_of_different_meshes_fails() {
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b) = (dir.path().join("a.ply"), dir.path().join("b.ply"));
+    for (p, k) in [(&a, "1"), (&b, "2")] {
+        ok(vcsmooth([
+            "generate".as_ref(),
+            "sphere".as_ref(),
+            p.as_os_str(),
+            "--subdivisions".as_ref(),
+            k.as_ref(),
+        ]));
+    }
+    fails(
+        &vcsmooth(["compare".as_ref(), a.as_os_str(), b.as_os_str()]),
+        1,
+        &["b.ply"],
+    );
+}
+
+#[test]
+fn help_lists_commands_and_defaults() {
+    let top = ok(vcsmooth(["--help"]));
+    for cmd in ["smooth", "info", "compare", "generate", "curves"] {
+        assert!(top.contains(cmd), "{cmd} missing from --help");
+    }
+    let smooth = ok(vcsmooth(["smooth", "--help"]));
+    for s in [
+        "[default: vcs]",
+        "[default: 10]",
+        "[default: 0.5]",
+        "[default: -0.53]",
+        "--reject-energy-increase",
+        "--threads",
+        "--report",
+        "--plot",
+    ] {
+        assert!(smooth.contains(s), "'{s}' missing from smooth --help");
+    }
+    assert!(ok(vcsmooth(["--version"])).contains(env!("CARGO_PKG_VERSION")));
+}
