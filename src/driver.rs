@@ -7,6 +7,7 @@
 //! - `laplacian`, `taubin`: Jacobi (every vertex from the previous positions), so the order is
 //!   irrelevant and any thread count gives bit-identical output.
 
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use glam::DVec3;
@@ -14,7 +15,8 @@ use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 use crate::mesh::{Buf, Storage};
-use crate::metrics;
+use crate::metrics::{self, MeshInfo};
+use crate::{io, resources};
 use crate::partition::{self, Patch, Reordered};
 use crate::schedule::{self, Schedule, SharedField};
 use crate::smooth::{
@@ -425,4 +427,230 @@ fn validate(opts: &Options) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// How the patch engine runs a file.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+pub struct EngineSettings {
+    /// Worker threads; `None`: all cores.
+    pub threads: Option<usize>,
+    /// Vertices per patch (part of the result's definition: outputs are identical for any thread
+    /// count and memory budget only for the same patch size).
+    pub patch_size: usize,
+    /// Anonymous memory allowed; `None`: three quarters of the available memory.
+    pub memory_budget: Option<u64>,
+    /// Where scratch files go when the mesh does not fit the budget; `None`: beside the output.
+    pub scratch: Option<PathBuf>,
+    /// Measure input and output statistics (for a report).
+    pub with_stats: bool,
+}
+
+/// Default vertices per patch: small enough that a 1M-triangle mesh has dozens of patches to
+/// share among threads, large enough that the per-patch scheduling cost is negligible.
+pub const DEFAULT_PATCH_SIZE: usize = 16_384;
+
+impl Default for EngineSettings {
+    fn default() -> Self {
+        EngineSettings {
+            threads: None,
+            patch_size: DEFAULT_PATCH_SIZE,
+            memory_budget: None,
+            scratch: None,
+            with_stats: false,
+        }
+    }
+}
+
+/// What `run_file` did.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct FileRun {
+    #[serde(skip)]
+    pub input_format: Option<io::Format>,
+    pub vertices: usize,
+    pub triangles: usize,
+    pub records: Vec<IterationRecord>,
+    pub input_stats: Option<MeshInfo>,
+    /// Measured on the f64 positions before the output format rounds them.
+    pub output_stats: Option<MeshInfo>,
+    pub plan: PlanStats,
+    pub memory: MemoryStats,
+    pub timings: PhaseTimings,
+}
+
+/// The patch decomposition of a run.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct PlanStats {
+    pub patch_size: usize,
+    pub patches: usize,
+    pub colours: usize,
+    /// Vertices outside a patch's own range that its stencils read: smallest, mean, largest.
+    pub halo_min: u32,
+    pub halo_mean: f64,
+    pub halo_max: u32,
+    /// Edge stencils whose two vertices lie in different patches (each applied once, by the
+    /// patch of its smaller vertex).
+    pub crossing_edge_stencils: u64,
+    pub threads: usize,
+}
+
+/// Memory and I/O of a run.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct MemoryStats {
+    pub budget: u64,
+    /// "heap" when the mesh fits the budget, else "scratch" (memory-mapped files).
+    pub storage: &'static str,
+    pub scratch_bytes: u64,
+    /// Peak anonymous resident memory (RssAnon), file-backed pages excluded; 0 if unknown.
+    pub peak_anon: u64,
+    pub bytes_read: u64,
+    pub bytes_written: u64,
+}
+
+/// Seconds per phase.
+#[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+pub struct PhaseTimings {
+    pub ingest: f64,
+    pub reorder: f64,
+    pub topology: f64,
+    pub partition: f64,
+    pub smoothing: f64,
+    pub write: f64,
+    pub metrics: f64,
+    pub total: f64,
+}
+
+/// Read `input`, smooth it patch-parallel with `opts`, write `output` (atomically, in the input's
+/// vertex order and layout). The one place that wires I/O, partition, schedule and kernels.
+pub fn run_file(
+    input: &Path,
+    output: &Path,
+    opts: &Options,
+    engine: &EngineSettings,
+    observer: &mut dyn Observer,
+) -> Result<FileRun> {
+    validate(opts)?;
+    let start = Instant::now();
+    let sampler = resources::PeakSampler::start(std::time::Duration::from_millis(20));
+    let budget = match engine.memory_budget {
+        Some(b) => {
+            resources::check_budget(b)?;
+            b
+        }
+        None => resources::default_budget(),
+    };
+    let pool = thread_pool(engine.threads)?;
+    let mut t = PhaseTimings::default();
+
+    let clock = Instant::now();
+    let mut mesh = io::read_mesh(input)?;
+    t.ingest = clock.elapsed().as_secs_f64();
+    let bytes_read = std::fs::metadata(input).map(|m| m.len()).unwrap_or(0);
+
+    let need = resources::in_core_estimate(mesh.positions.len() as u64, mesh.triangles.len() as u64);
+    let storage = if need <= budget {
+        Storage::heap()
+    } else {
+        let dir = match &engine.scratch {
+            Some(d) => d.clone(),
+            None => scratch_beside(output),
+        };
+        Storage::scratch(&dir)?
+    };
+
+    let run = pool.install(|| -> Result<_> {
+        let mut prep = Prepared::new(&storage, &mesh.positions, &mesh.triangles, engine.patch_size)
+            .map_err(|e| in_file(input, e))?;
+        t.reorder = prep.timings.reorder;
+        t.topology = prep.timings.topology;
+        t.partition = prep.timings.partition;
+        let clock = Instant::now();
+        let input_stats = engine.with_stats.then(|| prep.info(&mesh.source));
+        t.metrics += clock.elapsed().as_secs_f64();
+
+        let clock = Instant::now();
+        let records = prep.smooth(&storage, opts, observer)?;
+        t.smoothing = clock.elapsed().as_secs_f64();
+
+        let clock = Instant::now();
+        let output_stats = engine.with_stats.then(|| prep.info(&mesh.source));
+        t.metrics += clock.elapsed().as_secs_f64();
+        prep.positions_in_input_order(&mut mesh.positions);
+        Ok((records, input_stats, output_stats, prep.plan_stats()))
+    })?;
+    let (records, input_stats, output_stats, mut plan) = run;
+    plan.threads = pool.current_num_threads();
+
+    let clock = Instant::now();
+    io::write_mesh(output, &mesh)?;
+    t.write = clock.elapsed().as_secs_f64();
+    t.total = start.elapsed().as_secs_f64();
+    let memory = MemoryStats {
+        budget,
+        storage: if storage.is_mapped() { "scratch" } else { "heap" },
+        scratch_bytes: storage.mapped_bytes(),
+        peak_anon: sampler.peak(),
+        bytes_read,
+        bytes_written: std::fs::metadata(output).map(|m| m.len()).unwrap_or(0),
+    };
+    Ok(FileRun {
+        input_format: mesh.source.format,
+        vertices: mesh.positions.len(),
+        triangles: mesh.triangles.len(),
+        records,
+        input_stats,
+        output_stats,
+        plan,
+        memory,
+        timings: t,
+    })
+}
+
+impl Prepared {
+    /// Statistics of the current (reordered) mesh; every figure is order-independent.
+    pub fn info(&self, source: &io::Source) -> MeshInfo {
+        metrics::info_of(&self.reordered.positions, &self.reordered.triangles, source, &self.topology)
+    }
+
+    /// The decomposition's figures for reports.
+    pub fn plan_stats(&self) -> PlanStats {
+        let halo = &self.schedule.halo;
+        PlanStats {
+            patch_size: self.patches.first().map_or(0, |p| p.vertices.len()),
+            patches: self.patches.len(),
+            colours: self.schedule.colours.len(),
+            halo_min: halo.iter().copied().min().unwrap_or(0),
+            halo_mean: halo.iter().map(|&h| h as f64).sum::<f64>() / halo.len().max(1) as f64,
+            halo_max: halo.iter().copied().max().unwrap_or(0),
+            crossing_edge_stencils: self.patches.iter().map(|p| p.crossing_edges(&self.topology)).sum(),
+            threads: rayon::current_num_threads(),
+        }
+    }
+}
+
+/// A rayon pool of `threads` threads (all cores when `None`).
+pub fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
+    let mut builder = rayon::ThreadPoolBuilder::new();
+    if let Some(n) = threads {
+        if n == 0 {
+            return Err(Error::Config("--threads must be at least 1".into()));
+        }
+        builder = builder.num_threads(n);
+    }
+    builder.build().map_err(|e| Error::Config(format!("thread pool: {e}")))
+}
+
+/// The directory of `output` (the current directory for a bare file name).
+fn scratch_beside(output: &Path) -> PathBuf {
+    match output.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    }
+}
+
+/// Attach the input's name to an error that lacks one.
+fn in_file(path: &Path, e: Error) -> Error {
+    match e {
+        Error::Config(what) => Error::invalid(path, what),
+        other => other,
+    }
 }

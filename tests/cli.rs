@@ -174,7 +174,13 @@ fn smooth_with_each_method_writes_mesh_report_and_plot() {
         assert_eq!(r["input"]["stats"]["vertices"], 642);
         assert_eq!(r["output"]["stats"]["vertices"], 642);
         assert_eq!(r["output"]["stats"]["closed"], true);
-        for phase in ["read", "topology", "smoothing", "write"] {
+        assert!(r["plan"]["patches"].as_u64().unwrap() >= 1);
+        assert!(r["plan"]["colours"].as_u64().unwrap() >= 1);
+        assert!(r["memory"]["peak_anon"].as_u64().unwrap() > 0);
+        assert_eq!(r["memory"]["storage"], "heap");
+        assert!(r["memory"]["bytes_read"].as_u64().unwrap() > 0);
+        assert!(r["memory"]["bytes_written"].as_u64().unwrap() > 0);
+        for phase in ["ingest", "reorder", "topology", "partition", "smoothing", "write"] {
             assert!(
                 r["timings"][phase].as_f64().unwrap() >= 0.0,
                 "{method}: timing {phase}"
@@ -518,4 +524,71 @@ fn help_lists_commands_and_defaults() {
         assert!(smooth.contains(s), "'{s}' missing from smooth --help");
     }
     assert!(ok(vcsmooth(["--version"])).contains(env!("CARGO_PKG_VERSION")));
+}
+
+/// Issue 3: the output file is bit-identical for 1, 2 and 8 threads, and between in-core and the
+/// smallest memory budget (scratch-mapped arrays), for a fixed patch size; scratch files vanish.
+#[test]
+fn smooth_output_identical_across_threads_and_memory_budgets() {
+    let dir = tempfile::tempdir().unwrap();
+    let scratch = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in.ply");
+    // Level 8 (1.3M triangles) is the smallest sphere whose in-core estimate exceeds the 64M minimum.
+    ok(vcsmooth(["generate", "sphere"].iter().map(|s| s.to_string()).chain([
+        input.display().to_string(),
+        "--subdivisions".into(),
+        "8".into(),
+        "--noise".into(),
+        "0.3".into(),
+    ])));
+    let run = |name: &str, extra: &[&str]| -> (Vec<u8>, Value) {
+        let out = dir.path().join(format!("{name}.ply"));
+        let report = dir.path().join(format!("{name}.json"));
+        let mut args: Vec<String> = vec![
+            "smooth".into(),
+            input.display().to_string(),
+            out.display().to_string(),
+            "--iterations".into(),
+            "1".into(),
+            "--patch-size".into(),
+            "4096".into(),
+            "--report".into(),
+            report.display().to_string(),
+        ];
+        args.extend(extra.iter().map(|s| s.to_string()));
+        ok(vcsmooth(&args));
+        (std::fs::read(&out).unwrap(), read_json(&report))
+    };
+    let (one, r1) = run("t1", &["--threads", "1"]);
+    assert_eq!(r1["memory"]["storage"], "heap");
+    assert!(r1["plan"]["colours"].as_u64().unwrap() > 1);
+    assert!(r1["plan"]["crossing_edge_stencils"].as_u64().unwrap() > 0);
+    assert_eq!(
+        r1["iterations"][0]["stencils"]["applied"].as_u64().unwrap()
+            + r1["iterations"][0]["stencils"]["skipped_fixed"].as_u64().unwrap()
+            + r1["iterations"][0]["stencils"]["skipped_degenerate"].as_u64().unwrap()
+            + r1["iterations"][0]["stencils"]["rejected"].as_u64().unwrap(),
+        r1["input"]["stats"]["edges"].as_u64().unwrap(),
+        "every edge stencil considered exactly once"
+    );
+    for threads in ["2", "8"] {
+        let (out, _) = run(&format!("t{threads}"), &["--threads", threads]);
+        assert!(out == one, "--threads {threads} differs from --threads 1");
+    }
+    let sdir = scratch.path().display().to_string();
+    let (mapped, rm) = run("mapped", &["--memory-budget", "64M", "--scratch", &sdir]);
+    assert_eq!(rm["memory"]["storage"], "scratch");
+    assert!(rm["memory"]["scratch_bytes"].as_u64().unwrap() > 64 << 20);
+    assert!(mapped == one, "scratch-mapped run differs from in-core");
+    assert_eq!(std::fs::read_dir(scratch.path()).unwrap().count(), 0, "scratch left behind");
+
+    let o = vcsmooth([
+        "smooth",
+        &input.display().to_string(),
+        &dir.path().join("x.ply").display().to_string(),
+        "--memory-budget",
+        "1M",
+    ]);
+    fails(&o, 2, &["--memory-budget", "minimum"]);
+    assert!(!dir.path().join("x.ply").exists());
 }

@@ -78,13 +78,21 @@ pub struct MethodParams {
     pub reject_energy_increase: bool,
 }
 
-/// How the engine runs. The out-of-core flags (`--memory-budget`, `--patch-size`, `--scratch`) join
-/// these when patch-parallel smoothing lands.
+/// How the engine runs: threads, patches, memory.
 #[derive(Debug, Clone, ClapArgs)]
 pub struct EngineArgs {
     /// Worker threads [default: all cores].
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..), allow_negative_numbers = true)]
     pub threads: Option<u32>,
+    /// Vertices per patch; the result is identical for any thread count and memory budget for a given patch size [default: 16384].
+    #[arg(long, value_name = "VERTICES", value_parser = clap::value_parser!(u64).range(1..u32::MAX as u64), allow_negative_numbers = true)]
+    pub patch_size: Option<u64>,
+    /// Anonymous memory allowed, with K/M/G/T suffixes (binary units); larger meshes go to memory-mapped scratch files [default: 3/4 of available memory].
+    #[arg(long, value_name = "SIZE", value_parser = crate::resources::parse_size)]
+    pub memory_budget: Option<u64>,
+    /// Directory for scratch files (removed on exit, even on error) [default: the output's directory].
+    #[arg(long, value_name = "DIR")]
+    pub scratch: Option<PathBuf>,
 }
 
 /// `vcsmooth info IN [--json]`

@@ -20,55 +20,33 @@ use crate::mesh::Mesh;
 use crate::topology::Topology;
 use crate::{generate, io, metrics};
 
-/// `vcsmooth smooth`: read → topology → smooth → write mesh → write report and plot → print table.
+/// `vcsmooth smooth`: read → reorder → topology → partition → smooth → write mesh → write report
+/// and plot → print table.
 pub fn smooth(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) -> Result<()> {
-    let start = Instant::now();
-    let mut t = Timings::default();
-
-    progress.phase(format!("reading {}", cfg.input.display()));
-    let (mut mesh, topo) = read_with_topology(&cfg.input, progress, &mut t)?;
-
-    let clock = Instant::now();
-    let input_stats = cfg.report.as_ref().map(|_| metrics::info(&mesh, &topo));
-    t.metrics += clock.elapsed().as_secs_f64();
-
+    progress.phase(format!("smoothing {}", cfg.input.display()));
     progress.iterations(cfg.options.method.name(), cfg.options.iterations);
-    let clock = Instant::now();
-    let records = driver::smooth_positions(
-        &topo,
-        &mesh.triangles,
-        &mut mesh.positions,
-        &cfg.options,
-        cfg.engine.threads,
-        progress,
-    )
-    .map_err(|e| in_file(&cfg.input, e))?;
-    t.smoothing = clock.elapsed().as_secs_f64();
+    let run = driver::run_file(&cfg.input, &cfg.output, &cfg.options, &cfg.engine, progress)?;
+    let records = &run.records;
 
-    progress.phase(format!("writing {}", cfg.output.display()));
-    let clock = Instant::now();
-    io::write_mesh(&cfg.output, &mesh)?;
-    t.write = clock.elapsed().as_secs_f64();
-
-    if let (Some(path), Some(input_stats)) = (&cfg.report, input_stats) {
-        let clock = Instant::now();
-        let output_stats = metrics::info(&mesh, &topo);
-        t.metrics += clock.elapsed().as_secs_f64();
-        t.total = start.elapsed().as_secs_f64();
+    if let (Some(path), Some(input_stats), Some(output_stats)) =
+        (&cfg.report, &run.input_stats, &run.output_stats)
+    {
         let report = SmoothReport {
             tool: Tool::this(),
             command: "smooth",
             argv: cfg.argv.clone(),
             options: cfg.options,
-            engine: cfg.engine,
-            input: FileStats::new(&cfg.input, mesh.source.format, input_stats),
+            engine: cfg.engine.clone(),
+            input: FileStats::new(&cfg.input, run.input_format, input_stats.clone()),
             output: FileStats::new(
                 &cfg.output,
                 super::config::output_format(&cfg.output),
-                output_stats,
+                output_stats.clone(),
             ),
-            timings: t,
-            summary: Summary::of(&records),
+            plan: run.plan.clone(),
+            memory: run.memory.clone(),
+            timings: run.timings,
+            summary: Summary::of(records),
             iterations: records.clone(),
         };
         write_json(path, &report)?;
@@ -76,34 +54,47 @@ pub fn smooth(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) 
     if let Some(path) = &cfg.plot {
         let curve = Curve {
             method: cfg.options.method,
-            volume_pct: volume_curve(&records),
+            volume_pct: volume_curve(records),
         };
         let title = format!("{} on {}", cfg.options.method, file_name(&cfg.input));
         write_volume_plot(path, &title, &[curve])?;
     }
-    t.total = start.elapsed().as_secs_f64();
     progress.finish();
 
-    let s = Summary::of(&records);
+    let s = Summary::of(records);
     let text = format!(
         "{} -> {}: {}, {}, {} vertices, {} triangles; volume {:.6} %, area {:.4} %\n",
         cfg.input.display(),
         cfg.output.display(),
         cfg.options.method,
         count(cfg.options.iterations, "iteration"),
-        mesh.positions.len(),
-        mesh.triangles.len(),
+        run.vertices,
+        run.triangles,
         s.volume_pct,
         s.area_pct
     );
     out.write_all(text.as_bytes()).map_err(stdout_error)?;
     if !records.is_empty() {
-        print_iterations(out, &records)?;
+        print_iterations(out, records)?;
     }
+    let (t, p, m) = (&run.timings, &run.plan, &run.memory);
     writeln!(
         out,
-        "seconds: read {:.3}, topology {:.3}, smoothing {:.3}, write {:.3}, total {:.3}",
-        t.read, t.topology, t.smoothing, t.write, t.total
+        "patches: {} of {} vertices in {} colours on {} threads, {} crossing edge stencils; memory: {} ({}), peak anonymous {}",
+        p.patches,
+        p.patch_size,
+        p.colours,
+        p.threads,
+        p.crossing_edge_stencils,
+        m.storage,
+        crate::resources::format_size(m.budget),
+        crate::resources::format_size(m.peak_anon)
+    )
+    .map_err(stdout_error)?;
+    writeln!(
+        out,
+        "seconds: ingest {:.3}, reorder {:.3}, topology {:.3}, partition {:.3}, smoothing {:.3}, write {:.3}, total {:.3}",
+        t.ingest, t.reorder, t.topology, t.partition, t.smoothing, t.write, t.total
     )
     .map_err(stdout_error)
 }

@@ -20,13 +20,8 @@ pub enum Config {
     Curves(CurvesConfig),
 }
 
-/// How the engine runs: threads now; the out-of-core settings (memory budget, patch size, scratch
-/// directory) are added here, so every command that smooths picks them up.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
-pub struct EngineConfig {
-    /// Worker threads; `None`: all cores.
-    pub threads: Option<usize>,
-}
+/// How the engine runs (threads, patch size, memory budget, scratch directory).
+pub type EngineConfig = crate::driver::EngineSettings;
 
 /// `vcsmooth smooth`.
 #[derive(Debug, Clone)]
@@ -92,9 +87,11 @@ impl Config {
                 if let Some(p) = &a.plot {
                     svg_output(p)?;
                 }
+                let mut engine = engine(&a.engine)?;
+                engine.with_stats = a.report.is_some();
                 Config::Smooth(SmoothConfig {
                     options: options(a.method, a.iterations, &a.params),
-                    engine: engine(&a.engine),
+                    engine,
                     input: a.input,
                     output: a.output,
                     report: a.report,
@@ -140,7 +137,7 @@ impl Config {
                 }
                 Config::Curves(CurvesConfig {
                     options: options(methods[0], a.iterations as usize, &a.params),
-                    engine: engine(&a.engine),
+                    engine: engine(&a.engine)?,
                     input: a.input,
                     methods,
                     plot: a.plot,
@@ -161,10 +158,25 @@ fn options(method: Method, iterations: usize, p: &MethodParams) -> Options {
     }
 }
 
-fn engine(e: &EngineArgs) -> EngineConfig {
-    EngineConfig {
-        threads: e.threads.map(|t| t as usize),
+fn engine(e: &EngineArgs) -> Result<EngineConfig> {
+    if let Some(b) = e.memory_budget {
+        crate::resources::check_budget(b)?;
     }
+    if let Some(dir) = &e.scratch {
+        if !dir.is_dir() {
+            return Err(Error::Config(format!(
+                "{}: --scratch must be an existing directory",
+                dir.display()
+            )));
+        }
+    }
+    Ok(EngineConfig {
+        threads: e.threads.map(|t| t as usize),
+        patch_size: e.patch_size.map_or(crate::driver::DEFAULT_PATCH_SIZE, |p| p as usize),
+        memory_budget: e.memory_budget,
+        scratch: e.scratch.clone(),
+        with_stats: false,
+    })
 }
 
 /// The mesh format written for `path`, from its extension (case-insensitive), as the writer sees it.

@@ -100,7 +100,9 @@ pub struct SmoothReport {
     pub input: FileStats,
     /// Statistics of the smoothed f64 positions (before the output format's rounding).
     pub output: FileStats,
-    pub timings: Timings,
+    pub plan: crate::driver::PlanStats,
+    pub memory: crate::driver::MemoryStats,
+    pub timings: crate::driver::PhaseTimings,
     pub summary: Summary,
     /// One row per iteration.
     pub iterations: Vec<IterationRecord>,

@@ -40,7 +40,17 @@ pub struct MeshInfo {
 
 /// Measure `mesh` with its topology (`topo` built from `mesh.triangles` over `mesh.positions`).
 pub fn info(mesh: &Mesh, topo: &Topology) -> MeshInfo {
-    let pos = &mesh.positions;
+    info_of(&mesh.positions, &mesh.triangles, &mesh.source, topo)
+}
+
+/// [`info`] from the parts of a mesh (e.g. the reordered arrays of the patch engine; every figure
+/// is independent of the vertex and triangle order).
+pub fn info_of(
+    pos: &[DVec3],
+    triangles: &[[u32; 3]],
+    source: &crate::io::Source,
+    topo: &Topology,
+) -> MeshInfo {
     debug_assert_eq!(
         topo.len(),
         pos.len(),
@@ -50,9 +60,9 @@ pub fn info(mesh: &Mesh, topo: &Topology) -> MeshInfo {
     let (lo, hi) = bounding_box(pos);
     MeshInfo {
         vertices: pos.len(),
-        triangles: mesh.triangles.len(),
-        input_faces: mesh.source.input_faces,
-        polygons_triangulated: mesh.source.polygons_triangulated,
+        triangles: triangles.len(),
+        input_faces: source.input_faces,
+        polygons_triangulated: source.polygons_triangulated,
         edges: s.edges,
         boundary_edges: s.boundary_edges,
         non_manifold_edges: s.non_manifold_edges,
@@ -60,14 +70,14 @@ pub fn info(mesh: &Mesh, topo: &Topology) -> MeshInfo {
         degenerate_triangles: s.degenerate_triangles,
         components: components(topo),
         unreferenced_vertices: s.unreferenced_vertices,
-        closed: s.boundary_edges == 0 && s.non_manifold_edges == 0 && !mesh.triangles.is_empty(),
-        volume: super::volume(pos, &mesh.triangles),
-        area: super::area(pos, &mesh.triangles),
+        closed: s.boundary_edges == 0 && s.non_manifold_edges == 0 && !triangles.is_empty(),
+        volume: super::volume(pos, triangles),
+        area: super::area(pos, triangles),
         bbox_min: lo.to_array(),
         bbox_max: hi.to_array(),
         bbox_diagonal: (hi - lo).length(),
         mean_edge_length: mean_edge_length(pos, topo),
-        roughness_deg: roughness(pos, &mesh.triangles, topo),
+        roughness_deg: roughness(pos, triangles, topo),
     }
 }
 

@@ -50,4 +50,4 @@ pub fn centroid(pos: &[DVec3]) -> DVec3 {
 mod compare;
 mod info;
 pub use compare::{Comparison, compare};
-pub use info::{MeshInfo, info, mean_edge_length, roughness};
+pub use info::{MeshInfo, info, info_of, mean_edge_length, roughness};
