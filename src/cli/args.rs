@@ -30,6 +30,24 @@ pub enum Command {
     Generate(GenerateArgs),
     /// Run several methods from the same input and plot volume % per iteration (the paper's Fig. 4).
     Curves(CurvesArgs),
+    /// Smooth a generated noisy sphere with every method and print volume and roughness per method.
+    Demo(DemoArgs),
+}
+
+/// `vcsmooth demo [--subdivisions K] [--iterations N] [--noise SIGMA]`
+#[derive(Debug, Clone, ClapArgs)]
+pub struct DemoArgs {
+    /// Icosphere level of the embedded test mesh (20·4^K triangles).
+    #[arg(long, value_name = "K", default_value_t = 4, value_parser = clap::value_parser!(u32).range(0..=10))]
+    pub subdivisions: u32,
+    /// Iterations per method.
+    #[arg(long, value_name = "N", default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..10_000))]
+    pub iterations: u64,
+    /// Noise along normals, × the mean edge length.
+    #[arg(long, value_name = "SIGMA", default_value_t = 0.3)]
+    pub noise: f64,
+    #[command(flatten)]
+    pub engine: EngineArgs,
 }
 
 /// `vcsmooth smooth IN OUT ...`

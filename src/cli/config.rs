@@ -18,6 +18,16 @@ pub enum Config {
     Compare(CompareConfig),
     Generate(GenerateConfig),
     Curves(CurvesConfig),
+    Demo(DemoConfig),
+}
+
+/// `vcsmooth demo`.
+#[derive(Debug, Clone)]
+pub struct DemoConfig {
+    pub subdivisions: u32,
+    pub iterations: usize,
+    pub noise: f64,
+    pub engine: EngineConfig,
 }
 
 /// How the engine runs (threads, patch size, memory budget, scratch directory).
@@ -142,6 +152,17 @@ impl Config {
                     methods,
                     plot: a.plot,
                     json: a.json,
+                })
+            }
+            Command::Demo(a) => {
+                if !(a.noise.is_finite() && a.noise >= 0.0) {
+                    return Err(Error::Config(format!("--noise must be a finite number ≥ 0, got {}", a.noise)));
+                }
+                Config::Demo(DemoConfig {
+                    subdivisions: a.subdivisions,
+                    iterations: a.iterations as usize,
+                    noise: a.noise,
+                    engine: engine(&a.engine)?,
                 })
             }
         })
