@@ -24,11 +24,17 @@ pub enum Error {
 impl Error {
     /// Shorthand for [`Error::InvalidInput`].
     pub fn invalid(path: impl Into<PathBuf>, what: impl Into<String>) -> Self {
-        Error::InvalidInput { path: path.into(), what: what.into() }
+        Error::InvalidInput {
+            path: path.into(),
+            what: what.into(),
+        }
     }
     /// Shorthand for [`Error::Io`].
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        Error::Io { path: path.into(), source }
+        Error::Io {
+            path: path.into(),
+            source,
+        }
     }
 }
 

@@ -1,0 +1,957 @@
+//! Tests of the readers and writers. `ply-rs-bw` serves as an independent oracle: it produces the
+//! big-endian and ASCII versions of files and checks what our writer puts out.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use glam::DVec3;
+use ply_rs_bw::parser::Parser;
+use ply_rs_bw::ply::{DefaultElement, Encoding, Ply, Property};
+use ply_rs_bw::writer::Writer;
+
+use super::*;
+
+// ---------------------------------------------------------------------------------------------
+// Fixtures and helpers
+
+/// A closed octahedron whose coordinates are not exact `f32`s, with every vertex first used in id
+/// order (so that STL's first-appearance numbering gives the same ids back).
+fn octahedron() -> Mesh {
+    let [a, b, c] = [1.234_567_891_234, 0.876_543_21, 1.111_111_111];
+    let o = DVec3::new(0.1, -0.2, 0.3);
+    let positions = [
+        [a, 0.0, 0.0],
+        [0.0, b, 0.0],
+        [0.0, 0.0, c],
+        [-a, 0.0, 0.0],
+        [0.0, -b, 0.0],
+        [0.0, 0.0, -c],
+    ]
+    .map(|p| DVec3::from_array(p) + o)
+    .to_vec();
+    let triangles = vec![
+        [0, 1, 2],
+        [1, 3, 2],
+        [3, 4, 2],
+        [4, 0, 2],
+        [1, 0, 5],
+        [3, 1, 5],
+        [4, 3, 5],
+        [0, 4, 5],
+    ];
+    Mesh::new(positions, triangles)
+}
+
+/// A unit cube made of 6 outward quads, kept as polygons.
+fn cube() -> Mesh {
+    let positions = (0..8)
+        .map(|i| DVec3::new((i & 1) as f64, (i >> 1 & 1) as f64, (i >> 2) as f64) * 0.3)
+        .collect();
+    let quads = [
+        [0, 2, 3, 1],
+        [4, 5, 7, 6],
+        [0, 1, 5, 4],
+        [2, 6, 7, 3],
+        [0, 4, 6, 2],
+        [1, 3, 7, 5],
+    ];
+    let triangles = quads
+        .iter()
+        .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
+        .collect();
+    let mut mesh = Mesh::new(positions, triangles);
+    mesh.source.face_sizes = Some(Arc::new(vec![4; 6]));
+    mesh
+}
+
+fn rounded(positions: &[DVec3]) -> Vec<DVec3> {
+    positions.iter().map(|p| p.as_vec3().as_dvec3()).collect()
+}
+
+/// Positions as `f32`: what a single-precision output must reproduce exactly. (Text outputs read
+/// back as the decimal they print, the shortest that reads back to the same `f32`.)
+fn single(positions: &[DVec3]) -> Vec<glam::Vec3> {
+    positions.iter().map(|p| p.as_vec3()).collect()
+}
+
+fn roundtrip(mesh: &Mesh, name: &str) -> Mesh {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join(name);
+    write_mesh(&path, mesh).unwrap();
+    read_mesh(&path).unwrap()
+}
+
+fn write_bytes(mesh: &Mesh, name: &str) -> Vec<u8> {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join(name);
+    write_mesh(&path, mesh).unwrap();
+    std::fs::read(path).unwrap()
+}
+
+/// Parses bytes as if read from a file called `name`.
+fn parse_as(bytes: &[u8], name: &str) -> std::result::Result<Mesh, String> {
+    parse(bytes, Path::new(name))
+}
+
+/// A binary little-endian PLY: `header` lines between `format` and `end_header`, then `body`.
+fn binary_ply(header: &str, body: &[u8]) -> Vec<u8> {
+    let mut bytes =
+        format!("ply\nformat binary_little_endian 1.0\n{header}end_header\n").into_bytes();
+    bytes.extend_from_slice(body);
+    bytes
+}
+
+const XYZ_FACES: &str = "element vertex 3\nproperty float x\nproperty float y\nproperty float z\n\
+                         element face 1\nproperty list uchar int vertex_indices\n";
+
+fn floats(values: &[f32]) -> Vec<u8> {
+    values.iter().flat_map(|v| v.to_le_bytes()).collect()
+}
+
+fn face(indices: &[i32]) -> Vec<u8> {
+    let mut bytes = vec![indices.len() as u8];
+    bytes.extend(indices.iter().flat_map(|v| v.to_le_bytes()));
+    bytes
+}
+
+/// A valid one-triangle binary PLY and the length of its header.
+fn triangle_ply() -> (Vec<u8>, usize) {
+    let header = binary_ply(XYZ_FACES, &[]).len();
+    let mut body = floats(&[0., 0., 0., 1., 0., 0., 0., 1., 0.]);
+    body.extend(face(&[0, 1, 2]));
+    (binary_ply(XYZ_FACES, &body), header)
+}
+
+fn meshes_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/meshes")
+}
+
+fn oracle_read(bytes: &[u8]) -> Ply<DefaultElement> {
+    Parser::<DefaultElement>::new()
+        .read_ply(&mut &bytes[..])
+        .expect("ply-rs-bw reads the file")
+}
+
+fn oracle_write(ply: &Ply<DefaultElement>, encoding: Encoding) -> Vec<u8> {
+    let mut ply = ply.clone();
+    ply.header.encoding = encoding;
+    let mut out = Vec::new();
+    Writer::new()
+        .write_ply(&mut out, &mut ply)
+        .expect("ply-rs-bw writes the file");
+    out
+}
+
+fn scalar(p: &Property) -> f64 {
+    match *p {
+        Property::Char(v) => v.into(),
+        Property::UChar(v) => v.into(),
+        Property::Short(v) => v.into(),
+        Property::UShort(v) => v.into(),
+        Property::Int(v) => v.into(),
+        Property::UInt(v) => v.into(),
+        Property::Float(v) => v.into(),
+        Property::Double(v) => v,
+        ref list => panic!("not a scalar: {list:?}"),
+    }
+}
+
+fn list(p: &Property) -> Vec<i64> {
+    match p {
+        Property::ListUChar(v) => v.iter().map(|&x| x.into()).collect(),
+        Property::ListInt(v) => v.iter().map(|&x| x.into()).collect(),
+        Property::ListUInt(v) => v.iter().map(|&x| x.into()).collect(),
+        Property::ListUShort(v) => v.iter().map(|&x| x.into()).collect(),
+        other => panic!("not an integer list: {other:?}"),
+    }
+}
+
+/// Positions and fan-triangulated faces as ply-rs-bw decodes them.
+fn oracle_mesh(ply: &Ply<DefaultElement>) -> (Vec<DVec3>, Vec<[u32; 3]>) {
+    let positions = ply.payload["vertex"]
+        .iter()
+        .map(|v| DVec3::new(scalar(&v["x"]), scalar(&v["y"]), scalar(&v["z"])))
+        .collect();
+    let mut triangles = Vec::new();
+    for f in ply.payload.get("face").into_iter().flatten() {
+        let c = list(&f["vertex_indices"]);
+        triangles.extend(
+            c[1..]
+                .windows(2)
+                .map(|w| [c[0] as u32, w[0] as u32, w[1] as u32]),
+        );
+    }
+    (positions, triangles)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Round trips
+
+#[test]
+fn every_format_round_trips() {
+    let mesh = octahedron();
+    for name in ["m.ply", "m.obj", "m.off", "m.stl", "M.PLY", "m.Obj"] {
+        let back = roundtrip(&mesh, name);
+        assert_eq!(
+            single(&back.positions),
+            single(&mesh.positions),
+            "{name}: f32-exact positions"
+        );
+        if name.ends_with("ply") || name.ends_with("stl") {
+            assert_eq!(
+                back.positions,
+                rounded(&mesh.positions),
+                "{name}: binary f32"
+            );
+        }
+        assert_eq!(back.triangles, mesh.triangles, "{name}");
+        assert_eq!(back.source.input_faces, 8, "{name}");
+        assert_eq!(back.source.polygons_triangulated, 0, "{name}");
+        assert_eq!(
+            back.source.format,
+            Format::from_extension(Path::new(name)),
+            "{name}"
+        );
+    }
+}
+
+#[test]
+fn second_round_trip_is_exact_and_byte_identical() {
+    for name in ["m.ply", "m.obj", "m.off", "m.stl"] {
+        let once = roundtrip(&octahedron(), name);
+        let twice = roundtrip(&once, name);
+        assert_eq!(twice.positions, once.positions, "{name}");
+        assert_eq!(
+            write_bytes(&once, name),
+            write_bytes(&twice, name),
+            "{name}"
+        );
+    }
+}
+
+#[test]
+fn polygons_are_fan_triangulated_and_written_back_as_polygons() {
+    let mesh = cube();
+    for name in ["c.ply", "c.obj", "c.off"] {
+        let back = roundtrip(&mesh, name);
+        assert_eq!(single(&back.positions), single(&mesh.positions), "{name}");
+        assert_eq!(back.triangles, mesh.triangles, "{name}");
+        assert_eq!(back.source.input_faces, 6, "{name}");
+        assert_eq!(back.source.polygons_triangulated, 6, "{name}");
+        assert_eq!(
+            back.source.face_sizes.as_deref(),
+            Some(&vec![4; 6]),
+            "{name}"
+        );
+    }
+    let text = String::from_utf8(write_bytes(&mesh, "c.obj")).unwrap();
+    assert!(text.contains("\nf 1 3 4 2\n"), "{text}");
+    // STL has no polygons: triangles.
+    let back = roundtrip(&mesh, "c.stl");
+    assert_eq!(back.triangles.len(), 12);
+    assert_eq!(back.source.face_sizes, None);
+}
+
+#[test]
+fn double_precision_stays_double() {
+    let mut mesh = octahedron();
+    mesh.source.precision = Precision::Double;
+    for name in ["d.ply", "d.obj", "d.off"] {
+        let back = roundtrip(&mesh, name);
+        assert_eq!(back.positions, mesh.positions, "{name}: f64-exact");
+        assert_eq!(back.source.precision, Precision::Double, "{name}");
+    }
+    let bytes = write_bytes(&mesh, "d.ply");
+    assert!(bytes.windows(17).any(|w| w == b"property double x"));
+    // Text inputs that an f32 reproduces stay single precision.
+    let back = roundtrip(&roundtrip(&octahedron(), "f.obj"), "f.off");
+    assert_eq!(back.source.precision, Precision::Float);
+}
+
+#[test]
+fn double_ply_input_stays_double_through_a_ply_round_trip() {
+    let text = "ply\nformat ascii 1.0\nelement vertex 3\nproperty double x\nproperty double y\n\
+                property double z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n\
+                0.1 0.2 0.3\n1.000000000001 0 0\n0 1e-300 1\n3 0 1 2\n";
+    let mesh = parse_as(text.as_bytes(), "d.ply").unwrap();
+    assert_eq!(mesh.positions[1].x, 1.000000000001);
+    assert_eq!(mesh.source.precision, Precision::Double);
+    let back = roundtrip(&mesh, "d.ply");
+    assert_eq!(back.positions, mesh.positions);
+    let bytes = write_bytes(&mesh, "d.ply");
+    assert!(bytes.starts_with(b"ply\nformat ascii 1.0\n"));
+}
+
+/// A hand-written ASCII PLY with colours, a list between the coordinates and the normals, a quad,
+/// face quality, another element, comments and obj_info.
+const RICH: &str = "ply\r\nformat ascii 1.0\r\ncomment made by hand\r\nobj_info scanner 42\r\n\
+element vertex 5\r\nproperty float x\r\nproperty float y\r\nproperty float z\r\n\
+property uchar red\r\nproperty uchar green\r\nproperty uchar blue\r\nproperty list uchar float uv\r\n\
+property float nx\r\nproperty float ny\r\nproperty float nz\r\nproperty float confidence\r\n\
+element face 3\r\nproperty list uchar int vertex_indices\r\nproperty float quality\r\n\
+element edge 2\r\nproperty int vertex1\r\nproperty int vertex2\r\nend_header\r\n\
+0 0 0 255 0 0 2 0.5 0.25 9 9 9 0.5\r\n\
+1 0 0 0 255 0 0 9 9 9 0.25\r\n\
+1 1 0 0 0 255 1 7 9 9 9 0.125\r\n\
+0 1 0 10 20 30 3 1 2 3 9 9 9 1\r\n\
+0.5 0.5 1 1 2 3 0 9 9 9 0.1\r\n\
+4 3 2 1 0 0.25\r\n\
+3 0 1 4 0.5\r\n\
+3 1 2 4 0.75\r\n\
+0 4\r\n\
+2 3\r\n";
+
+#[test]
+fn extra_ply_properties_vertex_order_and_polygons_survive_in_every_encoding() {
+    let input = oracle_read(RICH.as_bytes());
+    for encoding in [
+        Encoding::Ascii,
+        Encoding::BinaryLittleEndian,
+        Encoding::BinaryBigEndian,
+    ] {
+        let bytes = oracle_write(&input, encoding);
+        let mut mesh = parse_as(&bytes, "rich.ply").unwrap();
+        assert_eq!(mesh.positions.len(), 5);
+        assert_eq!(mesh.triangles, [[3, 2, 1], [3, 1, 0], [0, 1, 4], [1, 2, 4]]);
+        assert_eq!(
+            (mesh.source.input_faces, mesh.source.polygons_triangulated),
+            (3, 1)
+        );
+        // Smoothing moves vertices, nothing else.
+        for p in &mut mesh.positions {
+            *p = *p * 2.0 + DVec3::new(0.1, 0.2, 0.3);
+        }
+        let out = write_bytes(&mesh, "out.ply");
+        let expected_format = match encoding {
+            Encoding::Ascii => "format ascii 1.0",
+            _ => "format binary_little_endian 1.0", // big-endian becomes little-endian
+        };
+        assert!(
+            out.starts_with(format!("ply\n{expected_format}\n").as_bytes()),
+            "{encoding:?}"
+        );
+
+        let output = oracle_read(&out);
+        assert_eq!(output.header.comments, ["made by hand"], "{encoding:?}");
+        assert_eq!(output.header.obj_infos, ["scanner 42"], "{encoding:?}");
+        let names = |ply: &Ply<DefaultElement>| -> Vec<(String, Vec<String>)> {
+            ply.header
+                .elements
+                .values()
+                .map(|e| (e.name.clone(), e.properties.keys().cloned().collect()))
+                .collect()
+        };
+        assert_eq!(
+            names(&output),
+            names(&input),
+            "{encoding:?}: same elements and properties"
+        );
+        let normals = vertex_normals(&mesh.positions, &mesh.triangles);
+        for (i, (a, b)) in input.payload["vertex"]
+            .iter()
+            .zip(&output.payload["vertex"])
+            .enumerate()
+        {
+            for key in ["red", "green", "blue", "uv", "confidence"] {
+                assert_eq!(a[key], b[key], "{encoding:?} vertex {i} {key}");
+            }
+            let p = DVec3::new(scalar(&b["x"]), scalar(&b["y"]), scalar(&b["z"]));
+            assert_eq!(
+                p,
+                mesh.positions[i].as_vec3().as_dvec3(),
+                "{encoding:?}: moved, in vertex order"
+            );
+            let n = DVec3::new(scalar(&b["nx"]), scalar(&b["ny"]), scalar(&b["nz"]));
+            assert_eq!(
+                n,
+                normals[i].as_vec3().as_dvec3(),
+                "{encoding:?}: normals recomputed"
+            );
+        }
+        assert_eq!(
+            input.payload["face"], output.payload["face"],
+            "{encoding:?}: faces as they were"
+        );
+        assert_eq!(
+            input.payload["edge"], output.payload["edge"],
+            "{encoding:?}: other elements kept"
+        );
+        assert_eq!(
+            Property::Float(0.1),
+            output.payload["vertex"][4]["confidence"],
+            "{encoding:?}"
+        );
+    }
+}
+
+#[test]
+fn recomputed_normals_are_area_weighted_and_unit() {
+    // Two triangles at a right angle, areas 1/2 (normal +z) and 1 (normal +y): the shared
+    // vertices' normal leans twice as much to the bigger one.
+    let p = [[0., 0., 0.], [1., 0., 0.], [0., 1., 0.], [0., 0., 2.]]
+        .map(DVec3::from_array)
+        .to_vec();
+    let n = vertex_normals(&p, &[[0, 1, 2], [0, 3, 1]]);
+    let expected = DVec3::new(0.0, 2.0, 1.0).normalize();
+    assert!(
+        (n[0] - expected).length() < 1e-15 && (n[1] - expected).length() < 1e-15,
+        "{n:?}"
+    );
+    assert_eq!(n[2], DVec3::Z);
+    let alone = vertex_normals(&p, &[[0, 1, 1]]);
+    assert_eq!(alone, [DVec3::ZERO; 4], "no area, no direction");
+}
+
+#[test]
+fn every_scalar_type_reads_and_round_trips_in_every_encoding() {
+    let text = "ply\nformat ascii 1.0\nelement vertex 3\nproperty char a\nproperty uchar b\n\
+                property short c\nproperty ushort d\nproperty int e\nproperty uint f\n\
+                property float x\nproperty double y\nproperty short z\nproperty double w\n\
+                element face 1\nproperty list ushort uint vertex_indices\nend_header\n\
+                -128 255 -32768 65535 -2147483648 4294967295 0.5 0.25 -7 1e300\n\
+                127 0 32767 0 2147483647 0 1.5 -0.125 12 -1e-300\n\
+                0 1 2 3 4 5 -2.5 3.75 -32768 0\n\
+                3 2 1 0\n";
+    let input = oracle_read(text.as_bytes());
+    for encoding in [
+        Encoding::Ascii,
+        Encoding::BinaryLittleEndian,
+        Encoding::BinaryBigEndian,
+    ] {
+        let mesh = parse_as(&oracle_write(&input, encoding), "types.ply").unwrap();
+        assert_eq!(
+            mesh.positions[0],
+            DVec3::new(0.5, 0.25, -7.0),
+            "{encoding:?}"
+        );
+        assert_eq!(
+            mesh.positions[2],
+            DVec3::new(-2.5, 3.75, -32768.0),
+            "{encoding:?}"
+        );
+        assert_eq!(mesh.triangles, [[2, 1, 0]], "{encoding:?}");
+        let output = oracle_read(&write_bytes(&mesh, "types.ply"));
+        assert_eq!(
+            output.payload, input.payload,
+            "{encoding:?}: every value as it was"
+        );
+    }
+    // The sized type names and `vertex_index` read the same.
+    let aliases = text
+        .replace("char a", "int8 a")
+        .replace("uchar b", "uint8 b")
+        .replace("float x", "float32 x")
+        .replace("double y", "float64 y")
+        .replace("uint vertex_indices", "uint32 vertex_index");
+    let mesh = parse_as(aliases.as_bytes(), "aliases.ply").unwrap();
+    assert_eq!(
+        mesh.positions,
+        parse_as(text.as_bytes(), "t.ply").unwrap().positions
+    );
+    assert_eq!(mesh.triangles, [[2, 1, 0]]);
+}
+
+#[test]
+fn integer_coordinates_that_no_longer_fit_are_refused() {
+    let text = "ply\nformat ascii 1.0\nelement vertex 1\nproperty uchar x\nproperty uchar y\n\
+                property uchar z\nend_header\n1 2 3\n";
+    let mut mesh = parse_as(text.as_bytes(), "u.ply").unwrap();
+    mesh.positions[0].y = 300.0;
+    let dir = tempfile::tempdir().unwrap();
+    let target = dir.path().join("u.ply");
+    let e = write_mesh(&target, &mesh).unwrap_err().to_string();
+    assert!(
+        e.contains("vertex 0: coordinate 300 does not fit PLY property 'y' (uchar)"),
+        "{e}"
+    );
+    assert!(!target.exists());
+}
+
+// ---------------------------------------------------------------------------------------------
+// Real meshes
+
+#[test]
+fn the_shared_meshes_read_with_their_documented_counts() {
+    let expected = [
+        ("fertility-9k.ply", 4_494, 9_000),
+        ("demosthenes-17k.ply", 8_394, 16_719),
+        ("kitten-25k.ply", 12_623, 25_246),
+        ("stanford-bunny.ply", 35_947, 69_451),
+        ("armadillo-86k.ply", 43_243, 86_482),
+        ("horse.ply", 48_485, 96_966),
+    ];
+    for (name, vertices, faces) in expected {
+        let path = meshes_dir().join(name);
+        let mesh =
+            read_mesh(&path).unwrap_or_else(|e| panic!("{e} (the tests read ../shared/meshes)"));
+        assert_eq!(
+            (mesh.positions.len(), mesh.triangles.len()),
+            (vertices, faces),
+            "{name}"
+        );
+        assert_eq!(mesh.source.input_faces, faces, "{name}");
+        assert_eq!(mesh.source.polygons_triangulated, 0, "{name}");
+        // The same numbers as an independent decoder.
+        let (positions, triangles) = oracle_mesh(&oracle_read(&std::fs::read(&path).unwrap()));
+        assert_eq!(mesh.positions, positions, "{name}");
+        assert_eq!(mesh.triangles, triangles, "{name}");
+    }
+}
+
+#[test]
+fn big_endian_and_ascii_versions_read_the_same_as_little_endian() {
+    for name in ["kitten-25k.ply", "fertility-9k.ply"] {
+        let bytes = std::fs::read(meshes_dir().join(name)).unwrap();
+        let little = parse_as(&bytes, name).unwrap();
+        let ply = oracle_read(&bytes);
+        for encoding in [Encoding::BinaryBigEndian, Encoding::Ascii] {
+            let mesh = parse_as(&oracle_write(&ply, encoding), name).unwrap();
+            assert_eq!(mesh.positions, little.positions, "{name} {encoding:?}");
+            assert_eq!(mesh.triangles, little.triangles, "{name} {encoding:?}");
+        }
+    }
+}
+
+#[test]
+fn a_real_mesh_round_trips_through_every_format() {
+    let mesh = read_mesh(&meshes_dir().join("fertility-9k.ply")).unwrap();
+    let ply = write_bytes(&mesh, "f.ply");
+    assert_eq!(
+        ply,
+        std::fs::read(meshes_dir().join("fertility-9k.ply")).unwrap(),
+        "byte-identical PLY"
+    );
+    for name in ["f.obj", "f.off"] {
+        let back = roundtrip(&mesh, name);
+        assert_eq!(single(&back.positions), single(&mesh.positions), "{name}");
+        assert_eq!(back.triangles, mesh.triangles, "{name}");
+    }
+    // STL numbers vertices by first appearance: the same triangles, corner by corner.
+    let corners = |m: &Mesh| -> Vec<DVec3> {
+        m.triangles
+            .iter()
+            .flatten()
+            .map(|&v| m.positions[v as usize])
+            .collect()
+    };
+    let back = roundtrip(&mesh, "f.stl");
+    assert_eq!(corners(&back), corners(&mesh));
+    assert_eq!(
+        back.positions.len(),
+        mesh.positions.len(),
+        "every corner merged back into its vertex"
+    );
+}
+
+// ---------------------------------------------------------------------------------------------
+// Other readers' details
+
+#[test]
+fn obj_corner_forms_negative_indices_and_ignored_statements() {
+    let text = "# a comment\r\nmtllib x.mtl\r\no thing\r\nv 0 0 0\r\nv 1 0 0 # inline comment\r\n\
+                v 1 1 0 0.5 0.5 0.5\r\nv 0 1 0\r\nvt 0 0\r\nvn 0 0 1\r\ns off\r\nusemtl m\r\n\
+                f 1/1/1 2/1/1 3/1/1 4/1/1\r\nf -4//1 -2//1 -1//1\r\nf 1/1 2/1 3/1\r\nl 1 2\r\n";
+    let mesh = parse_as(text.as_bytes(), "m.obj").unwrap();
+    assert_eq!(mesh.positions.len(), 4);
+    assert_eq!(mesh.triangles, [[0, 1, 2], [0, 2, 3], [0, 2, 3], [0, 1, 2]]);
+    assert_eq!(
+        (mesh.source.input_faces, mesh.source.polygons_triangulated),
+        (3, 1)
+    );
+    // Faces may come before the vertices they use.
+    let forward = parse_as(b"f 1 2 3\nv 0 0 0\nv 1 0 0\nv 0 1 0\n", "m.obj").unwrap();
+    assert_eq!(forward.triangles, [[0, 1, 2]]);
+}
+
+#[test]
+fn off_variants_comments_and_colours() {
+    let text = "# comment first\nCOFF\n4 2 0\n0 0 0 1 0 0 1\n1 0 0 0 1 0 1\n1 1 0 0 0 1 1\n\
+                0 1 0 1 1 1 1\n3 0 1 2 255 0 0\n3 0 2 3 # no colour\n\n";
+    let mesh = parse_as(text.as_bytes(), "m.off").unwrap();
+    assert_eq!(mesh.triangles, [[0, 1, 2], [0, 2, 3]]);
+    let same_line = parse_as(b"OFF 3 1 0\n0 0 0\n1 0 0\n0 1 0\n4 0 1 2 2\n", "m.off").unwrap();
+    assert_eq!(
+        same_line.triangles,
+        [[0, 1, 2], [0, 2, 2]],
+        "degenerate polygon kept"
+    );
+}
+
+#[test]
+fn stl_merges_bitwise_equal_corners_only() {
+    let facet = |corners: [[f32; 3]; 3]| {
+        let mut b = vec![0; 12];
+        b.extend(corners.iter().flatten().flat_map(|x| x.to_le_bytes()));
+        b.extend([0, 0]);
+        b
+    };
+    // The header starts with "solid", as many binary exporters write: the size decides.
+    let mut bytes = b"solid but binary".to_vec();
+    bytes.resize(80, b' ');
+    bytes.extend(3u32.to_le_bytes());
+    bytes.extend(facet([[0., 0., 0.], [1., 0., 0.], [0., 1., 0.]]));
+    bytes.extend(facet([[1., 0., 0.], [1., 1., 0.], [0., 1., 0.]]));
+    bytes.extend(facet([[-0., 0., 0.], [1., 0., 0.], [0., 1., 0.]]));
+    let mesh = parse_as(&bytes, "m.stl").unwrap();
+    assert_eq!(mesh.positions.len(), 5, "-0.0 is not merged with 0.0");
+    assert_eq!(mesh.triangles, [[0, 1, 2], [1, 3, 2], [4, 1, 2]]);
+
+    let ascii = "solid name with words\n facet normal 0 0 1\n  outer loop\n   vertex 0 0 0\n\
+                 vertex 1 0 0\n   vertex 1 1 0\n   vertex 0 1 0\n  endloop\n endfacet\nendsolid name\n\
+                 solid second\nfacet normal 0 0 0 outer loop vertex 0 0 0 vertex 1 1 0 vertex 1 0 0 \
+                 endloop endfacet\nendsolid\n";
+    let mesh = parse_as(ascii.as_bytes(), "m.stl").unwrap();
+    assert_eq!(mesh.positions.len(), 4);
+    assert_eq!(mesh.triangles, [[0, 1, 2], [0, 2, 3], [0, 2, 1]]);
+    assert_eq!(mesh.source.polygons_triangulated, 1);
+}
+
+#[test]
+fn degenerate_and_duplicate_faces_are_kept() {
+    let mut body = floats(&[0., 0., 0., 1., 0., 0., 0., 1., 0.]);
+    for f in [[0, 1, 2], [0, 1, 2], [0, 0, 1]] {
+        body.extend(face(&f));
+    }
+    let bytes = binary_ply(&XYZ_FACES.replace("face 1", "face 3"), &body);
+    let mesh = parse_as(&bytes, "d.ply").unwrap();
+    assert_eq!(mesh.triangles, [[0, 1, 2], [0, 1, 2], [0, 0, 1]]);
+    assert_eq!(roundtrip(&mesh, "d.ply").triangles, mesh.triangles);
+}
+
+#[test]
+fn trailing_whitespace_and_empty_meshes_are_valid() {
+    let (mut bytes, _) = triangle_ply();
+    bytes.extend(b"\r\n \n");
+    assert_eq!(parse_as(&bytes, "t.ply").unwrap().triangles, [[0, 1, 2]]);
+    let empty = binary_ply(
+        "element vertex 0\nproperty float x\nproperty float y\nproperty float z\n",
+        b"",
+    );
+    let mesh = parse_as(&empty, "e.ply").unwrap();
+    assert!(mesh.positions.is_empty() && mesh.triangles.is_empty());
+    assert_eq!(roundtrip(&mesh, "e.ply").positions, []);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Bad input: every case must give InvalidInput with this message.
+
+#[test]
+fn malformed_inputs_give_clear_one_line_errors() {
+    let (good, header) = triangle_ply();
+    let with_face = |f: &[i32]| {
+        let mut body = floats(&[0., 0., 0., 1., 0., 0., 0., 1., 0.]);
+        body.extend(face(&[0, 1, 2]));
+        body.extend(face(f));
+        binary_ply(&XYZ_FACES.replace("face 1", "face 2"), &body)
+    };
+    let second_face = header + 36 + 13;
+    let ascii = |body: &str| {
+        format!(
+            "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\n\
+             property uchar red\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n{body}"
+        )
+        .into_bytes()
+    };
+    let mut nan = good.clone();
+    nan[header + 16..header + 20].copy_from_slice(&f32::NAN.to_le_bytes());
+    let mut big = good.clone();
+    big.extend(b"\nxyz");
+    let lying = binary_ply(
+        &XYZ_FACES.replace("vertex 3", "vertex 4000000000"),
+        &good[header..],
+    );
+    let lying_start = lying.len() - (good.len() - header);
+    let lying_faces = binary_ply(
+        &XYZ_FACES.replace("face 1", "face 1000000000000"),
+        &good[header..],
+    );
+    let lying_faces_start = lying_faces.len() - (good.len() - header) + 36;
+    let too_many = binary_ply(
+        &XYZ_FACES.replace("vertex 3", "vertex 5000000000"),
+        &good[header..],
+    );
+    let mut stl_truncated = b"solid exported as binary".to_vec();
+    stl_truncated.resize(80, b' ');
+    stl_truncated.extend(1u32.to_le_bytes());
+    stl_truncated.resize(120, 0);
+    let stl_ascii = "solid s\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\nendfacet\n";
+
+    let cases: Vec<(&str, Vec<u8>, String)> = vec![
+        ("e.ply", vec![], "empty file".into()),
+        ("x.dat", b"hello world\n".to_vec(), "unknown format".into()),
+        ("x.ply", b"hello world\n".to_vec(), "not a PLY file".into()),
+        ("h.ply", b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\n".to_vec(), "no end_header".into()),
+        ("h.ply", b"ply\nformat binary_little_endian 2.0\nend_header\n".to_vec(), "unsupported PLY version".into()),
+        ("h.ply", b"ply\nelement vertex 1\nproperty float x\nend_header\n".to_vec(), "no format line".into()),
+        ("h.ply", binary_ply("element vertex 1\nproperty flaot x\n", b""), "header line 4: unknown type \"flaot\"".into()),
+        ("h.ply", binary_ply("element vertex 1\nproperty list float int x\n", b""), "not an integer type".into()),
+        ("h.ply", binary_ply("element vertex -1\nproperty float x\n", b""), "is not a count".into()),
+        ("h.ply", binary_ply("element point 1\nproperty float x\n", &[0; 4]), "no 'vertex' element".into()),
+        ("h.ply", binary_ply("element vertex 0\nproperty float x\nproperty float y\n", b""), "no scalar property 'z'".into()),
+        ("h.ply", binary_ply("element vertex 0\nelement face 0\n", b""), "element 'vertex' has no properties".into()),
+        ("h.ply", binary_ply("element vertex 1\nproperty float x\nproperty float x\n", b""), "a second property 'x'".into()),
+        ("h.ply", binary_ply("bogus line\n", b""), "header line 3: unknown keyword \"bogus\"".into()),
+        (
+            "l.ply",
+            lying,
+            format!("vertex (byte {lying_start}): the header declares 4000000000 records of at least 12 bytes, but only 49 bytes are left"),
+        ),
+        (
+            "l.ply",
+            lying_faces,
+            format!("face (byte {lying_faces_start}): the header declares 1000000000000 records of at least 1 bytes, but only 13 bytes are left"),
+        ),
+        ("l.ply", too_many, "5000000000 vertices: more than 32-bit indices can address".into()),
+        ("t.ply", good[..good.len() - 3].to_vec(), format!("face 0 (byte {}): file ends inside the record", header + 36)),
+        ("t.ply", good[..header + 30].to_vec(), format!("vertex (byte {header}): the header declares 3 records")),
+        ("g.ply", big, format!("byte {}: 3 bytes of unexpected data after the last element", good.len() + 1)),
+        ("n.ply", nan, format!("vertex 1 (byte {}): coordinate is not finite (1, NaN, 0)", header + 12)),
+        ("r.ply", with_face(&[0, 1, 99]), format!("face 1 (byte {second_face}): vertex index 99 out of range (0..3)")),
+        ("r.ply", with_face(&[0, -1, 2]), format!("face 1 (byte {second_face}): vertex index -1 is negative")),
+        ("r.ply", with_face(&[0, 1]), format!("face 1 (byte {second_face}): face has 2 vertices, at least 3 are needed")),
+        ("a.ply", ascii("0 0 0 1\n1 0 0 2\n3 0 1 2\n"), "face 0 (line 13): vertex index 2 out of range (0..2)".into()),
+        ("a.ply", ascii("0 0 0 1\n1 zero 0 2\n3 0 1 1\n"), "vertex 1 (line 12): \"zero\" is not a number ('y' is float)".into()),
+        ("a.ply", ascii("0 0 0 1\n1 inf 0 2\n3 0 1 1\n"), "vertex 1 (line 12): coordinate is not finite (1, inf, 0)".into()),
+        ("a.ply", ascii("0 0 0 1\n1 0 0 300\n3 0 1 1\n"), "vertex 1 (line 12): value 300 does not fit 'red' (uchar)".into()),
+        ("a.ply", ascii("0 0 0 1 7\n1 0 0 2\n3 0 1 1\n"), "vertex 0 (line 11): unexpected value \"7\" after the last property".into()),
+        ("a.ply", ascii("0 0 0 1\n1 0 0\n3 0 1 1\n"), "vertex 1 (line 12): too few values: 'red' is missing".into()),
+        ("a.ply", ascii("0 0 0 1\n\n1 0 0 2\n3 0 1 1\n"), "vertex 1 (line 12): too few values".into()),
+        ("a.ply", ascii("0 0 0 1\n1 0 0 2\n3 0 1 1\n3 0 1 1\n"), "line 14: unexpected data after the last element".into()),
+        ("a.ply", ascii("0 0 0 1\n1 0 0 2\n"), "face 0 (line 13): file ends early".into()),
+        ("a.ply", ascii("0 0 0 1\n1 0 0 2\n3 0 1.5 1\n"), "face 0 (line 13): \"1.5\" is not an integer".into()),
+        (
+            "c.ply",
+            b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n\
+              element face 1\nproperty list char int vertex_indices\nend_header\n0 0 0\n-1\n"
+                .to_vec(),
+            "face 0 (line 11): negative list count -1".into(),
+        ),
+        ("m.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n".to_vec(), "face 0 (line 4): vertex index 9 out of range (1..=3)".into()),
+        ("m.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 0\n".to_vec(), "face 0 (line 4): vertex index 0 (OBJ indices start at 1)".into()),
+        ("m.obj", b"v 0 0 0\nf -1 -2 -3\n".to_vec(), "vertex index -2 points before the first vertex".into()),
+        ("m.obj", b"v 0 0 0\nv 1 nan 0\n".to_vec(), "vertex 1 (line 2): coordinate is not finite".into()),
+        ("m.obj", b"v 0 0 0\nv 1 x 0\n".to_vec(), "vertex 1 (line 2): \"x\" is not a number".into()),
+        ("m.obj", b"v 0 0 0\nv 1 0\n".to_vec(), "vertex 1 (line 2): 2 coordinates, 3 are needed".into()),
+        ("m.obj", b"v 0 0 0\nv 1 0 0\nf 1 2\n".to_vec(), "face 0 (line 3): face has 2 vertices".into()),
+        ("m.obj", b"v 0 0 0\nf 1/x 1 1\n".to_vec(), "face 0 (line 2): \"x\" is not an integer".into()),
+        ("m.off", b"OFF\n3 1 0\n0 0 0\n1 0 0\n".to_vec(), "vertex 2 (line 5): file ends early (the header declares 3 vertices)".into()),
+        ("m.off", b"OFF\n1 1000000 0\n0 0 0\n3 0 0 0\n".to_vec(), "face 1 (line 5): file ends early (the header declares 1000000 faces)".into()),
+        ("m.off", b"OFF\n3 -1 0\n".to_vec(), "counts (line 2): negative count".into()),
+        ("m.off", b"OFF\n3\n".to_vec(), "counts (line 2): expected 'vertices faces edges'".into()),
+        ("m.off", b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n".to_vec(), "face 0 (line 6): vertex index 3 out of range (0..3)".into()),
+        ("m.off", b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n3 0 1 2\n".to_vec(), "line 7: unexpected data after the last face".into()),
+        ("m.off", b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1\n".to_vec(), "face 0 (line 6): face lists 3 vertices but has only 2".into()),
+        ("m.off", b"OFF BINARY\n".to_vec(), "binary OFF is not supported".into()),
+        ("m.off", b"4OFF\n".to_vec(), "(4-D or n-D OFF) is not supported".into()),
+        ("m.stl", vec![0; 100], "binary STL: the header declares 0 triangles (84 bytes) but the file has 100 bytes".into()),
+        ("m.stl", vec![0; 50], "binary STL: 50 bytes, shorter than the 84-byte header".into()),
+        ("m.stl", stl_truncated, "binary STL: the header declares 1 triangles (134 bytes) but the file has 120 bytes".into()),
+        ("m.stl", stl_ascii.as_bytes().to_vec(), "facet 0 (line 7): expected 'endloop', found \"endfacet\"".into()),
+        ("m.stl", b"solid s\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\n".to_vec(), "facet 0 (line 5): file ends early, expected 'endloop'".into()),
+        ("m.stl", b"solid s\nfacet normal 0 0 1 outer loop vertex 0 0 inf".to_vec(), "facet 0 (line 2): coordinate is not finite".into()),
+        ("m.stl", b"solid s\nendsolid\ngarbage\n".to_vec(), "line 3: expected 'solid', found \"garbage\"".into()),
+    ];
+    let dir = tempfile::tempdir().unwrap();
+    for (name, bytes, expected) in &cases {
+        let path = dir.path().join(name);
+        std::fs::write(&path, bytes).unwrap();
+        match read_mesh(&path) {
+            Err(e @ Error::InvalidInput { .. }) => {
+                let message = e.to_string();
+                assert!(
+                    message.contains(expected.as_str()),
+                    "{name}: {message:?} lacks {expected:?}"
+                );
+                assert!(
+                    message.starts_with(&path.display().to_string()),
+                    "{message}"
+                );
+                assert!(!message.contains('\n'), "one line: {message:?}");
+            }
+            other => panic!("{name} ({expected}): {other:?}"),
+        }
+    }
+    assert!(cases.len() >= 40);
+}
+
+#[test]
+fn a_header_claiming_a_trillion_vertices_fails_fast() {
+    let (good, header) = triangle_ply();
+    for count in ["4000000000", "1000000000000", "18446744073709551615"] {
+        let bytes = binary_ply(
+            &XYZ_FACES.replace("face 1", &format!("face {count}")),
+            &good[header..],
+        );
+        let start = std::time::Instant::now();
+        let e = parse_as(&bytes, "l.ply").unwrap_err();
+        assert!(
+            start.elapsed().as_millis() < 100 && e.contains(count),
+            "{e}"
+        );
+    }
+    let ascii = "ply\nformat ascii 1.0\nelement vertex 4000000000\nproperty float x\nproperty float y\n\
+                 property float z\nend_header\n0 0 0\n";
+    let e = parse_as(ascii.as_bytes(), "a.ply").unwrap_err();
+    assert!(
+        e.contains(
+            "vertex 1 (line 9): file ends early (the header declares 4000000000 vertex records)"
+        ),
+        "{e}"
+    );
+    let off = b"OFF\n1000000000 1 0\n0 0 0\n";
+    let e = parse_as(off, "m.off").unwrap_err();
+    assert!(
+        e.contains("vertex 1 (line 4): file ends early (the header declares 1000000000 vertices)"),
+        "{e}"
+    );
+}
+
+/// Every truncation and many random byte changes of valid files of every format: an error or a
+/// mesh, never a panic, and errors stay on one line.
+#[test]
+fn damaged_files_never_panic() {
+    let mut samples: Vec<(&str, Vec<u8>)> = vec![
+        ("r.ply", RICH.as_bytes().to_vec()),
+        ("t.ply", triangle_ply().0),
+        ("c.obj", write_bytes(&cube(), "c.obj")),
+        ("c.off", write_bytes(&cube(), "c.off")),
+        ("c.stl", write_bytes(&cube(), "c.stl")),
+        ("s.stl", b"solid s\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\nendloop\nendfacet\nendsolid s\n".to_vec()),
+    ];
+    let rich = oracle_read(RICH.as_bytes());
+    samples.push(("le.ply", oracle_write(&rich, Encoding::BinaryLittleEndian)));
+    samples.push(("be.ply", oracle_write(&rich, Encoding::BinaryBigEndian)));
+    let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+    let mut random = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        state
+    };
+    for (name, bytes) in &samples {
+        let check = |bytes: &[u8]| {
+            if let Err(e) = parse_as(bytes, name) {
+                assert!(!e.contains('\n'), "{name}: {e:?}");
+            }
+        };
+        for len in 0..bytes.len() {
+            check(&bytes[..len]);
+        }
+        for _ in 0..2000 {
+            let mut damaged = bytes.clone();
+            for _ in 0..1 + random() % 3 {
+                let at = random() as usize % damaged.len();
+                damaged[at] = match random() % 4 {
+                    0 => random() as u8,
+                    1 => b'\n',
+                    2 => b'9',
+                    _ => 0xff,
+                };
+            }
+            check(&damaged);
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Writing
+
+#[test]
+fn failed_writes_leave_no_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut bad = octahedron();
+    bad.positions[3].y = f64::NAN;
+    let target = dir.path().join("nan.ply");
+    let e = write_mesh(&target, &bad).unwrap_err();
+    assert!(
+        matches!(e, Error::InvalidInput { .. })
+            && e.to_string().contains("vertex 3 has a non-finite"),
+        "{e}"
+    );
+
+    let mut out_of_range = octahedron();
+    out_of_range.triangles[2][1] = 6;
+    write_mesh(&dir.path().join("range.obj"), &out_of_range).unwrap_err();
+
+    let huge = Mesh::new(vec![DVec3::splat(1e300)], vec![]);
+    let e = write_mesh(&dir.path().join("huge.stl"), &huge).unwrap_err();
+    assert!(
+        e.to_string().contains("does not fit single precision"),
+        "{e}"
+    );
+
+    let e = write_mesh(&dir.path().join("mesh.xyz"), &octahedron()).unwrap_err();
+    assert!(
+        matches!(e, Error::Config(_))
+            && e.to_string().contains("mesh.xyz: unknown output extension"),
+        "{e}"
+    );
+
+    // A directory where the output should go: the final rename fails after a complete write.
+    let blocked = dir.path().join("blocked.ply");
+    std::fs::create_dir(&blocked).unwrap();
+    write_mesh(&blocked, &octahedron()).unwrap_err();
+    assert!(blocked.is_dir());
+
+    let left: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(left, ["blocked.ply"], "no output, no temporary file");
+}
+
+#[test]
+fn a_source_layout_that_no_longer_matches_the_mesh_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let mesh = parse_as(RICH.as_bytes(), "rich.ply").unwrap();
+
+    let mut fewer = mesh.clone();
+    fewer.positions.pop();
+    fewer.triangles.clear();
+    let e = write_mesh(&dir.path().join("a.ply"), &fewer)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("the mesh has 4 vertices but its PLY source has 5"),
+        "{e}"
+    );
+
+    let mut rewired = mesh.clone();
+    rewired.triangles[0] = [0, 1, 2];
+    let e = write_mesh(&dir.path().join("b.ply"), &rewired)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("no longer match the PLY source's faces"), "{e}");
+    let e = write_mesh(&dir.path().join("b.obj"), &rewired)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("no longer match the source's polygons (face 0)"),
+        "{e}"
+    );
+
+    // Clearing the source writes the plain layout instead.
+    rewired.source = Source::default();
+    let back = roundtrip(&rewired, "c.ply");
+    assert_eq!(back.triangles, rewired.triangles);
+    assert!(std::fs::read_dir(dir.path()).unwrap().next().is_none());
+}
+
+#[test]
+fn plain_ply_layout_is_the_documented_one() {
+    let bytes = write_bytes(&octahedron(), "o.ply");
+    let header = "ply\nformat binary_little_endian 1.0\nelement vertex 6\nproperty float x\nproperty float y\n\
+                  property float z\nelement face 8\nproperty list uchar int vertex_indices\nend_header\n";
+    assert!(bytes.starts_with(header.as_bytes()));
+    assert_eq!(bytes.len(), header.len() + 6 * 12 + 8 * 13);
+}
+
+#[test]
+fn source_debug_does_not_dump_data() {
+    let mesh = read_mesh(&meshes_dir().join("kitten-25k.ply")).unwrap();
+    let text = format!("{:?}", mesh.source);
+    assert!(
+        text.len() < 2000 && text.contains("BinaryLittleEndian"),
+        "{text}"
+    );
+}
