@@ -26,13 +26,20 @@ pub fn parse_size(s: &str) -> std::result::Result<u64, String> {
                 'G' => 1 << 30,
                 'T' => 1 << 40,
                 'B' => 1,
-                _ => return Err(format!("'{s}': unknown size suffix '{c}' (use K, M, G or T)")),
+                _ => {
+                    return Err(format!(
+                        "'{s}': unknown size suffix '{c}' (use K, M, G or T)"
+                    ));
+                }
             };
             (&t[..i], m)
         }
         _ => (t, 1),
     };
-    let x: f64 = num.trim().parse().map_err(|_| format!("'{s}' is not a size (e.g. 512M, 1G)"))?;
+    let x: f64 = num
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{s}' is not a size (e.g. 512M, 1G)"))?;
     if !x.is_finite() || x < 0.0 {
         return Err(format!("'{s}' is not a size (e.g. 512M, 1G)"));
     }
@@ -52,13 +59,22 @@ pub fn format_size(bytes: u64) -> String {
         x /= 1024.0;
         u += 1;
     }
-    if u == 0 { format!("{bytes} B") } else { format!("{x:.2} {}", UNITS[u]) }
+    if u == 0 {
+        format!("{bytes} B")
+    } else {
+        format!("{x:.2} {}", UNITS[u])
+    }
 }
 
 fn read_kib(file: &str, key: &str) -> Option<u64> {
     let text = std::fs::read_to_string(file).ok()?;
     let line = text.lines().find(|l| l.starts_with(key))?;
-    let kib: u64 = line[key.len()..].trim().trim_end_matches("kB").trim().parse().ok()?;
+    let kib: u64 = line[key.len()..]
+        .trim()
+        .trim_end_matches("kB")
+        .trim()
+        .parse()
+        .ok()?;
     Some(kib * 1024)
 }
 
@@ -74,7 +90,9 @@ pub fn mem_available() -> Option<u64> {
 
 /// The default budget: three quarters of the available memory (1 GiB if unknown).
 pub fn default_budget() -> u64 {
-    mem_available().map_or(1 << 30, |m| m / 4 * 3).max(MIN_BUDGET)
+    mem_available()
+        .map_or(1 << 30, |m| m / 4 * 3)
+        .max(MIN_BUDGET)
 }
 
 /// Check a user-given budget.
@@ -163,11 +181,12 @@ mod tests {
 
     #[test]
     fn rss_is_measured_and_the_sampler_sees_an_allocation() {
+        // Other tests share this process, so only an absolute floor is robust: the peak can only
+        // have grown past what this test holds.
         let s = PeakSampler::start(Duration::from_millis(1));
-        let before = s.peak();
-        assert!(before > 0);
-        let v = vec![1u8; 64 << 20];
+        assert!(s.peak() > 0);
+        let v = vec![1u8; 256 << 20];
         std::hint::black_box(&v);
-        assert!(s.peak() >= before + (60 << 20));
+        assert!(s.peak() >= 250 << 20, "peak {} below the 256 MiB held", s.peak());
     }
 }
