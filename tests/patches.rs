@@ -15,11 +15,19 @@ fn noisy_sphere(k: u32) -> Mesh {
 }
 
 fn shared(name: &str) -> Mesh {
-    io::read_mesh(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/meshes").join(name)).unwrap()
+    io::read_mesh(
+        &Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../shared/meshes")
+            .join(name),
+    )
+    .unwrap()
 }
 
 fn pool(threads: usize) -> rayon::ThreadPool {
-    rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap()
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap()
 }
 
 /// Prepare and smooth on `threads` threads; returns positions in the input order and the records.
@@ -31,7 +39,8 @@ fn run(
     threads: usize,
 ) -> (Vec<DVec3>, Vec<driver::IterationRecord>, Prepared) {
     pool(threads).install(|| {
-        let mut prep = Prepared::new(storage, &mesh.positions, &mesh.triangles, patch_size).unwrap();
+        let mut prep =
+            Prepared::new(storage, &mesh.positions, &mesh.triangles, patch_size).unwrap();
         let records = prep.smooth(storage, opts, &mut Quiet).unwrap();
         let mut out = vec![DVec3::ZERO; mesh.positions.len()];
         prep.positions_in_input_order(&mut out);
@@ -45,18 +54,32 @@ fn bit_identical_for_any_thread_count_and_any_storage() {
     let scratch = tempfile::tempdir().unwrap();
     let mapped = Storage::scratch(scratch.path()).unwrap();
     for method in Method::ALL {
-        let opts = Options { method, iterations: 2, ..Options::default() };
+        let opts = Options {
+            method,
+            iterations: 2,
+            ..Options::default()
+        };
         let (reference, _, prep) = run(&mesh, &Storage::heap(), 500, &opts, 1);
         assert!(prep.schedule.colours.len() > 1 && prep.patches.len() > 10);
         for threads in [2, 8] {
             let (out, _, _) = run(&mesh, &Storage::heap(), 500, &opts, threads);
-            assert!(out == reference, "{method}: {threads} threads differ from 1");
+            assert!(
+                out == reference,
+                "{method}: {threads} threads differ from 1"
+            );
         }
         let (out, _, _) = run(&mesh, &mapped, 500, &opts, 2);
-        assert!(out == reference, "{method}: scratch-mapped storage differs from heap");
+        assert!(
+            out == reference,
+            "{method}: scratch-mapped storage differs from heap"
+        );
         assert!(mapped.mapped_bytes() > 0);
     }
-    assert_eq!(std::fs::read_dir(scratch.path()).unwrap().count(), 0, "scratch files left behind");
+    assert_eq!(
+        std::fs::read_dir(scratch.path()).unwrap().count(),
+        0,
+        "scratch files left behind"
+    );
 }
 
 #[test]
@@ -65,19 +88,41 @@ fn every_stencil_is_applied_once_across_many_small_patches_and_volume_is_kept() 
         let mesh = shared(name);
         let origin = metrics::centroid(&mesh.positions);
         let v0 = metrics::volume_about(&mesh.positions, &mesh.triangles, origin);
-        for (method, per_iteration) in [(Method::Vcs, None), (Method::VcsTriangle, Some(mesh.triangles.len()))] {
-            let opts = Options { method, iterations: 3, ..Options::default() };
+        for (method, per_iteration) in [
+            (Method::Vcs, None),
+            (Method::VcsTriangle, Some(mesh.triangles.len())),
+        ] {
+            let opts = Options {
+                method,
+                iterations: 3,
+                ..Options::default()
+            };
             let (out, records, prep) = run(&mesh, &Storage::heap(), 64, &opts, 2);
             let edges = prep.topology.stats.edges;
-            let crossing = prep.patches.iter().map(|p| p.crossing_edges(&prep.topology)).sum::<u64>();
-            assert!(crossing > 1000, "{name}: patches of 64 vertices must cut many edges ({crossing})");
+            let crossing = prep
+                .patches
+                .iter()
+                .map(|p| p.crossing_edges(&prep.topology))
+                .sum::<u64>();
+            assert!(
+                crossing > 1000,
+                "{name}: patches of 64 vertices must cut many edges ({crossing})"
+            );
             let expected = per_iteration.unwrap_or(edges) as u64;
             for r in &records {
-                assert_eq!(r.stencils.considered(), expected, "{name} {method}: a stencil was missed or repeated");
+                assert_eq!(
+                    r.stencils.considered(),
+                    expected,
+                    "{name} {method}: a stencil was missed or repeated"
+                );
                 assert!(r.stencils.applied > expected / 2);
             }
             let v1 = metrics::volume_about(&out, &mesh.triangles, origin);
-            assert!(((v1 - v0) / v0).abs() <= 1e-9, "{name} {method}: {:e}", ((v1 - v0) / v0).abs());
+            assert!(
+                ((v1 - v0) / v0).abs() <= 1e-9,
+                "{name} {method}: {:e}",
+                ((v1 - v0) / v0).abs()
+            );
             // The input's fixed (boundary) vertices are untouched.
             let topo = vcsmooth::Topology::build(mesh.positions.len(), &mesh.triangles).unwrap();
             for v in 0..out.len() {
@@ -93,14 +138,20 @@ fn every_stencil_is_applied_once_across_many_small_patches_and_volume_is_kept() 
 fn one_patch_equals_the_whole_mesh_engine_on_the_reordered_mesh() {
     let mesh = noisy_sphere(3);
     for method in Method::ALL {
-        let opts = Options { method, iterations: 3, ..Options::default() };
+        let opts = Options {
+            method,
+            iterations: 3,
+            ..Options::default()
+        };
         let (out, _, prep) = run(&mesh, &Storage::heap(), usize::MAX / 2, &opts, 2);
         assert_eq!(prep.patches.len(), 1);
         // The whole-mesh engine on the same reordered arrays.
-        let re = vcsmooth::partition::reorder(&Storage::heap(), &mesh.positions, &mesh.triangles).unwrap();
+        let re = vcsmooth::partition::reorder(&Storage::heap(), &mesh.positions, &mesh.triangles)
+            .unwrap();
         let topo = vcsmooth::Topology::build(re.positions.len(), &re.triangles).unwrap();
         let mut pos = re.positions.to_vec();
-        driver::smooth_positions(&topo, &re.triangles, &mut pos, &opts, Some(1), &mut Quiet).unwrap();
+        driver::smooth_positions(&topo, &re.triangles, &mut pos, &opts, Some(1), &mut Quiet)
+            .unwrap();
         for (new, &old) in re.order.iter().enumerate() {
             assert_eq!(out[old as usize], pos[new], "{method}: vertex {old}");
         }
@@ -112,7 +163,11 @@ fn patched_laplacian_matches_the_whole_mesh_engine() {
     // Jacobi methods do not depend on order: only the neighbour summation order may differ.
     let mesh = noisy_sphere(4);
     for method in [Method::Laplacian, Method::Taubin] {
-        let opts = Options { method, iterations: 5, ..Options::default() };
+        let opts = Options {
+            method,
+            iterations: 5,
+            ..Options::default()
+        };
         let (out, _, _) = run(&mesh, &Storage::heap(), 100, &opts, 2);
         let mut reference = mesh.clone();
         driver::smooth_mesh(&mut reference, &opts, Some(1), &mut Quiet).unwrap();
@@ -120,4 +175,35 @@ fn patched_laplacian_matches_the_whole_mesh_engine() {
             assert!((*a - *b).length() < 1e-12, "{method}: {a} vs {b}");
         }
     }
+}
+
+/// A scratch directory without room gives a clean error up front (no SIGBUS later, no file left).
+/// Needs root to mount a 1 MiB tmpfs; as another user the check is reported and skipped.
+#[test]
+fn full_scratch_disk_is_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let mounted = std::process::Command::new("mount")
+        .args(["-t", "tmpfs", "-o", "size=1m", "tmpfs"])
+        .arg(dir.path())
+        .status()
+        .is_ok_and(|s| s.success());
+    if !mounted {
+        let root = std::process::Command::new("id").arg("-u").output().is_ok_and(|o| o.stdout.starts_with(b"0\n"));
+        assert!(!root, "running as root, but could not mount a tmpfs for the full-disk test");
+        eprintln!("full_scratch_disk_is_a_clear_error: not root, cannot mount a small tmpfs; skipped");
+        return;
+    }
+    struct Unmount<'a>(&'a Path);
+    impl Drop for Unmount<'_> {
+        fn drop(&mut self) {
+            let _ = std::process::Command::new("umount").arg(self.0).status();
+        }
+    }
+    let _guard = Unmount(dir.path());
+    let storage = Storage::scratch(dir.path()).unwrap();
+    let small = storage.zeroed::<DVec3>(1000);
+    assert!(small.is_ok(), "24 kB must fit in 1 MiB");
+    let err = storage.zeroed::<DVec3>(1 << 20).unwrap_err().to_string();
+    assert!(err.contains("cannot reserve") && err.contains("scratch"), "{err}");
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "a scratch file was left behind");
 }

@@ -102,9 +102,14 @@ impl Storage {
             .map_err(|e| Error::io(&path, e))?;
         // Unlink at once: the mapping keeps the data alive, and nothing is left behind on any exit.
         let removed = std::fs::remove_file(&path);
-        file.set_len(bytes as u64)
-            .map_err(|e| Error::io(&path, e))?;
         removed.map_err(|e| Error::io(&path, e))?;
+        reserve(&file, bytes as u64).map_err(|e| {
+            Error::Config(format!(
+                "{}: cannot reserve {} of scratch space ({e}); free space there or choose another --scratch",
+                dir.display(),
+                crate::resources::format_size(bytes as u64)
+            ))
+        })?;
         if bytes == 0 {
             return Ok(Buf::from_vec(Vec::new()));
         }
@@ -129,6 +134,23 @@ impl Storage {
         b.copy_from_slice(data);
         Ok(b)
     }
+}
+
+/// Give the file `bytes` of real, written blocks. A sparse file would map fine and then kill the
+/// process with SIGBUS on the first page the full disk cannot hold; writing zeros up front turns a
+/// lack of space into a clean error before any work is done.
+fn reserve(file: &std::fs::File, bytes: u64) -> std::io::Result<()> {
+    use std::io::Write;
+    const BLOCK: usize = 1 << 20;
+    let zeros = vec![0u8; BLOCK];
+    let mut w: &std::fs::File = file;
+    let mut left = bytes;
+    while left > 0 {
+        let n = left.min(BLOCK as u64) as usize;
+        w.write_all(&zeros[..n])?;
+        left -= n as u64;
+    }
+    Ok(())
 }
 
 fn zero<T: Pod>() -> T {
