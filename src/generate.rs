@@ -238,6 +238,167 @@ pub fn add_normal_noise(mesh: &mut Mesh, sigma: f64, seed: u64) {
     }
 }
 
+/// Counts of a streamed mesh.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Streamed {
+    pub vertices: u64,
+    pub triangles: u64,
+}
+
+/// Write `base` with every triangle split into `s²` (s = 2^`levels`) as a binary little-endian PLY
+/// (`x y z float`, `list uchar int`), streamed: memory is the base mesh and its edge table, never
+/// the output, so meshes of hundreds of millions of triangles come from a real scan.
+///
+/// New vertices lie on the base triangles (flat lattice), shared along base edges, so a closed
+/// manifold base gives a closed manifold output with the same orientation. Vertex ids: the base
+/// vertices, then `s − 1` per base edge (edges in ascending `(i, j)` order), then the interior
+/// lattice points of each base triangle. With `sigma > 0`, each vertex moves along its normal (base
+/// vertex normal, mean of the edge's face normals, or the face normal) by Gaussian noise of
+/// standard deviation `sigma` × (base mean edge length / s), drawn from a hash of the seed and the
+/// vertex id so the result does not depend on the write order. Degenerate base triangles are dropped.
+pub fn write_subdivided(
+    base: &Mesh,
+    levels: u32,
+    sigma: f64,
+    seed: u64,
+    out: &std::path::Path,
+) -> crate::Result<Streamed> {
+    use std::collections::HashMap;
+    use std::io::Write;
+
+    if levels > 15 {
+        return Err(crate::Error::Config(format!("--subdivide {levels} is too large (at most 15)")));
+    }
+    let s = 1u64 << levels;
+    let topo = Topology::build(base.positions.len(), &base.triangles)?;
+    let pos = &base.positions;
+    let tris: Vec<[u32; 3]> = base.triangles.iter().copied().filter(|t| t[0] != t[1] && t[1] != t[2] && t[0] != t[2]).collect();
+    let edges: Vec<[u32; 2]> = topo.edges().collect();
+    let edge_id: HashMap<(u32, u32), u64> = edges.iter().enumerate().map(|(e, &[a, b])| ((a, b), e as u64)).collect();
+    let nv = pos.len() as u64;
+    let per_edge = s - 1;
+    let per_face = (s - 1) * s.saturating_sub(2) / 2;
+    let vertices = nv + edges.len() as u64 * per_edge + tris.len() as u64 * per_face;
+    let triangles = tris.len() as u64 * s * s;
+    if vertices > u32::MAX as u64 || triangles > u32::MAX as u64 {
+        return Err(crate::Error::Config(format!(
+            "--subdivide {levels} makes {vertices} vertices and {triangles} triangles, beyond 32-bit indices"
+        )));
+    }
+
+    // Normals for the noise: area-weighted per base vertex, per face, and per edge (sum of its faces).
+    let face_n: Vec<DVec3> = tris
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|v| pos[v as usize]);
+            (b - a).cross(c - a)
+        })
+        .collect();
+    let mut vertex_n = vec![DVec3::ZERO; pos.len()];
+    let mut edge_n = vec![DVec3::ZERO; edges.len()];
+    for (t, n) in tris.iter().zip(&face_n) {
+        for k in 0..3 {
+            vertex_n[t[k] as usize] += *n;
+            let (a, b) = (t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3]));
+            edge_n[edge_id[&(a, b)] as usize] += *n;
+        }
+    }
+    let scale = sigma * mean_edge_length(pos, &topo) / s as f64;
+    let noisy = |id: u64, p: DVec3, n: DVec3| -> DVec3 {
+        if scale == 0.0 || !scale.is_finite() {
+            return p;
+        }
+        match n.try_normalize() {
+            Some(n) => {
+                let moved = p + n * (scale * Gaussian::new(seed ^ id.wrapping_mul(0xD1B5_4A32_D192_ED03)).sample());
+                if moved.is_finite() { moved } else { p }
+            }
+            None => p,
+        }
+    };
+
+    // Global id of lattice point (i, j) of triangle t = (A, B, C): A + i/s (B − A) + j/s (C − A).
+    let edge_point = |u: u32, v: u32, k: u64| -> u64 {
+        // k segments from u towards v; edge vertices are numbered from the lower end.
+        let (lo, hi, k) = if u < v { (u, v, k) } else { (v, u, s - k) };
+        nv + edge_id[&(lo, hi)] * per_edge + (k - 1)
+    };
+    let interior_base = nv + edges.len() as u64 * per_edge;
+    let id = |t: usize, i: u64, j: u64| -> u64 {
+        let [a, b, c] = tris[t];
+        match (i, j) {
+            (0, 0) => a as u64,
+            _ if i == s => b as u64,
+            _ if j == s => c as u64,
+            (_, 0) => edge_point(a, b, i),
+            (0, _) => edge_point(a, c, j),
+            _ if i + j == s => edge_point(b, c, j),
+            _ => {
+                let row = (j - 1) * (s - 1) - (j - 1) * j / 2;
+                interior_base + t as u64 * per_face + row + (i - 1)
+            }
+        }
+    };
+
+    crate::io::write_atomically(out, |w| {
+        write!(
+            w,
+            "ply\nformat binary_little_endian 1.0\ncomment vcsmooth generate: {} triangles x {s}^2\n\
+             element vertex {vertices}\nproperty float x\nproperty float y\nproperty float z\n\
+             element face {triangles}\nproperty list uchar int vertex_indices\nend_header\n",
+            tris.len()
+        )?;
+        let mut put = |p: DVec3| w.write_all(bytemuck_f32(p).as_slice());
+        for (v, p) in pos.iter().enumerate() {
+            put(noisy(v as u64, *p, vertex_n[v]))?;
+        }
+        for (e, &[a, b]) in edges.iter().enumerate() {
+            let (pa, pb) = (pos[a as usize], pos[b as usize]);
+            for k in 1..s {
+                let id = nv + e as u64 * per_edge + (k - 1);
+                put(noisy(id, pa + (pb - pa) * (k as f64 / s as f64), edge_n[e]))?;
+            }
+        }
+        for (t, tri) in tris.iter().enumerate() {
+            let [a, b, c] = tri.map(|v| pos[v as usize]);
+            for j in 1..s {
+                for i in 1..s - j {
+                    let p = a + (b - a) * (i as f64 / s as f64) + (c - a) * (j as f64 / s as f64);
+                    put(noisy(id(t, i, j), p, face_n[t]))?;
+                }
+            }
+        }
+        let mut face = [3u8; 13];
+        for t in 0..tris.len() {
+            for j in 0..s {
+                for i in 0..s - j {
+                    let mut emit = |q: [u64; 3]| {
+                        for (k, v) in q.iter().enumerate() {
+                            face[1 + 4 * k..5 + 4 * k].copy_from_slice(&(*v as u32).to_le_bytes());
+                        }
+                        w.write_all(&face)
+                    };
+                    emit([id(t, i, j), id(t, i + 1, j), id(t, i, j + 1)])?;
+                    if i + j + 1 < s {
+                        emit([id(t, i + 1, j), id(t, i + 1, j + 1), id(t, i, j + 1)])?;
+                    }
+                }
+            }
+        }
+        Ok(())
+    })?;
+    Ok(Streamed { vertices, triangles })
+}
+
+/// A position as three little-endian f32s.
+fn bytemuck_f32(p: DVec3) -> [u8; 12] {
+    let mut b = [0u8; 12];
+    for (k, x) in p.to_array().iter().enumerate() {
+        b[4 * k..4 * k + 4].copy_from_slice(&(*x as f32).to_le_bytes());
+    }
+    b
+}
+
 /// Standard normal samples from splitmix64 through the Box–Muller transform (both outputs used).
 struct Gaussian {
     state: u64,
@@ -282,6 +443,31 @@ mod tests {
     use super::*;
     use crate::metrics::{info, volume};
     use std::f64::consts::PI;
+
+    #[test]
+    fn streamed_subdivision_is_closed_keeps_the_surface_and_counts() {
+        let base = icosphere(1);
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("sub.ply");
+        let n = write_subdivided(&base, 2, 0.0, 1, &out).unwrap();
+        assert_eq!(n.triangles, 80 * 16);
+        let m = crate::io::read_mesh(&out).unwrap();
+        assert_eq!(m.positions.len() as u64, n.vertices);
+        assert_eq!(m.triangles.len() as u64, n.triangles);
+        let i = info(&m, &topo(&m));
+        assert!(i.closed && i.components == 1 && i.non_manifold_vertices == 0);
+        assert_eq!(i.vertices as i64 - i.edges as i64 + i.triangles as i64, 2);
+        // Flat subdivision: the same volume as the base (up to f32 rounding of the file).
+        let (v0, v1) = (volume(&base.positions, &base.triangles), volume(&m.positions, &m.triangles));
+        assert!(((v1 - v0) / v0).abs() < 1e-6, "{v0} vs {v1}");
+        // Noise moves vertices, deterministically.
+        let noisy = dir.path().join("noisy.ply");
+        write_subdivided(&base, 2, 0.3, 9, &noisy).unwrap();
+        let again = dir.path().join("again.ply");
+        write_subdivided(&base, 2, 0.3, 9, &again).unwrap();
+        assert_eq!(std::fs::read(&noisy).unwrap(), std::fs::read(&again).unwrap());
+        assert_ne!(std::fs::read(&noisy).unwrap(), std::fs::read(&out).unwrap());
+    }
 
     fn topo(m: &Mesh) -> Topology {
         Topology::build(m.positions.len(), &m.triangles).unwrap()

@@ -32,6 +32,54 @@ pub enum Command {
     Curves(CurvesArgs),
     /// Smooth a generated noisy sphere with every method and print volume and roughness per method.
     Demo(DemoArgs),
+    /// Measure throughput on generated meshes: smoothing, plan, PLY I/O, memory (to size jobs).
+    #[command(long_about = BENCH_ABOUT)]
+    Bench(BenchArgs),
+}
+
+const BENCH_ABOUT: &str = "\
+Measure end-to-end throughput on generated noisy icospheres: triangles and stencils per second per
+iteration of each method on each thread count, the plan's preparation time (reorder, topology,
+partition), binary PLY write and read in GB/s, and the peak anonymous memory per triangle.
+
+Sizes run smallest first; every timing is the median of --repeats runs (seconds per iteration: the
+median over all iterations of all repeats). Run it on a cluster node, with that node's thread counts,
+to size jobs: a run of N iterations on T triangles takes about N × T / (triangles per second), plus
+the preparation and the I/O, and needs about T × (bytes per triangle) of memory in-core (more goes
+to scratch files under --memory-budget). The defaults take about a minute on 2 cores.
+
+Example: vcsmooth bench --sizes 1M,4M --methods laplacian,taubin,vcs --threads 1,2 --json";
+
+/// `vcsmooth bench [--sizes ...] [--methods ...] [--threads ...] [--iterations N] [--repeats R] [--json]`
+#[derive(Debug, Clone, ClapArgs)]
+pub struct BenchArgs {
+    /// Comma-separated mesh sizes: triangle counts (decimal K/M/G suffixes), each mapped to the icosphere level with the nearest triangle count (1M → level 8, 1.31M triangles; 4M → level 9, 5.24M), or icoK for level K exactly.
+    #[arg(long, value_name = "SIZE,...", value_delimiter = ',', default_value = "1M",
+          value_parser = crate::bench::parse_size)]
+    pub sizes: Vec<crate::bench::SizeSpec>,
+    /// Comma-separated methods to time.
+    #[arg(long, value_enum, value_delimiter = ',', value_name = "M,M,...",
+          default_values_t = [Method::Laplacian, Method::Taubin, Method::Vcs])]
+    pub methods: Vec<Method>,
+    /// Comma-separated thread counts [default: 1 and all cores].
+    #[arg(long, value_name = "N,...", value_delimiter = ',',
+          value_parser = clap::value_parser!(u32).range(1..))]
+    pub threads: Vec<u32>,
+    /// Iterations per smoothing run.
+    #[arg(long, value_name = "N", default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=1000))]
+    pub iterations: u32,
+    /// Repeats of every timing; the median is reported.
+    #[arg(long, value_name = "R", default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=100))]
+    pub repeats: u32,
+    /// Vertices per patch [default: 16384].
+    #[arg(long, value_name = "VERTICES", value_parser = clap::value_parser!(u64).range(1..u32::MAX as u64))]
+    pub patch_size: Option<u64>,
+    /// Directory for the temporary PLY file (a tmpfs such as /dev/shm leaves out the disk's fsync) [default: the system's temporary directory].
+    #[arg(long, value_name = "DIR")]
+    pub dir: Option<PathBuf>,
+    /// Print JSON instead of a table [default: table].
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// `vcsmooth demo [--subdivisions K] [--iterations N] [--noise SIGMA]`
@@ -146,20 +194,28 @@ pub enum Shape {
     Sphere,
     /// Torus around the z axis (radii 1 and 0.4); the grid resolution doubles with each level.
     Torus,
+    /// The mesh given by --from (e.g. a real scan), refined with --subdivide.
+    Mesh,
 }
 
-/// `vcsmooth generate sphere|torus OUT --subdivisions K ...`
+/// `vcsmooth generate sphere|torus|mesh OUT [--subdivisions K] [--from MESH] [--subdivide L] ...`
 #[derive(Debug, Clone, ClapArgs)]
 pub struct GenerateArgs {
     /// Shape to generate.
     #[arg(value_enum)]
     pub shape: Shape,
-    /// Output mesh; .ply, .obj, .off or .stl.
+    /// Output mesh; .ply, .obj, .off or .stl (.ply only with --subdivide).
     #[arg(value_name = "OUT")]
     pub output: PathBuf,
-    /// Subdivision level K (sphere: 20·4^K triangles; K = 2 is the paper's 162-vertex sphere).
+    /// Subdivision level K of sphere or torus (sphere: 20·4^K triangles; K = 2 is the paper's 162-vertex sphere).
     #[arg(long, value_name = "K")]
-    pub subdivisions: u32,
+    pub subdivisions: Option<u32>,
+    /// Base mesh for the `mesh` shape (any readable mesh, e.g. a scan).
+    #[arg(long, value_name = "MESH")]
+    pub from: Option<PathBuf>,
+    /// Split every triangle of the base into 4^L, streamed straight to a binary PLY without holding the output in memory (for meshes of hundreds of millions of triangles).
+    #[arg(long, value_name = "L", value_parser = clap::value_parser!(u32).range(0..=15))]
+    pub subdivide: Option<u32>,
     /// Gaussian noise along vertex normals, standard deviation relative to the mean edge length.
     #[arg(long, value_name = "SIGMA", default_value_t = 0.0, value_parser = finite_f64)]
     pub noise: f64,

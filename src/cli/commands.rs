@@ -155,6 +155,9 @@ const NOISE_BYTES_PER_TRIANGLE: u64 = 48;
 
 /// `vcsmooth generate`.
 pub fn generate(cfg: &GenerateConfig, progress: &mut Progress, out: &mut dyn Write) -> Result<()> {
+    if cfg.shape == Shape::Mesh || cfg.subdivide.is_some() {
+        return generate_streamed(cfg, progress, out);
+    }
     let k = cfg.subdivisions;
     let max = max_subdivisions(cfg.shape);
     if k > max {
@@ -191,7 +194,8 @@ pub fn generate(cfg: &GenerateConfig, progress: &mut Progress, out: &mut dyn Wri
     progress.phase(format!("generating {} level {k}", shape_name(cfg.shape)));
     let mut mesh = match cfg.shape {
         Shape::Sphere => generate::icosphere(k),
-        Shape::Torus => generate::torus(k),
+        // `mesh` always takes the streamed path above.
+        Shape::Torus | Shape::Mesh => generate::torus(k),
     };
     if cfg.noise > 0.0 {
         progress.phase("adding noise");
@@ -315,6 +319,7 @@ fn shape_name(s: Shape) -> &'static str {
     match s {
         Shape::Sphere => "sphere",
         Shape::Torus => "torus",
+        Shape::Mesh => "mesh",
     }
 }
 
@@ -323,6 +328,7 @@ fn max_subdivisions(shape: Shape) -> u32 {
     match shape {
         Shape::Sphere => generate::ICOSPHERE_MAX_SUBDIVISIONS,
         Shape::Torus => generate::TORUS_MAX_SUBDIVISIONS,
+        Shape::Mesh => 0,
     }
 }
 
@@ -331,6 +337,7 @@ fn triangles_at(shape: Shape, k: u32) -> u64 {
     let base = match shape {
         Shape::Sphere => 20,
         Shape::Torus => 256,
+        Shape::Mesh => 0,
     };
     base << (2 * k.min(max_subdivisions(shape)))
 }
@@ -447,4 +454,52 @@ pub fn demo(cfg: &DemoConfig, progress: &mut Progress, out: &mut dyn Write) -> R
     }
     progress.finish();
     Ok(())
+}
+
+/// `vcsmooth bench`: throughput on generated meshes (see [`crate::bench`]), as a table or JSON.
+pub fn bench(
+    cfg: &super::config::BenchConfig,
+    progress: &mut Progress,
+    out: &mut dyn Write,
+) -> Result<()> {
+    let report = crate::bench::run(&cfg.settings, &mut |m| progress.phase(m))?;
+    progress.finish();
+    if cfg.json {
+        let doc = super::report::BenchDoc {
+            tool: Tool::this(),
+            report,
+        };
+        print_json(out, &doc)
+    } else {
+        super::report::print_bench(out, &report)
+    }
+}
+
+/// `vcsmooth generate … --subdivide L` (and the `mesh` shape): refine a base mesh and stream it.
+fn generate_streamed(cfg: &GenerateConfig, progress: &mut Progress, out: &mut dyn Write) -> Result<()> {
+    let base = match (&cfg.from, cfg.shape) {
+        (Some(path), _) => {
+            progress.phase(format!("reading {}", path.display()));
+            io::read_mesh(path)?
+        }
+        (None, Shape::Sphere) => generate::icosphere(cfg.subdivisions.min(generate::ICOSPHERE_MAX_SUBDIVISIONS)),
+        (None, _) => generate::torus(cfg.subdivisions.min(generate::TORUS_MAX_SUBDIVISIONS)),
+    };
+    let levels = cfg.subdivide.unwrap_or(0);
+    progress.phase(format!("writing {} (streamed, ×{} triangles)", cfg.output.display(), 1u64 << (2 * levels)));
+    let n = generate::write_subdivided(&base, levels, cfg.noise, cfg.seed, &cfg.output)
+        .map_err(|e| in_file(&cfg.output, e))?;
+    progress.finish();
+    writeln!(
+        out,
+        "{}: {} triangles of {} split into 4^{levels}: {} vertices, {} triangles, noise {} × mean edge length (seed {})",
+        cfg.output.display(),
+        base.triangles.len(),
+        cfg.from.as_ref().map_or_else(|| shape_name(cfg.shape).to_string(), |p| p.display().to_string()),
+        n.vertices,
+        n.triangles,
+        cfg.noise,
+        cfg.seed
+    )
+    .map_err(stdout_error)
 }

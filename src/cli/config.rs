@@ -19,6 +19,50 @@ pub enum Config {
     Generate(GenerateConfig),
     Curves(CurvesConfig),
     Demo(DemoConfig),
+    Bench(BenchConfig),
+}
+
+/// `vcsmooth bench`.
+#[derive(Debug, Clone)]
+pub struct BenchConfig {
+    pub settings: crate::bench::BenchSettings,
+    pub json: bool,
+}
+
+impl BenchConfig {
+    fn from_args(a: super::args::BenchArgs) -> Result<BenchConfig> {
+        let defaults = crate::bench::BenchSettings::default();
+        let mut methods: Vec<Method> = Vec::new();
+        for m in a.methods {
+            if !methods.contains(&m) {
+                methods.push(m);
+            }
+        }
+        let mut threads: Vec<usize> = Vec::new();
+        for t in a.threads {
+            if !threads.contains(&(t as usize)) {
+                threads.push(t as usize);
+            }
+        }
+        let settings = crate::bench::BenchSettings {
+            sizes: crate::bench::normalize_sizes(a.sizes),
+            methods,
+            threads: if threads.is_empty() {
+                defaults.threads
+            } else {
+                threads
+            },
+            iterations: a.iterations as usize,
+            repeats: a.repeats as usize,
+            patch_size: a.patch_size.map_or(defaults.patch_size, |p| p as usize),
+            dir: a.dir.unwrap_or(defaults.dir),
+        };
+        crate::bench::check(&settings)?;
+        Ok(BenchConfig {
+            settings,
+            json: a.json,
+        })
+    }
 }
 
 /// `vcsmooth demo`.
@@ -66,7 +110,12 @@ pub struct CompareConfig {
 pub struct GenerateConfig {
     pub shape: Shape,
     pub output: PathBuf,
+    /// Level of sphere or torus (0 for `mesh`).
     pub subdivisions: u32,
+    /// Base mesh file of the `mesh` shape.
+    pub from: Option<PathBuf>,
+    /// Levels of streamed flat subdivision.
+    pub subdivide: Option<u32>,
     /// Noise standard deviation relative to the mean edge length (≥ 0).
     pub noise: f64,
     pub seed: u64,
@@ -126,10 +175,36 @@ impl Config {
                         a.noise
                     )));
                 }
+                let subdivisions = match (a.shape, a.subdivisions, &a.from) {
+                    (Shape::Mesh, None, Some(_)) => 0,
+                    (Shape::Mesh, _, None) => {
+                        return Err(Error::Config("generate mesh needs --from MESH".into()));
+                    }
+                    (Shape::Mesh, Some(_), _) => {
+                        return Err(Error::Config(
+                            "--subdivisions is for sphere and torus; refine a mesh with --subdivide".into(),
+                        ));
+                    }
+                    (_, _, Some(_)) => {
+                        return Err(Error::Config("--from goes with the shape `mesh`".into()));
+                    }
+                    (_, None, None) => {
+                        return Err(Error::Config("generate sphere|torus needs --subdivisions K".into()));
+                    }
+                    (_, Some(k), None) => k,
+                };
+                if a.subdivide.is_some() && output_format(&a.output) != Some(Format::Ply) {
+                    return Err(Error::Config(format!(
+                        "{}: --subdivide streams binary PLY only; use a .ply output",
+                        a.output.display()
+                    )));
+                }
                 Config::Generate(GenerateConfig {
                     shape: a.shape,
                     output: a.output,
-                    subdivisions: a.subdivisions,
+                    subdivisions,
+                    from: a.from,
+                    subdivide: a.subdivide,
                     noise: a.noise,
                     seed: a.seed,
                 })
@@ -165,6 +240,7 @@ impl Config {
                     engine: engine(&a.engine)?,
                 })
             }
+            Command::Bench(a) => Config::Bench(BenchConfig::from_args(a)?),
         })
     }
 }

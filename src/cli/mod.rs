@@ -11,7 +11,7 @@
 //! Every failure is one line on stderr, `vcsmooth: error: <file>: <problem>`; no output file, report
 //! or plot is written by a run that fails before it would write them.
 //!
-//! Commands: `smooth`, `info`, `compare`, `generate`, `curves`, `demo` (see [`args::Command`]).
+//! Commands: `smooth`, `info`, `compare`, `generate`, `curves`, `demo`, `bench` (see [`args::Command`]).
 
 pub mod args;
 pub mod commands;
@@ -90,6 +90,7 @@ pub fn run_with(
         Config::Generate(c) => commands::generate(c, progress, out),
         Config::Curves(c) => commands::curves(c, progress, out),
         Config::Demo(c) => commands::demo(c, progress, out),
+        Config::Bench(c) => commands::bench(c, progress, out),
     }
 }
 

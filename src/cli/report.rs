@@ -334,3 +334,91 @@ mod tests {
         assert_eq!(num(2.5e-7), "2.50000000e-7");
     }
 }
+
+/// The JSON of `vcsmooth bench --json`: the tool and every figure of [`crate::bench::BenchReport`].
+#[derive(Debug, Clone, Serialize)]
+pub struct BenchDoc {
+    pub tool: Tool,
+    #[serde(flatten)]
+    pub report: crate::bench::BenchReport,
+}
+
+/// Print the tables of `vcsmooth bench`: per size (PLY I/O, memory), per thread count (plan), per
+/// method (throughput).
+pub fn print_bench(out: &mut dyn Write, r: &crate::bench::BenchReport) -> Result<()> {
+    use crate::resources::format_size;
+    let s = &r.settings;
+    let load = r.machine.load_average.map_or(String::from("unknown"), |l| {
+        format!("{:.2} {:.2} {:.2}", l[0], l[1], l[2])
+    });
+    let mut t = format!(
+        "noisy icospheres (noise {} × mean edge), {} × {} (median); {} cores, load average {load}\n\n",
+        crate::bench::NOISE,
+        count(s.iterations, "iteration"),
+        count(s.repeats, "repeat"),
+        r.machine.cores,
+    );
+    t += &format!(
+        "{:<8} {:>5} {:>10} {:>10} {:>9} {:>10} {:>10} {:>11} {:>8}\n",
+        "size", "level", "vertices", "triangles", "PLY MB", "write GB/s", "read GB/s", "peak anon", "B/tri"
+    );
+    for z in &r.sizes {
+        t += &format!(
+            "{:<8} {:>5} {:>10} {:>10} {:>9.1} {:>10.3} {:>10.3} {:>11} {:>8.1}\n",
+            z.label,
+            z.level,
+            z.vertices,
+            z.triangles,
+            z.ply.file_bytes as f64 / 1e6,
+            z.ply.write_gb_per_second,
+            z.ply.read_gb_per_second,
+            format_size(z.memory.peak_anon),
+            z.memory.anon_bytes_per_triangle
+        );
+    }
+    t += &format!(
+        "\n{:<8} {:>7} {:>7} {:>7} {:>10} {:>9} {:>9} {:>9}\n",
+        "size", "threads", "patches", "colours", "prepare s", "reorder", "topology", "partition"
+    );
+    for z in &r.sizes {
+        for run in &z.runs {
+            let p = &run.prepare;
+            t += &format!(
+                "{:<8} {:>7} {:>7} {:>7} {:>10.3} {:>9.3} {:>9.3} {:>9.3}\n",
+                z.label,
+                run.threads,
+                run.patches,
+                run.colours,
+                p.total_seconds,
+                p.reorder_seconds,
+                p.topology_seconds,
+                p.partition_seconds
+            );
+        }
+    }
+    t += &format!(
+        "\n{:<8} {:>7} {:<13} {:>12} {:>13} {:>12} {:>12}\n",
+        "size", "threads", "method", "s/iteration", "Mtriangles/s", "Mstencils/s", "volume %"
+    );
+    for z in &r.sizes {
+        for run in &z.runs {
+            for m in &run.methods {
+                let stencils = m
+                    .stencils_per_second
+                    .map_or(String::from("-"), |x| format!("{:.2}", x / 1e6));
+                t += &format!(
+                    "{:<8} {:>7} {:<13} {:>12.4} {:>13.2} {:>12} {:>12.6}\n",
+                    z.label,
+                    run.threads,
+                    m.method.name(),
+                    m.seconds_per_iteration,
+                    m.triangles_per_second / 1e6,
+                    stencils,
+                    m.volume_pct
+                );
+            }
+        }
+    }
+    t += &format!("\n{:.1} s in all\n", r.seconds);
+    out.write_all(t.as_bytes()).map_err(stdout_error)
+}

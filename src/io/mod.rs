@@ -62,6 +62,8 @@ mod ply;
 mod ply_ascii;
 mod stl;
 
+pub(crate) use atomic::write_atomically;
+
 use std::fmt;
 use std::fs::File;
 use std::io::{Read, Write};
@@ -147,11 +149,31 @@ impl fmt::Debug for Source {
 
 /// Read a mesh file.
 pub fn read_mesh(path: &Path) -> Result<Mesh> {
+    read_mesh_observed(path, |_| ())
+}
+
+/// Decode a mesh from bytes already in memory, choosing the reader as [`read_mesh`] does (by
+/// content, else by the extension of `name`, which also prefixes error messages). For fuzzing and
+/// for inputs that do not come from a file.
+pub fn read_mesh_bytes(bytes: &[u8], name: &Path) -> Result<Mesh> {
+    parse(bytes, name).map_err(|what| Error::invalid(name, what))
+}
+
+/// Decode `bytes` with the reader of `format`, whatever their content looks like (the fuzz
+/// targets use it so that each one exercises its own reader). `name` prefixes error messages.
+pub fn read_format_bytes(bytes: &[u8], format: Format, name: &Path) -> Result<Mesh> {
+    decode(bytes, format).map_err(|what| Error::invalid(name, what))
+}
+
+/// [`read_mesh`] calling `decoded(path)` between the decode and the final size/mtime check, so
+/// that the unit tests can change the file exactly there.
+fn read_mesh_observed(path: &Path, decoded: impl FnOnce(&Path)) -> Result<Mesh> {
     let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
     let before = file.metadata().map_err(|e| Error::io(path, e))?;
     let contents = Contents::load(&mut file, &before).map_err(|e| Error::io(path, e))?;
     let mesh = parse(&contents, path).map_err(|what| Error::invalid(path, what))?;
     drop(contents);
+    decoded(path);
     // A mapped file rewritten under us would decode into a mix of old and new bytes: compare the
     // size and modification time seen before and after the decode.
     let after = file.metadata().map_err(|e| Error::io(path, e))?;
@@ -196,7 +218,12 @@ pub fn write_mesh(path: &Path, mesh: &Mesh) -> Result<()> {
 
 /// Decode a whole file's bytes; the error is the message without the path.
 fn parse(bytes: &[u8], path: &Path) -> std::result::Result<Mesh, String> {
-    match detect(bytes, path)? {
+    decode(bytes, detect(bytes, path)?)
+}
+
+/// Decode bytes with one format's reader; the error is the message without the path.
+fn decode(bytes: &[u8], format: Format) -> std::result::Result<Mesh, String> {
+    match format {
         Format::Ply => ply::read(bytes),
         Format::Obj => obj::read(bytes),
         Format::Off => off::read(bytes),
