@@ -8,6 +8,7 @@
 //! [`io`] writes atomically → [`metrics`] report volume, area and per-iteration statistics.
 //! [`driver`] is the one place that wires them together.
 
+pub mod bench;
 pub mod cli;
 pub mod driver;
 pub mod error;
