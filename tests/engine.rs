@@ -11,7 +11,12 @@ use vcsmooth::{Mesh, Method, Options, Topology, generate, io, metrics};
 fn shared_meshes() -> Vec<PathBuf> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/meshes");
     let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
-        .unwrap_or_else(|e| panic!("{}: {e} (the tests need ../shared beside the checkout)", dir.display()))
+        .unwrap_or_else(|e| {
+            panic!(
+                "{}: {e} (the tests need ../shared beside the checkout)",
+                dir.display()
+            )
+        })
         .map(|e| e.unwrap().path())
         .filter(|p| p.extension().is_some_and(|x| x == "ply"))
         .collect();
@@ -21,7 +26,9 @@ fn shared_meshes() -> Vec<PathBuf> {
 }
 
 fn shared(name: &str) -> Mesh {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/meshes").join(name);
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/meshes")
+        .join(name);
     io::read_mesh(&path).unwrap()
 }
 
@@ -32,7 +39,11 @@ fn noisy_sphere(k: u32, sigma: f64, seed: u64) -> Mesh {
 }
 
 fn run(mesh: &mut Mesh, method: Method, iterations: usize) -> Vec<IterationRecord> {
-    let opts = Options { method, iterations, ..Options::default() };
+    let opts = Options {
+        method,
+        iterations,
+        ..Options::default()
+    };
     driver::smooth_mesh(mesh, &opts, Some(1), &mut Quiet).unwrap()
 }
 
@@ -56,16 +67,30 @@ fn vcs_preserves_volume_on_every_scan_in_f64_and_after_float_ply_round_trip() {
             let records = run(&mut mesh, method, 20);
             let v1 = volume_about(&mesh, origin);
             let name = path.file_name().unwrap().to_string_lossy();
-            assert!(rel(v1, v0) <= 1e-9, "{name} {method}: f64 relative volume change {:e}", rel(v1, v0));
+            assert!(
+                rel(v1, v0) <= 1e-9,
+                "{name} {method}: f64 relative volume change {:e}",
+                rel(v1, v0)
+            );
             let last = records.last().unwrap();
-            assert!(last.stencils.applied > 0, "{name} {method}: nothing applied");
-            assert!(last.max_displacement > 0.0, "{name} {method}: nothing moved");
+            assert!(
+                last.stencils.applied > 0,
+                "{name} {method}: nothing applied"
+            );
+            assert!(
+                last.max_displacement > 0.0,
+                "{name} {method}: nothing moved"
+            );
 
             let out = tmp.path().join(format!("{name}-{method}.ply"));
             io::write_mesh(&out, &mesh).unwrap();
             let back = io::read_mesh(&out).unwrap();
             let v2 = volume_about(&back, origin);
-            assert!(rel(v2, v0) <= 1e-6, "{name} {method}: after float PLY {:e}", rel(v2, v0));
+            assert!(
+                rel(v2, v0) <= 1e-6,
+                "{name} {method}: after float PLY {:e}",
+                rel(v2, v0)
+            );
             assert!(back.positions.iter().all(|p| p.is_finite()));
         }
     }
@@ -86,7 +111,10 @@ fn vcs_preserves_volume_on_generated_meshes_where_laplacian_shrinks() {
         // The unconstrained method does shrink the same mesh, so the check above is not vacuous.
         let mut m = mesh.clone();
         run(&mut m, Method::Laplacian, 20);
-        assert!(metrics::volume(&m.positions, &m.triangles) < 0.99 * v0, "{name}: laplacian kept volume");
+        assert!(
+            metrics::volume(&m.positions, &m.triangles) < 0.99 * v0,
+            "{name}: laplacian kept volume"
+        );
     }
 }
 
@@ -98,18 +126,46 @@ fn paper_sphere_experiment_volume_curves_and_roughness() {
     let topo = Topology::build(162, &input.triangles).unwrap();
     let rough0 = metrics::roughness(&input.positions, &input.triangles, &topo);
     let mut volume_pct = std::collections::BTreeMap::new();
-    for method in [Method::Laplacian, Method::Lem, Method::Vcs, Method::VcsTriangle, Method::Taubin] {
+    for method in [
+        Method::Laplacian,
+        Method::Lem,
+        Method::Vcs,
+        Method::VcsTriangle,
+        Method::Taubin,
+    ] {
         let mut m = input.clone();
-        let opts = Options { method, iterations: 6, lambda: 1.0, ..Options::default() };
-        let opts = if method == Method::Taubin { Options { lambda: 0.5, ..opts } } else { opts };
+        let opts = Options {
+            method,
+            iterations: 6,
+            lambda: 1.0,
+            ..Options::default()
+        };
+        let opts = if method == Method::Taubin {
+            Options {
+                lambda: 0.5,
+                ..opts
+            }
+        } else {
+            opts
+        };
         let rec = driver::smooth_mesh(&mut m, &opts, Some(1), &mut Quiet).unwrap();
         let rough = metrics::roughness(&m.positions, &m.triangles, &topo);
-        assert!(rough < rough0, "{method}: roughness {rough} not below input {rough0}");
+        assert!(
+            rough < rough0,
+            "{method}: roughness {rough} not below input {rough0}"
+        );
         volume_pct.insert(method.name(), rec.last().unwrap().volume_pct);
     }
-    let (lap, lem, vcs) = (volume_pct["laplacian"], volume_pct["lem"], volume_pct["vcs"]);
+    let (lap, lem, vcs) = (
+        volume_pct["laplacian"],
+        volume_pct["lem"],
+        volume_pct["vcs"],
+    );
     assert!(lap < 60.0, "laplacian kept {lap} %");
-    assert!(lap < lem && lem < 100.0, "lem {lem} % not between laplacian {lap} % and 100 %");
+    assert!(
+        lap < lem && lem < 100.0,
+        "lem {lem} % not between laplacian {lap} % and 100 %"
+    );
     assert!((vcs - 100.0).abs() < 1e-7, "vcs {vcs} %");
     assert!((volume_pct["vcs-triangle"] - 100.0).abs() < 1e-7);
 }
@@ -126,12 +182,18 @@ fn open_scans_keep_boundary_vertices_bit_identical() {
             let mut moved = 0;
             for v in 0..m.positions.len() {
                 if topo.is_fixed(v as u32) {
-                    assert_eq!(m.positions[v], input.positions[v], "{name} {method}: fixed vertex {v} moved");
+                    assert_eq!(
+                        m.positions[v], input.positions[v],
+                        "{name} {method}: fixed vertex {v} moved"
+                    );
                 } else if m.positions[v] != input.positions[v] {
                     moved += 1;
                 }
             }
-            assert!(moved > m.positions.len() / 2, "{name} {method}: only {moved} vertices moved");
+            assert!(
+                moved > m.positions.len() / 2,
+                "{name} {method}: only {moved} vertices moved"
+            );
         }
     }
 }
@@ -160,7 +222,10 @@ fn rigidly_moved_input_gives_rigidly_moved_output() {
         run(&mut b, method, 4);
         for (pa, pb) in a.positions.iter().zip(&b.positions) {
             let expect = rot * *pa + shift;
-            assert!((expect - *pb).length() <= 1e-9 * (1.0 + shift.length()), "{method}: {expect} vs {pb}");
+            assert!(
+                (expect - *pb).length() <= 1e-9 * (1.0 + shift.length()),
+                "{method}: {expect} vs {pb}"
+            );
         }
     }
 }
@@ -169,16 +234,23 @@ fn rigidly_moved_input_gives_rigidly_moved_output() {
 fn output_is_bit_identical_for_any_thread_count() {
     let input = noisy_sphere(5, 0.3, 4);
     for method in Method::ALL {
-        let opts = Options { method, iterations: 3, ..Options::default() };
+        let opts = Options {
+            method,
+            iterations: 3,
+            ..Options::default()
+        };
         let outputs: Vec<Vec<DVec3>> = [1, 2, 8]
             .iter()
             .map(|&t| {
                 let mut m = input.clone();
                 driver::smooth_mesh(&mut m, &opts, Some(t), &mut Quiet).unwrap();
-                m.positions
+                m.positions.to_vec()
             })
             .collect();
-        assert!(outputs.windows(2).all(|w| w[0] == w[1]), "{method}: threads change the result");
+        assert!(
+            outputs.windows(2).all(|w| w[0] == w[1]),
+            "{method}: threads change the result"
+        );
     }
 }
 
@@ -189,7 +261,9 @@ fn every_stencil_is_accounted_for_each_iteration() {
     let edges = topo.edges().count() as u64;
     for rec in run(&mut mesh, Method::Vcs, 2) {
         assert_eq!(rec.stencils.considered(), edges);
-        assert!(rec.stencils.skipped_fixed > 0 && rec.stencils.applied > rec.stencils.skipped_fixed);
+        assert!(
+            rec.stencils.skipped_fixed > 0 && rec.stencils.applied > rec.stencils.skipped_fixed
+        );
     }
     let mut mesh = shared("kitten-25k.ply");
     for rec in run(&mut mesh, Method::VcsTriangle, 1) {
@@ -202,10 +276,17 @@ fn every_stencil_is_accounted_for_each_iteration() {
 fn energy_rejection_counts_rejections_and_still_preserves_volume() {
     let mut mesh = noisy_sphere(3, 0.05, 9);
     let v0 = metrics::volume(&mesh.positions, &mesh.triangles);
-    let opts = Options { iterations: 10, reject_energy_increase: true, ..Options::default() };
+    let opts = Options {
+        iterations: 10,
+        reject_energy_increase: true,
+        ..Options::default()
+    };
     let rec = driver::smooth_mesh(&mut mesh, &opts, Some(1), &mut Quiet).unwrap();
     let rejected: u64 = rec.iter().map(|r| r.stencils.rejected).sum();
-    assert!(rejected > 0, "a nearly smooth sphere must see some energy-increasing stencils");
+    assert!(
+        rejected > 0,
+        "a nearly smooth sphere must see some energy-increasing stencils"
+    );
     assert!(rel(metrics::volume(&mesh.positions, &mesh.triangles), v0) <= 1e-9);
 }
 

@@ -364,7 +364,7 @@ mod tests {
         for shape in [Shape::Sphere, Shape::Torus] {
             let mesh = match shape {
                 Shape::Sphere => generate::icosphere(1),
-                Shape::Torus => generate::torus(1),
+                _ => generate::torus(1),
             };
             assert_eq!(triangles_at(shape, 1), mesh.triangles.len() as u64);
             assert!(triangles_at(shape, max_subdivisions(shape)) < 1 << 31);

@@ -380,8 +380,8 @@ impl FaceBuilder {
         source.polygons_triangulated = self.polygons;
         source.face_sizes = self.sizes.map(Arc::new);
         Mesh {
-            positions,
-            triangles: self.triangles,
+            positions: positions.into(),
+            triangles: self.triangles.into(),
             source,
         }
     }

@@ -12,10 +12,13 @@ use glam::DVec3;
 /// - `triangles`: vertex indices into `positions`; polygons of the input are fan-triangulated
 ///   (`(v0, v1, v2), (v0, v2, v3), …`), keeping the input's orientation.
 /// - `source`: format details for a faithful round trip (see [`crate::io::Source`]).
+///
+/// The arrays are [`Buf`]s: on the heap, or in memory-mapped scratch files for meshes larger than
+/// the memory budget (see [`crate::io::read_mesh_in`]); either way they deref to slices.
 #[derive(Debug, Clone, Default)]
 pub struct Mesh {
-    pub positions: Vec<DVec3>,
-    pub triangles: Vec<[u32; 3]>,
+    pub positions: Buf<DVec3>,
+    pub triangles: Buf<[u32; 3]>,
     pub source: crate::io::Source,
 }
 
@@ -23,8 +26,8 @@ impl Mesh {
     /// A mesh with no source layout: written as a plain `x y z` + triangle list.
     pub fn new(positions: Vec<DVec3>, triangles: Vec<[u32; 3]>) -> Self {
         Mesh {
-            positions,
-            triangles,
+            positions: positions.into(),
+            triangles: triangles.into(),
             source: Default::default(),
         }
     }

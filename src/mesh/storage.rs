@@ -185,6 +185,78 @@ impl<T: Pod> Buf<T> {
     pub fn is_mapped(&self) -> bool {
         matches!(self.inner, Inner::Map(_))
     }
+
+    /// The array as a growable heap vector, moving a mapped array to the heap first (editing
+    /// meshes element by element is for small meshes: tests, generators).
+    pub fn heap_mut(&mut self) -> &mut Vec<T> {
+        if let Inner::Map(_) = self.inner {
+            *self = Buf::from_vec(self.to_vec());
+        }
+        match &mut self.inner {
+            Inner::Heap(v) => v,
+            Inner::Map(_) => unreachable!("moved to the heap above"),
+        }
+    }
+
+    /// Append an element (see [`Buf::heap_mut`]).
+    pub fn push(&mut self, x: T) {
+        self.heap_mut().push(x);
+        self.len += 1;
+    }
+}
+
+impl<T: Pod> Extend<T> for Buf<T> {
+    fn extend<I: IntoIterator<Item = T>>(&mut self, iter: I) {
+        let v = self.heap_mut();
+        v.extend(iter);
+        self.len = v.len();
+    }
+}
+
+impl<T: Pod + PartialEq, const N: usize> PartialEq<[T; N]> for Buf<T> {
+    fn eq(&self, other: &[T; N]) -> bool {
+        self[..] == other[..]
+    }
+}
+
+impl<T: Pod> From<Vec<T>> for Buf<T> {
+    fn from(v: Vec<T>) -> Self {
+        Buf::from_vec(v)
+    }
+}
+
+impl<'a, T: Pod> IntoIterator for &'a Buf<T> {
+    type Item = &'a T;
+    type IntoIter = std::slice::Iter<'a, T>;
+    fn into_iter(self) -> Self::IntoIter {
+        self.iter()
+    }
+}
+
+impl<'a, T: Pod> IntoIterator for &'a mut Buf<T> {
+    type Item = &'a mut T;
+    type IntoIter = std::slice::IterMut<'a, T>;
+    fn into_iter(self) -> Self::IntoIter {
+        self.iter_mut()
+    }
+}
+
+impl<T: Pod + PartialEq> PartialEq for Buf<T> {
+    fn eq(&self, other: &Self) -> bool {
+        self[..] == other[..]
+    }
+}
+
+impl<T: Pod + PartialEq> PartialEq<Buf<T>> for &[T] {
+    fn eq(&self, other: &Buf<T>) -> bool {
+        self[..] == other[..]
+    }
+}
+
+impl<T: Pod + PartialEq> PartialEq<Vec<T>> for Buf<T> {
+    fn eq(&self, other: &Vec<T>) -> bool {
+        self[..] == other[..]
+    }
 }
 
 impl<T: Pod> Default for Buf<T> {

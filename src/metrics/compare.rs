@@ -200,7 +200,7 @@ mod tests {
         assert!(e.to_string().contains("triangle 3"), "{e}");
 
         let mut d = a.clone();
-        d.triangles.pop();
+        d.triangles.heap_mut().pop();
         assert!(
             compare(&a, &d)
                 .unwrap_err()

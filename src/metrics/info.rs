@@ -237,10 +237,10 @@ mod tests {
     fn two_disjoint_spheres_and_an_unreferenced_vertex() {
         let a = icosphere(1);
         let n = a.positions.len() as u32;
-        let mut pos = a.positions.clone();
+        let mut pos = a.positions.to_vec();
         pos.extend(a.positions.iter().map(|p| *p + DVec3::new(3.0, 0.0, 0.0)));
         pos.push(DVec3::new(-7.0, 0.0, 0.0));
-        let mut tris = a.triangles.clone();
+        let mut tris = a.triangles.to_vec();
         tris.extend(a.triangles.iter().map(|t| t.map(|v| v + n)));
         let m = Mesh::new(pos, tris);
         let i = info(&m, &topo(&m));
