@@ -541,13 +541,11 @@ pub fn run_file(
     let pool = thread_pool(engine.threads)?;
     let mut t = PhaseTimings::default();
 
-    let clock = Instant::now();
-    let mut mesh = io::read_mesh(input)?;
-    t.ingest = clock.elapsed().as_secs_f64();
-    let bytes_read = std::fs::metadata(input).map(|m| m.len()).unwrap_or(0);
-
-    let need = resources::in_core_estimate(mesh.positions.len() as u64, mesh.triangles.len() as u64);
-    let storage = if need <= budget {
+    // Heap or scratch is decided before reading, from the file size: a binary PLY of T triangles
+    // is about 19·T bytes and the engine needs about 105·T, so 6 × the file size (text formats,
+    // larger per triangle, are overestimated, which only sends them to scratch sooner).
+    let bytes_read = std::fs::metadata(input).map_err(|e| Error::io(input, e))?.len();
+    let storage = if bytes_read.saturating_mul(6) <= budget {
         Storage::heap()
     } else {
         let dir = match &engine.scratch {
@@ -556,6 +554,10 @@ pub fn run_file(
         };
         Storage::scratch(&dir)?
     };
+
+    let clock = Instant::now();
+    let mut mesh = io::read_mesh_in(input, &storage)?;
+    t.ingest = clock.elapsed().as_secs_f64();
 
     let run = pool.install(|| -> Result<_> {
         let mut prep = Prepared::new(&storage, &mesh.positions, &mesh.triangles, engine.patch_size)

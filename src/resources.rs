@@ -107,14 +107,6 @@ pub fn check_budget(budget: u64) -> Result<()> {
     Ok(())
 }
 
-/// Anonymous bytes the in-core engine needs for a mesh, per vertex and per triangle: positions
-/// (working, previous, sums: 3 × 24), reorder permutations and keys (4 + 4 + 16), CSR offsets
-/// (2 × 8), fixed mask (1); triangles (12, input and reordered), vertex→face (12) and
-/// vertex→vertex (≈ 12) adjacency. Used to decide between heap and scratch.
-pub fn in_core_estimate(vertices: u64, triangles: u64) -> u64 {
-    vertices * (72 + 24 + 16 + 1) + triangles * (24 + 12 + 12)
-}
-
 /// Samples `RssAnon` in the background and keeps the peak.
 pub struct PeakSampler {
     peak: Arc<AtomicU64>,

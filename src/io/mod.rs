@@ -147,9 +147,16 @@ impl fmt::Debug for Source {
     }
 }
 
-/// Read a mesh file.
+/// Read a mesh file onto the heap.
 pub fn read_mesh(path: &Path) -> Result<Mesh> {
-    read_mesh_observed(path, |_| ())
+    read_mesh_in(path, &crate::mesh::Storage::heap())
+}
+
+/// Read a mesh file, placing the positions and triangles of a binary PLY as `storage` says (in
+/// memory-mapped scratch files for inputs larger than memory). Other formats, and big-endian
+/// bodies (byte-swapped through memory), are read onto the heap.
+pub fn read_mesh_in(path: &Path, storage: &crate::mesh::Storage) -> Result<Mesh> {
+    read_mesh_observed(path, storage, |_| ())
 }
 
 /// Decode a mesh from bytes already in memory, choosing the reader as [`read_mesh`] does (by
@@ -167,11 +174,21 @@ pub fn read_format_bytes(bytes: &[u8], format: Format, name: &Path) -> Result<Me
 
 /// [`read_mesh`] calling `decoded(path)` between the decode and the final size/mtime check, so
 /// that the unit tests can change the file exactly there.
-fn read_mesh_observed(path: &Path, decoded: impl FnOnce(&Path)) -> Result<Mesh> {
+fn read_mesh_observed(
+    path: &Path,
+    storage: &crate::mesh::Storage,
+    decoded: impl FnOnce(&Path),
+) -> Result<Mesh> {
     let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
     let before = file.metadata().map_err(|e| Error::io(path, e))?;
     let contents = Contents::load(&mut file, &before).map_err(|e| Error::io(path, e))?;
-    let mesh = parse(&contents, path).map_err(|what| Error::invalid(path, what))?;
+    let mesh = match detect(&contents, path) {
+        Ok(Format::Ply) => ply::read_in(&contents, storage).map_err(|e| match e {
+            ply::ReadError::Invalid(what) => Error::invalid(path, what),
+            ply::ReadError::Storage(e) => e,
+        })?,
+        _ => parse(&contents, path).map_err(|what| Error::invalid(path, what))?,
+    };
     drop(contents);
     decoded(path);
     // A mapped file rewritten under us would decode into a mix of old and new bytes: compare the
@@ -324,7 +341,9 @@ fn check_mesh(mesh: &Mesh) -> std::result::Result<(), String> {
 /// Collects a reader's faces: fan-triangulates polygons and starts remembering corner counts once
 /// the first polygon appears (a triangle-only mesh pays nothing for it).
 pub(crate) struct FaceBuilder {
-    triangles: Vec<[u32; 3]>,
+    /// Written by index while preallocated slots remain, pushed (on the heap) after that.
+    triangles: crate::mesh::Buf<[u32; 3]>,
+    filled: usize,
     sizes: Option<Vec<u32>>,
     faces: usize,
     polygons: usize,
@@ -334,16 +353,39 @@ impl FaceBuilder {
     /// `capacity` must be a count already checked against the input's size.
     pub(crate) fn with_capacity(capacity: usize) -> Self {
         FaceBuilder {
-            triangles: Vec::with_capacity(capacity),
+            triangles: Vec::with_capacity(capacity).into(),
+            filled: 0,
             sizes: None,
             faces: 0,
             polygons: 0,
         }
     }
 
+    /// `faces` slots from `storage` (mapped scratch for huge inputs): exact for a triangle-only
+    /// input; polygons beyond the slots move the array to the heap.
+    pub(crate) fn in_storage(storage: &crate::mesh::Storage, faces: usize) -> Result<Self> {
+        Ok(FaceBuilder {
+            triangles: storage.zeroed(faces)?,
+            filled: 0,
+            sizes: None,
+            faces: 0,
+            polygons: 0,
+        })
+    }
+
+    #[inline]
+    fn put(&mut self, t: [u32; 3]) {
+        if self.filled < self.triangles.len() {
+            self.triangles[self.filled] = t;
+        } else {
+            self.triangles.push(t);
+        }
+        self.filled += 1;
+    }
+
     #[inline]
     pub(crate) fn triangle(&mut self, t: [u32; 3]) {
-        self.triangles.push(t);
+        self.put(t);
         if let Some(sizes) = &mut self.sizes {
             sizes.push(3);
         }
@@ -357,7 +399,7 @@ impl FaceBuilder {
 
     /// Triangles so far.
     pub(crate) fn triangles(&self) -> &[[u32; 3]] {
-        &self.triangles
+        &self.triangles[..self.filled.min(self.triangles.len())]
     }
 
     /// A face with at least 3 corners (the readers reject fewer).
@@ -368,14 +410,19 @@ impl FaceBuilder {
         let sizes = self.sizes.get_or_insert_with(|| vec![3; self.faces]);
         sizes.push(u32::try_from(corners.len()).unwrap_or(u32::MAX));
         for w in corners[1..].windows(2) {
-            self.triangles.push([corners[0], w[0], w[1]]);
+            self.put([corners[0], w[0], w[1]]);
         }
         self.faces += 1;
         self.polygons += 1;
     }
 
     /// The mesh with these faces, and the face counts recorded in `source`.
-    pub(crate) fn into_mesh(self, positions: Vec<glam::DVec3>, mut source: Source) -> Mesh {
+    pub(crate) fn into_mesh(
+        mut self,
+        positions: impl Into<crate::mesh::Buf<glam::DVec3>>,
+        mut source: Source,
+    ) -> Mesh {
+        self.triangles.truncate(self.filled);
         source.input_faces = self.faces;
         source.polygons_triangulated = self.polygons;
         source.face_sizes = self.sizes.map(Arc::new);
@@ -500,9 +547,19 @@ pub(crate) fn tokens(line: &[u8]) -> impl Iterator<Item = &[u8]> {
 /// line whatever the file contains.
 pub(crate) fn show(token: &[u8]) -> String {
     const MAX: usize = 24;
-    let text = String::from_utf8_lossy(&token[..token.len().min(MAX)]);
+    let cut = &token[..token.len().min(MAX)];
     let more = if token.len() > MAX { "…" } else { "" };
-    format!("{:?}{more}", text)
+    let text = match std::str::from_utf8(cut) {
+        Ok(text) => Some(text),
+        // The cut split a character: the text before it.
+        Err(e) if e.error_len().is_none() => std::str::from_utf8(&cut[..e.valid_up_to()]).ok(),
+        Err(_) => None,
+    };
+    match text {
+        Some(text) => format!("{text:?}{more}"),
+        // Not text (a binary file read as text): its bytes, escaped.
+        None => format!("\"{}\"{more}", cut.escape_ascii()),
+    }
 }
 
 /// A decimal number token (`f64`), or a message saying it is not one.

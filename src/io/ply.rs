@@ -13,6 +13,8 @@
 
 use std::borrow::Cow;
 use std::fmt;
+
+use crate::mesh::{Buf, Storage};
 use std::io::{self, Write};
 use std::sync::Arc;
 
@@ -461,7 +463,9 @@ impl Roles {
             .ok_or("no 'vertex' element")?;
         let v = &elements[vertex];
         let vertices = u32::try_from(v.count)
-            .map_err(|_| format!("{} vertices: more than 32-bit indices can address", v.count))?;
+            .map_err(|_| {
+                format!("element vertex {}: more vertices than 32-bit indices can address", v.count)
+            })?;
         let mut xyz = [0; 3];
         for (k, name) in xyz.iter_mut().zip(["x", "y", "z"]) {
             *k = v
@@ -613,12 +617,36 @@ fn bytes_at<const N: usize>(b: &[u8], at: usize) -> [u8; N] {
 }
 
 /// Reads a PLY file of any encoding.
+/// Why [`read_in`] failed: the file (a message without the path), or the scratch storage.
+pub(crate) enum ReadError {
+    Invalid(String),
+    Storage(crate::error::Error),
+}
+
+impl From<String> for ReadError {
+    fn from(what: String) -> Self {
+        ReadError::Invalid(what)
+    }
+}
+
+/// Reads a PLY file's bytes onto the heap.
 pub(crate) fn read(bytes: &[u8]) -> Fallible<Mesh> {
+    read_in(bytes, &Storage::heap()).map_err(|e| match e {
+        ReadError::Invalid(what) => what,
+        ReadError::Storage(e) => e.to_string(),
+    })
+}
+
+/// Reads a PLY file's bytes, decoding positions and triangles into arrays from `storage`.
+pub(crate) fn read_in(bytes: &[u8], storage: &Storage) -> Result<Mesh, ReadError> {
     let header = parse_header(bytes)?;
-    let roles = Roles::find(&header.elements)?;
     let body = &bytes[header.body..];
+    if header.encoding != PlyEncoding::Ascii {
+        check_counts(&header, body.len())?;
+    }
+    let roles = Roles::find(&header.elements)?;
     let mut elements = header.elements;
-    let mut mesh = Decoded::default();
+    let mut mesh = Decoded { storage, positions: Buf::default(), faces: None };
     match header.encoding {
         PlyEncoding::Ascii => {
             let records = ply_ascii::parse_body(body, header.lines + 1, &elements)?;
@@ -649,7 +677,8 @@ pub(crate) fn read(bytes: &[u8]) -> Fallible<Mesh> {
                         el.count,
                         el.min_record(),
                         rest.len()
-                    ));
+                    )
+                    .into());
                 }
                 let data = if big {
                     Cow::Owned(to_little_endian(rest, el, origin)?)
@@ -664,7 +693,8 @@ pub(crate) fn read(bytes: &[u8]) -> Fallible<Mesh> {
                     "byte {}: {} bytes of unexpected data after the last element",
                     header.body + pos + k,
                     trailing.len() - k
-                ));
+                )
+                .into());
             }
         }
     }
@@ -687,14 +717,45 @@ pub(crate) fn read(bytes: &[u8]) -> Fallible<Mesh> {
     Ok(faces.into_mesh(mesh.positions, source))
 }
 
+/// A binary header whose counts need more bytes than the body has is a lie (a truncated transfer,
+/// a bad exporter): say so before anything else is made of the counts, even a count too large for
+/// 32-bit indices. Element offsets are exact while the elements before have fixed-size records,
+/// and lower bounds after a list element.
+fn check_counts(header: &Header, body: usize) -> Fallible<()> {
+    let mut start = 0usize;
+    let mut exact = true;
+    for el in &header.elements {
+        let rest = body - start;
+        let need = el.count.checked_mul(el.min_record());
+        if need.is_none_or(|n| n > rest) {
+            let (at, left) = if exact {
+                ("byte", "only")
+            } else {
+                ("after byte", "at most")
+            };
+            return Err(format!(
+                "{} ({at} {}): the header declares {} records of at least {} bytes, \
+                 but {left} {rest} bytes are left",
+                el.name,
+                header.body + start,
+                el.count,
+                el.min_record(),
+            ));
+        }
+        start += need.unwrap_or(0);
+        exact &= el.stride().is_some();
+    }
+    Ok(())
+}
+
 /// What the elements decode into.
-#[derive(Default)]
-struct Decoded {
-    positions: Vec<DVec3>,
+struct Decoded<'s> {
+    storage: &'s Storage,
+    positions: Buf<DVec3>,
     faces: Option<FaceBuilder>,
 }
 
-impl Decoded {
+impl Decoded<'_> {
     /// Decodes element `e` from `data` (little-endian; for a little-endian file, the rest of the
     /// body), keeps its records when the writer will need them, and returns its length in bytes.
     fn take(
@@ -704,13 +765,15 @@ impl Decoded {
         el: &mut Element,
         data: Cow<[u8]>,
         origin: Origin,
-    ) -> Fallible<usize> {
+    ) -> Result<usize, ReadError> {
         let len = if e == roles.vertex {
-            let (positions, len) = decode_positions(&data, el, roles.xyz, origin)?;
+            let mut positions = self.storage.zeroed(el.count).map_err(ReadError::Storage)?;
+            let len = decode_positions(&data, el, roles.xyz, origin, &mut positions)?;
             self.positions = positions;
             len
         } else if let Some(face) = roles.face.filter(|f| f.element == e) {
-            let (faces, len) = decode_faces(&data, el, face, roles.vertices, origin)?;
+            let mut faces = FaceBuilder::in_storage(self.storage, el.count).map_err(ReadError::Storage)?;
+            let len = decode_faces(&data, el, face, roles.vertices, origin, &mut faces)?;
             self.faces = Some(faces);
             len
         } else {
@@ -793,12 +856,15 @@ fn to_little_endian(data: &[u8], el: &Element, origin: Origin) -> Fallible<Vec<u
 }
 
 /// Decodes `x y z` of every vertex, rejecting NaN and infinities; returns the element's length.
+/// Decodes the vertex coordinates into `positions` (one slot per record, already allocated from a
+/// count the caller checked against the file size); returns the element's length in bytes.
 fn decode_positions(
     data: &[u8],
     el: &Element,
     xyz: [usize; 3],
     origin: Origin,
-) -> Fallible<(Vec<DVec3>, usize)> {
+    positions: &mut [DVec3],
+) -> Fallible<usize> {
     let types = xyz.map(|k| el.scalar(k));
     let not_finite = |i: usize, offset: usize, p: DVec3| {
         fail(
@@ -809,7 +875,6 @@ fn decode_positions(
             format!("coordinate is not finite ({}, {}, {})", p.x, p.y, p.z),
         )
     };
-    let mut positions = Vec::with_capacity(el.count); // the caller checked count against the size
     if let Some(stride) = el.stride() {
         let len = el.count * stride;
         let Some(records) = data.get(..len) else {
@@ -823,15 +888,15 @@ fn decode_positions(
                 stride,
                 at,
                 |b: [u8; 4]| f32::from_le_bytes(b).into(),
-                &mut positions,
+                positions,
             ),
             [Scalar::F64, Scalar::F64, Scalar::F64] => {
-                decode_fixed(records, stride, at, f64::from_le_bytes, &mut positions)
+                decode_fixed(records, stride, at, f64::from_le_bytes, positions)
             }
-            _ => decode_any(records, stride, at, types, &mut positions),
+            _ => decode_any(records, stride, at, types, positions),
         };
         decoded.map_err(|(i, p)| not_finite(i, i * stride, p))?;
-        return Ok((positions, len));
+        return Ok(len);
     }
     let mut fields = Vec::new();
     let mut pos = 0;
@@ -844,10 +909,10 @@ fn decode_positions(
         if !p.is_finite() {
             return Err(not_finite(i, pos, p));
         }
-        positions.push(p);
+        positions[i] = p;
         pos = end;
     }
-    Ok((positions, pos))
+    Ok(pos)
 }
 
 /// Fixed-stride decode of three coordinates of one type (`N` bytes each) at offsets `at`.
@@ -858,9 +923,9 @@ fn decode_fixed<const N: usize>(
     stride: usize,
     at: [usize; 3],
     value: impl Fn([u8; N]) -> f64,
-    positions: &mut Vec<DVec3>,
+    positions: &mut [DVec3],
 ) -> Result<(), (usize, DVec3)> {
-    for (i, r) in records.chunks_exact(stride).enumerate() {
+    for (i, (r, out)) in records.chunks_exact(stride).zip(positions.iter_mut()).enumerate() {
         let p = DVec3::new(
             value(bytes_at(r, at[0])),
             value(bytes_at(r, at[1])),
@@ -869,7 +934,7 @@ fn decode_fixed<const N: usize>(
         if !p.is_finite() {
             return Err((i, p));
         }
-        positions.push(p);
+        *out = p;
     }
     Ok(())
 }
@@ -880,16 +945,16 @@ fn decode_any(
     stride: usize,
     at: [usize; 3],
     types: [Scalar; 3],
-    positions: &mut Vec<DVec3>,
+    positions: &mut [DVec3],
 ) -> Result<(), (usize, DVec3)> {
-    for (i, r) in records.chunks_exact(stride).enumerate() {
+    for (i, (r, out)) in records.chunks_exact(stride).zip(positions.iter_mut()).enumerate() {
         let p = DVec3::from_array(std::array::from_fn(|c| {
             types[c].get(&r[at[c]..]).unwrap_or(f64::NAN)
         }));
         if !p.is_finite() {
             return Err((i, p));
         }
-        positions.push(p);
+        *out = p;
     }
     Ok(())
 }
@@ -902,18 +967,17 @@ fn decode_faces(
     face: FaceRole,
     vertices: u32,
     origin: Origin,
-) -> Fallible<(FaceBuilder, usize)> {
-    let mut faces = FaceBuilder::with_capacity(el.count); // the caller checked count against the size
-    let len = match (el.props.len(), face.count, face.index) {
-        (1, Scalar::U8, Scalar::I32) => faces_u8_32(data, el, vertices, origin, &mut faces, |b| {
+    faces: &mut FaceBuilder,
+) -> Fallible<usize> {
+    match (el.props.len(), face.count, face.index) {
+        (1, Scalar::U8, Scalar::I32) => faces_u8_32(data, el, vertices, origin, faces, |b| {
             i32::from_le_bytes(b).into()
-        })?,
-        (1, Scalar::U8, Scalar::U32) => faces_u8_32(data, el, vertices, origin, &mut faces, |b| {
+        }),
+        (1, Scalar::U8, Scalar::U32) => faces_u8_32(data, el, vertices, origin, faces, |b| {
             u32::from_le_bytes(b).into()
-        })?,
-        _ => faces_any(data, el, face, vertices, origin, &mut faces)?,
-    };
-    Ok((faces, len))
+        }),
+        _ => faces_any(data, el, face, vertices, origin, faces),
+    }
 }
 
 fn too_few(n: usize) -> String {
@@ -1048,8 +1112,9 @@ pub(crate) fn check_writable(mesh: &Mesh) -> Fallible<()> {
     };
     let el = &layout.elements[face.element];
     if let Some(records) = &el.records {
-        let same = decode_faces(records, el, face, roles.vertices, Origin::Byte(0))
-            .is_ok_and(|(faces, _)| faces.triangles() == mesh.triangles);
+        let mut faces = FaceBuilder::with_capacity(el.count);
+        let same = decode_faces(records, el, face, roles.vertices, Origin::Byte(0), &mut faces)
+            .is_ok_and(|_| faces.triangles() == &mesh.triangles[..]);
         if !same {
             return Err(
                 "the triangles no longer match the PLY source's faces; clear \

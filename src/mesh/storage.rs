@@ -198,6 +198,14 @@ impl<T: Pod> Buf<T> {
         }
     }
 
+    /// Keep the first `n` elements (a mapped array keeps its file, and shows only `n`).
+    pub fn truncate(&mut self, n: usize) {
+        match &mut self.inner {
+            Inner::Heap(v) => v.truncate(n),
+            Inner::Map(_) => self.len = self.len.min(n),
+        }
+    }
+
     /// Append an element (see [`Buf::heap_mut`]).
     pub fn push(&mut self, x: T) {
         self.heap_mut().push(x);
