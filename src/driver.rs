@@ -96,6 +96,7 @@ fn run(
     let a_in = metrics::area(pos, triangles);
     let movable = (topo.len() - topo.stats.fixed_vertices).max(1);
     let mut prev = pos.to_vec();
+    let mut taubin_mid: Option<Vec<DVec3>> = None;
     let mut ws = Workspace::default();
     let mut records = Vec::with_capacity(opts.iterations);
     for it in 1..=opts.iterations {
@@ -104,9 +105,9 @@ fn run(
         let stencils = match opts.method {
             Method::Laplacian => jacobi(topo, &prev, pos, opts.lambda),
             Method::Taubin => {
-                let mut s = jacobi(topo, &prev, pos, opts.lambda);
-                let mid = pos.to_vec();
-                s.add(&jacobi(topo, &mid, pos, opts.mu));
+                let mid = taubin_mid.get_or_insert_with(|| vec![DVec3::ZERO; pos.len()]);
+                let mut s = jacobi(topo, &prev, mid, opts.lambda);
+                s.add(&jacobi(topo, mid, pos, opts.mu));
                 s
             }
             Method::Lem | Method::Vcs => {
@@ -290,8 +291,7 @@ impl Prepared {
         let tris: &[[u32; 3]] = &reordered.triangles;
         let pos: &mut [DVec3] = &mut reordered.positions;
         let origin = metrics::centroid(pos);
-        let v_in = volume_par(pos, tris, origin);
-        let a_in = area_par(pos, tris);
+        let (v_in, a_in) = volume_area_par(pos, tris, origin);
         let movable = (topo.len() - topo.stats.fixed_vertices).max(1);
         let mut prev: Buf<DVec3> = storage.zeroed(pos.len())?;
         let mut scratch: Buf<DVec3> = storage.zeroed(pos.len())?;
@@ -318,12 +318,12 @@ impl Prepared {
             };
             let seconds = start.elapsed().as_secs_f64();
             let (max_d, sum_d) = displacement_par(pos, &prev);
-            let volume = volume_par(pos, tris, origin);
+            let (volume, area) = volume_area_par(pos, tris, origin);
             let record = IterationRecord {
                 iteration: it,
                 volume,
                 volume_pct: percent(volume, v_in),
-                area_pct: percent(area_par(pos, tris), a_in),
+                area_pct: percent(area, a_in),
                 max_displacement: max_d,
                 mean_displacement: sum_d / movable as f64,
                 stencils,
@@ -385,20 +385,19 @@ fn sweep_colours(
 /// Fixed-size chunks make the parallel sums below independent of the thread count.
 const SUM_CHUNK: usize = 1 << 15;
 
-fn volume_par(pos: &[DVec3], tris: &[[u32; 3]], origin: DVec3) -> f64 {
-    let parts: Vec<f64> = tris
+/// Volume about `origin` and area, in one pass over the triangles.
+fn volume_area_par(pos: &[DVec3], tris: &[[u32; 3]], origin: DVec3) -> (f64, f64) {
+    let parts: Vec<(f64, f64)> = tris
         .par_chunks(SUM_CHUNK)
-        .map(|c| metrics::volume_about(pos, c, origin))
+        .map(|chunk| {
+            chunk.iter().fold((0.0, 0.0), |(v, a), t| {
+                let [p, q, r] = t.map(|i| pos[i as usize] - origin);
+                (v + p.dot(q.cross(r)), a + (q - p).cross(r - p).length())
+            })
+        })
         .collect();
-    parts.iter().sum()
-}
-
-fn area_par(pos: &[DVec3], tris: &[[u32; 3]]) -> f64 {
-    let parts: Vec<f64> = tris
-        .par_chunks(SUM_CHUNK)
-        .map(|c| metrics::area(pos, c))
-        .collect();
-    parts.iter().sum()
+    let (v, a) = parts.iter().fold((0.0, 0.0), |(v, a), &(pv, pa)| (v + pv, a + pa));
+    (v / 6.0, a / 2.0)
 }
 
 /// Largest and summed vertex displacement between `a` and `b`.

@@ -45,8 +45,10 @@ partition), binary PLY write and read in GB/s, and the peak anonymous memory per
 Sizes run smallest first; every timing is the median of --repeats runs (seconds per iteration: the
 median over all iterations of all repeats). Run it on a cluster node, with that node's thread counts,
 to size jobs: a run of N iterations on T triangles takes about N × T / (triangles per second), plus
-the preparation and the I/O, and needs about T × (bytes per triangle) of memory in-core (more goes
-to scratch files under --memory-budget). The defaults take about a minute on 2 cores.
+the preparation and the I/O, and needs about T × (bytes per triangle) of memory in-core (a `smooth`
+run whose mesh exceeds its --memory-budget puts the large arrays in scratch files instead). Figures
+drop on a loaded machine: the table's first line gives the load average. The defaults take about a
+minute on 2 cores.
 
 Example: vcsmooth bench --sizes 1M,4M --methods laplacian,taubin,vcs --threads 1,2 --json";
 

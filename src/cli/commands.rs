@@ -354,6 +354,25 @@ fn gib(bytes: u64) -> String {
     format!("{:.1} GiB", bytes as f64 / (1u64 << 30) as f64)
 }
 
+/// `vcsmooth bench`: throughput on generated meshes (see [`crate::bench`]), as a table or JSON.
+pub fn bench(
+    cfg: &super::config::BenchConfig,
+    progress: &mut Progress,
+    out: &mut dyn Write,
+) -> Result<()> {
+    let report = crate::bench::run(&cfg.settings, &mut |m| progress.phase(m))?;
+    progress.finish();
+    if cfg.json {
+        let doc = super::report::BenchDoc {
+            tool: Tool::this(),
+            report,
+        };
+        print_json(out, &doc)
+    } else {
+        super::report::print_bench(out, &report)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -454,25 +473,6 @@ pub fn demo(cfg: &DemoConfig, progress: &mut Progress, out: &mut dyn Write) -> R
     }
     progress.finish();
     Ok(())
-}
-
-/// `vcsmooth bench`: throughput on generated meshes (see [`crate::bench`]), as a table or JSON.
-pub fn bench(
-    cfg: &super::config::BenchConfig,
-    progress: &mut Progress,
-    out: &mut dyn Write,
-) -> Result<()> {
-    let report = crate::bench::run(&cfg.settings, &mut |m| progress.phase(m))?;
-    progress.finish();
-    if cfg.json {
-        let doc = super::report::BenchDoc {
-            tool: Tool::this(),
-            report,
-        };
-        print_json(out, &doc)
-    } else {
-        super::report::print_bench(out, &report)
-    }
 }
 
 /// `vcsmooth generate … --subdivide L` (and the `mesh` shape): refine a base mesh and stream it.

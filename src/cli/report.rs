@@ -364,14 +364,14 @@ pub fn print_bench(out: &mut dyn Write, r: &crate::bench::BenchReport) -> Result
     );
     for z in &r.sizes {
         t += &format!(
-            "{:<8} {:>5} {:>10} {:>10} {:>9.1} {:>10.3} {:>10.3} {:>11} {:>8.1}\n",
+            "{:<8} {:>5} {:>10} {:>10} {:>9} {:>10} {:>10} {:>11} {:>8.1}\n",
             z.label,
             z.level,
             z.vertices,
             z.triangles,
-            z.ply.file_bytes as f64 / 1e6,
-            z.ply.write_gb_per_second,
-            z.ply.read_gb_per_second,
+            sig(z.ply.file_bytes as f64 / 1e6),
+            sig(z.ply.write_gb_per_second),
+            sig(z.ply.read_gb_per_second),
             format_size(z.memory.peak_anon),
             z.memory.anon_bytes_per_triangle
         );
@@ -384,15 +384,15 @@ pub fn print_bench(out: &mut dyn Write, r: &crate::bench::BenchReport) -> Result
         for run in &z.runs {
             let p = &run.prepare;
             t += &format!(
-                "{:<8} {:>7} {:>7} {:>7} {:>10.3} {:>9.3} {:>9.3} {:>9.3}\n",
+                "{:<8} {:>7} {:>7} {:>7} {:>10} {:>9} {:>9} {:>9}\n",
                 z.label,
                 run.threads,
                 run.patches,
                 run.colours,
-                p.total_seconds,
-                p.reorder_seconds,
-                p.topology_seconds,
-                p.partition_seconds
+                sig(p.total_seconds),
+                sig(p.reorder_seconds),
+                sig(p.topology_seconds),
+                sig(p.partition_seconds)
             );
         }
     }
@@ -405,20 +405,29 @@ pub fn print_bench(out: &mut dyn Write, r: &crate::bench::BenchReport) -> Result
             for m in &run.methods {
                 let stencils = m
                     .stencils_per_second
-                    .map_or(String::from("-"), |x| format!("{:.2}", x / 1e6));
+                    .map_or(String::from("-"), |x| sig(x / 1e6));
                 t += &format!(
-                    "{:<8} {:>7} {:<13} {:>12.4} {:>13.2} {:>12} {:>12.6}\n",
+                    "{:<8} {:>7} {:<13} {:>12} {:>13} {:>12} {:>12.6}\n",
                     z.label,
                     run.threads,
                     m.method.name(),
-                    m.seconds_per_iteration,
-                    m.triangles_per_second / 1e6,
+                    sig(m.seconds_per_iteration),
+                    sig(m.triangles_per_second / 1e6),
                     stencils,
                     m.volume_pct
                 );
             }
         }
     }
-    t += &format!("\n{:.1} s in all\n", r.seconds);
+    t += &format!("\n{} s in all\n", sig(r.seconds));
     out.write_all(t.as_bytes()).map_err(stdout_error)
+}
+
+/// A measurement with 4 significant digits in fixed point (at most 9 decimals).
+fn sig(x: f64) -> String {
+    if x == 0.0 || !x.is_finite() {
+        return format!("{x}");
+    }
+    let decimals = (3 - x.abs().log10().floor() as i32).clamp(0, 9) as usize;
+    format!("{x:.decimals$}")
 }
