@@ -373,33 +373,6 @@ pub fn bench(
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn triangle_counts_match_the_generators() {
-        assert_eq!(triangles_at(Shape::Sphere, 3), 1280);
-        for shape in [Shape::Sphere, Shape::Torus] {
-            let mesh = match shape {
-                Shape::Sphere => generate::icosphere(1),
-                _ => generate::torus(1),
-            };
-            assert_eq!(triangles_at(shape, 1), mesh.triangles.len() as u64);
-            assert!(triangles_at(shape, max_subdivisions(shape)) < 1 << 31);
-        }
-    }
-
-    #[test]
-    fn curve_starts_at_100() {
-        let r = IterationRecord {
-            iteration: 1,
-            volume_pct: 90.0,
-            ..Default::default()
-        };
-        assert_eq!(volume_curve(&[r]), vec![100.0, 90.0]);
-    }
-}
 
 /// `vcsmooth demo`: the embedded default job. A noisy icosphere is smoothed by every method on the
 /// patch engine; the table shows what the paper shows: only the volume-constrained methods keep
@@ -502,4 +475,32 @@ fn generate_streamed(cfg: &GenerateConfig, progress: &mut Progress, out: &mut dy
         cfg.seed
     )
     .map_err(stdout_error)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn triangle_counts_match_the_generators() {
+        assert_eq!(triangles_at(Shape::Sphere, 3), 1280);
+        for shape in [Shape::Sphere, Shape::Torus] {
+            let mesh = match shape {
+                Shape::Sphere => generate::icosphere(1),
+                _ => generate::torus(1),
+            };
+            assert_eq!(triangles_at(shape, 1), mesh.triangles.len() as u64);
+            assert!(triangles_at(shape, max_subdivisions(shape)) < 1 << 31);
+        }
+    }
+
+    #[test]
+    fn curve_starts_at_100() {
+        let r = IterationRecord {
+            iteration: 1,
+            volume_pct: 90.0,
+            ..Default::default()
+        };
+        assert_eq!(volume_curve(&[r]), vec![100.0, 90.0]);
+    }
 }
