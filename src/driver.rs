@@ -16,7 +16,6 @@ use rayon::prelude::*;
 use crate::error::{Error, Result};
 use crate::mesh::{Buf, Storage};
 use crate::metrics::{self, MeshInfo};
-use crate::{io, resources};
 use crate::partition::{self, Patch, Reordered};
 use crate::schedule::{self, Schedule, SharedField};
 use crate::smooth::{
@@ -24,6 +23,7 @@ use crate::smooth::{
     stencil::{self, StencilParams, Workspace},
 };
 use crate::topology::Topology;
+use crate::{io, resources};
 
 /// Statistics of one iteration, relative to the input where a percentage is given.
 #[derive(Debug, Clone, Copy, Default, serde::Serialize)]
@@ -90,53 +90,76 @@ fn run(
     opts: &Options,
     observer: &mut dyn Observer,
 ) -> Result<Vec<IterationRecord>> {
+    let mut prev = vec![DVec3::ZERO; pos.len()];
+    let mut scratch = vec![DVec3::ZERO; pos.len()];
+    let params = stencil_params(opts);
+    let mut ws = Workspace::default();
+    let records = iterate(
+        topo,
+        triangles,
+        pos,
+        &mut prev,
+        &mut scratch,
+        opts,
+        observer,
+        |pos, sums| {
+            if opts.method == Method::VcsTriangle {
+                let faces = 0..triangles.len() as u32;
+                stencil::sweep_triangles(topo, triangles, pos, sums, faces, params, &mut ws)
+            } else {
+                stencil::sweep_edges(topo, triangles, pos, sums, topo.edges(), params, &mut ws)
+            }
+        },
+    );
+    Ok(records)
+}
+
+/// The iteration loop both engines share: Jacobi methods here, stencil methods through
+/// `stencil_sweep(positions, neighbour sums)`; then the per-iteration statistics.
+#[allow(clippy::too_many_arguments)]
+fn iterate(
+    topo: &Topology,
+    tris: &[[u32; 3]],
+    pos: &mut [DVec3],
+    prev: &mut [DVec3],
+    scratch: &mut [DVec3],
+    opts: &Options,
+    observer: &mut dyn Observer,
+    mut stencil_sweep: impl FnMut(&mut [DVec3], &mut [DVec3]) -> SweepStats,
+) -> Vec<IterationRecord> {
     // A fixed reference point, so that the volume of an open mesh is followed consistently.
     let origin = metrics::centroid(pos);
-    let v_in = metrics::volume_about(pos, triangles, origin);
-    let a_in = metrics::area(pos, triangles);
+    let (v_in, a_in) = volume_area_par(pos, tris, origin);
     let movable = (topo.len() - topo.stats.fixed_vertices).max(1);
-    let mut prev = pos.to_vec();
-    let mut taubin_mid: Option<Vec<DVec3>> = None;
-    let mut ws = Workspace::default();
     let mut records = Vec::with_capacity(opts.iterations);
     for it in 1..=opts.iterations {
         let start = Instant::now();
         prev.copy_from_slice(pos);
         let stencils = match opts.method {
-            Method::Laplacian => jacobi(topo, &prev, pos, opts.lambda),
+            Method::Laplacian => jacobi(topo, prev, pos, opts.lambda),
             Method::Taubin => {
-                let mid = taubin_mid.get_or_insert_with(|| vec![DVec3::ZERO; pos.len()]);
-                let mut s = jacobi(topo, &prev, mid, opts.lambda);
-                s.add(&jacobi(topo, mid, pos, opts.mu));
+                let mut s = jacobi(topo, prev, scratch, opts.lambda);
+                s.add(&jacobi(topo, scratch, pos, opts.mu));
                 s
             }
-            Method::Lem | Method::Vcs => {
-                let params = stencil_params(opts);
-                let sums = &mut smooth::neighbor_sums(topo, pos)[..];
-                stencil::sweep_edges(topo, triangles, pos, sums, topo.edges(), params, &mut ws)
-            }
-            Method::VcsTriangle => {
-                let params = stencil_params(opts);
-                let sums = &mut smooth::neighbor_sums(topo, pos)[..];
-                let faces = 0..triangles.len() as u32;
-                stencil::sweep_triangles(topo, triangles, pos, sums, faces, params, &mut ws)
+            Method::Lem | Method::Vcs | Method::VcsTriangle => {
+                // `scratch` holds the neighbour sums, fresh each iteration.
+                const CHUNK: usize = 1 << 14;
+                scratch
+                    .par_chunks_mut(CHUNK)
+                    .enumerate()
+                    .for_each(|(c, out)| smooth::neighbor_sums_into(topo, pos, out, c * CHUNK));
+                stencil_sweep(pos, scratch)
             }
         };
         let seconds = start.elapsed().as_secs_f64();
-        let (max_d, sum_d) = pos
-            .par_iter()
-            .zip(prev.par_iter())
-            .map(|(a, b)| {
-                let d = a.distance(*b);
-                (d, d)
-            })
-            .reduce(|| (0.0, 0.0), |x, y| (x.0.max(y.0), x.1 + y.1));
-        let volume = metrics::volume_about(pos, triangles, origin);
+        let (max_d, sum_d) = displacement_par(pos, prev);
+        let (volume, area) = volume_area_par(pos, tris, origin);
         let record = IterationRecord {
             iteration: it,
             volume,
             volume_pct: percent(volume, v_in),
-            area_pct: percent(metrics::area(pos, triangles), a_in),
+            area_pct: percent(area, a_in),
             max_displacement: max_d,
             mean_displacement: sum_d / movable as f64,
             stencils,
@@ -145,7 +168,7 @@ fn run(
         observer.iteration(&record, opts.iterations);
         records.push(record);
     }
-    Ok(records)
+    records
 }
 
 fn stencil_params(opts: &Options) -> StencilParams {
@@ -290,49 +313,18 @@ impl Prepared {
         } = self;
         let tris: &[[u32; 3]] = &reordered.triangles;
         let pos: &mut [DVec3] = &mut reordered.positions;
-        let origin = metrics::centroid(pos);
-        let (v_in, a_in) = volume_area_par(pos, tris, origin);
-        let movable = (topo.len() - topo.stats.fixed_vertices).max(1);
         let mut prev: Buf<DVec3> = storage.zeroed(pos.len())?;
         let mut scratch: Buf<DVec3> = storage.zeroed(pos.len())?;
-        let mut records = Vec::with_capacity(opts.iterations);
-        for it in 1..=opts.iterations {
-            let start = Instant::now();
-            prev.copy_from_slice(pos);
-            let stencils = match opts.method {
-                Method::Laplacian => jacobi(topo, &prev, pos, opts.lambda),
-                Method::Taubin => {
-                    let mut s = jacobi(topo, &prev, &mut scratch, opts.lambda);
-                    s.add(&jacobi(topo, &scratch, pos, opts.mu));
-                    s
-                }
-                Method::Lem | Method::Vcs | Method::VcsTriangle => {
-                    // `scratch` holds the neighbour sums, fresh each iteration.
-                    const CHUNK: usize = 1 << 14;
-                    scratch
-                        .par_chunks_mut(CHUNK)
-                        .enumerate()
-                        .for_each(|(c, out)| smooth::neighbor_sums_into(topo, pos, out, c * CHUNK));
-                    sweep_colours(topo, tris, pos, &mut scratch, patches, schedule, opts)
-                }
-            };
-            let seconds = start.elapsed().as_secs_f64();
-            let (max_d, sum_d) = displacement_par(pos, &prev);
-            let (volume, area) = volume_area_par(pos, tris, origin);
-            let record = IterationRecord {
-                iteration: it,
-                volume,
-                volume_pct: percent(volume, v_in),
-                area_pct: percent(area, a_in),
-                max_displacement: max_d,
-                mean_displacement: sum_d / movable as f64,
-                stencils,
-                seconds,
-            };
-            observer.iteration(&record, opts.iterations);
-            records.push(record);
-        }
-        Ok(records)
+        Ok(iterate(
+            topo,
+            tris,
+            pos,
+            &mut prev,
+            &mut scratch,
+            opts,
+            observer,
+            |pos, sums| sweep_colours(topo, tris, pos, sums, patches, schedule, opts),
+        ))
     }
 }
 
@@ -396,7 +388,9 @@ fn volume_area_par(pos: &[DVec3], tris: &[[u32; 3]], origin: DVec3) -> (f64, f64
             })
         })
         .collect();
-    let (v, a) = parts.iter().fold((0.0, 0.0), |(v, a), &(pv, pa)| (v + pv, a + pa));
+    let (v, a) = parts
+        .iter()
+        .fold((0.0, 0.0), |(v, a), &(pv, pa)| (v + pv, a + pa));
     (v / 6.0, a / 2.0)
 }
 
@@ -543,7 +537,9 @@ pub fn run_file(
     // Heap or scratch is decided before reading, from the file size: a binary PLY of T triangles
     // is about 19·T bytes and the engine needs about 105·T, so 6 × the file size (text formats,
     // larger per triangle, are overestimated, which only sends them to scratch sooner).
-    let bytes_read = std::fs::metadata(input).map_err(|e| Error::io(input, e))?.len();
+    let bytes_read = std::fs::metadata(input)
+        .map_err(|e| Error::io(input, e))?
+        .len();
     let storage = if bytes_read.saturating_mul(6) <= budget {
         Storage::heap()
     } else {
@@ -559,8 +555,13 @@ pub fn run_file(
     t.ingest = clock.elapsed().as_secs_f64();
 
     let run = pool.install(|| -> Result<_> {
-        let mut prep = Prepared::new(&storage, &mesh.positions, &mesh.triangles, engine.patch_size)
-            .map_err(|e| in_file(input, e))?;
+        let mut prep = Prepared::new(
+            &storage,
+            &mesh.positions,
+            &mesh.triangles,
+            engine.patch_size,
+        )
+        .map_err(|e| in_file(input, e))?;
         t.reorder = prep.timings.reorder;
         t.topology = prep.timings.topology;
         t.partition = prep.timings.partition;
@@ -587,7 +588,11 @@ pub fn run_file(
     t.total = start.elapsed().as_secs_f64();
     let memory = MemoryStats {
         budget,
-        storage: if storage.is_mapped() { "scratch" } else { "heap" },
+        storage: if storage.is_mapped() {
+            "scratch"
+        } else {
+            "heap"
+        },
         scratch_bytes: storage.mapped_bytes(),
         peak_anon: sampler.peak(),
         bytes_read,
@@ -609,7 +614,12 @@ pub fn run_file(
 impl Prepared {
     /// Statistics of the current (reordered) mesh; every figure is order-independent.
     pub fn info(&self, source: &io::Source) -> MeshInfo {
-        metrics::info_of(&self.reordered.positions, &self.reordered.triangles, source, &self.topology)
+        metrics::info_of(
+            &self.reordered.positions,
+            &self.reordered.triangles,
+            source,
+            &self.topology,
+        )
     }
 
     /// The decomposition's figures for reports.
@@ -622,7 +632,11 @@ impl Prepared {
             halo_min: halo.iter().copied().min().unwrap_or(0),
             halo_mean: halo.iter().map(|&h| h as f64).sum::<f64>() / halo.len().max(1) as f64,
             halo_max: halo.iter().copied().max().unwrap_or(0),
-            crossing_edge_stencils: self.patches.iter().map(|p| p.crossing_edges(&self.topology)).sum(),
+            crossing_edge_stencils: self
+                .patches
+                .iter()
+                .map(|p| p.crossing_edges(&self.topology))
+                .sum(),
             threads: rayon::current_num_threads(),
         }
     }
@@ -637,7 +651,9 @@ pub fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
         }
         builder = builder.num_threads(n);
     }
-    builder.build().map_err(|e| Error::Config(format!("thread pool: {e}")))
+    builder
+        .build()
+        .map_err(|e| Error::Config(format!("thread pool: {e}")))
 }
 
 /// The directory of `output` (the current directory for a bare file name).
