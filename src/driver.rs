@@ -17,7 +17,7 @@ use crate::error::{Error, Result};
 use crate::mesh::{Buf, Storage};
 use crate::metrics::{self, MeshInfo};
 use crate::partition::{self, Patch, Reordered};
-use crate::schedule::{self, Schedule, SharedField};
+use crate::schedule::{self, Prefetch, Schedule, SharedField};
 use crate::smooth::{
     self, Method, Options, SweepStats, laplacian,
     stencil::{self, StencilParams, Workspace},
@@ -312,23 +312,32 @@ impl Prepared {
             ..
         } = self;
         let tris: &[[u32; 3]] = &reordered.triangles;
+        let n = reordered.positions.len();
+        let mut prev: Buf<DVec3> = storage.zeroed(n)?;
+        let mut scratch: Buf<DVec3> = storage.zeroed(n)?;
+        let advisors: Vec<_> = [reordered.positions.advisor(), scratch.advisor()]
+            .into_iter()
+            .flatten()
+            .collect();
         let pos: &mut [DVec3] = &mut reordered.positions;
-        let mut prev: Buf<DVec3> = storage.zeroed(pos.len())?;
-        let mut scratch: Buf<DVec3> = storage.zeroed(pos.len())?;
-        Ok(iterate(
-            topo,
-            tris,
-            pos,
-            &mut prev,
-            &mut scratch,
-            opts,
-            observer,
-            |pos, sums| sweep_colours(topo, tris, pos, sums, patches, schedule, opts),
-        ))
+        let queue = 2 * rayon::current_num_threads();
+        Ok(schedule::with_prefetch(topo, advisors, queue, |prefetch| {
+            iterate(
+                topo,
+                tris,
+                pos,
+                &mut prev,
+                &mut scratch,
+                opts,
+                observer,
+                |pos, sums| sweep_colours(topo, tris, pos, sums, patches, schedule, opts, prefetch),
+            )
+        }))
     }
 }
 
 /// One Gauss–Seidel pass of the stencil method over all patches, colour by colour.
+#[allow(clippy::too_many_arguments)]
 fn sweep_colours(
     topo: &Topology,
     tris: &[[u32; 3]],
@@ -337,6 +346,7 @@ fn sweep_colours(
     patches: &[Patch],
     schedule: &Schedule,
     opts: &Options,
+    prefetch: &Prefetch,
 ) -> SweepStats {
     let params = stencil_params(opts);
     // SAFETY: the views are used only by the patches of one colour at a time, which touch disjoint
@@ -344,7 +354,12 @@ fn sweep_colours(
     // otherwise while the views live.
     let (pos_view, sums_view) = unsafe { (SharedField::new(pos), SharedField::new(sums)) };
     let mut total = SweepStats::default();
-    for colour in &schedule.colours {
+    for (c, colour) in schedule.colours.iter().enumerate() {
+        // Read ahead the next colour (or, at the end, the first: the next iteration starts there).
+        let next = &schedule.colours[(c + 1) % schedule.colours.len()];
+        for &p in next {
+            prefetch.hint(patches[p as usize].vertices.clone());
+        }
         let stats = colour
             .par_iter()
             .map_init(Workspace::default, |ws, &p| {

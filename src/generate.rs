@@ -267,14 +267,25 @@ pub fn write_subdivided(
     use std::io::Write;
 
     if levels > 15 {
-        return Err(crate::Error::Config(format!("--subdivide {levels} is too large (at most 15)")));
+        return Err(crate::Error::Config(format!(
+            "--subdivide {levels} is too large (at most 15)"
+        )));
     }
     let s = 1u64 << levels;
     let topo = Topology::build(base.positions.len(), &base.triangles)?;
     let pos = &base.positions;
-    let tris: Vec<[u32; 3]> = base.triangles.iter().copied().filter(|t| t[0] != t[1] && t[1] != t[2] && t[0] != t[2]).collect();
+    let tris: Vec<[u32; 3]> = base
+        .triangles
+        .iter()
+        .copied()
+        .filter(|t| t[0] != t[1] && t[1] != t[2] && t[0] != t[2])
+        .collect();
     let edges: Vec<[u32; 2]> = topo.edges().collect();
-    let edge_id: HashMap<(u32, u32), u64> = edges.iter().enumerate().map(|(e, &[a, b])| ((a, b), e as u64)).collect();
+    let edge_id: HashMap<(u32, u32), u64> = edges
+        .iter()
+        .enumerate()
+        .map(|(e, &[a, b])| ((a, b), e as u64))
+        .collect();
     let nv = pos.len() as u64;
     let per_edge = s - 1;
     let per_face = (s - 1) * s.saturating_sub(2) / 2;
@@ -310,7 +321,9 @@ pub fn write_subdivided(
         }
         match n.try_normalize() {
             Some(n) => {
-                let moved = p + n * (scale * Gaussian::new(seed ^ id.wrapping_mul(0xD1B5_4A32_D192_ED03)).sample());
+                let moved = p + n
+                    * (scale
+                        * Gaussian::new(seed ^ id.wrapping_mul(0xD1B5_4A32_D192_ED03)).sample());
                 if moved.is_finite() { moved } else { p }
             }
             None => p,
@@ -387,7 +400,10 @@ pub fn write_subdivided(
         }
         Ok(())
     })?;
-    Ok(Streamed { vertices, triangles })
+    Ok(Streamed {
+        vertices,
+        triangles,
+    })
 }
 
 /// A position as three little-endian f32s.
@@ -458,14 +474,20 @@ mod tests {
         assert!(i.closed && i.components == 1 && i.non_manifold_vertices == 0);
         assert_eq!(i.vertices as i64 - i.edges as i64 + i.triangles as i64, 2);
         // Flat subdivision: the same volume as the base (up to f32 rounding of the file).
-        let (v0, v1) = (volume(&base.positions, &base.triangles), volume(&m.positions, &m.triangles));
+        let (v0, v1) = (
+            volume(&base.positions, &base.triangles),
+            volume(&m.positions, &m.triangles),
+        );
         assert!(((v1 - v0) / v0).abs() < 1e-6, "{v0} vs {v1}");
         // Noise moves vertices, deterministically.
         let noisy = dir.path().join("noisy.ply");
         write_subdivided(&base, 2, 0.3, 9, &noisy).unwrap();
         let again = dir.path().join("again.ply");
         write_subdivided(&base, 2, 0.3, 9, &again).unwrap();
-        assert_eq!(std::fs::read(&noisy).unwrap(), std::fs::read(&again).unwrap());
+        assert_eq!(
+            std::fs::read(&noisy).unwrap(),
+            std::fs::read(&again).unwrap()
+        );
         assert_ne!(std::fs::read(&noisy).unwrap(), std::fs::read(&out).unwrap());
     }
 

@@ -8,6 +8,7 @@
 //! [`io`] writes atomically → [`metrics`] report volume, area and per-iteration statistics.
 //! [`driver`] is the one place that wires them together.
 
+pub mod batch;
 pub mod bench;
 pub mod cli;
 pub mod driver;
@@ -17,6 +18,7 @@ pub mod io;
 pub mod mesh;
 pub mod metrics;
 pub mod partition;
+pub mod refine;
 pub mod resources;
 pub mod schedule;
 pub mod smooth;

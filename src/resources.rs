@@ -179,6 +179,10 @@ mod tests {
         assert!(s.peak() > 0);
         let v = vec![1u8; 256 << 20];
         std::hint::black_box(&v);
-        assert!(s.peak() >= 250 << 20, "peak {} below the 256 MiB held", s.peak());
+        assert!(
+            s.peak() >= 250 << 20,
+            "peak {} below the 256 MiB held",
+            s.peak()
+        );
     }
 }

@@ -180,7 +180,14 @@ fn smooth_with_each_method_writes_mesh_report_and_plot() {
         assert_eq!(r["memory"]["storage"], "heap");
         assert!(r["memory"]["bytes_read"].as_u64().unwrap() > 0);
         assert!(r["memory"]["bytes_written"].as_u64().unwrap() > 0);
-        for phase in ["ingest", "reorder", "topology", "partition", "smoothing", "write"] {
+        for phase in [
+            "ingest",
+            "reorder",
+            "topology",
+            "partition",
+            "smoothing",
+            "write",
+        ] {
             assert!(
                 r["timings"][phase].as_f64().unwrap() >= 0.0,
                 "{method}: timing {phase}"
@@ -534,13 +541,15 @@ fn smooth_output_identical_across_threads_and_memory_budgets() {
     let scratch = tempfile::tempdir().unwrap();
     let input = dir.path().join("in.ply");
     // Level 8 (1.3M triangles) is the smallest sphere whose in-core estimate exceeds the 64M minimum.
-    ok(vcsmooth(["generate", "sphere"].iter().map(|s| s.to_string()).chain([
-        input.display().to_string(),
-        "--subdivisions".into(),
-        "8".into(),
-        "--noise".into(),
-        "0.3".into(),
-    ])));
+    ok(vcsmooth(
+        ["generate", "sphere"].iter().map(|s| s.to_string()).chain([
+            input.display().to_string(),
+            "--subdivisions".into(),
+            "8".into(),
+            "--noise".into(),
+            "0.3".into(),
+        ]),
+    ));
     let run = |name: &str, extra: &[&str]| -> (Vec<u8>, Value) {
         let out = dir.path().join(format!("{name}.ply"));
         let report = dir.path().join(format!("{name}.json"));
@@ -565,9 +574,15 @@ fn smooth_output_identical_across_threads_and_memory_budgets() {
     assert!(r1["plan"]["crossing_edge_stencils"].as_u64().unwrap() > 0);
     assert_eq!(
         r1["iterations"][0]["stencils"]["applied"].as_u64().unwrap()
-            + r1["iterations"][0]["stencils"]["skipped_fixed"].as_u64().unwrap()
-            + r1["iterations"][0]["stencils"]["skipped_degenerate"].as_u64().unwrap()
-            + r1["iterations"][0]["stencils"]["rejected"].as_u64().unwrap(),
+            + r1["iterations"][0]["stencils"]["skipped_fixed"]
+                .as_u64()
+                .unwrap()
+            + r1["iterations"][0]["stencils"]["skipped_degenerate"]
+                .as_u64()
+                .unwrap()
+            + r1["iterations"][0]["stencils"]["rejected"]
+                .as_u64()
+                .unwrap(),
         r1["input"]["stats"]["edges"].as_u64().unwrap(),
         "every edge stencil considered exactly once"
     );
@@ -580,7 +595,11 @@ fn smooth_output_identical_across_threads_and_memory_budgets() {
     assert_eq!(rm["memory"]["storage"], "scratch");
     assert!(rm["memory"]["scratch_bytes"].as_u64().unwrap() > 64 << 20);
     assert!(mapped == one, "scratch-mapped run differs from in-core");
-    assert_eq!(std::fs::read_dir(scratch.path()).unwrap().count(), 0, "scratch left behind");
+    assert_eq!(
+        std::fs::read_dir(scratch.path()).unwrap().count(),
+        0,
+        "scratch left behind"
+    );
 
     let o = vcsmooth([
         "smooth",

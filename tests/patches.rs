@@ -188,9 +188,17 @@ fn full_scratch_disk_is_a_clear_error() {
         .status()
         .is_ok_and(|s| s.success());
     if !mounted {
-        let root = std::process::Command::new("id").arg("-u").output().is_ok_and(|o| o.stdout.starts_with(b"0\n"));
-        assert!(!root, "running as root, but could not mount a tmpfs for the full-disk test");
-        eprintln!("full_scratch_disk_is_a_clear_error: not root, cannot mount a small tmpfs; skipped");
+        let root = std::process::Command::new("id")
+            .arg("-u")
+            .output()
+            .is_ok_and(|o| o.stdout.starts_with(b"0\n"));
+        assert!(
+            !root,
+            "running as root, but could not mount a tmpfs for the full-disk test"
+        );
+        eprintln!(
+            "full_scratch_disk_is_a_clear_error: not root, cannot mount a small tmpfs; skipped"
+        );
         return;
     }
     struct Unmount<'a>(&'a Path);
@@ -204,6 +212,13 @@ fn full_scratch_disk_is_a_clear_error() {
     let small = storage.zeroed::<DVec3>(1000);
     assert!(small.is_ok(), "24 kB must fit in 1 MiB");
     let err = storage.zeroed::<DVec3>(1 << 20).unwrap_err().to_string();
-    assert!(err.contains("cannot reserve") && err.contains("scratch"), "{err}");
-    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "a scratch file was left behind");
+    assert!(
+        err.contains("cannot reserve") && err.contains("scratch"),
+        "{err}"
+    );
+    assert_eq!(
+        std::fs::read_dir(dir.path()).unwrap().count(),
+        0,
+        "a scratch file was left behind"
+    );
 }

@@ -35,6 +35,14 @@ pub enum Command {
     /// Measure throughput on generated meshes: smoothing, plan, PLY I/O, memory (to size jobs).
     #[command(long_about = BENCH_ABOUT)]
     Bench(BenchArgs),
+    /// Smooth many meshes as one share of a job array (Slurm's), with per-input success markers; --summary gathers them.
+    Batch(super::batch::BatchArgs),
+    /// Print a ready Slurm script: an array job running `batch` over the inputs, and a dependent summary job.
+    SlurmScript(super::batch::SlurmScriptArgs),
+    /// Split triangles until no edge is longer than --max-edge (the paper's adaptive subdivision, §4).
+    Subdivide(super::refine::SubdivideArgs),
+    /// Alternate subdivide and vcs smoothing --rounds times (the paper's Figs. 5–7).
+    Refine(super::refine::RefineArgs),
 }
 
 const BENCH_ABOUT: &str = "\

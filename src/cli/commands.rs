@@ -373,13 +373,15 @@ pub fn bench(
     }
 }
 
-
 /// `vcsmooth demo`: the embedded default job. A noisy icosphere is smoothed by every method on the
 /// patch engine; the table shows what the paper shows: only the volume-constrained methods keep
 /// the volume, and all of them remove the noise.
 pub fn demo(cfg: &DemoConfig, progress: &mut Progress, out: &mut dyn Write) -> Result<()> {
     use crate::mesh::Storage;
-    progress.phase(format!("generating a noisy sphere (level {})", cfg.subdivisions));
+    progress.phase(format!(
+        "generating a noisy sphere (level {})",
+        cfg.subdivisions
+    ));
     let clean = generate::icosphere(cfg.subdivisions);
     let mut noisy = clean.clone();
     generate::add_normal_noise(&mut noisy, cfg.noise, 1);
@@ -408,7 +410,11 @@ pub fn demo(cfg: &DemoConfig, progress: &mut Progress, out: &mut dyn Write) -> R
     )
     .map_err(stdout_error)?;
     for method in crate::smooth::Method::ALL {
-        let opts = crate::smooth::Options { method, iterations: cfg.iterations, ..Default::default() };
+        let opts = crate::smooth::Options {
+            method,
+            iterations: cfg.iterations,
+            ..Default::default()
+        };
         progress.iterations(method.name(), cfg.iterations);
         let (records, positions) = pool.install(|| -> Result<_> {
             let mut prep = driver::Prepared::new(
@@ -449,17 +455,27 @@ pub fn demo(cfg: &DemoConfig, progress: &mut Progress, out: &mut dyn Write) -> R
 }
 
 /// `vcsmooth generate … --subdivide L` (and the `mesh` shape): refine a base mesh and stream it.
-fn generate_streamed(cfg: &GenerateConfig, progress: &mut Progress, out: &mut dyn Write) -> Result<()> {
+fn generate_streamed(
+    cfg: &GenerateConfig,
+    progress: &mut Progress,
+    out: &mut dyn Write,
+) -> Result<()> {
     let base = match (&cfg.from, cfg.shape) {
         (Some(path), _) => {
             progress.phase(format!("reading {}", path.display()));
             io::read_mesh(path)?
         }
-        (None, Shape::Sphere) => generate::icosphere(cfg.subdivisions.min(generate::ICOSPHERE_MAX_SUBDIVISIONS)),
+        (None, Shape::Sphere) => {
+            generate::icosphere(cfg.subdivisions.min(generate::ICOSPHERE_MAX_SUBDIVISIONS))
+        }
         (None, _) => generate::torus(cfg.subdivisions.min(generate::TORUS_MAX_SUBDIVISIONS)),
     };
     let levels = cfg.subdivide.unwrap_or(0);
-    progress.phase(format!("writing {} (streamed, ×{} triangles)", cfg.output.display(), 1u64 << (2 * levels)));
+    progress.phase(format!(
+        "writing {} (streamed, ×{} triangles)",
+        cfg.output.display(),
+        1u64 << (2 * levels)
+    ));
     let n = generate::write_subdivided(&base, levels, cfg.noise, cfg.seed, &cfg.output)
         .map_err(|e| in_file(&cfg.output, e))?;
     progress.finish();

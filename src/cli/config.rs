@@ -20,6 +20,10 @@ pub enum Config {
     Curves(CurvesConfig),
     Demo(DemoConfig),
     Bench(BenchConfig),
+    Batch(super::batch::BatchConfig),
+    SlurmScript(super::batch::SlurmScriptConfig),
+    Subdivide(super::refine::SubdivideConfig),
+    Refine(super::refine::RefineConfig),
 }
 
 /// `vcsmooth bench`.
@@ -189,7 +193,9 @@ impl Config {
                         return Err(Error::Config("--from goes with the shape `mesh`".into()));
                     }
                     (_, None, None) => {
-                        return Err(Error::Config("generate sphere|torus needs --subdivisions K".into()));
+                        return Err(Error::Config(
+                            "generate sphere|torus needs --subdivisions K".into(),
+                        ));
                     }
                     (_, Some(k), None) => k,
                 };
@@ -231,7 +237,10 @@ impl Config {
             }
             Command::Demo(a) => {
                 if !(a.noise.is_finite() && a.noise >= 0.0) {
-                    return Err(Error::Config(format!("--noise must be a finite number ≥ 0, got {}", a.noise)));
+                    return Err(Error::Config(format!(
+                        "--noise must be a finite number ≥ 0, got {}",
+                        a.noise
+                    )));
                 }
                 Config::Demo(DemoConfig {
                     subdivisions: a.subdivisions,
@@ -241,11 +250,19 @@ impl Config {
                 })
             }
             Command::Bench(a) => Config::Bench(BenchConfig::from_args(a)?),
+            Command::Batch(a) => Config::Batch(super::batch::BatchConfig::from_args(a)?),
+            Command::SlurmScript(a) => {
+                Config::SlurmScript(super::batch::SlurmScriptConfig::from_args(a)?)
+            }
+            Command::Subdivide(a) => {
+                Config::Subdivide(super::refine::SubdivideConfig::from_args(a)?)
+            }
+            Command::Refine(a) => Config::Refine(super::refine::RefineConfig::from_args(a)?),
         })
     }
 }
 
-fn options(method: Method, iterations: usize, p: &MethodParams) -> Options {
+pub(super) fn options(method: Method, iterations: usize, p: &MethodParams) -> Options {
     Options {
         method,
         iterations,
@@ -255,7 +272,7 @@ fn options(method: Method, iterations: usize, p: &MethodParams) -> Options {
     }
 }
 
-fn engine(e: &EngineArgs) -> Result<EngineConfig> {
+pub(super) fn engine(e: &EngineArgs) -> Result<EngineConfig> {
     if let Some(b) = e.memory_budget {
         crate::resources::check_budget(b)?;
     }
@@ -269,7 +286,9 @@ fn engine(e: &EngineArgs) -> Result<EngineConfig> {
     }
     Ok(EngineConfig {
         threads: e.threads.map(|t| t as usize),
-        patch_size: e.patch_size.map_or(crate::driver::DEFAULT_PATCH_SIZE, |p| p as usize),
+        patch_size: e
+            .patch_size
+            .map_or(crate::driver::DEFAULT_PATCH_SIZE, |p| p as usize),
         memory_budget: e.memory_budget,
         scratch: e.scratch.clone(),
         with_stats: false,

@@ -11,14 +11,17 @@
 //! Every failure is one line on stderr, `vcsmooth: error: <file>: <problem>`; no output file, report
 //! or plot is written by a run that fails before it would write them.
 //!
-//! Commands: `smooth`, `info`, `compare`, `generate`, `curves`, `demo`, `bench` (see [`args::Command`]).
+//! Commands: `smooth`, `info`, `compare`, `generate`, `curves`, `demo`, `bench`, `batch`,
+//! `slurm-script` (see [`args::Command`]).
 
 pub mod args;
+pub mod batch;
 pub mod commands;
 pub mod config;
 pub mod output;
 pub mod plot;
 pub mod progress;
+pub mod refine;
 pub mod report;
 
 use std::ffi::OsString;
@@ -91,6 +94,10 @@ pub fn run_with(
         Config::Curves(c) => commands::curves(c, progress, out),
         Config::Demo(c) => commands::demo(c, progress, out),
         Config::Bench(c) => commands::bench(c, progress, out),
+        Config::Batch(c) => batch::batch(c, progress, out),
+        Config::SlurmScript(c) => batch::slurm_script(c, out),
+        Config::Subdivide(c) => refine::subdivide(c, progress, out),
+        Config::Refine(c) => refine::refine(c, progress, out),
     }
 }
 

@@ -360,7 +360,15 @@ pub fn print_bench(out: &mut dyn Write, r: &crate::bench::BenchReport) -> Result
     );
     t += &format!(
         "{:<8} {:>5} {:>10} {:>10} {:>9} {:>10} {:>10} {:>11} {:>8}\n",
-        "size", "level", "vertices", "triangles", "PLY MB", "write GB/s", "read GB/s", "peak anon", "B/tri"
+        "size",
+        "level",
+        "vertices",
+        "triangles",
+        "PLY MB",
+        "write GB/s",
+        "read GB/s",
+        "peak anon",
+        "B/tri"
     );
     for z in &r.sizes {
         t += &format!(

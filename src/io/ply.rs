@@ -462,10 +462,12 @@ impl Roles {
             .position(|e| e.name == "vertex")
             .ok_or("no 'vertex' element")?;
         let v = &elements[vertex];
-        let vertices = u32::try_from(v.count)
-            .map_err(|_| {
-                format!("element vertex {}: more vertices than 32-bit indices can address", v.count)
-            })?;
+        let vertices = u32::try_from(v.count).map_err(|_| {
+            format!(
+                "element vertex {}: more vertices than 32-bit indices can address",
+                v.count
+            )
+        })?;
         let mut xyz = [0; 3];
         for (k, name) in xyz.iter_mut().zip(["x", "y", "z"]) {
             *k = v
@@ -646,7 +648,11 @@ pub(crate) fn read_in(bytes: &[u8], storage: &Storage) -> Result<Mesh, ReadError
     }
     let roles = Roles::find(&header.elements)?;
     let mut elements = header.elements;
-    let mut mesh = Decoded { storage, positions: Buf::default(), faces: None };
+    let mut mesh = Decoded {
+        storage,
+        positions: Buf::default(),
+        faces: None,
+    };
     match header.encoding {
         PlyEncoding::Ascii => {
             let records = ply_ascii::parse_body(body, header.lines + 1, &elements)?;
@@ -772,7 +778,8 @@ impl Decoded<'_> {
             self.positions = positions;
             len
         } else if let Some(face) = roles.face.filter(|f| f.element == e) {
-            let mut faces = FaceBuilder::in_storage(self.storage, el.count).map_err(ReadError::Storage)?;
+            let mut faces =
+                FaceBuilder::in_storage(self.storage, el.count).map_err(ReadError::Storage)?;
             let len = decode_faces(&data, el, face, roles.vertices, origin, &mut faces)?;
             self.faces = Some(faces);
             len
@@ -900,7 +907,7 @@ fn decode_positions(
     }
     let mut fields = Vec::new();
     let mut pos = 0;
-    for i in 0..el.count {
+    for (i, slot) in positions.iter_mut().enumerate().take(el.count) {
         let end = walk_record(data, pos, &el.props, false, &mut fields)
             .map_err(|e| walk_failed(el, i, origin, pos, e))?;
         let p = DVec3::from_array(std::array::from_fn(|c| {
@@ -909,7 +916,7 @@ fn decode_positions(
         if !p.is_finite() {
             return Err(not_finite(i, pos, p));
         }
-        positions[i] = p;
+        *slot = p;
         pos = end;
     }
     Ok(pos)
@@ -925,7 +932,11 @@ fn decode_fixed<const N: usize>(
     value: impl Fn([u8; N]) -> f64,
     positions: &mut [DVec3],
 ) -> Result<(), (usize, DVec3)> {
-    for (i, (r, out)) in records.chunks_exact(stride).zip(positions.iter_mut()).enumerate() {
+    for (i, (r, out)) in records
+        .chunks_exact(stride)
+        .zip(positions.iter_mut())
+        .enumerate()
+    {
         let p = DVec3::new(
             value(bytes_at(r, at[0])),
             value(bytes_at(r, at[1])),
@@ -947,7 +958,11 @@ fn decode_any(
     types: [Scalar; 3],
     positions: &mut [DVec3],
 ) -> Result<(), (usize, DVec3)> {
-    for (i, (r, out)) in records.chunks_exact(stride).zip(positions.iter_mut()).enumerate() {
+    for (i, (r, out)) in records
+        .chunks_exact(stride)
+        .zip(positions.iter_mut())
+        .enumerate()
+    {
         let p = DVec3::from_array(std::array::from_fn(|c| {
             types[c].get(&r[at[c]..]).unwrap_or(f64::NAN)
         }));
@@ -1113,8 +1128,15 @@ pub(crate) fn check_writable(mesh: &Mesh) -> Fallible<()> {
     let el = &layout.elements[face.element];
     if let Some(records) = &el.records {
         let mut faces = FaceBuilder::with_capacity(el.count);
-        let same = decode_faces(records, el, face, roles.vertices, Origin::Byte(0), &mut faces)
-            .is_ok_and(|_| faces.triangles() == &mesh.triangles[..]);
+        let same = decode_faces(
+            records,
+            el,
+            face,
+            roles.vertices,
+            Origin::Byte(0),
+            &mut faces,
+        )
+        .is_ok_and(|_| faces.triangles() == &mesh.triangles[..]);
         if !same {
             return Err(
                 "the triangles no longer match the PLY source's faces; clear \

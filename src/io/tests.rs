@@ -703,7 +703,7 @@ fn malformed_inputs_give_clear_one_line_errors() {
             lying_faces,
             format!("face (byte {lying_faces_start}): the header declares 1000000000000 records of at least 1 bytes, but only 13 bytes are left"),
         ),
-        ("l.ply", too_many, "5000000000 vertices: more than 32-bit indices can address".into()),
+        ("l.ply", too_many, "element vertex 5000000000: more vertices than 32-bit indices can address".into()),
         ("t.ply", good[..good.len() - 3].to_vec(), format!("face 0 (byte {}): file ends inside the record", header + 36)),
         ("t.ply", good[..header + 30].to_vec(), format!("vertex (byte {header}): the header declares 3 records")),
         ("g.ply", big, format!("byte {}: 3 bytes of unexpected data after the last element", good.len() + 1)),
@@ -853,6 +853,67 @@ fn damaged_files_never_panic() {
             check(&damaged);
         }
     }
+}
+
+#[test]
+fn a_file_changed_while_it_is_read_is_reported() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("m.ply");
+    let (good, _) = triangle_ply();
+    let heap = crate::mesh::Storage::heap();
+    let read = |change: &dyn Fn(&Path)| {
+        read_mesh_observed(&path, &heap, change)
+            .map(|_| ())
+            .map_err(|e| e.to_string())
+    };
+    let changed = |change: &dyn Fn(&Path)| {
+        std::fs::write(&path, &good).unwrap();
+        read(change)
+    };
+    let message = |what: &str| {
+        format!(
+            "{}: file changed while it was being read ({what})",
+            path.display()
+        )
+    };
+    let append = |p: &Path| {
+        let mut f = std::fs::OpenOptions::new().append(true).open(p).unwrap();
+        f.write_all(b"more").unwrap();
+    };
+    let truncate = |p: &Path| {
+        let f = std::fs::OpenOptions::new().write(true).open(p).unwrap();
+        f.set_len(10).unwrap();
+    };
+    let touch = |p: &Path| {
+        let f = std::fs::OpenOptions::new().write(true).open(p).unwrap();
+        let mtime = f.metadata().unwrap().modified().unwrap();
+        f.set_modified(mtime + std::time::Duration::from_secs(5))
+            .unwrap();
+    };
+    let n = good.len();
+    assert_eq!(
+        changed(&append),
+        Err(message(&format!("size {n} -> {} bytes", n + 4)))
+    );
+    assert_eq!(
+        changed(&truncate),
+        Err(message(&format!("size {n} -> 10 bytes")))
+    );
+    assert_eq!(changed(&touch), Err(message("modification time changed")));
+    // The change is reported rather than what the decode made of the bytes it saw.
+    std::fs::write(&path, &good[..n - 1]).unwrap();
+    assert_eq!(
+        read(&append),
+        Err(message(&format!("size {} -> {} bytes", n - 1, n + 3)))
+    );
+    // A new file renamed over the path is another inode: the opened one reads consistently.
+    let replace = |p: &Path| {
+        let other = p.with_extension("new");
+        std::fs::write(&other, b"junk").unwrap();
+        std::fs::rename(&other, p).unwrap();
+    };
+    assert_eq!(changed(&replace), Ok(()));
+    assert_eq!(changed(&|_| ()), Ok(()));
 }
 
 // ---------------------------------------------------------------------------------------------

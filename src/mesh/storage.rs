@@ -10,10 +10,11 @@ use std::fs::OpenOptions;
 use std::marker::PhantomData;
 use std::ops::{Deref, DerefMut};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 
 use glam::DVec3;
-use memmap2::MmapMut;
+use memmap2::{Mmap, MmapMut};
 
 use crate::error::{Error, Result};
 
@@ -117,9 +118,12 @@ impl Storage {
         // name), and is only accessed through this mapping, so nobody truncates or changes it
         // underneath; `Buf` ties the slice's lifetime to the mapping.
         let map = unsafe { MmapMut::map_mut(&file) }.map_err(|e| Error::io(&path, e))?;
+        // SAFETY: a second, read-only view of the same file, used only to give the kernel
+        // read-ahead advice (`Advisor`); its bytes are never read through it.
+        let advice = unsafe { Mmap::map(&file) }.map_err(|e| Error::io(&path, e))?;
         self.mapped_bytes.fetch_add(bytes as u64, Ordering::Relaxed);
         Ok(Buf {
-            inner: Inner::Map(map),
+            inner: Inner::Map(map, Arc::new(advice)),
             len,
             _t: PhantomData,
         })
@@ -160,7 +164,29 @@ fn zero<T: Pod>() -> T {
 
 enum Inner<T> {
     Heap(Vec<T>),
-    Map(MmapMut),
+    Map(MmapMut, Arc<Mmap>),
+}
+
+/// Read-ahead advice for a mapped array, usable from another thread while the array itself is
+/// borrowed mutably: `madvise(WILLNEED)` on a second mapping of the same file touches no data, it
+/// only asks the kernel to bring the pages into the page cache.
+#[derive(Clone)]
+pub struct Advisor {
+    map: Arc<Mmap>,
+    elem: usize,
+}
+
+impl Advisor {
+    /// Ask for elements `range` to be read ahead (a hint: errors are ignored).
+    pub fn will_need(&self, range: std::ops::Range<usize>) {
+        let start = (range.start * self.elem).min(self.map.len());
+        let end = (range.end * self.elem).min(self.map.len());
+        if end > start {
+            let _ = self
+                .map
+                .advise_range(memmap2::Advice::WillNeed, start, end - start);
+        }
+    }
 }
 
 /// An array on the heap or in a mapped scratch file; derefs to a slice either way.
@@ -183,18 +209,29 @@ impl<T: Pod> Buf<T> {
 
     /// Whether the array lives in a scratch file.
     pub fn is_mapped(&self) -> bool {
-        matches!(self.inner, Inner::Map(_))
+        matches!(self.inner, Inner::Map(..))
     }
 
     /// The array as a growable heap vector, moving a mapped array to the heap first (editing
     /// meshes element by element is for small meshes: tests, generators).
     pub fn heap_mut(&mut self) -> &mut Vec<T> {
-        if let Inner::Map(_) = self.inner {
+        if let Inner::Map(..) = self.inner {
             *self = Buf::from_vec(self.to_vec());
         }
         match &mut self.inner {
             Inner::Heap(v) => v,
-            Inner::Map(_) => unreachable!("moved to the heap above"),
+            Inner::Map(..) => unreachable!("moved to the heap above"),
+        }
+    }
+
+    /// Read-ahead advice for this array; `None` on the heap.
+    pub fn advisor(&self) -> Option<Advisor> {
+        match &self.inner {
+            Inner::Heap(_) => None,
+            Inner::Map(_, advice) => Some(Advisor {
+                map: advice.clone(),
+                elem: std::mem::size_of::<T>(),
+            }),
         }
     }
 
@@ -202,7 +239,7 @@ impl<T: Pod> Buf<T> {
     pub fn truncate(&mut self, n: usize) {
         match &mut self.inner {
             Inner::Heap(v) => v.truncate(n),
-            Inner::Map(_) => self.len = self.len.min(n),
+            Inner::Map(..) => self.len = self.len.min(n),
         }
     }
 
@@ -280,7 +317,7 @@ impl<T: Pod> Deref for Buf<T> {
             Inner::Heap(v) => v,
             // SAFETY: the mapping is page-aligned (so aligned for any T), holds exactly
             // `len * size_of::<T>()` bytes, and `Pod` makes every bit pattern a valid T.
-            Inner::Map(m) => unsafe {
+            Inner::Map(m, _) => unsafe {
                 std::slice::from_raw_parts(m.as_ptr().cast::<T>(), self.len)
             },
         }
@@ -292,7 +329,7 @@ impl<T: Pod> DerefMut for Buf<T> {
         match &mut self.inner {
             Inner::Heap(v) => v,
             // SAFETY: as in `deref`; `&mut self` makes the access exclusive.
-            Inner::Map(m) => unsafe {
+            Inner::Map(m, _) => unsafe {
                 std::slice::from_raw_parts_mut(m.as_mut_ptr().cast::<T>(), self.len)
             },
         }

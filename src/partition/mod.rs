@@ -124,7 +124,9 @@ impl Patch {
 impl Patch {
     /// Owned edge stencils whose second vertex lies in another patch (stencils crossing the seam).
     pub fn crossing_edges(&self, topo: &Topology) -> u64 {
-        self.edges(topo).filter(|[_, j]| !self.vertices.contains(j)).count() as u64
+        self.edges(topo)
+            .filter(|[_, j]| !self.vertices.contains(j))
+            .count() as u64
     }
 }
 

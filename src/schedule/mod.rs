@@ -99,6 +99,57 @@ fn rings_outside(topo: &Topology, p: &Patch, depth: usize) -> Vec<Vec<u32>> {
     rings
 }
 
+/// The bounded read-ahead pipeline of out-of-core runs: while the patches of one colour are
+/// smoothed, a prefetch thread receives the next colour's patches over a bounded channel and asks
+/// the kernel to read their pages ahead (positions, neighbour sums, adjacency). It only gives
+/// advice, so it never changes a result; when the queue is full, hints are dropped rather than
+/// stalling the sweep. On the heap there is nothing to prefetch and no thread is started.
+pub struct Prefetch {
+    tx: Option<crossbeam_channel::Sender<std::ops::Range<u32>>>,
+}
+
+impl Prefetch {
+    /// A prefetch that does nothing (in-core runs).
+    pub fn none() -> Prefetch {
+        Prefetch { tx: None }
+    }
+
+    /// Hint that `vertices` will be needed soon.
+    pub fn hint(&self, vertices: std::ops::Range<u32>) {
+        if let Some(tx) = &self.tx {
+            let _ = tx.try_send(vertices);
+        }
+    }
+}
+
+/// Run `f` with a prefetch pipeline for the given advisors (positions and sums of a mapped run)
+/// and `topo`'s adjacency; without advisors, `f` gets [`Prefetch::none`].
+pub fn with_prefetch<R>(
+    topo: &Topology,
+    advisors: Vec<crate::mesh::storage::Advisor>,
+    queue: usize,
+    f: impl FnOnce(&Prefetch) -> R,
+) -> R {
+    if advisors.is_empty() {
+        return f(&Prefetch::none());
+    }
+    let (tx, rx) = crossbeam_channel::bounded::<std::ops::Range<u32>>(queue.max(1));
+    std::thread::scope(|scope| {
+        scope.spawn(move || {
+            for range in rx {
+                topo.will_need(range.clone());
+                for a in &advisors {
+                    a.will_need(range.start as usize..range.end as usize);
+                }
+            }
+        });
+        let prefetch = Prefetch { tx: Some(tx) };
+        let result = f(&prefetch);
+        drop(prefetch); // closes the channel, so the prefetch thread ends
+        result
+    })
+}
+
 /// A per-vertex array shared by the threads that run the patches of one colour.
 ///
 /// Each thread gets its own copy and accesses the array through raw pointers; soundness rests on
@@ -122,6 +173,8 @@ impl<'a> SharedField<'a> {
     /// While any copy of the view is in use from several threads, no element may be accessed by
     /// two threads where one of them writes (the colouring of [`schedule`] guarantees this for
     /// the stencils of the patches of one colour), and `data` is not used except through the view.
+    /// Every vertex passed to `get`/`add` must be below `data.len()`: the kernels take vertices
+    /// from a [`Topology`] of `data.len()` vertices, whose build rejects out-of-range indices.
     pub unsafe fn new(data: &'a mut [DVec3]) -> Self {
         SharedField {
             ptr: data.as_mut_ptr(),
@@ -134,14 +187,14 @@ impl<'a> SharedField<'a> {
 impl Field for SharedField<'_> {
     #[inline]
     fn get(&self, v: u32) -> DVec3 {
-        assert!((v as usize) < self.len, "vertex {v} out of range");
-        // SAFETY: in bounds (checked above); no concurrent writer by the contract of `new`.
+        debug_assert!((v as usize) < self.len, "vertex {v} out of range");
+        // SAFETY: in bounds and no concurrent writer, by the contract of `new`.
         unsafe { self.ptr.add(v as usize).read() }
     }
     #[inline]
     fn add(&mut self, v: u32, d: DVec3) {
-        assert!((v as usize) < self.len, "vertex {v} out of range");
-        // SAFETY: in bounds; this thread is the only one touching element v (contract of `new`).
+        debug_assert!((v as usize) < self.len, "vertex {v} out of range");
+        // SAFETY: in bounds, and this thread is the only one touching element v (contract of `new`).
         unsafe {
             let p = self.ptr.add(v as usize);
             p.write(p.read() + d);

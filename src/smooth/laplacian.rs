@@ -2,7 +2,7 @@
 
 use glam::DVec3;
 
-use super::Topology;
+use super::{Topology, inv_deg};
 
 /// Umbrella Laplacian `L(v) = (1/deg v) Σ_{u∈N(v)} p_u − p_v`; zero for an isolated vertex.
 #[inline]
@@ -12,7 +12,7 @@ pub fn umbrella(topo: &Topology, pos: &[DVec3], v: u32) -> DVec3 {
         return DVec3::ZERO;
     }
     let sum = nbrs.iter().fold(DVec3::ZERO, |s, &u| s + pos[u as usize]);
-    sum / nbrs.len() as f64 - pos[v as usize]
+    sum * inv_deg(nbrs.len()) - pos[v as usize]
 }
 
 /// One Jacobi step `p' = p + λ L(p)` for the vertices `first .. first + dst.len()`, reading only `src`.
@@ -26,14 +26,19 @@ pub fn jacobi_step(
     first: usize,
     lambda: f64,
 ) -> u64 {
+    // The mask and the old positions of the range as slices: one bounds check for the range
+    // instead of one per vertex.
+    let fixed = &topo.fixed_mask()[first..first + dst.len()];
+    let own = &src[first..first + dst.len()];
     let mut moved = 0;
-    for (k, out) in dst.iter_mut().enumerate() {
-        let v = (first + k) as u32;
-        *out = if topo.is_fixed(v) {
-            src[v as usize]
+    for (k, ((out, &fix), &p)) in dst.iter_mut().zip(fixed).zip(own).enumerate() {
+        *out = if fix != 0 {
+            p
         } else {
             moved += 1;
-            src[v as usize] + lambda * umbrella(topo, src, v)
+            let nbrs = topo.neighbors((first + k) as u32);
+            let sum = nbrs.iter().fold(DVec3::ZERO, |s, &u| s + src[u as usize]);
+            p + lambda * (sum * inv_deg(nbrs.len()) - p)
         };
     }
     moved

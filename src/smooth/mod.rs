@@ -157,6 +157,27 @@ impl Field for [DVec3] {
     }
 }
 
+/// `1/d` for the degrees of nearly every vertex, so that the kernels load it instead of dividing.
+const INV_SMALL: [f64; 32] = {
+    let mut t = [0.0; 32];
+    let mut d = 1;
+    while d < 32 {
+        t[d] = 1.0 / d as f64;
+        d += 1;
+    }
+    t
+};
+
+/// `1/d` (0 for d = 0). The table holds the correctly rounded quotient, the same value a division
+/// gives, so results do not depend on which path a degree takes.
+#[inline]
+pub(crate) fn inv_deg(d: usize) -> f64 {
+    match INV_SMALL.get(d) {
+        Some(&x) => x,
+        None => 1.0 / d as f64,
+    }
+}
+
 /// Sum of neighbour positions per vertex, `S(v) = Σ_{u∈N(v)} p_u`: the cache that makes an umbrella
 /// Laplacian `S(v)/deg(v) − p_v` cost O(1) inside the stencil kernels.
 pub fn neighbor_sums(topo: &Topology, pos: &[DVec3]) -> Vec<DVec3> {

@@ -19,7 +19,7 @@
 
 use glam::DVec3;
 
-use super::{Field, SweepStats, Topology};
+use super::{Field, SweepStats, Topology, inv_deg};
 
 /// What a stencil kernel does after the energy minimisation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -39,34 +39,13 @@ pub enum Outcome {
     Rejected,
 }
 
-/// One row of a stencil: vertex `v`, which free vertices it is (`self_mask`) and neighbours
-/// (`nbr_mask`), `1/deg v`, and its current Laplacian.
-#[derive(Debug, Clone, Copy)]
-struct Row {
-    v: u32,
-    self_mask: u8,
-    nbr_mask: u8,
-    inv_deg: f64,
-    lap: DVec3,
-}
-
-impl Row {
-    #[inline]
-    fn k(&self, f: usize) -> f64 {
-        if self.self_mask & (1 << f) != 0 {
-            -1.0
-        } else if self.nbr_mask & (1 << f) != 0 {
-            self.inv_deg
-        } else {
-            0.0
-        }
-    }
-}
-
-/// Scratch buffer reused across stencils, so that no stencil allocates.
+/// Per-thread scratch of the stencil kernels. The kernels now accumulate everything they need in
+/// registers during one pass over the rows, so it holds nothing; it stays in the signatures so
+/// that callers keep one per thread should a kernel need scratch again.
 #[derive(Debug, Default)]
 pub struct Workspace {
-    rows: Vec<Row>,
+    // Not a unit struct, so that callers' `Workspace::default()` stays idiomatic.
+    _reserved: (),
 }
 
 /// Relative size below which a pivot of `KᵀK`, or `|n|` against the stencil's area, counts as degenerate.
@@ -76,7 +55,18 @@ const DEGENERATE: f64 = 1e-10;
 /// It reads positions of F ∪ N(F) and sums of F ∪ N(F); it writes positions of F and sums of N(F).
 ///
 /// `triangles` is the array the topology was built from (its faces give the stencil volume).
-/// Positions and sums are written only when the outcome is [`Outcome::Applied`].
+/// Positions and sums are written only when the outcome is [`Outcome::Applied`]. The free vertices
+/// must be mutual neighbours (an edge or a face of the mesh); a stencil whose are not is skipped
+/// as degenerate.
+///
+/// How the normal equations are assembled: with `w_v = 1/deg v` and `k[v][f] = −[v = f] + w_v [v ∈ N(f)]`,
+/// and the free vertices mutual neighbours,
+/// - `(KᵀK)[f][f] = 1 + Σ_{v∈N(f)} w_v²`,
+/// - `(KᵀK)[f][g] = Σ_{v∈N(f)∩N(g)} w_v² − w_f − w_g` for f ≠ g,
+/// - `(−KᵀL)[f] = L(f) − Σ_{v∈N(f)} w_v L(v)`,
+///
+/// so one merge of the sorted neighbour lists, computing each row's Laplacian once, gives the
+/// whole system without materialising K.
 pub fn apply<const N: usize, P: Field + ?Sized, S: Field + ?Sized>(
     topo: &Topology,
     triangles: &[[u32; 3]],
@@ -84,18 +74,131 @@ pub fn apply<const N: usize, P: Field + ?Sized, S: Field + ?Sized>(
     sums: &mut S,
     free: [u32; N],
     params: StencilParams,
-    ws: &mut Workspace,
+    _ws: &mut Workspace,
 ) -> Outcome {
+    const { assert!(N >= 1 && N <= 8, "masks are u8") };
     if free.iter().any(|&f| topo.is_fixed(f)) {
         return Outcome::SkippedFixed;
     }
 
-    // Rows F ∪ N(F), merged by vertex.
-    // Rows F ∪ N(F): the free vertices of an edge or triangle stencil are neighbours of each
-    // other, so the rows are exactly the merge of their sorted neighbour lists.
-    let rows = &mut ws.rows;
-    rows.clear();
+    // Rows F ∪ N(F) = the merge of the free vertices' sorted neighbour lists (each free vertex is
+    // in the others' lists); `mask` says which lists hold the row.
     let lists: [&[u32]; N] = free.map(|f| topo.neighbors(f));
+    let mut sq = [0.0f64; N]; // Σ_{v∈N(f)} w_v²
+    let mut cross = [[0.0f64; N]; N]; // Σ_{v∈N(f)∩N(g)} w_v², f < g
+    let mut weighted = [DVec3::ZERO; N]; // Σ_{v∈N(f)} w_v L(v)
+    let mut lap_free = [DVec3::ZERO; N]; // L(f)
+    let mut free_mask = [0u8; N]; // which lists hold free vertex f: all but f's own when adjacent
+    // Inlined at each of the merge's call sites, where the mask is a constant for edge stencils.
+    merge_rows(
+        lists,
+        #[inline(always)]
+        |v, mask| {
+            let w = inv_deg(topo.deg(v));
+            let lap = sums.get(v) * w - pos.get(v);
+            for f in 0..N {
+                if mask & (1 << f) != 0 {
+                    weighted[f] += w * lap;
+                    sq[f] += w * w;
+                    for (g, c) in cross[f].iter_mut().enumerate().skip(f + 1) {
+                        if mask & (1 << g) != 0 {
+                            *c += w * w;
+                        }
+                    }
+                } else if v == free[f] {
+                    lap_free[f] = lap;
+                    free_mask[f] = mask;
+                }
+            }
+        },
+    );
+    let all = (((1u16 << N) - 1) & 0xff) as u8;
+    if (0..N).any(|f| free_mask[f] != all & !(1 << f)) {
+        debug_assert!(
+            false,
+            "free vertices of a stencil must be mutual neighbours"
+        );
+        return Outcome::SkippedDegenerate;
+    }
+
+    // Normal equations (KᵀK) d = −Kᵀ L.
+    let w_free: [f64; N] = std::array::from_fn(|f| inv_deg(lists[f].len()));
+    let mut m = [[0.0f64; N]; N];
+    for f in 0..N {
+        m[f][f] = 1.0 + sq[f];
+        for g in f + 1..N {
+            let x = cross[f][g] - w_free[f] - w_free[g];
+            m[f][g] = x;
+            m[g][f] = x;
+        }
+    }
+    let rhs: [DVec3; N] = std::array::from_fn(|f| lap_free[f] - weighted[f]);
+    let Some(mut d) = solve_spd(m, rhs) else {
+        return Outcome::SkippedDegenerate;
+    };
+
+    if params.volume {
+        match volume_translation(topo, triangles, pos, &free, &d) {
+            Some(w) => d.iter_mut().for_each(|x| *x += w),
+            None => return Outcome::SkippedDegenerate,
+        }
+    }
+    // One sum is finite exactly when every component is (short of an overflow of the sum, which
+    // is as good a reason to skip).
+    if !d.iter().fold(0.0, |s, x| s + x.element_sum()).is_finite() {
+        return Outcome::SkippedDegenerate;
+    }
+    if params.reject_energy_increase {
+        // 2 (E(d) − E(0)) = dᵀ(KᵀK)d + 2 dᵀKᵀL = Σ_fg m_fg d_f·d_g − 2 Σ_f d_f·rhs_f: the exact
+        // energy change from the normal equations, so no row needs to be revisited (and the
+        // difference is not lost in the cancellation of two large energies).
+        let mut change = 0.0;
+        for f in 0..N {
+            change -= 2.0 * d[f].dot(rhs[f]);
+            for g in 0..N {
+                change += m[f][g] * d[f].dot(d[g]);
+            }
+        }
+        if change > 0.0 {
+            return Outcome::Rejected;
+        }
+    }
+
+    for (fi, &f) in free.iter().enumerate() {
+        pos.add(f, d[fi]);
+        for &u in lists[fi] {
+            sums.add(u, d[fi]);
+        }
+    }
+    Outcome::Applied
+}
+
+/// Call `row(v, mask)` for every vertex v of the union of the ascending lists, in ascending order,
+/// with bit f of `mask` set when `lists[f]` holds v.
+#[inline(always)]
+fn merge_rows<const N: usize>(lists: [&[u32]; N], mut row: impl FnMut(u32, u8)) {
+    if N == 2 {
+        // Edge stencils: a plain two-way merge. Each branch passes a constant mask, so after
+        // inlining every branch accumulates into only the lists that hold its row.
+        let (la, lb) = (lists[0], lists[1]);
+        let (mut i, mut j) = (0, 0);
+        while let (Some(&x), Some(&y)) = (la.get(i), lb.get(j)) {
+            if x < y {
+                row(x, 1);
+                i += 1;
+            } else if y < x {
+                row(y, 2);
+                j += 1;
+            } else {
+                row(x, 3);
+                i += 1;
+                j += 1;
+            }
+        }
+        la[i..].iter().for_each(|&x| row(x, 1));
+        lb[j..].iter().for_each(|&y| row(y, 2));
+        return;
+    }
     let mut at = [0usize; N];
     loop {
         let mut v = u32::MAX;
@@ -107,78 +210,26 @@ pub fn apply<const N: usize, P: Field + ?Sized, S: Field + ?Sized>(
         if v == u32::MAX {
             break;
         }
-        let mut nbr_mask = 0u8;
+        let mut mask = 0u8;
         for f in 0..N {
-            if lists[f].get(at[f]) == Some(&v) {
-                nbr_mask |= 1 << f;
-                at[f] += 1;
-            }
+            let hit = lists[f].get(at[f]) == Some(&v);
+            mask |= (hit as u8) << f;
+            at[f] += hit as usize;
         }
-        let self_mask = free.iter().position(|&f| f == v).map_or(0, |k| 1u8 << k);
-        rows.push(Row {
-            v,
-            self_mask,
-            nbr_mask,
-            inv_deg: 0.0,
-            lap: DVec3::ZERO,
-        });
+        row(v, mask);
     }
-    debug_assert_eq!(
-        rows.iter().filter(|r| r.self_mask != 0).count(),
-        N,
-        "free vertices of a stencil must be mutual neighbours"
-    );
+}
 
-    // Normal equations (KᵀK) d = −Kᵀ L, and the energy before the stencil.
-    let mut m = [[0.0f64; N]; N];
-    let mut rhs = [DVec3::ZERO; N];
-    let mut energy_before = 0.0;
-    for r in rows.iter_mut() {
-        r.inv_deg = 1.0 / topo.deg(r.v) as f64;
-        r.lap = sums.get(r.v) * r.inv_deg - pos.get(r.v);
-        if params.reject_energy_increase {
-            energy_before += r.lap.length_squared();
-        }
-        let k: [f64; N] = std::array::from_fn(|f| r.k(f));
-        for f in 0..N {
-            if k[f] != 0.0 {
-                rhs[f] -= k[f] * r.lap;
-                for g in 0..N {
-                    m[f][g] += k[f] * k[g];
-                }
-            }
-        }
+/// The two corners of `tri` after `v`, in the face's cyclic order (`v` must be a corner).
+#[inline]
+fn after(tri: [u32; 3], v: u32) -> (u32, u32) {
+    if tri[0] == v {
+        (tri[1], tri[2])
+    } else if tri[1] == v {
+        (tri[2], tri[0])
+    } else {
+        (tri[0], tri[1])
     }
-    let Some(mut d) = solve_spd(m, rhs) else {
-        return Outcome::SkippedDegenerate;
-    };
-
-    if params.volume {
-        match volume_translation(topo, triangles, pos, &free, &d) {
-            Some(w) => d.iter_mut().for_each(|x| *x += w),
-            None => return Outcome::SkippedDegenerate,
-        }
-    }
-    if !d.iter().all(|x| x.is_finite()) {
-        return Outcome::SkippedDegenerate;
-    }
-    if params.reject_energy_increase {
-        let energy_after: f64 = rows
-            .iter()
-            .map(|r| (r.lap + (0..N).fold(DVec3::ZERO, |s, f| s + r.k(f) * d[f])).length_squared())
-            .sum();
-        if energy_after > energy_before {
-            return Outcome::Rejected;
-        }
-    }
-
-    for (fi, &f) in free.iter().enumerate() {
-        pos.add(f, d[fi]);
-        for &u in topo.neighbors(f) {
-            sums.add(u, d[fi]);
-        }
-    }
-    Outcome::Applied
 }
 
 /// Step 2: the common translation w of the free vertices (already displaced by `d`) that restores
@@ -190,60 +241,72 @@ fn volume_translation<const N: usize, P: Field + ?Sized>(
     free: &[u32; N],
     d: &[DVec3; N],
 ) -> Option<DVec3> {
-    let origin = free.iter().fold(DVec3::ZERO, |s, &f| s + pos.get(f)) / N as f64;
+    let origin = free.iter().fold(DVec3::ZERO, |s, &f| s + pos.get(f)) * (1.0 / N as f64);
     // ΔV = V(P¹) − V(P⁰) and n = ∂V/∂w at P¹, both times 6 (the factor cancels in w).
     let (mut dv, mut scale) = (0.0, 0.0);
     let mut n = DVec3::ZERO;
     for (fi, &f) in free.iter().enumerate() {
+        // Faces where f is the only free corner (most of them): n_t = p_b × p_c does not depend
+        // on f, and ΔV_t = d_f · n_t, so their n_t are summed first and dotted with d_f once.
+        let mut single = DVec3::ZERO;
         for &t in topo.faces_of(f) {
             let tri = triangles[t as usize];
-            // Which corners are free; a face holding an earlier free vertex was already counted.
-            let mut slot = [usize::MAX; 3];
-            let mut free_corners = 0;
-            let mut seen = false;
-            for c in 0..3 {
-                for (g, &fg) in free.iter().enumerate() {
-                    if tri[c] == fg {
-                        slot[c] = g;
-                        free_corners += 1;
-                        seen |= g < fi;
-                    }
-                }
+            let (b, c) = after(tri, f);
+            // Which other free vertices are corners of this face.
+            let mut others = 0u8;
+            for (g, &fg) in free.iter().enumerate() {
+                others |= (((b == fg) | (c == fg)) as u8) << g;
             }
-            if seen {
+            if others == 0 {
+                let nt = (pos.get(b) - origin).cross(pos.get(c) - origin);
+                single += nt;
+                scale += nt.length_squared();
                 continue;
             }
-            let nt = if free_corners == 1 {
-                // Most faces: only f moves, so ΔV_t = d·(p_b × p_c) and n_t = p_b × p_c.
-                let c = slot.iter().position(|&g| g == fi).unwrap_or(0);
-                let pb = pos.get(tri[(c + 1) % 3]) - origin;
-                let pc = pos.get(tri[(c + 2) % 3]) - origin;
-                let nt = pb.cross(pc);
-                dv += d[fi].dot(nt);
-                nt
-            } else {
-                let old = tri.map(|v| pos.get(v) - origin);
-                let mut new = old;
-                for c in 0..3 {
-                    if slot[c] != usize::MAX {
-                        new[c] += d[slot[c]];
-                    }
+            // A face holding an earlier free vertex was already counted with it.
+            if others & ((1u8 << fi) - 1) != 0 {
+                continue;
+            }
+            // Faces with several free corners (2 per edge stencil, 4 per triangle stencil), in the
+            // face's cyclic order (f, b, c): P, Q, R after step 1, p, q, r before.
+            let (mut db, mut dc) = (DVec3::ZERO, DVec3::ZERO);
+            let (mut b_free, mut c_free) = (false, false);
+            for (g, &fg) in free.iter().enumerate() {
+                if b == fg {
+                    db = d[g];
+                    b_free = true;
                 }
-                dv += new[0].dot(new[1].cross(new[2])) - old[0].dot(old[1].cross(old[2]));
-                let mut nt = DVec3::ZERO;
-                for a in 0..3 {
-                    if slot[a] != usize::MAX {
-                        nt += new[(a + 1) % 3].cross(new[(a + 2) % 3]);
-                    }
+                if c == fg {
+                    dc = d[g];
+                    c_free = true;
                 }
-                nt
-            };
+            }
+            let (p, q, r) = (
+                pos.get(f) - origin,
+                pos.get(b) - origin,
+                pos.get(c) - origin,
+            );
+            let (bp, bq, br) = (p + d[fi], q + db, r + dc);
+            let qr = bq.cross(br);
+            dv += bp.dot(qr) - p.dot(q.cross(r));
+            // n_t sums p_b × p_c over the free corners a only.
+            let mut nt = qr;
+            if b_free {
+                nt += br.cross(bp);
+            }
+            if c_free {
+                nt += bp.cross(bq);
+            }
             n += nt;
             scale += nt.length_squared();
         }
+        dv += d[fi].dot(single);
+        n += single;
     }
     // A gradient that cancels out against its faces' own (|n|² ≪ Σ|n_t|²) is degenerate.
     let nn = n.length_squared();
+    // Negated so that a NaN counts as degenerate.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
     if !(nn > DEGENERATE * DEGENERATE * scale) {
         return None;
     }
@@ -251,8 +314,29 @@ fn volume_translation<const N: usize, P: Field + ?Sized>(
 }
 
 /// Solve the small SPD system `m x = b` by Cholesky; `None` if a pivot is not clearly positive.
+///
+/// For N = 2 the same test (pivots `m00` and `det/m00`, each against its diagonal entry) and
+/// Cramer's rule, one division instead of two square roots and four divisions.
+// The pivot tests are negated so that a NaN counts as degenerate.
+#[allow(clippy::neg_cmp_op_on_partial_ord)]
 fn solve_spd<const N: usize>(m: [[f64; N]; N], b: [DVec3; N]) -> Option<[DVec3; N]> {
+    if N == 2 {
+        let (a, o, c) = (m[0][0], m[0][1], m[1][1]);
+        let det = a * c - o * o;
+        if !(a > 0.0 && det > DEGENERATE * a * c) {
+            return None;
+        }
+        let inv = 1.0 / det;
+        return Some(std::array::from_fn(|i| {
+            if i == 0 {
+                (c * b[0] - o * b[1]) * inv
+            } else {
+                (a * b[1] - o * b[0]) * inv
+            }
+        }));
+    }
     let mut l = [[0.0f64; N]; N];
+    let mut inv_diag = [0.0f64; N];
     for i in 0..N {
         for j in 0..=i {
             let s = m[i][j] - (0..j).map(|k| l[i][k] * l[j][k]).sum::<f64>();
@@ -261,18 +345,19 @@ fn solve_spd<const N: usize>(m: [[f64; N]; N], b: [DVec3; N]) -> Option<[DVec3; 
                     return None;
                 }
                 l[i][i] = s.sqrt();
+                inv_diag[i] = 1.0 / l[i][i];
             } else {
-                l[i][j] = s / l[j][j];
+                l[i][j] = s * inv_diag[j];
             }
         }
     }
     let mut y = [DVec3::ZERO; N];
     for i in 0..N {
-        y[i] = (b[i] - (0..i).fold(DVec3::ZERO, |s, k| s + l[i][k] * y[k])) / l[i][i];
+        y[i] = (b[i] - (0..i).fold(DVec3::ZERO, |s, k| s + l[i][k] * y[k])) * inv_diag[i];
     }
     let mut x = [DVec3::ZERO; N];
     for i in (0..N).rev() {
-        x[i] = (y[i] - (i + 1..N).fold(DVec3::ZERO, |s, k| s + l[k][i] * x[k])) / l[i][i];
+        x[i] = (y[i] - (i + 1..N).fold(DVec3::ZERO, |s, k| s + l[k][i] * x[k])) * inv_diag[i];
     }
     Some(x)
 }

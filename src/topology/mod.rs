@@ -257,6 +257,32 @@ impl Topology {
         })
     }
 
+    /// Ask the kernel to read ahead the adjacency of `vertices` when the arrays are memory-mapped
+    /// (a hint for the prefetch pipeline; no data is touched).
+    pub fn will_need(&self, vertices: std::ops::Range<u32>) {
+        let (lo, hi) = (
+            vertices.start as usize,
+            (vertices.end as usize).min(self.len()),
+        );
+        if lo >= hi {
+            return;
+        }
+        for offsets in [&self.vv_offsets, &self.vf_offsets] {
+            if let Some(a) = offsets.advisor() {
+                a.will_need(lo..hi + 1);
+            }
+        }
+        if let Some(a) = self.fixed.advisor() {
+            a.will_need(lo..hi);
+        }
+        if let Some(a) = self.vv.advisor() {
+            a.will_need(self.vv_offsets[lo]..self.vv_offsets[hi]);
+        }
+        if let Some(a) = self.vf.advisor() {
+            a.will_need(self.vf_offsets[lo]..self.vf_offsets[hi]);
+        }
+    }
+
     /// Bytes held by the adjacency arrays (for memory reports).
     pub fn heap_bytes(&self) -> usize {
         (self.vv_offsets.len() + self.vf_offsets.len()) * std::mem::size_of::<usize>()

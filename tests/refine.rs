@@ -1,0 +1,415 @@
+//! Adaptive subdivision (`vcsmooth::refine`, `vcsmooth subdivide`, `vcsmooth refine`): every
+//! output edge ≤ δ, closed manifolds stay closed, manifold and oriented, new vertices lie on the
+//! input's triangles, open meshes keep their boundary, and the smoothing rounds keep the volume.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use glam::DVec3;
+use vcsmooth::driver::Quiet;
+use vcsmooth::refine::{self, RefineOptions};
+use vcsmooth::topology::Topology;
+use vcsmooth::{Mesh, generate, io, metrics};
+
+fn meshes_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/meshes")
+}
+
+fn bbox_diagonal(pos: &[DVec3]) -> f64 {
+    let lo = pos.iter().fold(DVec3::splat(f64::MAX), |a, &p| a.min(p));
+    let hi = pos.iter().fold(DVec3::splat(f64::MIN), |a, &p| a.max(p));
+    (hi - lo).length()
+}
+
+/// Distance from `p` to the segment `[a, b]`.
+fn segment_distance(p: DVec3, a: DVec3, b: DVec3) -> f64 {
+    let d = b - a;
+    let t = if d.length_squared() > 0.0 {
+        ((p - a).dot(d) / d.length_squared()).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (p - (a + t * d)).length()
+}
+
+/// Distance from `p` to the triangle `abc` (its plane where the projection falls inside, else
+/// its nearest side).
+fn triangle_distance(p: DVec3, [a, b, c]: [DVec3; 3]) -> f64 {
+    let n = (b - a).cross(c - a);
+    let sides = segment_distance(p, a, b)
+        .min(segment_distance(p, b, c))
+        .min(segment_distance(p, c, a));
+    if n.length_squared() == 0.0 {
+        return sides;
+    }
+    let inside = [(a, b), (b, c), (c, a)]
+        .iter()
+        .all(|&(u, v)| (v - u).cross(p - u).dot(n) >= 0.0);
+    if inside {
+        (p - a).dot(n).abs() / n.length()
+    } else {
+        sides
+    }
+}
+
+/// Assert that every vertex of `out` with id ≥ `input.positions.len()` lies on a triangle of
+/// `input` within `1e-9 ×` the bounding-box diagonal, and that the old vertices did not move.
+/// A uniform grid over the input triangles' boxes keeps this fast on real scans.
+fn assert_new_vertices_on_input(input: &Mesh, out: &Mesh) {
+    let n = input.positions.len();
+    assert_eq!(
+        &out.positions[..n],
+        &input.positions[..],
+        "old vertices moved"
+    );
+    let tol = 1e-9 * bbox_diagonal(&input.positions);
+    let tri = |t: &[u32; 3]| t.map(|v| input.positions[v as usize]);
+    let lo = input
+        .positions
+        .iter()
+        .fold(DVec3::splat(f64::MAX), |a, &p| a.min(p));
+    let cells = 32.0;
+    let size = (bbox_diagonal(&input.positions) / cells).max(1e-300);
+    let cell_of = |p: DVec3| ((p - lo) / size).floor().as_ivec3();
+    let mut grid: std::collections::HashMap<glam::IVec3, Vec<usize>> = Default::default();
+    for (f, t) in input.triangles.iter().enumerate() {
+        let [a, b, c] = tri(t);
+        let (c0, c1) = (
+            cell_of(a.min(b).min(c) - tol),
+            cell_of(a.max(b).max(c) + tol),
+        );
+        for x in c0.x..=c1.x {
+            for y in c0.y..=c1.y {
+                for z in c0.z..=c1.z {
+                    grid.entry(glam::IVec3::new(x, y, z)).or_default().push(f);
+                }
+            }
+        }
+    }
+    for (v, &p) in out.positions.iter().enumerate().skip(n) {
+        let best = grid
+            .get(&cell_of(p))
+            .into_iter()
+            .flatten()
+            .map(|&f| triangle_distance(p, tri(&input.triangles[f])))
+            .fold(f64::INFINITY, f64::min);
+        assert!(
+            best <= tol,
+            "new vertex {v} at {p} is {best} off the input surface"
+        );
+    }
+}
+
+/// Subdivide a copy of `input` to `delta` and check the invariants of a closed manifold.
+fn subdivide_closed(input: &Mesh, delta: f64) -> (Mesh, refine::SubdivideStats) {
+    let mut out = input.clone();
+    let s = refine::subdivide(&mut out, delta).unwrap();
+    let max = refine::max_edge_of(&out.positions, &out.triangles);
+    assert!(max <= delta * (1.0 + 1e-12), "max edge {max} > δ = {delta}");
+    assert_eq!(s.max_edge_after, max);
+    assert_eq!(
+        (s.vertices_after, s.triangles_after),
+        (out.positions.len(), out.triangles.len())
+    );
+    let topo = Topology::build(out.positions.len(), &out.triangles).unwrap();
+    let st = &topo.stats;
+    assert_eq!(
+        (
+            st.boundary_edges,
+            st.non_manifold_edges,
+            st.non_manifold_vertices
+        ),
+        (0, 0, 0),
+        "{st:?}"
+    );
+    // Euler characteristic unchanged (same genus, one surface).
+    let euler = |m: &Mesh, t: &Topology| {
+        m.positions.len() as i64 - t.stats.edges as i64 + m.triangles.len() as i64
+    };
+    let topo_in = Topology::build(input.positions.len(), &input.triangles).unwrap();
+    assert_eq!(euler(&out, &topo), euler(input, &topo_in));
+    // Orientation kept and new points on the old faces: the volume does not change.
+    let (v0, v1) = (
+        metrics::volume(&input.positions, &input.triangles),
+        metrics::volume(&out.positions, &out.triangles),
+    );
+    assert!(((v1 - v0) / v0).abs() <= 1e-9, "volume {v0} -> {v1}");
+    let (a0, a1) = (
+        metrics::area(&input.positions, &input.triangles),
+        metrics::area(&out.positions, &out.triangles),
+    );
+    assert!(((a1 - a0) / a0).abs() <= 1e-9, "area {a0} -> {a1}");
+    assert_new_vertices_on_input(input, &out);
+    (out, s)
+}
+
+#[test]
+fn icosahedron_closed_manifold_on_surface() {
+    let ico = generate::icosphere(0);
+    for delta in [0.9, 0.3, 0.1] {
+        let (out, s) = subdivide_closed(&ico, delta);
+        eprintln!(
+            "icosahedron δ={delta}: {} → {} triangles, {} → {} vertices, max edge {:.4} → {:.4}, {} passes, volume {:.12}",
+            s.triangles_before,
+            s.triangles_after,
+            s.vertices_before,
+            s.vertices_after,
+            s.max_edge_before,
+            s.max_edge_after,
+            s.passes,
+            metrics::volume(&out.positions, &out.triangles)
+        );
+        assert!(s.triangles_after > 20);
+    }
+}
+
+#[test]
+fn torus_closed_manifold_on_surface() {
+    let torus = generate::torus(0);
+    let (_, s) = subdivide_closed(&torus, 0.08);
+    assert!(s.triangles_after > s.triangles_before);
+}
+
+#[test]
+fn real_scan_closed_manifold_on_surface() {
+    let input = io::read_mesh(&meshes_dir().join("fertility-9k.ply")).unwrap();
+    let delta = bbox_diagonal(&input.positions) / 100.0;
+    let (out, s) = subdivide_closed(&input, delta);
+    eprintln!(
+        "fertility δ={delta:.3}: {} → {} triangles, max edge {:.3} → {:.3}",
+        s.triangles_before, s.triangles_after, s.max_edge_before, s.max_edge_after
+    );
+    // The PLY layout no longer matches: it is dropped, and the mesh can be written as PLY.
+    assert!(out.source.ply.is_none());
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("f.ply");
+    io::write_mesh(&path, &out).unwrap();
+    assert_eq!(
+        io::read_mesh(&path).unwrap().triangles.len(),
+        s.triangles_after
+    );
+}
+
+/// Directed boundary edges (those whose reverse is not in the mesh).
+fn boundary(m: &Mesh) -> Vec<[u32; 2]> {
+    let set: std::collections::HashSet<[u32; 2]> = m
+        .triangles
+        .iter()
+        .flat_map(|t| (0..3).map(move |c| [t[c], t[(c + 1) % 3]]))
+        .collect();
+    set.iter()
+        .filter(|e| !set.contains(&[e[1], e[0]]))
+        .copied()
+        .collect()
+}
+
+#[test]
+fn open_mesh_keeps_its_boundary() {
+    // A sphere with a hole: drop the triangles around vertex 0.
+    let sphere = generate::icosphere(1);
+    let tris: Vec<[u32; 3]> = sphere
+        .triangles
+        .iter()
+        .filter(|t| !t.contains(&0))
+        .copied()
+        .collect();
+    let input = Mesh::new(sphere.positions.to_vec(), tris);
+    let delta = 0.12;
+    let mut out = input.clone();
+    refine::subdivide(&mut out, delta).unwrap();
+    assert!(refine::max_edge_of(&out.positions, &out.triangles) <= delta * (1.0 + 1e-12));
+    let topo = Topology::build(out.positions.len(), &out.triangles).unwrap();
+    assert_eq!(topo.stats.non_manifold_edges, 0);
+    assert_eq!(topo.stats.non_manifold_vertices, 0);
+    let (b_in, b_out) = (boundary(&input), boundary(&out));
+    assert!(b_out.len() > b_in.len(), "boundary edges were not split");
+    let length = |m: &Mesh, b: &[[u32; 2]]| -> f64 {
+        b.iter()
+            .map(|e| (m.positions[e[0] as usize] - m.positions[e[1] as usize]).length())
+            .sum()
+    };
+    let (l_in, l_out) = (length(&input, &b_in), length(&out, &b_out));
+    assert!(((l_out - l_in) / l_in).abs() < 1e-12, "{l_in} vs {l_out}");
+    // Every output boundary vertex lies on an input boundary edge.
+    for e in &b_out {
+        let p = out.positions[e[0] as usize];
+        let d = b_in
+            .iter()
+            .map(|b| {
+                segment_distance(
+                    p,
+                    input.positions[b[0] as usize],
+                    input.positions[b[1] as usize],
+                )
+            })
+            .fold(f64::INFINITY, f64::min);
+        assert!(d < 1e-12, "boundary vertex {} off the input boundary", e[0]);
+    }
+    assert_new_vertices_on_input(&input, &out);
+    let (a0, a1) = (
+        metrics::area(&input.positions, &input.triangles),
+        metrics::area(&out.positions, &out.triangles),
+    );
+    assert!(((a1 - a0) / a0).abs() < 1e-12);
+}
+
+#[test]
+fn refine_rounds_preserve_volume() {
+    let mut noisy = generate::icosphere(1);
+    generate::add_normal_noise(&mut noisy, 0.3, 3);
+    for (input, delta) in [(generate::icosphere(0), 0.3), (noisy, 0.15)] {
+        let mut mesh = input.clone();
+        let opts = RefineOptions {
+            max_edge: delta,
+            rounds: 3,
+            ..Default::default()
+        };
+        assert_eq!(opts.smoothing.method, vcsmooth::Method::Vcs);
+        assert_eq!(opts.smoothing.iterations, 5);
+        let records = refine::refine(&mut mesh, &opts, Some(2), &mut Quiet).unwrap();
+        assert_eq!(records.len(), 3);
+        let v0 = metrics::volume(&input.positions, &input.triangles);
+        for r in &records {
+            assert!(r.subdivision.max_edge_after <= delta * (1.0 + 1e-12));
+            let sub = ((r.volume_subdivided - r.volume_before) / r.volume_before).abs();
+            let round = ((r.volume_smoothed - r.volume_before) / r.volume_before).abs();
+            assert!(
+                sub <= 1e-12 && round <= 1e-9,
+                "round {}: {sub:e}, {round:e}",
+                r.round
+            );
+            eprintln!(
+                "refine δ={delta}, round {}: {} → {} triangles, volume {:.12} → {:.12}, max edge after smoothing {:.4}",
+                r.round,
+                r.subdivision.triangles_before,
+                r.subdivision.triangles_after,
+                r.volume_before,
+                r.volume_smoothed,
+                r.max_edge_smoothed
+            );
+        }
+        let v1 = metrics::volume(&mesh.positions, &mesh.triangles);
+        assert!(((v1 - v0) / v0).abs() <= 1e-9);
+        let topo = Topology::build(mesh.positions.len(), &mesh.triangles).unwrap();
+        assert_eq!(topo.stats.boundary_edges + topo.stats.non_manifold_edges, 0);
+        // Smoothing moved the new vertices (the surface got rounder, the volume did not change).
+        assert_ne!(
+            &mesh.positions[..input.positions.len()],
+            &input.positions[..]
+        );
+    }
+}
+
+// ---- the binary ----
+
+fn vcsmooth<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_vcsmooth"))
+        .args(args)
+        .output()
+        .expect("run vcsmooth")
+}
+
+fn ok(o: Output) -> String {
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn sphere_file(dir: &Path) -> PathBuf {
+    let path = dir.join("sphere.ply");
+    ok(vcsmooth(&[
+        "generate".as_ref(),
+        "sphere".as_ref(),
+        path.as_os_str(),
+        "--subdivisions".as_ref(),
+        "1".as_ref(),
+        "--noise".as_ref(),
+        "0.2".as_ref(),
+    ]));
+    path
+}
+
+#[test]
+fn cli_subdivide_and_refine() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = sphere_file(dir.path());
+    let mesh_in = io::read_mesh(&input).unwrap();
+    let v_in = metrics::volume(&mesh_in.positions, &mesh_in.triangles);
+    let delta = 0.2;
+
+    let sub = dir.path().join("sub.ply");
+    let text = ok(vcsmooth(&[
+        "subdivide".as_ref(),
+        input.as_os_str(),
+        sub.as_os_str(),
+        "--max-edge".as_ref(),
+        "0.2".as_ref(),
+    ]));
+    assert_eq!(text.lines().count(), 1, "{text}");
+    assert!(
+        text.contains("80 triangles ->") && text.contains("42 vertices"),
+        "{text}"
+    );
+    let m = io::read_mesh(&sub).unwrap();
+    // Float output: positions rounded to f32.
+    assert!(refine::max_edge_of(&m.positions, &m.triangles) <= delta * (1.0 + 1e-6));
+    let v = metrics::volume(&m.positions, &m.triangles);
+    assert!(((v - v_in) / v_in).abs() <= 1e-6);
+
+    let out = dir.path().join("refined.obj");
+    let text = ok(vcsmooth(&[
+        "refine".as_ref(),
+        input.as_os_str(),
+        out.as_os_str(),
+        "--max-edge".as_ref(),
+        "0.2".as_ref(),
+        "--rounds".as_ref(),
+        "2".as_ref(),
+        "--iterations".as_ref(),
+        "4".as_ref(),
+    ]));
+    assert!(
+        text.starts_with(&format!("{} -> {}", input.display(), out.display())),
+        "{text}"
+    );
+    assert!(text.contains("round 2:"), "{text}");
+    let m = io::read_mesh(&out).unwrap();
+    let v = metrics::volume(&m.positions, &m.triangles);
+    assert!(((v - v_in) / v_in).abs() <= 1e-6, "{v_in} -> {v}");
+    let topo = Topology::build(m.positions.len(), &m.triangles).unwrap();
+    assert_eq!(topo.stats.boundary_edges + topo.stats.non_manifold_edges, 0);
+    assert!(m.triangles.len() > 80);
+}
+
+#[test]
+fn cli_bad_max_edge_refused_without_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = sphere_file(dir.path());
+    let out = dir.path().join("out.ply");
+    for bad in ["0", "-1", "NaN", "inf", "abc", "1e-7"] {
+        for cmd in ["subdivide", "refine"] {
+            let mut args: Vec<&std::ffi::OsStr> = vec![
+                cmd.as_ref(),
+                input.as_os_str(),
+                out.as_os_str(),
+                "--max-edge".as_ref(),
+                bad.as_ref(),
+            ];
+            if cmd == "refine" {
+                args.extend([std::ffi::OsStr::new("--rounds"), std::ffi::OsStr::new("1")]);
+            }
+            let o = vcsmooth(&args);
+            let err = String::from_utf8_lossy(&o.stderr);
+            assert!(!o.status.success(), "{cmd} --max-edge {bad} accepted");
+            assert!(
+                err.starts_with("vcsmooth: error:") && err.trim_end().lines().count() == 1,
+                "{cmd} {bad}: {err}"
+            );
+            if bad == "1e-7" {
+                assert!(err.contains("2^31"), "{err}");
+            } else {
+                assert!(err.contains("--max-edge"), "{err}");
+            }
+            assert!(!out.exists(), "{cmd} {bad} wrote an output");
+        }
+    }
+}
