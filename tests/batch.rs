@@ -125,12 +125,16 @@ fn array_of_three_tasks_rerun_and_summary() {
     let before: Vec<_> = (0..MESHES).map(|k| mtime(&marker(&out, k))).collect();
     std::fs::remove_file(out.join("m4.ply")).unwrap();
     std::fs::remove_file(marker(&out, 4)).unwrap();
+    // As if a killed task left its temporary output behind.
+    let leftover = out.join(".m4.ply.tmp-999999-0");
+    std::fs::write(&leftover, b"partial").unwrap();
     std::thread::sleep(std::time::Duration::from_millis(20));
     let text = ok(run_task(&input, &out, 1, 3));
     assert_eq!(text.matches("\ndone ").count(), 1, "{text}");
     assert!(text.contains("m4.ply ->"), "{text}");
     assert_eq!(text.matches("\nskipped ").count(), 2, "{text}");
     assert!(out.join("m4.ply").is_file() && marker(&out, 4).is_file());
+    assert!(!leftover.exists());
     for k in (0..MESHES).filter(|&k| k != 4) {
         assert_eq!(mtime(&marker(&out, k)), before[k], "m{k} was redone");
     }

@@ -106,7 +106,7 @@ if ! munge -n 2>/dev/null | unmunge >/dev/null 2>&1; then
     chown munge:munge /run/munge /var/lib/munge /var/log/munge
     runuser -u munge -- /usr/sbin/munged --force
     for _ in $(seq 50); do munge -n 2>/dev/null | unmunge >/dev/null 2>&1 && break; sleep 0.1; done
-    pgrep -u munge -x munged | head -1 > "$PIDS/munged.pid"
+    cp /run/munge/munged.pid "$PIDS/munged.pid" 2>/dev/null || pgrep -u munge -x munged | head -1 > "$PIDS/munged.pid"
     munge -n | unmunge >/dev/null || die "munged did not start"
 fi
 
