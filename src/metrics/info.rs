@@ -100,22 +100,28 @@ pub(crate) fn bounding_box(pos: &[DVec3]) -> (DVec3, DVec3) {
 
 /// Connected components over the adjacency, counting only vertices with a neighbour.
 fn components(topo: &Topology) -> usize {
+    // A bit per vertex and a breadth-first frontier (on a surface it holds about √n vertices,
+    // where a depth-first stack can grow to n): the count stays cheap in memory for huge meshes.
     let n = topo.len();
-    let mut seen = vec![false; n];
-    let mut stack: Vec<u32> = Vec::new();
+    let mut seen = vec![0u64; n.div_ceil(64)];
+    let mut mark = |v: u32| {
+        let (w, b) = (v as usize / 64, 1u64 << (v % 64));
+        let new = seen[w] & b == 0;
+        seen[w] |= b;
+        new
+    };
+    let mut frontier = std::collections::VecDeque::new();
     let mut count = 0;
     for start in 0..n as u32 {
-        if seen[start as usize] || topo.deg(start) == 0 {
+        if topo.deg(start) == 0 || !mark(start) {
             continue;
         }
         count += 1;
-        seen[start as usize] = true;
-        stack.push(start);
-        while let Some(v) = stack.pop() {
+        frontier.push_back(start);
+        while let Some(v) = frontier.pop_front() {
             for &u in topo.neighbors(v) {
-                if !seen[u as usize] {
-                    seen[u as usize] = true;
-                    stack.push(u);
+                if mark(u) {
+                    frontier.push_back(u);
                 }
             }
         }
