@@ -108,15 +108,9 @@ pub struct DemoArgs {
     pub engine: EngineArgs,
 }
 
-/// `vcsmooth smooth IN OUT ...`
+/// The smoothing flags shared by `smooth` and `batch`: method, iterations, step sizes, engine.
 #[derive(Debug, Clone, ClapArgs)]
-pub struct SmoothArgs {
-    /// Input mesh (PLY, OBJ, OFF or STL).
-    #[arg(value_name = "IN")]
-    pub input: PathBuf,
-    /// Output mesh; .ply, .obj, .off or .stl. Written atomically, never on failure.
-    #[arg(value_name = "OUT")]
-    pub output: PathBuf,
+pub struct SmoothingArgs {
     /// Smoothing method.
     #[arg(long, value_enum, default_value_t = Method::Vcs)]
     pub method: Method,
@@ -132,6 +126,19 @@ pub struct SmoothArgs {
     pub params: MethodParams,
     #[command(flatten)]
     pub engine: EngineArgs,
+}
+
+/// `vcsmooth smooth IN OUT ...`
+#[derive(Debug, Clone, ClapArgs)]
+pub struct SmoothArgs {
+    /// Input mesh (PLY, OBJ, OFF or STL).
+    #[arg(value_name = "IN")]
+    pub input: PathBuf,
+    /// Output mesh; .ply, .obj, .off or .stl. Written atomically, never on failure.
+    #[arg(value_name = "OUT")]
+    pub output: PathBuf,
+    #[command(flatten)]
+    pub smoothing: SmoothingArgs,
     /// Write a JSON report (options, input/output statistics, timings, per-iteration table).
     #[arg(long, value_name = "FILE.json")]
     pub report: Option<PathBuf>,
@@ -306,6 +313,7 @@ mod tests {
         let Command::Smooth(s) = a.command else {
             panic!("not smooth")
         };
+        let s = s.smoothing;
         assert_eq!(s.method, Method::Vcs);
         assert_eq!(s.iterations, 10);
         assert_eq!(s.params.lambda, 0.5);
@@ -360,6 +368,6 @@ mod tests {
         let Command::Smooth(s) = a.command else {
             panic!("not smooth")
         };
-        assert_eq!(s.params.mu, -0.6);
+        assert_eq!(s.smoothing.params.mu, -0.6);
     }
 }

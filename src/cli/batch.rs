@@ -8,7 +8,6 @@ use std::time::{Duration, Instant};
 
 use clap::{Args as ClapArgs, ValueEnum};
 
-use super::args::{EngineArgs, MethodParams};
 use super::config::EngineConfig;
 use super::output::{print_json, stdout_error, write_json};
 use super::progress::Progress;
@@ -16,7 +15,7 @@ use crate::batch::{self as core, Marker, MeshRow};
 use crate::driver;
 use crate::error::{Error, Result};
 use crate::io::Format;
-use crate::smooth::{Method, Options};
+use crate::smooth::Options;
 
 /// Output formats of `batch --format`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -41,21 +40,8 @@ impl From<OutputFormat> for Format {
 /// The smoothing flags of `smooth`, for every mesh of a batch, plus the output format.
 #[derive(Debug, Clone, ClapArgs)]
 pub struct BatchSmoothArgs {
-    /// Smoothing method.
-    #[arg(long, value_enum, default_value_t = Method::Vcs)]
-    pub method: Method,
-    /// Number of iterations; 0 only converts the files' format.
-    #[arg(
-        long,
-        value_name = "N",
-        default_value_t = 10,
-        allow_negative_numbers = true
-    )]
-    pub iterations: usize,
     #[command(flatten)]
-    pub params: MethodParams,
-    #[command(flatten)]
-    pub engine: EngineArgs,
+    pub smoothing: super::args::SmoothingArgs,
     /// Format of the outputs, OUTDIR/<input's stem>.<format>.
     #[arg(long, value_enum, default_value_t = OutputFormat::Ply)]
     pub format: OutputFormat,
@@ -133,10 +119,11 @@ pub struct BatchSmooth {
 
 impl BatchSmooth {
     fn from_args(a: BatchSmoothArgs) -> Result<BatchSmooth> {
-        let mut engine = super::config::engine(&a.engine)?;
+        let s = &a.smoothing;
+        let mut engine = super::config::engine(&s.engine)?;
         engine.with_stats = true;
         Ok(BatchSmooth {
-            options: super::config::options(a.method, a.iterations, &a.params),
+            options: super::config::options(s.method, s.iterations, &s.params),
             engine,
             format: a.format.into(),
             args: a,
@@ -556,7 +543,7 @@ pub fn slurm_script(cfg: &SlurmScriptConfig, out: &mut dyn Write) -> Result<()> 
     let tasks = core::array_tasks(inputs.len(), max_array);
     let per_task = inputs.len().div_ceil(tasks);
     let mem = core::slurm_mem_mib(largest.0);
-    let a = &cfg.smooth.args;
+    let a = &cfg.smooth.args.smoothing;
     let cpus = cfg.cpus.or(a.engine.threads).unwrap_or(1);
 
     // The flags of `batch`, repeated.

@@ -150,10 +150,14 @@ impl Config {
                 if let Some(p) = &a.plot {
                     svg_output(p)?;
                 }
-                let mut engine = engine(&a.engine)?;
+                let mut engine = engine(&a.smoothing.engine)?;
                 engine.with_stats = a.report.is_some();
                 Config::Smooth(SmoothConfig {
-                    options: options(a.method, a.iterations, &a.params),
+                    options: options(
+                        a.smoothing.method,
+                        a.smoothing.iterations,
+                        &a.smoothing.params,
+                    ),
                     engine,
                     input: a.input,
                     output: a.output,
