@@ -568,6 +568,19 @@ pub fn run_file(
     let clock = Instant::now();
     let mut mesh = io::read_mesh_in(input, &storage)?;
     t.ingest = clock.elapsed().as_secs_f64();
+    // Only binary PLY decodes straight into scratch; other formats land on the heap. Refuse to go
+    // on rather than silently exceed the budget.
+    let heap = (mesh.positions.len() * 24 + mesh.triangles.len() * 12) as u64;
+    if storage.is_mapped() && !mesh.positions.is_mapped() && heap > budget {
+        return Err(Error::invalid(
+            input,
+            format!(
+                "this format is read into memory ({}), more than --memory-budget {}; convert it to binary PLY (vcsmooth smooth IN OUT.ply --iterations 0) on a larger machine, or raise the budget",
+                resources::format_size(heap),
+                resources::format_size(budget)
+            ),
+        ));
+    }
 
     let run = pool.install(|| -> Result<_> {
         let mut prep = Prepared::new(
