@@ -593,6 +593,10 @@ pub fn run_file(
         t.reorder = prep.timings.reorder;
         t.topology = prep.timings.topology;
         t.partition = prep.timings.partition;
+        // The plan holds its own (reordered) copy: the input-order positions are not needed until
+        // the write, so their memory is given back while smoothing (the peak of an in-core run).
+        let n = mesh.positions.len();
+        mesh.positions = Buf::default();
         let clock = Instant::now();
         let input_stats = engine.with_stats.then(|| prep.info(&mesh.source));
         t.metrics += clock.elapsed().as_secs_f64();
@@ -604,6 +608,7 @@ pub fn run_file(
         let clock = Instant::now();
         let output_stats = engine.with_stats.then(|| prep.info(&mesh.source));
         t.metrics += clock.elapsed().as_secs_f64();
+        mesh.positions = storage.zeroed(n)?;
         prep.positions_in_input_order(&mut mesh.positions);
         Ok((records, input_stats, output_stats, prep.plan_stats()))
     })?;
