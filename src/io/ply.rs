@@ -1226,7 +1226,7 @@ fn emit(out: &mut impl Write, props: &[Property], records: &[u8], ascii: bool) -
 }
 
 /// What a vertex property is rebuilt from.
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, PartialEq)]
 enum Value {
     Coordinate(usize),
     Normal(usize),
@@ -1285,6 +1285,21 @@ fn write_vertices(out: &mut impl Write, el: &Element, mesh: &Mesh, ascii: bool) 
         .map(|&(k, t, v)| (el.offset(k), t, v))
         .collect();
     const CHUNK: usize = 1 << 15; // records per buffer
+    let plain_xyz = [0, 1, 2].map(|c| (4 * c, Scalar::F32, Value::Coordinate(c)));
+    if !ascii && el.records.is_none() && stride == 12 && targets[..] == plain_xyz[..] {
+        // The common layout, `x y z float` and nothing else: encode straight from the positions.
+        let mut buf = Vec::with_capacity(CHUNK * 12);
+        for chunk in mesh.positions.chunks(CHUNK) {
+            buf.clear();
+            for p in chunk {
+                for x in [p.x, p.y, p.z] {
+                    buf.extend_from_slice(&(x as f32).to_le_bytes());
+                }
+            }
+            out.write_all(&buf)?;
+        }
+        return Ok(());
+    }
     let mut buf = Vec::with_capacity(CHUNK * stride);
     for start in (0..mesh.positions.len()).step_by(CHUNK) {
         let end = (start + CHUNK).min(mesh.positions.len());
@@ -1313,6 +1328,21 @@ fn write_faces(
 ) -> io::Result<()> {
     let FaceRole { count, index, .. } = face;
     const FLUSH: usize = 1 << 20; // bytes per buffer
+    if !ascii && faces.sizes.is_none() && (count, index) == (Scalar::U8, Scalar::I32) {
+        // Triangles as `list uchar int`: fixed 13-byte records, encoded in one tight loop.
+        let mut buf = Vec::with_capacity(FLUSH);
+        for chunk in faces.triangles.chunks(FLUSH / 13) {
+            buf.clear();
+            for t in chunk {
+                buf.push(3);
+                for &v in t {
+                    buf.extend_from_slice(&(v as i32).to_le_bytes());
+                }
+            }
+            out.write_all(&buf)?;
+        }
+        return Ok(());
+    }
     let mut buf = Vec::with_capacity(FLUSH + 1024);
     faces.try_for_each(|corners| {
         if (count, index) == (Scalar::U8, Scalar::I32) {
