@@ -611,3 +611,58 @@ fn smooth_output_identical_across_threads_and_memory_budgets() {
     fails(&o, 2, &["--memory-budget", "minimum"]);
     assert!(!dir.path().join("x.ply").exists());
 }
+
+/// `generate mesh --from MESH --subdivide L` streams a refined scan: 4^L times the triangles,
+/// closed like its base, the same volume (flat subdivision); misuse is a one-line usage error.
+#[test]
+fn generate_mesh_from_a_scan_streams_a_refined_copy() {
+    let dir = tempfile::tempdir().unwrap();
+    let base = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/meshes/fertility-9k.ply");
+    let out = dir.path().join("fine.ply");
+    ok(vcsmooth([
+        "generate",
+        "mesh",
+        &out.display().to_string(),
+        "--from",
+        &base.display().to_string(),
+        "--subdivide",
+        "2",
+    ]));
+    let fine = json(&ok(vcsmooth([
+        "info",
+        &out.display().to_string(),
+        "--json",
+    ])));
+    let coarse = json(&ok(vcsmooth([
+        "info",
+        &base.display().to_string(),
+        "--json",
+    ])));
+    assert_eq!(fine["triangles"], 9000 * 16);
+    assert_eq!(fine["closed"], true);
+    assert_eq!(fine["components"], 1);
+    assert_eq!(fine["non_manifold_vertices"], 0);
+    let (v0, v1) = (
+        coarse["volume"].as_f64().unwrap(),
+        fine["volume"].as_f64().unwrap(),
+    );
+    assert!(((v1 - v0) / v0).abs() < 1e-6, "{v0} vs {v1}");
+
+    let o = vcsmooth([
+        "generate",
+        "mesh",
+        &dir.path().join("x.ply").display().to_string(),
+    ]);
+    fails(&o, 2, &["--from"]);
+    let o = vcsmooth([
+        "generate",
+        "mesh",
+        &dir.path().join("x.obj").display().to_string(),
+        "--from",
+        &base.display().to_string(),
+        "--subdivide",
+        "1",
+    ]);
+    fails(&o, 2, &["--subdivide", "PLY"]);
+    assert!(!dir.path().join("x.ply").exists() && !dir.path().join("x.obj").exists());
+}
