@@ -589,7 +589,7 @@ pub fn run_file(
             &mesh.triangles,
             engine.patch_size,
         )
-        .map_err(|e| in_file(input, e))?;
+        .map_err(|e| e.in_file(input))?;
         t.reorder = prep.timings.reorder;
         t.topology = prep.timings.topology;
         t.partition = prep.timings.partition;
@@ -694,13 +694,5 @@ fn scratch_beside(output: &Path) -> PathBuf {
     match output.parent() {
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
         _ => PathBuf::from("."),
-    }
-}
-
-/// Attach the input's name to an error that lacks one.
-fn in_file(path: &Path, e: Error) -> Error {
-    match e {
-        Error::Config(what) => Error::invalid(path, what),
-        other => other,
     }
 }

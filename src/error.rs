@@ -29,6 +29,14 @@ impl Error {
             what: what.into(),
         }
     }
+    /// Name `path` in an error that names no file (a [`Error::Config`] raised while working on it).
+    pub fn in_file(self, path: &std::path::Path) -> Self {
+        match self {
+            Error::Config(what) => Error::invalid(path, what),
+            other => other,
+        }
+    }
+
     /// Shorthand for [`Error::Io`].
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         Error::Io {

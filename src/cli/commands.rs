@@ -239,7 +239,7 @@ pub fn curves(cfg: &CurvesConfig, progress: &mut Progress, out: &mut dyn Write) 
             cfg.engine.threads,
             progress,
         )
-        .map_err(|e| in_file(&cfg.input, e))?;
+        .map_err(|e| e.in_file(&cfg.input))?;
         docs.push(CurveDoc {
             method,
             volume_pct: volume_curve(&records),
@@ -288,17 +288,9 @@ fn read_with_topology(
     progress.phase("building topology");
     let clock = Instant::now();
     let topo =
-        Topology::build(mesh.positions.len(), &mesh.triangles).map_err(|e| in_file(path, e))?;
+        Topology::build(mesh.positions.len(), &mesh.triangles).map_err(|e| e.in_file(path))?;
     t.topology = clock.elapsed().as_secs_f64();
     Ok((mesh, topo))
-}
-
-/// Attach the file's name to an error that lacks one.
-fn in_file(path: &Path, e: Error) -> Error {
-    match e {
-        Error::Config(what) => Error::invalid(path, what),
-        other => other,
-    }
 }
 
 /// Volume % at iterations 0 (the input: 100), 1, …, N.
@@ -477,7 +469,7 @@ fn generate_streamed(
         1u64 << (2 * levels)
     ));
     let n = generate::write_subdivided(&base, levels, cfg.noise, cfg.seed, &cfg.output)
-        .map_err(|e| in_file(&cfg.output, e))?;
+        .map_err(|e| e.in_file(&cfg.output))?;
     progress.finish();
     writeln!(
         out,

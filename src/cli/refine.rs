@@ -142,7 +142,7 @@ pub fn subdivide(
     progress.phase(format!("reading {}", cfg.input.display()));
     let mut mesh = io::read_mesh(&cfg.input)?;
     progress.phase("subdividing");
-    let s = refine::subdivide(&mut mesh, cfg.max_edge).map_err(|e| in_file(&cfg.input, e))?;
+    let s = refine::subdivide(&mut mesh, cfg.max_edge).map_err(|e| e.in_file(&cfg.input))?;
     progress.phase(format!("writing {}", cfg.output.display()));
     io::write_mesh(&cfg.output, &mesh)?;
     progress.finish();
@@ -174,7 +174,7 @@ pub fn refine(cfg: &RefineConfig, progress: &mut Progress, out: &mut dyn Write) 
         cfg.options.rounds
     ));
     let records = refine::refine(&mut mesh, &cfg.options, cfg.threads, progress)
-        .map_err(|e| in_file(&cfg.input, e))?;
+        .map_err(|e| e.in_file(&cfg.input))?;
     progress.phase(format!("writing {}", cfg.output.display()));
     io::write_mesh(&cfg.output, &mesh)?;
     progress.finish();
@@ -221,13 +221,5 @@ fn pct(x: f64, reference: f64) -> f64 {
         100.0
     } else {
         100.0 * x / reference
-    }
-}
-
-/// Attach the file's name to an error that lacks one.
-fn in_file(path: &Path, e: Error) -> Error {
-    match e {
-        Error::Config(what) => Error::invalid(path, what),
-        other => other,
     }
 }

@@ -113,11 +113,7 @@ pub struct Patch {
 impl Patch {
     /// The owned edge stencils, in ascending `(i, j)` order.
     pub fn edges<'a>(&self, topo: &'a Topology) -> impl Iterator<Item = [u32; 2]> + 'a {
-        self.vertices.clone().flat_map(move |i| {
-            let nbrs = topo.neighbors(i);
-            let first_above = nbrs.partition_point(|&j| j <= i);
-            nbrs[first_above..].iter().map(move |&j| [i, j])
-        })
+        topo.edges_from(self.vertices.clone())
     }
 }
 

@@ -250,7 +250,16 @@ impl Topology {
     /// Every undirected edge once, as `(i, j)` with `i < j`, in ascending `(i, j)` order: the edge
     /// stencil order of the stencil methods.
     pub fn edges(&self) -> impl Iterator<Item = [u32; 2]> + '_ {
-        (0..self.len() as u32).flat_map(move |i| {
+        self.edges_from(0..self.len() as u32)
+    }
+
+    /// The edges `(i, j)`, `i < j`, whose smaller vertex `i` is in `vertices`, in ascending order
+    /// (the edge stencils a patch owns).
+    pub fn edges_from(
+        &self,
+        vertices: std::ops::Range<u32>,
+    ) -> impl Iterator<Item = [u32; 2]> + '_ {
+        vertices.flat_map(move |i| {
             let nbrs = self.neighbors(i);
             let first_above = nbrs.partition_point(|&j| j <= i);
             nbrs[first_above..].iter().map(move |&j| [i, j])
