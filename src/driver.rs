@@ -26,7 +26,7 @@ use crate::topology::Topology;
 use crate::{io, resources};
 
 /// Statistics of one iteration, relative to the input where a percentage is given.
-#[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+#[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize)]
 pub struct IterationRecord {
     /// 1-based iteration number.
     pub iteration: usize,
@@ -171,7 +171,7 @@ fn iterate(
     records
 }
 
-fn stencil_params(opts: &Options) -> StencilParams {
+pub(crate) fn stencil_params(opts: &Options) -> StencilParams {
     StencilParams {
         volume: matches!(opts.method, Method::Vcs | Method::VcsTriangle),
         reject_energy_increase: opts.reject_energy_increase,
@@ -194,7 +194,7 @@ fn jacobi(topo: &Topology, src: &[DVec3], dst: &mut [DVec3], lambda: f64) -> Swe
     }
 }
 
-fn percent(x: f64, reference: f64) -> f64 {
+pub(crate) fn percent(x: f64, reference: f64) -> f64 {
     if reference == 0.0 {
         100.0
     } else {
@@ -393,7 +393,7 @@ fn sweep_colours(
 const SUM_CHUNK: usize = 1 << 15;
 
 /// Volume about `origin` and area, in one pass over the triangles.
-fn volume_area_par(pos: &[DVec3], tris: &[[u32; 3]], origin: DVec3) -> (f64, f64) {
+pub(crate) fn volume_area_par(pos: &[DVec3], tris: &[[u32; 3]], origin: DVec3) -> (f64, f64) {
     let parts: Vec<(f64, f64)> = tris
         .par_chunks(SUM_CHUNK)
         .map(|chunk| {
@@ -410,7 +410,7 @@ fn volume_area_par(pos: &[DVec3], tris: &[[u32; 3]], origin: DVec3) -> (f64, f64
 }
 
 /// Largest and summed vertex displacement between `a` and `b`.
-fn displacement_par(a: &[DVec3], b: &[DVec3]) -> (f64, f64) {
+pub(crate) fn displacement_par(a: &[DVec3], b: &[DVec3]) -> (f64, f64) {
     let parts: Vec<(f64, f64)> = a
         .par_chunks(SUM_CHUNK)
         .zip(b.par_chunks(SUM_CHUNK))
@@ -426,7 +426,7 @@ fn displacement_par(a: &[DVec3], b: &[DVec3]) -> (f64, f64) {
         .fold((0.0, 0.0), |(m, s), &(pm, ps)| (m.max(pm), s + ps))
 }
 
-fn validate(opts: &Options) -> Result<()> {
+pub(crate) fn validate(opts: &Options) -> Result<()> {
     for (name, x) in [("lambda", opts.lambda), ("mu", opts.mu)] {
         if !x.is_finite() {
             return Err(Error::Config(format!(
@@ -469,6 +469,19 @@ impl Default for EngineSettings {
     }
 }
 
+impl EngineSettings {
+    /// The memory budget: as given (checked), or three quarters of the available memory.
+    pub fn budget(&self) -> Result<u64> {
+        match self.memory_budget {
+            Some(b) => {
+                resources::check_budget(b)?;
+                Ok(b)
+            }
+            None => Ok(resources::default_budget()),
+        }
+    }
+}
+
 /// What `run_file` did.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct FileRun {
@@ -483,6 +496,9 @@ pub struct FileRun {
     pub plan: PlanStats,
     pub memory: MemoryStats,
     pub timings: PhaseTimings,
+    /// Ranks, halo traffic and checkpoints of a cluster run ([`crate::cluster`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cluster: Option<crate::cluster::ClusterStats>,
 }
 
 /// The patch decomposition of a run.
@@ -539,48 +555,19 @@ pub fn run_file(
     validate(opts)?;
     let start = Instant::now();
     let sampler = resources::PeakSampler::start(std::time::Duration::from_millis(20));
-    let budget = match engine.memory_budget {
-        Some(b) => {
-            resources::check_budget(b)?;
-            b
-        }
-        None => resources::default_budget(),
-    };
+    let budget = engine.budget()?;
     let pool = thread_pool(engine.threads)?;
     let mut t = PhaseTimings::default();
 
-    // Heap or scratch is decided before reading, from the file size: a binary PLY of T triangles
-    // is about 19·T bytes and the engine needs about 105·T, so 6 × the file size (text formats,
-    // larger per triangle, are overestimated, which only sends them to scratch sooner).
     let bytes_read = std::fs::metadata(input)
         .map_err(|e| Error::io(input, e))?
         .len();
-    let storage = if bytes_read.saturating_mul(6) <= budget {
-        Storage::heap()
-    } else {
-        let dir = match &engine.scratch {
-            Some(d) => d.clone(),
-            None => scratch_beside(output),
-        };
-        Storage::scratch(&dir)?
-    };
+    let storage = storage_for(input, output, engine, budget)?;
 
     let clock = Instant::now();
     let mut mesh = io::read_mesh_in(input, &storage)?;
     t.ingest = clock.elapsed().as_secs_f64();
-    // Only binary PLY decodes straight into scratch; other formats land on the heap. Refuse to go
-    // on rather than silently exceed the budget.
-    let heap = (mesh.positions.len() * 24 + mesh.triangles.len() * 12) as u64;
-    if storage.is_mapped() && !mesh.positions.is_mapped() && heap > budget {
-        return Err(Error::invalid(
-            input,
-            format!(
-                "this format is read into memory ({}), more than --memory-budget {}; convert it to binary PLY (vcsmooth smooth IN OUT.ply --iterations 0) on a larger machine, or raise the budget",
-                resources::format_size(heap),
-                resources::format_size(budget)
-            ),
-        ));
-    }
+    check_in_memory_budget(input, &storage, &mesh, budget)?;
 
     let run = pool.install(|| -> Result<_> {
         let mut prep = Prepared::new(
@@ -641,6 +628,7 @@ pub fn run_file(
         plan,
         memory,
         timings: t,
+        cluster: None,
     })
 }
 
@@ -673,6 +661,50 @@ impl Prepared {
             threads: rayon::current_num_threads(),
         }
     }
+}
+
+/// Heap or scratch, decided before reading from the file size: a binary PLY of T triangles is
+/// about 19·T bytes and the engine needs about 105·T, so 6 × the file size (text formats, larger
+/// per triangle, are overestimated, which only sends them to scratch sooner).
+pub(crate) fn storage_for(
+    input: &Path,
+    output: &Path,
+    engine: &EngineSettings,
+    budget: u64,
+) -> Result<Storage> {
+    let size = std::fs::metadata(input)
+        .map_err(|e| Error::io(input, e))?
+        .len();
+    if size.saturating_mul(6) <= budget {
+        return Ok(Storage::heap());
+    }
+    let dir = match &engine.scratch {
+        Some(d) => d.clone(),
+        None => scratch_beside(output),
+    };
+    Storage::scratch(&dir)
+}
+
+/// Only binary PLY decodes straight into scratch; other formats land on the heap. Refuse to go on
+/// rather than silently exceed the budget.
+pub(crate) fn check_in_memory_budget(
+    input: &Path,
+    storage: &Storage,
+    mesh: &crate::Mesh,
+    budget: u64,
+) -> Result<()> {
+    let heap = (mesh.positions.len() * 24 + mesh.triangles.len() * 12) as u64;
+    if storage.is_mapped() && !mesh.positions.is_mapped() && heap > budget {
+        return Err(Error::invalid(
+            input,
+            format!(
+                "this format is read into memory ({}), more than --memory-budget {}; convert it to binary PLY (vcsmooth smooth IN OUT.ply --iterations 0) on a larger machine, or raise the budget",
+                resources::format_size(heap),
+                resources::format_size(budget)
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// A rayon pool of `threads` threads (all cores when `None`).

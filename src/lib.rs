@@ -6,11 +6,13 @@
 //! Data flows one way: [`io`] reads a [`mesh::Mesh`] → [`topology::Topology`] builds CSR adjacency and
 //! the fixed-vertex mask → [`smooth`] kernels move positions (pure functions over slices) →
 //! [`io`] writes atomically → [`metrics`] report volume, area and per-iteration statistics.
-//! [`driver`] is the one place that wires them together.
+//! [`driver`] is the one place that wires them together; [`cluster`] spreads the same patches over
+//! MPI ranks, with checkpoints.
 
 pub mod batch;
 pub mod bench;
 pub mod cli;
+pub mod cluster;
 pub mod driver;
 pub mod error;
 pub mod generate;

@@ -145,6 +145,22 @@ pub struct SmoothArgs {
     /// Write an SVG plot of volume % per iteration.
     #[arg(long, value_name = "FILE.svg")]
     pub plot: Option<PathBuf>,
+    #[command(flatten)]
+    pub cluster: ClusterArgs,
+}
+
+/// Checkpoints and MPI ranks (see the README's "One mesh over MPI ranks").
+#[derive(Debug, Clone, ClapArgs)]
+pub struct ClusterArgs {
+    /// Keep the prepared plan and the positions after every --checkpoint-every iterations in DIR
+    /// (on a file system all ranks see); a run started again with the same input, options and patch
+    /// size resumes after the last completed iteration. Under mpirun/srun without it, a work
+    /// directory OUT.vcsmooth-work is used and removed after success.
+    #[arg(long, value_name = "DIR")]
+    pub checkpoint: Option<PathBuf>,
+    /// Iterations between checkpoints (the last iteration is always written).
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..), allow_negative_numbers = true)]
+    pub checkpoint_every: u64,
 }
 
 /// Step sizes and stencil options shared by `smooth` and `curves`.

@@ -24,10 +24,59 @@ use crate::{generate, io, metrics};
 
 /// `vcsmooth smooth`: read → reorder → topology → partition → smooth → write mesh → write report
 /// and plot → print table.
+///
+/// Under `mpirun`/`srun` (built with `--features mpi`) or with `--checkpoint`, the cluster engine
+/// runs it; rank 0 alone reports.
 pub fn smooth(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) -> Result<()> {
-    progress.phase(format!("smoothing {}", cfg.input.display()));
-    progress.iterations(cfg.options.method.name(), cfg.options.iterations);
-    let run = driver::run_file(&cfg.input, &cfg.output, &cfg.options, &cfg.engine, progress)?;
+    crate::cluster::with_world(|comm| {
+        let Some(cluster) = cfg.cluster(comm.size()) else {
+            progress.phase(format!("smoothing {}", cfg.input.display()));
+            progress.iterations(cfg.options.method.name(), cfg.options.iterations);
+            let run =
+                driver::run_file(&cfg.input, &cfg.output, &cfg.options, &cfg.engine, progress)?;
+            return smooth_report(cfg, &run, progress, out);
+        };
+        let lead = comm.rank() == 0;
+        if lead {
+            progress.phase(format!(
+                "smoothing {} on {} (work directory {})",
+                cfg.input.display(),
+                count(comm.size(), "rank"),
+                cluster.work_dir.display()
+            ));
+            progress.iterations(cfg.options.method.name(), cfg.options.iterations);
+        }
+        let observer: &mut dyn driver::Observer = if lead { progress } else { &mut driver::Quiet };
+        let run = crate::cluster::run_file(
+            comm,
+            &cfg.input,
+            &cfg.output,
+            &cfg.options,
+            &cfg.engine,
+            &cluster,
+            observer,
+        )
+        .map_err(|e| {
+            if comm.size() > 1 {
+                Error::Config(format!("rank {}: {e}", comm.rank()))
+            } else {
+                e
+            }
+        })?;
+        if !lead {
+            return Ok(());
+        }
+        smooth_report(cfg, &run, progress, out)
+    })
+}
+
+/// The report, plot and table of a finished `smooth`.
+fn smooth_report(
+    cfg: &SmoothConfig,
+    run: &driver::FileRun,
+    progress: &mut Progress,
+    out: &mut dyn Write,
+) -> Result<()> {
     let records = &run.records;
 
     if let (Some(path), Some(input_stats), Some(output_stats)) =
@@ -48,6 +97,7 @@ pub fn smooth(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) 
             plan: run.plan.clone(),
             memory: run.memory.clone(),
             timings: run.timings,
+            cluster: run.cluster.clone(),
             summary: Summary::of(records),
             iterations: records.clone(),
         };

@@ -90,8 +90,32 @@ pub struct SmoothConfig {
     pub engine: EngineConfig,
     pub report: Option<PathBuf>,
     pub plot: Option<PathBuf>,
+    /// `--checkpoint DIR` (kept) and `--checkpoint-every`.
+    pub checkpoint: Option<PathBuf>,
+    pub checkpoint_every: usize,
     /// The command line as given, recorded in the report.
     pub argv: Vec<String>,
+}
+
+impl SmoothConfig {
+    /// How a run over `ranks` ranks uses its work directory; `None` for the plain engine (one
+    /// rank, no checkpoint).
+    pub fn cluster(&self, ranks: usize) -> Option<crate::cluster::ClusterSettings> {
+        let (work_dir, keep) = match &self.checkpoint {
+            Some(dir) => (dir.clone(), true),
+            None if ranks > 1 => {
+                let mut name = self.output.as_os_str().to_owned();
+                name.push(".vcsmooth-work");
+                (PathBuf::from(name), false)
+            }
+            None => return None,
+        };
+        Some(crate::cluster::ClusterSettings {
+            work_dir,
+            keep,
+            checkpoint_every: self.checkpoint_every,
+        })
+    }
 }
 
 /// `vcsmooth info`.
@@ -163,6 +187,8 @@ impl Config {
                     output: a.output,
                     report: a.report,
                     plot: a.plot,
+                    checkpoint: a.cluster.checkpoint,
+                    checkpoint_every: a.cluster.checkpoint_every as usize,
                     argv,
                 })
             }

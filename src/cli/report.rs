@@ -103,6 +103,9 @@ pub struct SmoothReport {
     pub plan: crate::driver::PlanStats,
     pub memory: crate::driver::MemoryStats,
     pub timings: crate::driver::PhaseTimings,
+    /// Ranks, halo traffic and checkpoints, for runs of the cluster engine.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cluster: Option<crate::cluster::ClusterStats>,
     pub summary: Summary,
     /// One row per iteration.
     pub iterations: Vec<IterationRecord>,

@@ -123,7 +123,7 @@ impl Storage {
         let advice = unsafe { Mmap::map(&file) }.map_err(|e| Error::io(&path, e))?;
         self.mapped_bytes.fetch_add(bytes as u64, Ordering::Relaxed);
         Ok(Buf {
-            inner: Inner::Map(map, Arc::new(advice)),
+            inner: Inner::Map(map, Some(Arc::new(advice))),
             len,
             _t: PhantomData,
         })
@@ -137,6 +137,87 @@ impl Storage {
         let mut b = self.zeroed(data.len())?;
         b.copy_from_slice(data);
         Ok(b)
+    }
+}
+
+impl<T: Pod> Buf<T> {
+    /// Map the file at `path`, which must hold exactly `len` elements, privately: the array reads
+    /// the file's pages on demand and writes stay in this process (copy-on-write). The cluster
+    /// engine maps the plan's arrays this way, so each rank touches only the pages of its region.
+    ///
+    /// The file must not be truncated or rewritten while mapped (the work directory's files are
+    /// written once, before any rank maps them).
+    pub fn map_file(path: &Path, len: usize) -> Result<Buf<T>> {
+        let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+        let bytes = len
+            .checked_mul(std::mem::size_of::<T>())
+            .ok_or_else(|| Error::invalid(path, format!("{len} elements overflow")))?;
+        let actual = file.metadata().map_err(|e| Error::io(path, e))?.len();
+        if actual != bytes as u64 {
+            return Err(Error::invalid(
+                path,
+                format!("holds {actual} bytes, expected {bytes} ({len} elements)"),
+            ));
+        }
+        if bytes == 0 {
+            return Ok(Buf::from_vec(Vec::new()));
+        }
+        // SAFETY: the size was checked above; the file belongs to our work directory and is not
+        // changed while mapped (see the doc); the private mapping never writes to it.
+        let map = unsafe { memmap2::MmapOptions::new().map_copy(&file) }
+            .map_err(|e| Error::io(path, e))?;
+        // SAFETY: as above; a read-only view for read-ahead advice only.
+        let advice = unsafe { Mmap::map(&file) }.map_err(|e| Error::io(path, e))?;
+        Ok(Buf {
+            inner: Inner::Map(map, Some(Arc::new(advice))),
+            len,
+            _t: PhantomData,
+        })
+    }
+
+    /// A zero-filled array of `len` elements whose pages exist only once touched: anonymous memory
+    /// mapped without reserving swap. A rank of the cluster engine indexes its arrays by global
+    /// vertex id but touches only its region, so its memory follows the region, not the mesh.
+    pub fn sparse(len: usize) -> Result<Buf<T>> {
+        let bytes = len.checked_mul(std::mem::size_of::<T>()).ok_or_else(|| {
+            Error::Config(format!(
+                "array of {len} elements overflows the address space"
+            ))
+        })?;
+        if bytes == 0 {
+            return Ok(Buf::from_vec(Vec::new()));
+        }
+        let map = memmap2::MmapOptions::new()
+            .len(bytes)
+            .no_reserve_swap()
+            .map_anon()
+            .map_err(|e| {
+                Error::Config(format!(
+                    "cannot map {} of address space: {e}",
+                    crate::resources::format_size(bytes as u64)
+                ))
+            })?;
+        // Anonymous memory has no file to read ahead: no advice mapping.
+        Ok(Buf {
+            inner: Inner::Map(map, None),
+            len,
+            _t: PhantomData,
+        })
+    }
+}
+
+/// The raw bytes of a slice of plain data (for writing arrays to files as they are in memory).
+pub fn as_bytes<T: Pod>(data: &[T]) -> &[u8] {
+    // SAFETY: `Pod` types have no padding, so every byte is initialised; u8 has alignment 1.
+    unsafe { std::slice::from_raw_parts(data.as_ptr().cast::<u8>(), std::mem::size_of_val(data)) }
+}
+
+/// The raw bytes of a mutable slice of plain data (for reading arrays from files).
+pub fn as_bytes_mut<T: Pod>(data: &mut [T]) -> &mut [u8] {
+    // SAFETY: as `as_bytes`; any bytes written are a valid `T` because `Pod` accepts every bit
+    // pattern.
+    unsafe {
+        std::slice::from_raw_parts_mut(data.as_mut_ptr().cast::<u8>(), std::mem::size_of_val(data))
     }
 }
 
@@ -164,7 +245,7 @@ fn zero<T: Pod>() -> T {
 
 enum Inner<T> {
     Heap(Vec<T>),
-    Map(MmapMut, Arc<Mmap>),
+    Map(MmapMut, Option<Arc<Mmap>>),
 }
 
 /// Read-ahead advice for a mapped array, usable from another thread while the array itself is
@@ -228,8 +309,8 @@ impl<T: Pod> Buf<T> {
     pub fn advisor(&self) -> Option<Advisor> {
         match &self.inner {
             Inner::Heap(_) => None,
-            Inner::Map(_, advice) => Some(Advisor {
-                map: advice.clone(),
+            Inner::Map(_, advice) => advice.as_ref().map(|map| Advisor {
+                map: map.clone(),
                 elem: std::mem::size_of::<T>(),
             }),
         }

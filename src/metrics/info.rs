@@ -6,7 +6,7 @@ use crate::mesh::Mesh;
 use crate::topology::Topology;
 
 /// Everything `vcsmooth info` reports about a mesh.
-#[derive(Debug, Clone, Default, serde::Serialize)]
+#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
 pub struct MeshInfo {
     pub vertices: usize,
     /// Triangles after fan triangulation.

@@ -110,7 +110,7 @@ impl Default for Options {
 }
 
 /// What one sweep did, per stencil or vertex.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct SweepStats {
     /// Stencils (or vertices, for Jacobi methods) whose result was written.
     pub applied: u64,

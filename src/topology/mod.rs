@@ -30,7 +30,7 @@ pub struct Topology {
 }
 
 /// What the topology build counted.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct TopologyStats {
     pub vertices: usize,
     pub triangles: usize,
@@ -201,6 +201,67 @@ impl Topology {
             fixed,
             stats,
         })
+    }
+
+    /// The arrays, for storing a plan on disk: vertex→vertex offsets and indices, vertex→face
+    /// offsets and indices, fixed mask.
+    pub fn parts(&self) -> (&[usize], &[u32], &[usize], &[u32], &[u8]) {
+        (
+            &self.vv_offsets,
+            &self.vv,
+            &self.vf_offsets,
+            &self.vf,
+            &self.fixed,
+        )
+    }
+
+    /// A topology from arrays written by [`Topology::parts`] (e.g. mapped from a plan on disk).
+    /// Checks the shapes only, in O(1), so that a rank mapping a huge plan touches no page it does
+    /// not need; whoever uses the entries of a vertex checks them first with
+    /// [`Topology::check_vertex`].
+    pub fn from_parts(
+        vv_offsets: Buf<usize>,
+        vv: Buf<u32>,
+        vf_offsets: Buf<usize>,
+        vf: Buf<u32>,
+        fixed: Buf<u8>,
+        stats: TopologyStats,
+    ) -> std::result::Result<Topology, String> {
+        let n = fixed.len();
+        let shape_ok = |offsets: &[usize], data: usize| {
+            offsets.len() == n + 1 && offsets.first() == Some(&0) && offsets.last() == Some(&data)
+        };
+        if n != stats.vertices
+            || !shape_ok(&vv_offsets, vv.len())
+            || !shape_ok(&vf_offsets, vf.len())
+        {
+            return Err("adjacency arrays have inconsistent sizes".into());
+        }
+        Ok(Topology {
+            vv_offsets,
+            vv,
+            vf_offsets,
+            vf,
+            fixed,
+            stats,
+        })
+    }
+
+    /// Whether the stored adjacency of `v` is well formed: offsets in order and within the arrays,
+    /// neighbours and faces in range (for topologies from [`Topology::from_parts`]).
+    pub fn check_vertex(&self, v: u32) -> bool {
+        let v = v as usize;
+        let n = self.len();
+        let ok = |offsets: &[usize], len: usize| {
+            v < n && offsets[v] <= offsets[v + 1] && offsets[v + 1] <= len
+        };
+        ok(&self.vv_offsets, self.vv.len())
+            && ok(&self.vf_offsets, self.vf.len())
+            && self.neighbors(v as u32).iter().all(|&u| (u as usize) < n)
+            && self
+                .faces_of(v as u32)
+                .iter()
+                .all(|&t| (t as usize) < self.stats.triangles)
     }
 
     /// Number of vertices.

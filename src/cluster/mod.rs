@@ -1,0 +1,904 @@
+//! One mesh over several processes (MPI ranks), with checkpoints.
+//!
+//! The unit of distribution is the patch of the out-of-core engine ([`crate::driver::Prepared`]):
+//! rank 0 prepares the plan once (Morton reorder, adjacency, patches, colours) into a work
+//! directory on a shared file system ([`store`]); every rank maps it and owns a contiguous block of
+//! patches, i.e. a contiguous range `A` of reordered vertices. A rank keeps positions and
+//! neighbour sums for its *region*: `A` and three rings around it (a stencil of an owned patch
+//! reads up to two rings out; the sums of ring 2 need the positions of ring 3). Its arrays are
+//! indexed by global vertex id but only the region's pages are ever touched
+//! ([`Buf::sparse`]), so a rank's memory follows its region, not the mesh.
+//!
+//! Per iteration, colour after colour: each rank applies the stencils of its patches of that
+//! colour (in parallel on its threads), then sends every value it changed that another rank's
+//! region holds to that rank ([`Comm::exchange`]). Patches of one colour touch disjoint data and
+//! every region copy is brought up to date before the next colour, so each stencil sees exactly
+//! the values it sees in the single-process engine: **the output is bit-identical to
+//! `vcsmooth smooth` at the same `--patch-size`, for any number of ranks and threads.** Jacobi
+//! methods (laplacian, taubin) update owned vertices and exchange them after each step.
+//!
+//! Which values to send is decided once: rank `r`'s *border* `X_r` is its three outer rings plus
+//! the owned vertices within three rings of another rank; the vertices two regions share are
+//! exactly `X_r ∩ X_s`.
+//!
+//! Checkpoints: after every `--checkpoint-every` iterations (and the last), each rank writes its
+//! owned positions into the work directory and rank 0 records the iteration ([`store`]). A run
+//! started again with the same input, options and patch size resumes after the last recorded
+//! iteration, with any number of ranks. The output is assembled by rank 0 from the input and the
+//! final positions file, on the heap or in scratch files by `--memory-budget` as in `smooth`, so no
+//! rank ever holds the whole mesh in memory.
+
+pub mod comm;
+pub mod store;
+
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+pub use comm::{Comm, Local, Single};
+use store::{Plan, PlanKey, Reference, StateDoc, WorkDir};
+
+use crate::driver::{
+    self, EngineSettings, FileRun, IterationRecord, MemoryStats, Observer, PhaseTimings, PlanStats,
+    Prepared,
+};
+use crate::error::{Error, Result};
+use crate::mesh::Buf;
+use crate::schedule::SharedField;
+use crate::smooth::{
+    self, Method, Options, SweepStats, laplacian,
+    stencil::{self, Workspace},
+};
+use crate::{io, metrics, resources};
+
+/// Rings of the region around a rank's owned vertices (see the module doc).
+const REGION_RINGS: usize = 3;
+
+/// Where the work directory is and how often to checkpoint.
+#[derive(Debug, Clone)]
+pub struct ClusterSettings {
+    pub work_dir: PathBuf,
+    /// Keep the work directory after success (`--checkpoint DIR`); otherwise it is removed.
+    pub keep: bool,
+    /// Write positions every this many iterations (the last iteration is always written).
+    pub checkpoint_every: usize,
+}
+
+/// What a cluster run adds to a [`FileRun`].
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct ClusterStats {
+    pub ranks: usize,
+    /// Iterations found completed in the checkpoint when this run started.
+    pub resumed_after: usize,
+    pub checkpoint_every: usize,
+    pub owned_vertices_min: u64,
+    pub owned_vertices_max: u64,
+    /// Vertices a rank holds (owned and its three rings), largest over the ranks.
+    pub region_vertices_max: u64,
+    /// Vertex values sent per iteration, all ranks together, and the largest share of one rank.
+    pub halo_values_per_iteration: u64,
+    pub halo_bytes_per_iteration_max: u64,
+    /// Largest peak anonymous memory of a rank.
+    pub peak_anon_max: u64,
+}
+
+/// Smooth `input` into `output` with the ranks of `comm` (see the module doc). Every rank calls
+/// it with the same arguments; rank 0 reports progress to `observer` and returns the full
+/// statistics, the others return theirs.
+pub fn run_file(
+    comm: &dyn Comm,
+    input: &Path,
+    output: &Path,
+    opts: &Options,
+    engine: &EngineSettings,
+    cluster: &ClusterSettings,
+    observer: &mut dyn Observer,
+) -> Result<FileRun> {
+    driver::validate(opts)?;
+    if cluster.checkpoint_every == 0 {
+        return Err(Error::Config(
+            "--checkpoint-every must be at least 1".into(),
+        ));
+    }
+    let start = Instant::now();
+    let sampler = resources::PeakSampler::start(std::time::Duration::from_millis(20));
+    let budget = engine.budget()?;
+    let pool = driver::thread_pool(engine.threads)?;
+    let work = WorkDir::new(&cluster.work_dir);
+    let mut t = PhaseTimings::default();
+
+    // 1. The plan: rank 0 makes it unless a matching one is there; the others wait for it.
+    let made = if comm.rank() == 0 {
+        pool.install(|| ensure_plan(&work, input, output, opts, engine, budget, &mut t))
+    } else {
+        Ok(())
+    };
+    agree(comm, made, "rank 0 could not prepare the plan")?;
+
+    // 2. Every rank maps the plan and finds its part.
+    let opened = work.open_plan().and_then(|plan| {
+        let state = work.read_state()?;
+        if state.done > opts.iterations {
+            return Err(Error::Config(format!(
+                "{}: the checkpoint has {} iterations done, more than --iterations {}",
+                work.dir.display(),
+                state.done,
+                opts.iterations
+            )));
+        }
+        Ok((plan, state))
+    });
+    let (plan, state) = agree(comm, opened, "another rank could not open the plan")?;
+    let clock = Instant::now();
+    let part = Part::new(comm, &plan)?;
+    t.partition += clock.elapsed().as_secs_f64();
+
+    // 3. Smooth from the checkpoint on.
+    let clock = Instant::now();
+    let resumed_after = state.done;
+    let rank = RankRun::new(comm, &pool, &plan, &part, &work, state);
+    let rank = agree(comm, rank, "another rank could not load its part")?;
+    let smoothed = rank.iterate(opts, cluster.checkpoint_every, observer);
+    let (state, traffic) = agree(comm, smoothed, "another rank failed while smoothing")?;
+    t.smoothing = clock.elapsed().as_secs_f64();
+
+    // 4. Rank 0 writes the output in the input's order.
+    let clock = Instant::now();
+    let written = if comm.rank() == 0 {
+        write_output(&work, &plan, &state, input, output, engine, budget)
+    } else {
+        Ok(None)
+    };
+    let output_stats = agree(comm, written, "rank 0 could not write the output")?;
+    t.write = clock.elapsed().as_secs_f64();
+    if comm.rank() == 0 && !cluster.keep {
+        work.remove();
+    }
+    t.total = start.elapsed().as_secs_f64();
+
+    // 5. Figures of all ranks.
+    let iterations_run = (state.done - resumed_after).max(1) as f64;
+    let owned = part.owned.len() as f64;
+    let region = (part.owned.len() + part.rings.iter().map(Vec::len).sum::<usize>()) as f64;
+    let per_iteration = traffic.values as f64 / iterations_run;
+    let peak = sampler.peak() as f64;
+    let maxima = comm.max(&[owned, -owned, region, per_iteration * 8.0, peak]);
+    let sums = comm.sum(&[per_iteration / 4.0]);
+    let doc = &plan.doc;
+    let halo = &doc.halo;
+    Ok(FileRun {
+        input_format: io::Format::from_extension(input),
+        vertices: doc.vertices,
+        triangles: doc.triangles,
+        records: state.records,
+        input_stats: engine.with_stats.then(|| doc.input_stats.clone()).flatten(),
+        output_stats,
+        plan: PlanStats {
+            patch_size: doc.key.patch_size,
+            patches: doc.patches.len(),
+            colours: doc.colours.len(),
+            halo_min: halo.iter().copied().min().unwrap_or(0),
+            halo_mean: halo.iter().map(|&h| h as f64).sum::<f64>() / halo.len().max(1) as f64,
+            halo_max: halo.iter().copied().max().unwrap_or(0),
+            crossing_edge_stencils: doc.crossing_edge_stencils,
+            threads: pool.current_num_threads(),
+        },
+        memory: MemoryStats {
+            budget,
+            storage: "cluster",
+            scratch_bytes: 0,
+            peak_anon: maxima[4] as u64,
+            bytes_read: std::fs::metadata(input).map_or(0, |m| m.len()),
+            bytes_written: std::fs::metadata(output).map_or(0, |m| m.len()),
+        },
+        timings: t,
+        cluster: Some(ClusterStats {
+            ranks: comm.size(),
+            resumed_after,
+            checkpoint_every: cluster.checkpoint_every,
+            owned_vertices_min: (-maxima[1]) as u64,
+            owned_vertices_max: maxima[0] as u64,
+            region_vertices_max: maxima[2] as u64,
+            halo_values_per_iteration: sums[0] as u64,
+            halo_bytes_per_iteration_max: maxima[3] as u64,
+            peak_anon_max: maxima[4] as u64,
+        }),
+    })
+}
+
+/// Turn a per-rank result into a collective one: every rank goes on only if all succeeded. A rank
+/// that failed returns its own error; the others return `other`.
+fn agree<T>(comm: &dyn Comm, r: Result<T>, other: &str) -> Result<T> {
+    let ok = comm.all(r.is_ok());
+    match r {
+        Err(e) => Err(e),
+        Ok(_) if !ok => Err(Error::Config(other.to_string())),
+        Ok(v) => Ok(v),
+    }
+}
+
+/// Rank 0: reuse the plan in the work directory if it was made from the same input, options and
+/// patch size; otherwise read the input and prepare it there.
+fn ensure_plan(
+    work: &WorkDir,
+    input: &Path,
+    output: &Path,
+    opts: &Options,
+    engine: &EngineSettings,
+    budget: u64,
+    t: &mut PhaseTimings,
+) -> Result<()> {
+    let key = PlanKey::of(input, opts, engine.patch_size)?;
+    if let Some(doc) = work.read_plan_doc()?
+        && doc.key == key
+    {
+        return Ok(());
+    }
+    let clock = Instant::now();
+    let storage = driver::storage_for(input, output, engine, budget)?;
+    let mesh = io::read_mesh_in(input, &storage)?;
+    driver::check_in_memory_budget(input, &storage, &mesh, budget)?;
+    t.ingest = clock.elapsed().as_secs_f64();
+    let prep = Prepared::new(
+        &storage,
+        &mesh.positions,
+        &mesh.triangles,
+        engine.patch_size,
+    )
+    .map_err(|e| e.in_file(input))?;
+    t.reorder = prep.timings.reorder;
+    t.topology = prep.timings.topology;
+    t.partition = prep.timings.partition;
+    // Measured always: a resumed run may ask for a report that the first run did not.
+    let input_stats = Some(prep.info(&mesh.source));
+    drop(mesh);
+    work.write_plan(&prep, key, input_stats)
+}
+
+/// Rank 0: the input with the final positions, written atomically; output statistics if asked.
+fn write_output(
+    work: &WorkDir,
+    plan: &Plan,
+    state: &StateDoc,
+    input: &Path,
+    output: &Path,
+    engine: &EngineSettings,
+    budget: u64,
+) -> Result<Option<metrics::MeshInfo>> {
+    let storage = driver::storage_for(input, output, engine, budget)?;
+    let mut mesh = io::read_mesh_in(input, &storage)?;
+    if mesh.positions.len() != plan.doc.vertices || mesh.triangles.len() != plan.doc.triangles {
+        return Err(Error::invalid(
+            input,
+            "changed since the plan was made (vertex or triangle count differs)",
+        ));
+    }
+    let last = work.map_positions(state.slot, plan.doc.vertices)?;
+    for (new, &old) in plan.order.iter().enumerate() {
+        mesh.positions[old as usize] = last[new];
+    }
+    let stats = engine
+        .with_stats
+        .then(|| metrics::info_of(&last, &plan.triangles, &mesh.source, &plan.topology));
+    io::write_mesh(output, &mesh)?;
+    Ok(stats)
+}
+
+/// A rank's share of the plan and what it exchanges with whom.
+struct Part {
+    /// Owned patches, a contiguous block.
+    patches: Range<usize>,
+    /// Owned vertices (the patches' ranges, contiguous) and owned triangles.
+    owned: Range<u32>,
+    triangles: Range<u32>,
+    /// The rings outside `owned`, ring 1 first.
+    rings: Vec<Vec<u32>>,
+    /// Vertices this rank shares with some other rank's region, ascending.
+    shared: Vec<u32>,
+    /// Per other rank: positions in `shared` of the vertices both regions hold.
+    links: Vec<(usize, Vec<u32>)>,
+}
+
+impl Part {
+    fn new(comm: &dyn Comm, plan: &Plan) -> Result<Part> {
+        let doc = &plan.doc;
+        let (r, size) = (comm.rank(), comm.size());
+        let count = doc.patches.len();
+        let patches = count * r / size..count * (r + 1) / size;
+        let span = |ps: &Range<usize>, k: usize| {
+            if ps.is_empty() {
+                None
+            } else {
+                Some((doc.patches[ps.start][k], doc.patches[ps.end - 1][k + 1]))
+            }
+        };
+        let owned = span(&patches, 0).map_or(0..0, |(a, b)| a..b);
+        let triangles = span(&patches, 2).map_or(0..0, |(a, b)| a..b);
+        let found = rings_around(plan, owned.clone())
+            .map_err(|msg| Error::invalid(&plan.dir, format!("the plan is damaged: {msg}")));
+        let (rings, inner) = agree(comm, found, "another rank found a damaged plan")?;
+        let mut border: Vec<u32> = rings.iter().flatten().chain(&inner).copied().collect();
+        border.sort_unstable();
+        // Everyone learns everyone's border; the shared vertices are the pairwise intersections.
+        let others = comm.exchange(
+            (0..size)
+                .map(|s| {
+                    if s == r {
+                        Vec::new()
+                    } else {
+                        border.iter().map(|&v| v as u64).collect()
+                    }
+                })
+                .collect(),
+        );
+        let mut pairs: Vec<(usize, Vec<u32>)> = Vec::new();
+        for (s, theirs) in others.iter().enumerate() {
+            if s == r {
+                continue;
+            }
+            let common = intersect(&border, theirs);
+            if !common.is_empty() {
+                pairs.push((s, common));
+            }
+        }
+        let mut shared: Vec<u32> = pairs.iter().flat_map(|(_, c)| c.iter().copied()).collect();
+        shared.sort_unstable();
+        shared.dedup();
+        let links = pairs
+            .into_iter()
+            .map(|(s, common)| {
+                let at = common
+                    .iter()
+                    .map(|v| shared.binary_search(v).expect("in the union") as u32)
+                    .collect();
+                (s, at)
+            })
+            .collect();
+        Ok(Part {
+            patches,
+            owned,
+            triangles,
+            rings,
+            shared,
+            links,
+        })
+    }
+}
+
+/// The [`REGION_RINGS`] rings outside `owned`, and the owned vertices within that many rings of
+/// the outside. Checks the adjacency and triangles of every vertex whose entries the rank will
+/// use, so a damaged plan is an error, not an out-of-range access.
+fn rings_around(
+    plan: &Plan,
+    owned: Range<u32>,
+) -> std::result::Result<(Vec<Vec<u32>>, Vec<u32>), String> {
+    let topo = &plan.topology;
+    let n = plan.doc.vertices as u32;
+    let check = |v: u32| -> std::result::Result<(), String> {
+        if v >= n || !topo.check_vertex(v) {
+            return Err(format!("the adjacency of vertex {v} is damaged"));
+        }
+        for &f in topo.faces_of(v) {
+            if plan.triangles[f as usize].iter().any(|&u| u >= n) {
+                return Err(format!("triangle {f} names a vertex out of range"));
+            }
+        }
+        Ok(())
+    };
+    let inside = |v: u32| owned.contains(&v);
+    let mut seen = std::collections::HashSet::new();
+    let mut ring = Vec::new();
+    for v in owned.clone() {
+        check(v)?;
+        for &u in topo.neighbors(v) {
+            if !inside(u) && seen.insert(u) {
+                ring.push(u);
+            }
+        }
+    }
+    let mut rings = vec![ring];
+    while rings.len() < REGION_RINGS {
+        let mut next = Vec::new();
+        for &v in rings.last().into_iter().flatten() {
+            check(v)?;
+            for &u in topo.neighbors(v) {
+                if !inside(u) && seen.insert(u) {
+                    next.push(u);
+                }
+            }
+        }
+        rings.push(next);
+    }
+    for ring in &mut rings {
+        ring.sort_unstable();
+    }
+    // Inward: owned vertices next to ring 1, then their owned neighbours, up to the same depth.
+    let mut near = vec![false; owned.len()];
+    let mut front: Vec<u32> = Vec::new();
+    for &v in &rings[0] {
+        for &u in topo.neighbors(v) {
+            if inside(u) && !std::mem::replace(&mut near[(u - owned.start) as usize], true) {
+                front.push(u);
+            }
+        }
+    }
+    let mut inner = front.clone();
+    for _ in 1..REGION_RINGS {
+        let mut next = Vec::new();
+        for &v in &front {
+            for &u in topo.neighbors(v) {
+                if inside(u) && !std::mem::replace(&mut near[(u - owned.start) as usize], true) {
+                    next.push(u);
+                }
+            }
+        }
+        inner.extend_from_slice(&next);
+        front = next;
+    }
+    Ok((rings, inner))
+}
+
+/// Sorted intersection of two ascending lists.
+fn intersect(a: &[u32], b: &[u64]) -> Vec<u32> {
+    let (mut i, mut j, mut out) = (0, 0, Vec::new());
+    while i < a.len() && j < b.len() {
+        match (a[i] as u64).cmp(&b[j]) {
+            std::cmp::Ordering::Less => i += 1,
+            std::cmp::Ordering::Greater => j += 1,
+            std::cmp::Ordering::Equal => {
+                out.push(a[i]);
+                i += 1;
+                j += 1;
+            }
+        }
+    }
+    out
+}
+
+/// Halo traffic of a run.
+#[derive(Default)]
+struct Traffic {
+    /// u64 words sent to other ranks.
+    values: u64,
+}
+
+/// One rank's arrays and loop.
+struct RankRun<'a> {
+    comm: &'a dyn Comm,
+    /// The rank's threads (the communicator stays on the calling thread).
+    pool: &'a rayon::ThreadPool,
+    plan: &'a Plan,
+    part: &'a Part,
+    work: &'a WorkDir,
+    state: StateDoc,
+    /// Positions, neighbour sums (or the Taubin half-step) and previous positions, by global id.
+    pos: Buf<DVec3>,
+    sums: Buf<DVec3>,
+    prev: Buf<DVec3>,
+    traffic: Traffic,
+}
+
+impl<'a> RankRun<'a> {
+    fn new(
+        comm: &'a dyn Comm,
+        pool: &'a rayon::ThreadPool,
+        plan: &'a Plan,
+        part: &'a Part,
+        work: &'a WorkDir,
+        state: StateDoc,
+    ) -> Result<RankRun<'a>> {
+        let n = plan.doc.vertices;
+        let mut pos: Buf<DVec3> = Buf::sparse(n)?;
+        let saved = work.map_positions(state.slot, n)?;
+        let (lo, hi) = (part.owned.start as usize, part.owned.end as usize);
+        pos[lo..hi].copy_from_slice(&saved[lo..hi]);
+        for &v in part.rings.iter().flatten() {
+            pos[v as usize] = saved[v as usize];
+        }
+        Ok(RankRun {
+            comm,
+            pool,
+            plan,
+            part,
+            work,
+            state,
+            pos,
+            sums: Buf::sparse(n)?,
+            prev: Buf::sparse(n)?,
+            traffic: Traffic::default(),
+        })
+    }
+
+    fn owned(&self) -> Range<usize> {
+        self.part.owned.start as usize..self.part.owned.end as usize
+    }
+
+    /// Iterations `done + 1 ..= opts.iterations`, with checkpoints; returns the final state.
+    fn iterate(
+        mut self,
+        opts: &Options,
+        every: usize,
+        observer: &mut dyn Observer,
+    ) -> Result<(StateDoc, Traffic)> {
+        let reference = match self.state.reference {
+            Some(r) => r,
+            None => {
+                let r = self.reference();
+                self.state.reference = Some(r);
+                r
+            }
+        };
+        let origin = DVec3::from_array(reference.origin);
+        let movable = (self.plan.doc.vertices - self.plan.topology.stats.fixed_vertices).max(1);
+        for it in self.state.done + 1..=opts.iterations {
+            let clock = Instant::now();
+            let owned = self.owned();
+            // Previous positions: owned (displacement) and ring 1 (the Jacobi steps read them).
+            self.prev[owned.clone()].copy_from_slice(&self.pos[owned.clone()]);
+            for &v in &self.part.rings[0] {
+                self.prev[v as usize] = self.pos[v as usize];
+            }
+            let stencils = match opts.method {
+                Method::Laplacian => self.jacobi(Src::Prev, Dst::Pos, opts.lambda),
+                Method::Taubin => {
+                    let mut s = self.jacobi(Src::Prev, Dst::Sums, opts.lambda);
+                    s.add(&self.jacobi(Src::Sums, Dst::Pos, opts.mu));
+                    s
+                }
+                Method::Lem | Method::Vcs | Method::VcsTriangle => self.sweep(opts),
+            };
+            let seconds = clock.elapsed().as_secs_f64();
+            let record = self.record(it, origin, &reference, movable, stencils, seconds);
+            if self.comm.rank() == 0 {
+                observer.iteration(&record, opts.iterations);
+            }
+            self.state.records.push(record);
+            if it % every == 0 || it == opts.iterations {
+                self.checkpoint(it)?;
+            }
+        }
+        Ok((self.state, self.traffic))
+    }
+
+    /// The input's centroid, volume and area (every rank gets the same bits).
+    fn reference(&self) -> Reference {
+        let owned = self.owned();
+        let s = self.pos[owned].iter().fold(DVec3::ZERO, |s, p| s + *p);
+        let total = self.comm.sum(&s.to_array());
+        let n = self.plan.doc.vertices.max(1) as f64;
+        let origin = DVec3::from_slice(&total) / n;
+        let (v, a) = self.volume_area(origin);
+        Reference {
+            origin: origin.to_array(),
+            volume: v,
+            area: a,
+        }
+    }
+
+    fn volume_area(&self, origin: DVec3) -> (f64, f64) {
+        let tris = &self.plan.triangles
+            [self.part.triangles.start as usize..self.part.triangles.end as usize];
+        let pos: &[DVec3] = &self.pos;
+        let (v, a) = self
+            .pool
+            .install(|| driver::volume_area_par(pos, tris, origin));
+        let total = self.comm.sum(&[v, a]);
+        (total[0], total[1])
+    }
+
+    fn record(
+        &self,
+        iteration: usize,
+        origin: DVec3,
+        reference: &Reference,
+        movable: usize,
+        stencils: SweepStats,
+        seconds: f64,
+    ) -> IterationRecord {
+        let owned = self.owned();
+        let (now, before) = (&self.pos[owned.clone()], &self.prev[owned]);
+        let (max_d, sum_d) = self.pool.install(|| driver::displacement_par(now, before));
+        let (volume, area) = self.volume_area(origin);
+        let counts = [
+            stencils.applied,
+            stencils.skipped_fixed,
+            stencils.skipped_degenerate,
+            stencils.rejected,
+        ];
+        let mut local = vec![sum_d, seconds];
+        local.extend(counts.iter().map(|&c| c as f64));
+        let sums = self.comm.sum(&local);
+        let maxima = self.comm.max(&[max_d, seconds]);
+        IterationRecord {
+            iteration,
+            volume,
+            volume_pct: driver::percent(volume, reference.volume),
+            area_pct: driver::percent(area, reference.area),
+            max_displacement: maxima[0],
+            mean_displacement: sums[0] / movable as f64,
+            stencils: SweepStats {
+                applied: sums[2] as u64,
+                skipped_fixed: sums[3] as u64,
+                skipped_degenerate: sums[4] as u64,
+                rejected: sums[5] as u64,
+            },
+            seconds: maxima[1],
+        }
+    }
+
+    /// One Jacobi step over the owned vertices, then the owned values others hold are sent.
+    fn jacobi(&mut self, src: Src, dst: Dst, lambda: f64) -> SweepStats {
+        const CHUNK: usize = 1 << 14;
+        let owned = self.owned();
+        let (src, out): (&[DVec3], &mut [DVec3]) = match (src, dst) {
+            (Src::Prev, Dst::Pos) => (&self.prev, &mut self.pos[owned.clone()]),
+            (Src::Prev, Dst::Sums) => (&self.prev, &mut self.sums[owned.clone()]),
+            (Src::Sums, Dst::Pos) => (&self.sums, &mut self.pos[owned.clone()]),
+            (Src::Sums, Dst::Sums) => unreachable!("a step never reads what it writes"),
+        };
+        let topo = &self.plan.topology;
+        let applied = self.pool.install(|| {
+            out.par_chunks_mut(CHUNK)
+                .enumerate()
+                .map(|(c, o)| laplacian::jacobi_step(topo, src, o, owned.start + c * CHUNK, lambda))
+                .sum::<u64>()
+        });
+        let field = match dst {
+            Dst::Pos => &mut self.pos,
+            Dst::Sums => &mut self.sums,
+        };
+        send_owned(self.comm, self.part, field, &mut self.traffic);
+        SweepStats {
+            applied,
+            skipped_fixed: owned.len() as u64 - applied,
+            ..Default::default()
+        }
+    }
+
+    /// One Gauss–Seidel pass of the stencil method, colour by colour, exchanging after each.
+    fn sweep(&mut self, opts: &Options) -> SweepStats {
+        let topo = &self.plan.topology;
+        let tris: &[[u32; 3]] = &self.plan.triangles;
+        // Neighbour sums for every vertex a stencil of ours reads: owned, rings 1 and 2.
+        let owned = self.owned();
+        {
+            let (pos, sums) = (&self.pos, &mut self.sums);
+            const CHUNK: usize = 1 << 14;
+            self.pool.install(|| {
+                sums[owned.clone()]
+                    .par_chunks_mut(CHUNK)
+                    .enumerate()
+                    .for_each(|(c, out)| {
+                        smooth::neighbor_sums_into(topo, pos, out, owned.start + c * CHUNK)
+                    })
+            });
+            for &v in self.part.rings[..2].iter().flatten() {
+                sums[v as usize] = topo
+                    .neighbors(v)
+                    .iter()
+                    .fold(DVec3::ZERO, |s, &u| s + pos[u as usize]);
+            }
+        }
+        let params = driver::stencil_params(opts);
+        let mut total = SweepStats::default();
+        for colour in &self.plan.doc.colours {
+            let mine: Vec<usize> = colour
+                .iter()
+                .map(|&p| p as usize)
+                .filter(|p| self.part.patches.contains(p))
+                .collect();
+            let before = snapshot(self.part, &self.pos, &self.sums);
+            // SAFETY: the patches of one colour touch disjoint positions and sums (the colouring
+            // invariant of `schedule`), and the arrays are used only through the views meanwhile.
+            let (pv, sv) = unsafe {
+                (
+                    SharedField::new(&mut self.pos),
+                    SharedField::new(&mut self.sums),
+                )
+            };
+            let doc = &self.plan.doc;
+            let stats = self.pool.install(|| {
+                mine.par_iter()
+                    .map_init(Workspace::default, |ws, &p| {
+                        let (mut pv, mut sv) = (pv, sv);
+                        let patch = doc.patch(p);
+                        if opts.method == Method::VcsTriangle {
+                            stencil::sweep_triangles(
+                                topo,
+                                tris,
+                                &mut pv,
+                                &mut sv,
+                                patch.triangles,
+                                params,
+                                ws,
+                            )
+                        } else {
+                            stencil::sweep_edges(
+                                topo,
+                                tris,
+                                &mut pv,
+                                &mut sv,
+                                patch.edges(topo),
+                                params,
+                                ws,
+                            )
+                        }
+                    })
+                    .reduce(SweepStats::default, |mut a, b| {
+                        a.add(&b);
+                        a
+                    })
+            });
+            total.add(&stats);
+            send_changes(
+                self.comm,
+                self.part,
+                &before,
+                &mut self.pos,
+                &mut self.sums,
+                &mut self.traffic,
+            );
+        }
+        total
+    }
+
+    /// Write the owned positions of iteration `it` into the free slot; once all ranks have,
+    /// rank 0 switches the state to it.
+    fn checkpoint(&mut self, it: usize) -> Result<()> {
+        let slot = 1 - self.state.slot;
+        let owned = self.owned();
+        let written = self
+            .work
+            .write_positions(slot, owned.start, &self.pos[owned]);
+        agree(
+            self.comm,
+            written,
+            "another rank could not write its checkpoint",
+        )?;
+        self.state.done = it;
+        self.state.slot = slot;
+        let recorded = if self.comm.rank() == 0 {
+            self.work.write_state(&self.state)
+        } else {
+            Ok(())
+        };
+        agree(
+            self.comm,
+            recorded,
+            "rank 0 could not record the checkpoint",
+        )
+    }
+}
+
+#[derive(Clone, Copy)]
+enum Src {
+    Prev,
+    Sums,
+}
+
+#[derive(Clone, Copy)]
+enum Dst {
+    Pos,
+    Sums,
+}
+
+/// Positions and sums of the shared vertices, to find what a colour phase changed.
+fn snapshot(part: &Part, pos: &[DVec3], sums: &[DVec3]) -> Vec<[DVec3; 2]> {
+    part.shared
+        .iter()
+        .map(|&v| [pos[v as usize], sums[v as usize]])
+        .collect()
+}
+
+/// After a colour phase: send each linked rank the shared vertices whose position or sum changed
+/// (vertex, position, sum), and apply what the others changed.
+fn send_changes(
+    comm: &dyn Comm,
+    part: &Part,
+    before: &[[DVec3; 2]],
+    pos: &mut [DVec3],
+    sums: &mut [DVec3],
+    traffic: &mut Traffic,
+) {
+    let same =
+        |a: DVec3, b: DVec3| a.to_array().map(f64::to_bits) == b.to_array().map(f64::to_bits);
+    let changed: Vec<bool> = part
+        .shared
+        .iter()
+        .zip(before)
+        .map(|(&v, b)| !same(pos[v as usize], b[0]) || !same(sums[v as usize], b[1]))
+        .collect();
+    let got = exchange_values(comm, part, traffic, 7, |k, msg| {
+        if changed[k] {
+            let v = part.shared[k] as usize;
+            msg.push(v as u64);
+            msg.extend(pos[v].to_array().map(f64::to_bits));
+            msg.extend(sums[v].to_array().map(f64::to_bits));
+        }
+    });
+    for msg in got {
+        for e in msg.chunks_exact(7) {
+            let v = e[0] as usize;
+            pos[v] = DVec3::new(
+                f64::from_bits(e[1]),
+                f64::from_bits(e[2]),
+                f64::from_bits(e[3]),
+            );
+            sums[v] = DVec3::new(
+                f64::from_bits(e[4]),
+                f64::from_bits(e[5]),
+                f64::from_bits(e[6]),
+            );
+        }
+    }
+}
+
+/// After a Jacobi step: send each linked rank the owned vertices it holds (vertex, value).
+fn send_owned(comm: &dyn Comm, part: &Part, field: &mut [DVec3], traffic: &mut Traffic) {
+    let got = exchange_values(comm, part, traffic, 4, |k, msg| {
+        let v = part.shared[k];
+        if part.owned.contains(&v) {
+            msg.push(v as u64);
+            msg.extend(field[v as usize].to_array().map(f64::to_bits));
+        }
+    });
+    for msg in got {
+        for e in msg.chunks_exact(4) {
+            field[e[0] as usize] = DVec3::new(
+                f64::from_bits(e[1]),
+                f64::from_bits(e[2]),
+                f64::from_bits(e[3]),
+            );
+        }
+    }
+}
+
+/// Build one message per linked rank with `fill(index in shared, message)`, exchange, and return
+/// the messages received (entries of `words` u64 each, checked).
+fn exchange_values(
+    comm: &dyn Comm,
+    part: &Part,
+    traffic: &mut Traffic,
+    words: usize,
+    mut fill: impl FnMut(usize, &mut Vec<u64>),
+) -> Vec<Vec<u64>> {
+    let mut send = vec![Vec::new(); comm.size()];
+    for (s, at) in &part.links {
+        let msg = &mut send[*s];
+        for &k in at {
+            fill(k as usize, msg);
+        }
+        traffic.values += msg.len() as u64;
+    }
+    let got = comm.exchange(send);
+    for msg in &got {
+        assert!(msg.len() % words == 0, "malformed halo message");
+    }
+    got
+}
+
+/// Run `f` with the communicator of this process: MPI's world when built with the `mpi` feature
+/// (a single process started without `mpirun` is a world of one), else a single rank. MPI is
+/// initialised and finalised around `f`.
+pub fn with_world<R>(f: impl FnOnce(&dyn Comm) -> R) -> R {
+    #[cfg(feature = "mpi")]
+    {
+        match mpi::initialize_with_threading(mpi::Threading::Funneled) {
+            Some((universe, _)) => {
+                let world = comm::Mpi {
+                    world: mpi::topology::Communicator::duplicate(&universe.world()),
+                };
+                let r = f(&world);
+                drop(world);
+                drop(universe);
+                r
+            }
+            None => f(&Single),
+        }
+    }
+    #[cfg(not(feature = "mpi"))]
+    f(&Single)
+}

@@ -1,0 +1,328 @@
+//! The work directory of a cluster run: the prepared plan (reordered mesh, adjacency, patches,
+//! colours) as raw arrays that every rank maps, and the checkpoint (positions after the last
+//! completed iteration).
+//!
+//! Files (all written by rank 0, except the positions, whose owned ranges each rank writes):
+//! - `plan.json`: what the arrays hold and what they were made from (input file size and time,
+//!   method options, patch size). Written last: a directory without it holds no usable plan.
+//! - `order.u32` (reordered → input vertex), `triangles.u32` (reordered, smallest vertex first),
+//!   `vv_offsets.u64`, `vv.u32`, `vf_offsets.u64`, `vf.u32`, `fixed.u8` (the adjacency).
+//! - `positions-0.f64`, `positions-1.f64`: two slots of `3 × f64` per reordered vertex. An
+//!   iteration's positions go to the slot that `state.json` does not name; only when every rank
+//!   has written and synced its part does rank 0 switch `state.json` (atomic rename) to it. A run
+//!   killed at any moment therefore finds a complete slot for the iteration `state.json` names.
+//!
+//! The directory must be on a file system every rank sees (for one machine, any directory).
+
+use std::fs::{self, File, OpenOptions};
+use std::os::unix::fs::FileExt;
+use std::path::{Path, PathBuf};
+
+use glam::DVec3;
+
+use crate::driver::{IterationRecord, Prepared};
+use crate::error::{Error, Result};
+use crate::mesh::Buf;
+use crate::mesh::storage::{Pod, as_bytes};
+use crate::metrics::MeshInfo;
+use crate::partition::Patch;
+use crate::topology::{Topology, TopologyStats};
+
+const FORMAT: u32 = 1;
+const PLAN: &str = "plan.json";
+const STATE: &str = "state.json";
+
+/// What a plan was made from; a plan is reused only when all of it matches.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PlanKey {
+    pub format: u32,
+    /// File name, size and modification time of the input.
+    pub input_name: String,
+    pub input_size: u64,
+    pub input_modified_ns: u128,
+    /// The options that change results (method, λ, μ, rejection), as JSON.
+    pub options: String,
+    pub patch_size: usize,
+}
+
+impl PlanKey {
+    /// The key of `input` smoothed with `options` (iterations excluded: a resumed run may go on
+    /// further) at `patch_size`.
+    pub fn of(input: &Path, opts: &crate::Options, patch_size: usize) -> Result<PlanKey> {
+        let meta = fs::metadata(input).map_err(|e| Error::io(input, e))?;
+        let modified = meta
+            .modified()
+            .ok()
+            .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+            .map_or(0, |d| d.as_nanos());
+        let options = serde_json::json!({
+            "method": opts.method,
+            "lambda": opts.lambda,
+            "mu": opts.mu,
+            "reject_energy_increase": opts.reject_energy_increase,
+        });
+        Ok(PlanKey {
+            format: FORMAT,
+            input_name: input
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+            input_size: meta.len(),
+            input_modified_ns: modified,
+            options: options.to_string(),
+            patch_size,
+        })
+    }
+}
+
+/// `plan.json`.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+pub struct PlanDoc {
+    pub key: PlanKey,
+    pub vertices: usize,
+    pub triangles: usize,
+    /// Per patch: owned vertices `[lo, hi)` and owned triangles `[lo, hi)`.
+    pub patches: Vec<[u32; 4]>,
+    pub colours: Vec<Vec<u32>>,
+    pub halo: Vec<u32>,
+    pub crossing_edge_stencils: u64,
+    pub topology: TopologyStats,
+    /// Input statistics, when the run that made the plan measured them.
+    pub input_stats: Option<MeshInfo>,
+}
+
+impl PlanDoc {
+    pub fn patch(&self, p: usize) -> Patch {
+        let [a, b, c, d] = self.patches[p];
+        Patch {
+            vertices: a..b,
+            triangles: c..d,
+        }
+    }
+}
+
+/// Reference values of the input, fixed when the run first starts, so that a resumed run reports
+/// percentages relative to the input as an uninterrupted one does.
+#[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize)]
+pub struct Reference {
+    pub origin: [f64; 3],
+    pub volume: f64,
+    pub area: f64,
+}
+
+/// `state.json`: iterations completed, which positions slot holds them, and their records.
+#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
+pub struct StateDoc {
+    pub done: usize,
+    pub slot: u8,
+    pub reference: Option<Reference>,
+    pub records: Vec<IterationRecord>,
+}
+
+/// A plan mapped from the work directory.
+pub struct Plan {
+    /// The work directory it was mapped from (for messages).
+    pub dir: PathBuf,
+    pub doc: PlanDoc,
+    pub topology: Topology,
+    pub triangles: Buf<[u32; 3]>,
+    pub order: Buf<u32>,
+}
+
+/// Paths in the work directory.
+pub struct WorkDir {
+    pub dir: PathBuf,
+}
+
+impl WorkDir {
+    pub fn new(dir: &Path) -> WorkDir {
+        WorkDir {
+            dir: dir.to_path_buf(),
+        }
+    }
+
+    fn path(&self, name: &str) -> PathBuf {
+        self.dir.join(name)
+    }
+
+    pub fn positions(&self, slot: u8) -> PathBuf {
+        self.path(&format!("positions-{slot}.f64"))
+    }
+
+    /// The plan's description, if a complete plan is there.
+    pub fn read_plan_doc(&self) -> Result<Option<PlanDoc>> {
+        read_json(&self.path(PLAN))
+    }
+
+    /// The checkpoint state (a complete plan always has one).
+    pub fn read_state(&self) -> Result<StateDoc> {
+        let path = self.path(STATE);
+        read_json(&path)?.ok_or_else(|| Error::invalid(&path, "missing; the plan is incomplete"))
+    }
+
+    /// Write the checkpoint state atomically.
+    pub fn write_state(&self, state: &StateDoc) -> Result<()> {
+        write_json(&self.path(STATE), state)
+    }
+
+    /// Store `prep` (fresh from [`Prepared::new`]) as the plan, replacing whatever plan was there.
+    pub fn write_plan(
+        &self,
+        prep: &Prepared,
+        key: PlanKey,
+        input_stats: Option<MeshInfo>,
+    ) -> Result<()> {
+        fs::create_dir_all(&self.dir).map_err(|e| Error::io(&self.dir, e))?;
+        // The plan's marker goes first and comes back last: a half-written plan is never used.
+        for stale in [PLAN, STATE] {
+            match fs::remove_file(self.path(stale)) {
+                Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                    return Err(Error::io(&self.path(stale), e));
+                }
+                _ => {}
+            }
+        }
+        let (vv_offsets, vv, vf_offsets, vf, fixed) = prep.topology.parts();
+        self.write_array("order.u32", &prep.reordered.order)?;
+        self.write_array("triangles.u32", &prep.reordered.triangles)?;
+        self.write_array("vv_offsets.u64", vv_offsets)?;
+        self.write_array("vv.u32", vv)?;
+        self.write_array("vf_offsets.u64", vf_offsets)?;
+        self.write_array("vf.u32", vf)?;
+        self.write_array("fixed.u8", fixed)?;
+        for slot in [0, 1] {
+            let name = format!("positions-{slot}.f64");
+            self.write_array(&name, &prep.reordered.positions)?;
+        }
+        self.write_state(&StateDoc::default())?;
+        let stats = prep.plan_stats();
+        let doc = PlanDoc {
+            key,
+            vertices: prep.reordered.positions.len(),
+            triangles: prep.reordered.triangles.len(),
+            patches: prep
+                .patches
+                .iter()
+                .map(|p| {
+                    [
+                        p.vertices.start,
+                        p.vertices.end,
+                        p.triangles.start,
+                        p.triangles.end,
+                    ]
+                })
+                .collect(),
+            colours: prep.schedule.colours.clone(),
+            halo: prep.schedule.halo.clone(),
+            crossing_edge_stencils: stats.crossing_edge_stencils,
+            topology: prep.topology.stats,
+            input_stats,
+        };
+        write_json(&self.path(PLAN), &doc)
+    }
+
+    fn write_array<T: Pod>(&self, name: &str, data: &[T]) -> Result<()> {
+        let path = self.path(name);
+        let write = || -> std::io::Result<()> {
+            let mut f = File::create(&path)?;
+            std::io::Write::write_all(&mut f, as_bytes(data))?;
+            f.sync_all()
+        };
+        write().map_err(|e| Error::io(&path, e))
+    }
+
+    /// Map the plan (each rank; only the pages a rank uses are ever read).
+    pub fn open_plan(&self) -> Result<Plan> {
+        let plan_path = self.path(PLAN);
+        let doc = self
+            .read_plan_doc()?
+            .ok_or_else(|| Error::invalid(&plan_path, "missing"))?;
+        let (n, t) = (doc.vertices, doc.triangles);
+        let m = |name: &str| self.path(name);
+        let topology = Topology::from_parts(
+            Buf::map_file(&m("vv_offsets.u64"), n + 1)?,
+            Buf::map_file(&m("vv.u32"), doc.topology.edges * 2)?,
+            Buf::map_file(&m("vf_offsets.u64"), n + 1)?,
+            Buf::map_file(&m("vf.u32"), 3 * (t - doc.topology.degenerate_triangles))?,
+            Buf::map_file(&m("fixed.u8"), n)?,
+            doc.topology,
+        )
+        .map_err(|e| Error::invalid(&self.dir, e))?;
+        let patches_ok = doc
+            .patches
+            .iter()
+            .all(|p| p[0] <= p[1] && p[1] as usize <= n && p[2] <= p[3] && p[3] as usize <= t)
+            && doc
+                .colours
+                .iter()
+                .flatten()
+                .all(|&p| (p as usize) < doc.patches.len());
+        if !patches_ok {
+            return Err(Error::invalid(&plan_path, "patches out of range"));
+        }
+        Ok(Plan {
+            triangles: Buf::map_file(&m("triangles.u32"), t)?,
+            order: Buf::map_file(&m("order.u32"), n)?,
+            topology,
+            doc,
+            dir: self.dir.clone(),
+        })
+    }
+
+    /// Map the positions of `slot` (read-only use; private mapping).
+    pub fn map_positions(&self, slot: u8, n: usize) -> Result<Buf<DVec3>> {
+        Buf::map_file(&self.positions(slot), n)
+    }
+
+    /// Write `data`, the positions of vertices `first ..`, into `slot`, and sync them to disk.
+    pub fn write_positions(&self, slot: u8, first: usize, data: &[DVec3]) -> Result<()> {
+        let path = self.positions(slot);
+        let write = || -> std::io::Result<()> {
+            let f = OpenOptions::new().write(true).open(&path)?;
+            f.write_all_at(
+                as_bytes(data),
+                (first * std::mem::size_of::<DVec3>()) as u64,
+            )?;
+            f.sync_data()
+        };
+        write().map_err(|e| Error::io(&path, e))
+    }
+
+    /// Remove the plan and checkpoint files (after a successful run without `--checkpoint`), and
+    /// the directory if nothing else is in it.
+    pub fn remove(&self) {
+        for name in [
+            PLAN,
+            STATE,
+            "order.u32",
+            "triangles.u32",
+            "vv_offsets.u64",
+            "vv.u32",
+            "vf_offsets.u64",
+            "vf.u32",
+            "fixed.u8",
+            "positions-0.f64",
+            "positions-1.f64",
+        ] {
+            let _ = fs::remove_file(self.path(name));
+        }
+        let _ = fs::remove_dir(&self.dir);
+    }
+}
+
+fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<Option<T>> {
+    match fs::read(path) {
+        Ok(bytes) => serde_json::from_slice(&bytes)
+            .map(Some)
+            .map_err(|e| Error::invalid(path, format!("unreadable: {e}"))),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+        Err(e) => Err(Error::io(path, e)),
+    }
+}
+
+fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<()> {
+    crate::io::write_atomically(path, |w| {
+        serde_json::to_writer_pretty(&mut *w, value).map_err(std::io::Error::other)?;
+        std::io::Write::write_all(w, b"\n")
+    })
+}

@@ -1,0 +1,371 @@
+//! The cluster engine (issue 7): one mesh over several ranks, with checkpoints. Ranks run here as
+//! threads exchanging through `cluster::Local`, the same code path MPI ranks take; tests/mpi.rs
+//! repeats the essentials with real OpenMPI processes.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use vcsmooth::cluster::{self, ClusterSettings, Comm, Local};
+use vcsmooth::driver::{self, EngineSettings, FileRun, Quiet};
+use vcsmooth::{Method, Options, generate, io};
+
+fn scan(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/meshes")
+        .join(name)
+}
+
+fn engine(patch_size: usize, threads: usize) -> EngineSettings {
+    EngineSettings {
+        threads: Some(threads),
+        patch_size,
+        ..EngineSettings::default()
+    }
+}
+
+/// Run the cluster engine on `ranks` thread-ranks; returns rank 0's result.
+fn run_ranks(
+    ranks: usize,
+    input: &Path,
+    output: &Path,
+    opts: &Options,
+    engine: &EngineSettings,
+    settings: &ClusterSettings,
+) -> vcsmooth::Result<FileRun> {
+    let comms = Local::group(ranks);
+    let mut results: Vec<_> = std::thread::scope(|s| {
+        let handles: Vec<_> = comms
+            .iter()
+            .map(|c| {
+                s.spawn(move || {
+                    cluster::run_file(c, input, output, opts, engine, settings, &mut Quiet)
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    results.swap_remove(0)
+}
+
+fn settings(dir: &Path, keep: bool, every: usize) -> ClusterSettings {
+    ClusterSettings {
+        work_dir: dir.to_path_buf(),
+        keep,
+        checkpoint_every: every,
+    }
+}
+
+fn noisy_sphere(dir: &Path, level: u32) -> PathBuf {
+    let mut m = generate::icosphere(level);
+    generate::add_normal_noise(&mut m, 0.4, 11);
+    let path = dir.join("sphere.ply");
+    io::write_mesh(&path, &m).unwrap();
+    path
+}
+
+#[test]
+fn any_number_of_ranks_gives_the_single_process_output_bit_for_bit() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = scan("armadillo-86k.ply");
+    for (method, iterations) in [
+        (Method::Vcs, 3),
+        (Method::Taubin, 4),
+        (Method::VcsTriangle, 2),
+        (Method::Lem, 2),
+        (Method::Laplacian, 3),
+    ] {
+        let opts = Options {
+            method,
+            iterations,
+            ..Options::default()
+        };
+        let reference = tmp.path().join(format!("{method}-plain.ply"));
+        let plain =
+            driver::run_file(&input, &reference, &opts, &engine(2048, 2), &mut Quiet).unwrap();
+        let expected = std::fs::read(&reference).unwrap();
+        for ranks in [1, 2, 3, 5] {
+            let out = tmp.path().join(format!("{method}-{ranks}.ply"));
+            let work = tmp.path().join(format!("{method}-{ranks}.work"));
+            let run = run_ranks(
+                ranks,
+                &input,
+                &out,
+                &opts,
+                &engine(2048, 1),
+                &settings(&work, false, 1),
+            )
+            .unwrap();
+            assert!(
+                std::fs::read(&out).unwrap() == expected,
+                "{method} on {ranks} ranks differs from the single-process engine"
+            );
+            assert!(
+                !work.exists(),
+                "the work directory is removed without --checkpoint"
+            );
+            let stats = run.cluster.unwrap();
+            assert_eq!(stats.ranks, ranks);
+            if ranks > 1 {
+                assert!(
+                    stats.halo_values_per_iteration > 0,
+                    "ranks must exchange halos"
+                );
+            }
+            assert_eq!(run.records.len(), iterations);
+            let (a, b) = (run.records.last().unwrap(), plain.records.last().unwrap());
+            assert!(
+                (a.volume_pct - b.volume_pct).abs() < 1e-9,
+                "{method}: {} vs {}",
+                a.volume_pct,
+                b.volume_pct
+            );
+            assert_eq!(a.stencils, b.stencils);
+        }
+    }
+}
+
+#[test]
+fn a_run_resumes_from_its_checkpoint_with_another_rank_count() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = noisy_sphere(tmp.path(), 5);
+    let opts = |iterations| Options {
+        iterations,
+        ..Options::default()
+    };
+    let plain = tmp.path().join("plain.ply");
+    driver::run_file(&input, &plain, &opts(5), &engine(700, 2), &mut Quiet).unwrap();
+
+    let work = tmp.path().join("ck");
+    let out = tmp.path().join("out.ply");
+    let first = run_ranks(
+        2,
+        &input,
+        &out,
+        &opts(2),
+        &engine(700, 1),
+        &settings(&work, true, 1),
+    )
+    .unwrap();
+    assert_eq!(first.cluster.unwrap().resumed_after, 0);
+    assert!(
+        work.join("plan.json").exists(),
+        "--checkpoint keeps the work directory"
+    );
+    let second = run_ranks(
+        3,
+        &input,
+        &out,
+        &opts(5),
+        &engine(700, 1),
+        &settings(&work, true, 2),
+    )
+    .unwrap();
+    assert_eq!(second.cluster.as_ref().unwrap().resumed_after, 2);
+    assert_eq!(
+        second.records.len(),
+        5,
+        "records of the earlier run are kept"
+    );
+    assert_eq!(std::fs::read(&out).unwrap(), std::fs::read(&plain).unwrap());
+
+    // Asking for fewer iterations than the checkpoint holds is an error, not a silent rerun.
+    let err = run_ranks(
+        2,
+        &input,
+        &out,
+        &opts(3),
+        &engine(700, 1),
+        &settings(&work, true, 1),
+    )
+    .unwrap_err();
+    assert!(err.to_string().contains("5 iterations done"), "{err}");
+
+    // Other options make a new plan instead of resuming a foreign one.
+    let taubin = Options {
+        method: Method::Taubin,
+        ..opts(2)
+    };
+    let run = run_ranks(
+        2,
+        &input,
+        &out,
+        &taubin,
+        &engine(700, 1),
+        &settings(&work, true, 1),
+    )
+    .unwrap();
+    assert_eq!(run.cluster.unwrap().resumed_after, 0);
+}
+
+#[test]
+fn a_damaged_plan_is_an_error_on_every_rank_not_a_panic() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = noisy_sphere(tmp.path(), 3);
+    let work = tmp.path().join("ck");
+    let out = tmp.path().join("out.ply");
+    let opts = Options {
+        iterations: 1,
+        ..Options::default()
+    };
+    run_ranks(
+        2,
+        &input,
+        &out,
+        &opts,
+        &engine(100, 1),
+        &settings(&work, true, 1),
+    )
+    .unwrap();
+    std::fs::remove_file(&out).unwrap();
+    // An out-of-range neighbour in the adjacency, and a truncated positions slot.
+    let vv = work.join("vv.u32");
+    let mut bytes = std::fs::read(&vv).unwrap();
+    bytes[4..8].copy_from_slice(&u32::MAX.to_le_bytes());
+    std::fs::write(&vv, bytes).unwrap();
+    let more = Options {
+        iterations: 2,
+        ..opts
+    };
+    let err = run_ranks(
+        2,
+        &input,
+        &out,
+        &more,
+        &engine(100, 1),
+        &settings(&work, true, 1),
+    )
+    .unwrap_err();
+    assert!(err.to_string().contains("damaged"), "{err}");
+    assert!(!out.exists());
+    let state = work.join("state.json");
+    std::fs::write(&state, "{ not json").unwrap();
+    let err = run_ranks(
+        2,
+        &input,
+        &out,
+        &more,
+        &engine(100, 1),
+        &settings(&work, true, 1),
+    )
+    .unwrap_err();
+    assert!(err.to_string().contains("state.json"), "{err}");
+    assert!(!out.exists());
+}
+
+#[test]
+fn more_ranks_than_patches_and_a_mesh_with_boundary() {
+    let tmp = tempfile::tempdir().unwrap();
+    // An open mesh (boundary vertices stay fixed) cut into 3 patches, over 4 ranks: one rank owns
+    // nothing and must still take part in every exchange.
+    let mut m = generate::icosphere(3);
+    let keep = m.triangles.len() - 40;
+    m.triangles.truncate(keep);
+    generate::add_normal_noise(&mut m, 0.3, 5);
+    let input = tmp.path().join("open.ply");
+    io::write_mesh(&input, &m).unwrap();
+    let opts = Options {
+        iterations: 3,
+        ..Options::default()
+    };
+    let plain = tmp.path().join("plain.ply");
+    driver::run_file(&input, &plain, &opts, &engine(250, 1), &mut Quiet).unwrap();
+    let out = tmp.path().join("out.ply");
+    let run = run_ranks(
+        4,
+        &input,
+        &out,
+        &opts,
+        &engine(250, 1),
+        &settings(&tmp.path().join("w"), false, 1),
+    )
+    .unwrap();
+    assert_eq!(run.plan.patches, 3);
+    assert_eq!(run.cluster.unwrap().owned_vertices_min, 0);
+    assert_eq!(std::fs::read(&out).unwrap(), std::fs::read(&plain).unwrap());
+}
+
+#[test]
+fn a_killed_run_resumes_to_the_uninterrupted_output() {
+    let bin = env!("CARGO_BIN_EXE_vcsmooth");
+    let tmp = tempfile::tempdir().unwrap();
+    let input = noisy_sphere(tmp.path(), 7);
+    let args = |out: &Path| -> Vec<String> {
+        [
+            "smooth",
+            input.to_str().unwrap(),
+            out.to_str().unwrap(),
+            "--iterations",
+            "12",
+            "--patch-size",
+            "4096",
+        ]
+        .map(String::from)
+        .to_vec()
+    };
+    let plain = tmp.path().join("plain.ply");
+    assert!(
+        Command::new(bin)
+            .args(args(&plain))
+            .output()
+            .unwrap()
+            .status
+            .success()
+    );
+
+    let work = tmp.path().join("ck");
+    let out = tmp.path().join("out.ply");
+    let mut child = Command::new(bin)
+        .args(args(&out))
+        .args(["--checkpoint", work.to_str().unwrap()])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    // Kill it once it has recorded some iterations but not all.
+    let state = work.join("state.json");
+    let done = |s: &Path| -> usize {
+        std::fs::read_to_string(s)
+            .ok()
+            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+            .and_then(|v| v["done"].as_u64())
+            .unwrap_or(0) as usize
+    };
+    let start = std::time::Instant::now();
+    while done(&state) < 2 && start.elapsed().as_secs() < 300 {
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let at_kill = done(&state);
+    assert!(
+        (2..12).contains(&at_kill),
+        "killed after {at_kill} iterations"
+    );
+    assert!(!out.exists(), "no output from a killed run");
+
+    let o = Command::new(bin)
+        .args(args(&out))
+        .args(["--checkpoint", work.to_str().unwrap(), "--report"])
+        .arg(tmp.path().join("r.json"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(std::fs::read(&out).unwrap(), std::fs::read(&plain).unwrap());
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(tmp.path().join("r.json")).unwrap()).unwrap();
+    assert!(report["cluster"]["resumed_after"].as_u64().unwrap() >= at_kill as u64);
+    assert_eq!(report["iterations"].as_array().unwrap().len(), 12);
+}
+
+#[test]
+fn comm_sum_is_identical_on_every_rank() {
+    let comms = Local::group(3);
+    let sums: Vec<Vec<f64>> = std::thread::scope(|s| {
+        let hs: Vec<_> = comms
+            .iter()
+            .map(|c| s.spawn(move || c.sum(&[0.1 * (c.rank() as f64 + 1.0), 1e16])))
+            .collect();
+        hs.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    assert!(sums.windows(2).all(|w| w[0] == w[1]));
+}
