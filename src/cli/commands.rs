@@ -143,6 +143,22 @@ fn smooth_report(
         crate::resources::format_size(m.peak_anon)
     )
     .map_err(stdout_error)?;
+    if let Some(c) = &run.cluster {
+        writeln!(
+            out,
+            "cluster: {}, {}-{} owned vertices and up to {} held per rank, {} halo values per iteration (largest rank {}/iteration), largest rank peak {}; resumed after {}, checkpoint every {}",
+            count(c.ranks, "rank"),
+            c.owned_vertices_min,
+            c.owned_vertices_max,
+            c.region_vertices_max,
+            c.halo_values_per_iteration,
+            crate::resources::format_size(c.halo_bytes_per_iteration_max),
+            crate::resources::format_size(c.peak_anon_max),
+            count(c.resumed_after, "iteration"),
+            count(c.checkpoint_every, "iteration"),
+        )
+        .map_err(stdout_error)?;
+    }
     writeln!(
         out,
         "seconds: ingest {:.3}, reorder {:.3}, topology {:.3}, partition {:.3}, smoothing {:.3}, write {:.3}, total {:.3}",

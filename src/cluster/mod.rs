@@ -163,10 +163,11 @@ pub fn run_file(
     let iterations_run = (state.done - resumed_after).max(1) as f64;
     let owned = part.owned.len() as f64;
     let region = (part.owned.len() + part.rings.iter().map(Vec::len).sum::<usize>()) as f64;
-    let per_iteration = traffic.values as f64 / iterations_run;
+    let values = traffic.values as f64 / iterations_run;
+    let bytes = traffic.bytes as f64 / iterations_run;
     let peak = sampler.peak() as f64;
-    let maxima = comm.max(&[owned, -owned, region, per_iteration * 8.0, peak]);
-    let sums = comm.sum(&[per_iteration / 4.0]);
+    let maxima = comm.max(&[owned, -owned, region, bytes, peak]);
+    let sums = comm.sum(&[values]);
     let doc = &plan.doc;
     let halo = &doc.halo;
     Ok(FileRun {
@@ -461,8 +462,9 @@ fn intersect(a: &[u32], b: &[u64]) -> Vec<u32> {
 /// Halo traffic of a run.
 #[derive(Default)]
 struct Traffic {
-    /// u64 words sent to other ranks.
+    /// Vertex entries and bytes sent to other ranks.
     values: u64,
+    bytes: u64,
 }
 
 /// One rank's arrays and loop.
@@ -871,7 +873,8 @@ fn exchange_values(
         for &k in at {
             fill(k as usize, msg);
         }
-        traffic.values += msg.len() as u64;
+        traffic.values += (msg.len() / words) as u64;
+        traffic.bytes += 8 * msg.len() as u64;
     }
     let got = comm.exchange(send);
     for msg in &got {
