@@ -27,7 +27,23 @@ use crate::{generate, io, metrics};
 pub fn smooth(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) -> Result<()> {
     progress.phase(format!("smoothing {}", cfg.input.display()));
     progress.iterations(cfg.options.method.name(), cfg.options.iterations);
-    let run = driver::run_file(&cfg.input, &cfg.output, &cfg.options, &cfg.engine, progress)?;
+    let (run, multires) = match &cfg.multires {
+        None => (
+            driver::run_file(&cfg.input, &cfg.output, &cfg.options, &cfg.engine, progress)?,
+            None,
+        ),
+        Some(m) => {
+            let (run, stats) = crate::multires::run_file(
+                &cfg.input,
+                &cfg.output,
+                &cfg.options,
+                m,
+                &cfg.engine,
+                progress,
+            )?;
+            (run, Some(stats))
+        }
+    };
     let records = &run.records;
 
     if let (Some(path), Some(input_stats), Some(output_stats)) =
@@ -50,6 +66,7 @@ pub fn smooth(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) 
             timings: run.timings,
             summary: Summary::of(records),
             iterations: records.clone(),
+            multires: multires.clone(),
         };
         write_json(path, &report)?;
     }
@@ -78,6 +95,9 @@ pub fn smooth(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) 
     out.write_all(text.as_bytes()).map_err(stdout_error)?;
     if !records.is_empty() {
         print_iterations(out, records)?;
+    }
+    if let Some(m) = &multires {
+        super::multires::print_multires(out, m)?;
     }
     let (t, p, m) = (&run.timings, &run.plan, &run.memory);
     writeln!(

@@ -90,6 +90,8 @@ pub struct SmoothConfig {
     pub engine: EngineConfig,
     pub report: Option<PathBuf>,
     pub plot: Option<PathBuf>,
+    /// `--multires` and its options.
+    pub multires: Option<crate::multires::MultiresOptions>,
     /// The command line as given, recorded in the report.
     pub argv: Vec<String>,
 }
@@ -152,12 +154,14 @@ impl Config {
                 }
                 let mut engine = engine(&a.smoothing.engine)?;
                 engine.with_stats = a.report.is_some();
+                let options = options(
+                    a.smoothing.method,
+                    a.smoothing.iterations,
+                    &a.smoothing.params,
+                );
                 Config::Smooth(SmoothConfig {
-                    options: options(
-                        a.smoothing.method,
-                        a.smoothing.iterations,
-                        &a.smoothing.params,
-                    ),
+                    multires: a.multires.resolve(&options)?,
+                    options,
                     engine,
                     input: a.input,
                     output: a.output,
