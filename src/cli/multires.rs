@@ -14,7 +14,7 @@ pub struct MultiresArgs {
     /// Multiresolution: vcs (--method vcs or vcs-triangle) on coarse levels built by vertex clustering with quadric placement, the displacement transferred down, then --iterations of --fine-method on the input, and a final global volume correction [default: off].
     #[arg(long)]
     pub multires: bool,
-    /// Levels of the hierarchy, the input included (2..=8); each coarse level has about 10× fewer vertices [default: 3].
+    /// Levels of the hierarchy, the input included (2..=8); each coarse level has about 18× fewer vertices (--cell-factor 4) [default: 2].
     #[arg(long, value_name = "K", requires = "multires",
           value_parser = clap::value_parser!(u32).range(2..=MAX_LEVELS as i64))]
     pub levels: Option<u32>,
@@ -24,10 +24,10 @@ pub struct MultiresArgs {
     /// Method on the input level: laplacian or taubin [default: laplacian].
     #[arg(long, value_name = "M", requires = "multires")]
     pub fine_method: Option<Method>,
-    /// How fine vertices follow their coarse representative [default: smooth].
+    /// How fine vertices follow their coarse representative [default: interpolate].
     #[arg(long, value_enum, value_name = "HOW", requires = "multires")]
     pub transfer: Option<Transfer>,
-    /// Cell edge of each coarse level, in mean edge lengths of the level below (> 1) [default: 3].
+    /// Cell edge of each coarse level, in mean edge lengths of the level below (> 1) [default: 4].
     #[arg(long, value_name = "X", requires = "multires")]
     pub cell_factor: Option<f64>,
 }
@@ -60,6 +60,9 @@ impl ValueEnum for Transfer {
         let help = match self {
             Transfer::Constant => "each fine vertex moves as its cluster's representative",
             Transfer::Smooth => "the same, diffused over about one cluster's width",
+            Transfer::Interpolate => {
+                "Shepard interpolation over the representative and its coarse neighbours"
+            }
         };
         Some(PossibleValue::new(self.name()).help(help))
     }

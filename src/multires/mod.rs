@@ -35,13 +35,15 @@ use crate::metrics;
 use crate::smooth::{Method, Options};
 pub use transfer::Transfer;
 
-/// Default number of levels, the input included: the input and two coarse levels (each about
-/// `cell_factor²` times fewer vertices than the one below).
-pub const DEFAULT_LEVELS: usize = 3;
+/// Default number of levels, the input included: the input and one coarse level with about
+/// 18× fewer vertices. A second coarse level (~300× fewer) smooths away real features of a scan
+/// when its vcs runs as many iterations: measured on the armadillo at 5.5M triangles, RMS distance
+/// to the clean mesh 4.4e-4 with three levels against 2.4e-4 with two.
+pub const DEFAULT_LEVELS: usize = 2;
 /// Largest `--levels`: beyond that a level has a handful of vertices even for billions of triangles.
 pub const MAX_LEVELS: usize = 8;
 /// Default cell edge of a coarse level, in mean edge lengths of the level below it.
-pub const DEFAULT_CELL_FACTOR: f64 = 3.0;
+pub const DEFAULT_CELL_FACTOR: f64 = 4.0;
 
 /// Options of the multiresolution mode. The coarse method and the fine iteration count come from
 /// the ordinary [`Options`] (`method`, `iterations`).
@@ -64,7 +66,7 @@ impl Default for MultiresOptions {
             levels: DEFAULT_LEVELS,
             coarse_iterations: None,
             fine_method: Method::Laplacian,
-            transfer: Transfer::Smooth,
+            transfer: Transfer::Interpolate,
             cell_factor: DEFAULT_CELL_FACTOR,
         }
     }
@@ -140,7 +142,21 @@ struct Level {
     /// `map[v]`: the vertex of this level (reordered id) representing vertex `v` of the level below.
     map: Buf<u32>,
     rest: Buf<DVec3>,
+    /// Cell edge of the clustering that built it.
+    cell: f64,
     stats: LevelStats,
+}
+
+impl Level {
+    /// This level as the transfer reads it, with displacement `disp`.
+    fn coarse<'a>(&'a self, disp: &'a [DVec3]) -> transfer::Coarse<'a> {
+        transfer::Coarse {
+            topo: &self.prep.topology,
+            rest: &self.rest,
+            disp,
+            cell: self.cell,
+        }
+    }
 }
 
 /// Smooth the plan `prep` (level 0) in multiresolution (see the module doc), creating the coarse
@@ -175,7 +191,8 @@ pub fn smooth_prepared(
         if !(edge > 0.0) {
             break;
         }
-        let c = cluster::cluster(storage, pos, tris, topo, m.cell_factor * edge)?;
+        let cell = m.cell_factor * edge;
+        let c = cluster::cluster(storage, pos, tris, topo, cell)?;
         // A level that does not shrink (or has nothing left to smooth) ends the hierarchy.
         if c.triangles.is_empty() || 2 * c.positions.len() > pos.len() {
             break;
@@ -214,6 +231,7 @@ pub fn smooth_prepared(
             prep: coarse,
             map,
             rest,
+            cell,
             stats,
         });
     }
@@ -236,7 +254,7 @@ pub fn smooth_prepared(
                 storage,
                 &p.topology,
                 &c.map,
-                d,
+                &c.coarse(d),
                 &mut p.reordered.positions,
                 m.transfer,
                 passes,
@@ -272,7 +290,7 @@ pub fn smooth_prepared(
             storage,
             &prep.topology,
             &c.map,
-            d,
+            &c.coarse(d),
             &mut prep.reordered.positions,
             m.transfer,
             passes,

@@ -20,17 +20,23 @@ pub enum Transfer {
     /// The piecewise-constant field diffused over the fine mesh (Jacobi steps of the umbrella
     /// operator on the displacements) across about one cluster's width, so that neighbouring
     /// clusters blend instead of stepping.
-    #[default]
     Smooth,
+    /// Shepard interpolation on the coarse surface: each fine vertex takes the average of the
+    /// displacements of its representative and the representative's coarse neighbours, weighted
+    /// by `(1 − (d/R)²)²` of its distance `d` to their positions as built, `R` = 1.5 cells. A
+    /// partition of unity that varies continuously with position, in one pass.
+    #[default]
+    Interpolate,
 }
 
 impl Transfer {
-    pub const ALL: [Transfer; 2] = [Transfer::Constant, Transfer::Smooth];
+    pub const ALL: [Transfer; 3] = [Transfer::Constant, Transfer::Smooth, Transfer::Interpolate];
 
     pub fn name(self) -> &'static str {
         match self {
             Transfer::Constant => "constant",
             Transfer::Smooth => "smooth",
+            Transfer::Interpolate => "interpolate",
         }
     }
 }
@@ -38,13 +44,24 @@ impl Transfer {
 /// Fixed-size chunks keep every parallel result independent of the thread count.
 const CHUNK: usize = 1 << 14;
 
-/// Add to `pos` (fine level) the displacement `coarse` of each vertex's representative `map[v]`,
-/// blended by `passes` diffusion steps for [`Transfer::Smooth`]. Fixed vertices do not move.
+/// A coarse level as the transfer reads it.
+pub struct Coarse<'a> {
+    pub topo: &'a Topology,
+    /// Positions as built (before smoothing): where each representative sat on the surface.
+    pub rest: &'a [DVec3],
+    /// Displacement of each coarse vertex.
+    pub disp: &'a [DVec3],
+    /// Cell edge of the level.
+    pub cell: f64,
+}
+
+/// Add to `pos` (fine level) the displacement of each vertex's representative `map[v]` as `how`
+/// says (`passes` diffusion steps for [`Transfer::Smooth`]). Fixed vertices do not move.
 pub fn apply(
     storage: &Storage,
     topo: &Topology,
     map: &[u32],
-    coarse: &[DVec3],
+    coarse: &Coarse,
     pos: &mut [DVec3],
     how: Transfer,
     passes: usize,
@@ -52,13 +69,18 @@ pub fn apply(
     let n = pos.len();
     let fixed = topo.fixed_mask();
     let mut d: Buf<DVec3> = storage.zeroed(n)?;
+    let radius2 = (1.5 * coarse.cell).powi(2);
+    let src: &[DVec3] = pos;
     d.par_chunks_mut(CHUNK).enumerate().for_each(|(c, out)| {
         for (k, x) in out.iter_mut().enumerate() {
             let v = c * CHUNK + k;
+            let rep = map[v];
             *x = if fixed[v] != 0 {
                 DVec3::ZERO
+            } else if how == Transfer::Interpolate {
+                shepard(coarse, rep, src[v], radius2)
             } else {
-                coarse[map[v] as usize]
+                coarse.disp[rep as usize]
             };
         }
     });
@@ -79,6 +101,25 @@ pub fn apply(
     Ok(())
 }
 
+/// The [`Transfer::Interpolate`] displacement at `p`, whose representative is `rep`.
+fn shepard(coarse: &Coarse, rep: u32, p: DVec3, radius2: f64) -> DVec3 {
+    let weight = |u: u32| {
+        let x = 1.0 - p.distance_squared(coarse.rest[u as usize]) / radius2;
+        if x > 0.0 { x * x } else { 0.0 }
+    };
+    let (mut sum, mut wsum) = (DVec3::ZERO, 0.0);
+    for u in std::iter::once(rep).chain(coarse.topo.neighbors(rep).iter().copied()) {
+        let w = weight(u);
+        sum += w * coarse.disp[u as usize];
+        wsum += w;
+    }
+    if wsum > 0.0 {
+        sum / wsum
+    } else {
+        coarse.disp[rep as usize]
+    }
+}
+
 /// Signed volume about `origin`, summed in fixed-size chunks.
 pub fn volume(pos: &[DVec3], triangles: &[[u32; 3]], origin: DVec3) -> f64 {
     let parts: Vec<f64> = triangles
@@ -96,9 +137,11 @@ pub fn volume(pos: &[DVec3], triangles: &[[u32; 3]], origin: DVec3) -> f64 {
 }
 
 /// Translate every movable vertex along its volume gradient (the area-weighted normal / 3) by one
-/// common factor so that the volume about `origin` becomes `target`: the global form of the vcs
-/// step 2. The volume is a cubic in the factor; Newton steps reach `target` to rounding in two or
-/// three passes. Returns the remaining relative volume error.
+/// common factor `t` so that the volume about `origin` becomes `target`: the global form of the vcs
+/// step 2. With the gradients `g` fixed, `V(p + t g)` is exactly a cubic in `t` (each triangle's
+/// determinant is trilinear); its coefficients take one pass over the triangles, Newton on the
+/// cubic gives `t` to rounding, and a second round removes what rounding left. Returns the
+/// remaining relative volume error.
 pub fn restore_volume(
     storage: &Storage,
     topo: &Topology,
@@ -111,7 +154,7 @@ pub fn restore_volume(
     let scale = target.abs().max(f64::MIN_POSITIVE);
     let mut grad: Buf<DVec3> = storage.zeroed(n)?;
     let mut err = (volume(pos, triangles, origin) - target) / scale;
-    for _ in 0..6 {
+    for _ in 0..2 {
         if err.abs() <= 1e-14 {
             break;
         }
@@ -123,26 +166,65 @@ pub fn restore_volume(
                 *g = if fixed[v as usize] != 0 {
                     DVec3::ZERO
                 } else {
-                    volume_gradient(topo, triangles, src, v, origin)
+                    volume_gradient(topo, triangles, src, v, src[v as usize])
                 };
             }
         });
-        let gg: f64 = grad
-            .par_chunks(CHUNK)
-            .map(|ch| ch.iter().map(|g| g.length_squared()).sum::<f64>())
-            .collect::<Vec<_>>()
-            .iter()
-            .sum();
-        if !(gg > 0.0 && gg.is_finite()) {
+        let cubic = volume_cubic(triangles, pos, &grad, origin);
+        let Some(t) = solve_cubic(cubic, target) else {
             break;
-        }
-        let t = -err * scale / gg;
+        };
         pos.par_chunks_mut(CHUNK)
             .zip(grad.par_chunks(CHUNK))
             .for_each(|(p, g)| p.iter_mut().zip(g).for_each(|(p, g)| *p += t * *g));
         err = (volume(pos, triangles, origin) - target) / scale;
     }
     Ok(err)
+}
+
+/// Coefficients `[c0, c1, c2, c3]` of `V(p + t g) = c0 + c1 t + c2 t² + c3 t³` about `origin`.
+fn volume_cubic(triangles: &[[u32; 3]], pos: &[DVec3], grad: &[DVec3], origin: DVec3) -> [f64; 4] {
+    let det = |a: DVec3, b: DVec3, c: DVec3| a.dot(b.cross(c));
+    let parts: Vec<[f64; 4]> = triangles
+        .par_chunks(CHUNK)
+        .map(|ch| {
+            let mut s = [0.0; 4];
+            for t in ch {
+                let [a, b, c] = t.map(|v| pos[v as usize] - origin);
+                let [ga, gb, gc] = t.map(|v| grad[v as usize]);
+                s[0] += det(a, b, c);
+                s[1] += det(ga, b, c) + det(a, gb, c) + det(a, b, gc);
+                s[2] += det(ga, gb, c) + det(ga, b, gc) + det(a, gb, gc);
+                s[3] += det(ga, gb, gc);
+            }
+            s
+        })
+        .collect();
+    let mut s = [0.0; 4];
+    for p in &parts {
+        for k in 0..4 {
+            s[k] += p[k] / 6.0;
+        }
+    }
+    s
+}
+
+/// The root of `cubic(t) = target` nearest 0, by Newton from 0; `None` if the slope vanishes.
+fn solve_cubic(c: [f64; 4], target: f64) -> Option<f64> {
+    let mut t = 0.0;
+    for _ in 0..50 {
+        let f = c[0] + t * (c[1] + t * (c[2] + t * c[3])) - target;
+        let df = c[1] + t * (2.0 * c[2] + t * 3.0 * c[3]);
+        if !(df.abs() > 0.0 && df.is_finite()) {
+            return None;
+        }
+        let step = f / df;
+        t -= step;
+        if step.abs() <= 1e-16 * t.abs().max(f64::MIN_POSITIVE) {
+            break;
+        }
+    }
+    t.is_finite().then_some(t)
 }
 
 /// The normal component of `now − rest` at every vertex (normals from the volume gradient at `now`,
