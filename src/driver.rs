@@ -536,9 +536,14 @@ pub fn run_file(
     engine: &EngineSettings,
     observer: &mut dyn Observer,
 ) -> Result<FileRun> {
-    run_file_with(input, output, opts, engine, observer, |prep, storage, obs| {
-        prep.smooth(storage, opts, obs)
-    })
+    run_file_with(
+        input,
+        output,
+        opts,
+        engine,
+        observer,
+        |prep, storage, obs| prep.smooth(storage, opts, obs),
+    )
 }
 
 /// [`run_file`] with the smoothing step given: `smooth(plan, storage, observer)` moves the plan's
@@ -550,7 +555,7 @@ pub fn run_file_with(
     engine: &EngineSettings,
     observer: &mut dyn Observer,
     smooth: impl FnOnce(&mut Prepared, &Storage, &mut dyn Observer) -> Result<Vec<IterationRecord>>
-        + Send,
+    + Send,
 ) -> Result<FileRun> {
     validate(opts)?;
     let start = Instant::now();

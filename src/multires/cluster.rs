@@ -170,10 +170,7 @@ fn coarse_triangles(
 ) -> Result<Buf<[u32; 3]>> {
     let mapped = |t: &[u32; 3]| t.map(|v| map[v as usize]);
     let distinct = |t: [u32; 3]| t[0] != t[1] && t[1] != t[2] && t[0] != t[2];
-    let count = triangles
-        .par_iter()
-        .filter(|t| distinct(mapped(t)))
-        .count();
+    let count = triangles.par_iter().filter(|t| distinct(mapped(t))).count();
     let mut out: Buf<[u32; 3]> = storage.zeroed(count)?;
     let mut k = 0;
     for t in triangles.iter() {

@@ -364,12 +364,19 @@ pub fn run_file(
 ) -> Result<(FileRun, MultiresStats)> {
     validate(opts, m)?;
     let mut stats = None;
-    let run = driver::run_file_with(input, output, opts, engine, observer, |prep, storage, obs| {
-        let (records, s) = smooth_prepared(prep, storage, opts, m, engine.patch_size, obs)
-            .map_err(|e| e.in_file(input))?;
-        stats = Some(s);
-        Ok(records)
-    })?;
+    let run = driver::run_file_with(
+        input,
+        output,
+        opts,
+        engine,
+        observer,
+        |prep, storage, obs| {
+            let (records, s) = smooth_prepared(prep, storage, opts, m, engine.patch_size, obs)
+                .map_err(|e| e.in_file(input))?;
+            stats = Some(s);
+            Ok(records)
+        },
+    )?;
     let stats = stats.ok_or_else(|| Error::Config("multires: no statistics".into()))?;
     Ok((run, stats))
 }

@@ -87,11 +87,9 @@ pub fn apply(
     if how == Transfer::Smooth && passes > 0 {
         let mut tmp: Buf<DVec3> = storage.zeroed(n)?;
         for _ in 0..passes {
-            tmp.par_chunks_mut(CHUNK)
-                .enumerate()
-                .for_each(|(c, out)| {
-                    laplacian::jacobi_step(topo, &d, out, c * CHUNK, 0.5);
-                });
+            tmp.par_chunks_mut(CHUNK).enumerate().for_each(|(c, out)| {
+                laplacian::jacobi_step(topo, &d, out, c * CHUNK, 0.5);
+            });
             std::mem::swap(&mut d, &mut tmp);
         }
     }
@@ -244,8 +242,7 @@ pub fn normal_displacement(
     out.par_chunks_mut(CHUNK).enumerate().for_each(|(c, out)| {
         for (k, d) in out.iter_mut().enumerate() {
             let v = c * CHUNK + k;
-            let n = volume_gradient(topo, triangles, now, v as u32, now[v])
-                .normalize_or_zero();
+            let n = volume_gradient(topo, triangles, now, v as u32, now[v]).normalize_or_zero();
             *d = n * n.dot(now[v] - rest[v]);
         }
     });
@@ -259,14 +256,82 @@ fn volume_gradient(
     v: u32,
     origin: DVec3,
 ) -> DVec3 {
-    topo.faces_of(v)
-        .iter()
-        .fold(DVec3::ZERO, |s, &f| {
-            let t = triangles[f as usize];
-            let i = t.iter().position(|&u| u == v).unwrap_or(0);
-            let b = pos[t[(i + 1) % 3] as usize] - origin;
-            let c = pos[t[(i + 2) % 3] as usize] - origin;
-            s + b.cross(c)
-        })
-        / 6.0
+    topo.faces_of(v).iter().fold(DVec3::ZERO, |s, &f| {
+        let t = triangles[f as usize];
+        let i = t.iter().position(|&u| u == v).unwrap_or(0);
+        let b = pos[t[(i + 1) % 3] as usize] - origin;
+        let c = pos[t[(i + 2) % 3] as usize] - origin;
+        s + b.cross(c)
+    }) / 6.0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::generate;
+
+    #[test]
+    fn restore_volume_reaches_the_target_and_leaves_fixed_vertices() {
+        let mut m = generate::icosphere(3);
+        let topo = Topology::build(m.positions.len(), &m.triangles).unwrap();
+        let target = volume(&m.positions, &m.triangles, DVec3::ZERO);
+        for p in m.positions.iter_mut() {
+            *p *= 0.9;
+        }
+        let err = restore_volume(
+            &Storage::heap(),
+            &topo,
+            &m.triangles,
+            &mut m.positions,
+            target,
+            DVec3::ZERO,
+        )
+        .unwrap();
+        assert!(err.abs() < 1e-14, "{err:e}");
+        let v = volume(&m.positions, &m.triangles, DVec3::ZERO);
+        assert!(((v - target) / target).abs() < 1e-14);
+        // A uniform shrink comes back as a uniform inflation: still a sphere.
+        let r: Vec<f64> = m.positions.iter().map(|p| p.length()).collect();
+        let (lo, hi) = r
+            .iter()
+            .fold((f64::MAX, 0.0f64), |(a, b), &x| (a.min(x), b.max(x)));
+        // (The gradient is area-weighted: vertices with larger areas move a little more.)
+        assert!(hi - lo < 0.05, "{lo}..{hi}");
+    }
+
+    #[test]
+    fn a_common_displacement_reaches_every_fine_vertex_unchanged() {
+        let fine = generate::icosphere(3);
+        let coarse = generate::icosphere(1);
+        let ft = Topology::build(fine.positions.len(), &fine.triangles).unwrap();
+        let ct = Topology::build(coarse.positions.len(), &coarse.triangles).unwrap();
+        // Nearest coarse vertex as the representative.
+        let map: Vec<u32> = fine
+            .positions
+            .iter()
+            .map(|p| {
+                (0..coarse.positions.len())
+                    .min_by(|&a, &b| {
+                        p.distance(coarse.positions[a])
+                            .total_cmp(&p.distance(coarse.positions[b]))
+                    })
+                    .unwrap() as u32
+            })
+            .collect();
+        let d = DVec3::new(0.01, -0.02, 0.03);
+        let disp = vec![d; coarse.positions.len()];
+        for how in Transfer::ALL {
+            let c = Coarse {
+                topo: &ct,
+                rest: &coarse.positions,
+                disp: &disp,
+                cell: 0.6,
+            };
+            let mut pos = fine.positions.to_vec();
+            apply(&Storage::heap(), &ft, &map, &c, &mut pos, how, 4).unwrap();
+            for (a, b) in pos.iter().zip(fine.positions.iter()) {
+                assert!((*a - *b - d).length() < 1e-15, "{how:?}");
+            }
+        }
+    }
 }
