@@ -154,7 +154,7 @@ fn place(
     }
     let reg = a + DMat3::from_diagonal(DVec3::splat(QEM_REGULARISATION * trace));
     let det = reg.determinant();
-    if !(det.abs() > 1e-300) {
+    if det.abs() <= 1e-300 || det.is_nan() {
         return mean;
     }
     let y = reg.inverse() * b;

@@ -188,7 +188,7 @@ pub fn smooth_prepared(
             &finer.topology,
         );
         let edge = metrics::mean_edge_length(pos, topo);
-        if !(edge > 0.0) {
+        if edge.is_nan() || edge <= 0.0 {
             break;
         }
         let cell = m.cell_factor * edge;
