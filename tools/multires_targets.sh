@@ -73,7 +73,7 @@ row() {
     local vol rms
     vol=$($B compare "$noisy" "$out" --json | json volume_ratio)
     rms=$($B compare "$clean" "$out" --json | json rms_distance)
-    python3 -c "print(f'{\"$name\":<10} {$(roughness "$out"):>12.4f} {abs($vol - 1) * 100:>14.6f} {$rms:>14.4e} {$s:>11.3f} {$t:>9.3f}')"
+    python3 -c "print(f'{\"$name\":<10} {$(roughness "$out"):>12.4f} {abs($vol - 1) * 100:>14.2e} {$rms:>14.4e} {$s:>11.3f} {$t:>9.3f}')"
 }
 echo
 printf '%-10s %12s %14s %14s %11s %9s\n' method "roughness °" "|ΔV| / V %" "RMS to clean" "smoothing s" "total s"
