@@ -552,6 +552,27 @@ pub fn run_file(
     engine: &EngineSettings,
     observer: &mut dyn Observer,
 ) -> Result<FileRun> {
+    run_file_with(
+        input,
+        output,
+        opts,
+        engine,
+        observer,
+        |prep, storage, obs| prep.smooth(storage, opts, obs),
+    )
+}
+
+/// [`run_file`] with the smoothing step given: `smooth(plan, storage, observer)` moves the plan's
+/// reordered positions and returns the iteration records (multiresolution mode plugs in here).
+pub fn run_file_with(
+    input: &Path,
+    output: &Path,
+    opts: &Options,
+    engine: &EngineSettings,
+    observer: &mut dyn Observer,
+    smooth: impl FnOnce(&mut Prepared, &Storage, &mut dyn Observer) -> Result<Vec<IterationRecord>>
+    + Send,
+) -> Result<FileRun> {
     validate(opts)?;
     let start = Instant::now();
     let sampler = resources::PeakSampler::start(std::time::Duration::from_millis(20));
@@ -589,7 +610,7 @@ pub fn run_file(
         t.metrics += clock.elapsed().as_secs_f64();
 
         let clock = Instant::now();
-        let records = prep.smooth(&storage, opts, observer)?;
+        let records = smooth(&mut prep, &storage, observer)?;
         t.smoothing = clock.elapsed().as_secs_f64();
 
         let clock = Instant::now();

@@ -19,6 +19,7 @@ pub mod generate;
 pub mod io;
 pub mod mesh;
 pub mod metrics;
+pub mod multires;
 pub mod partition;
 pub mod refine;
 pub mod resources;

@@ -139,6 +139,8 @@ pub struct SmoothArgs {
     pub output: PathBuf,
     #[command(flatten)]
     pub smoothing: SmoothingArgs,
+    #[command(flatten)]
+    pub multires: super::multires::MultiresArgs,
     /// Write a JSON report (options, input/output statistics, timings, per-iteration table).
     #[arg(long, value_name = "FILE.json")]
     pub report: Option<PathBuf>,

@@ -32,10 +32,30 @@ pub fn smooth(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) 
         let Some(cluster) = cfg.cluster(comm.size()) else {
             progress.phase(format!("smoothing {}", cfg.input.display()));
             progress.iterations(cfg.options.method.name(), cfg.options.iterations);
-            let run =
-                driver::run_file(&cfg.input, &cfg.output, &cfg.options, &cfg.engine, progress)?;
-            return smooth_report(cfg, &run, progress, out);
+            let (run, multires) = match &cfg.multires {
+                None => (
+                    driver::run_file(&cfg.input, &cfg.output, &cfg.options, &cfg.engine, progress)?,
+                    None,
+                ),
+                Some(m) => {
+                    let (run, stats) = crate::multires::run_file(
+                        &cfg.input,
+                        &cfg.output,
+                        &cfg.options,
+                        m,
+                        &cfg.engine,
+                        progress,
+                    )?;
+                    (run, Some(stats))
+                }
+            };
+            return smooth_report(cfg, &run, multires, progress, out);
         };
+        if cfg.multires.is_some() {
+            return Err(Error::Config(
+                "--multires runs in one process; it cannot be combined with --checkpoint or MPI ranks".into(),
+            ));
+        }
         let lead = comm.rank() == 0;
         if lead {
             progress.phase(format!(
@@ -66,7 +86,7 @@ pub fn smooth(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) 
         if !lead {
             return Ok(());
         }
-        smooth_report(cfg, &run, progress, out)
+        smooth_report(cfg, &run, None, progress, out)
     })
 }
 
@@ -74,6 +94,7 @@ pub fn smooth(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) 
 fn smooth_report(
     cfg: &SmoothConfig,
     run: &driver::FileRun,
+    multires: Option<crate::multires::MultiresStats>,
     progress: &mut Progress,
     out: &mut dyn Write,
 ) -> Result<()> {
@@ -100,6 +121,7 @@ fn smooth_report(
             cluster: run.cluster.clone(),
             summary: Summary::of(records),
             iterations: records.clone(),
+            multires: multires.clone(),
         };
         write_json(path, &report)?;
     }
@@ -128,6 +150,9 @@ fn smooth_report(
     out.write_all(text.as_bytes()).map_err(stdout_error)?;
     if !records.is_empty() {
         print_iterations(out, records)?;
+    }
+    if let Some(m) = &multires {
+        super::multires::print_multires(out, m)?;
     }
     let (t, p, m) = (&run.timings, &run.plan, &run.memory);
     writeln!(

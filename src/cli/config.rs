@@ -90,6 +90,8 @@ pub struct SmoothConfig {
     pub engine: EngineConfig,
     pub report: Option<PathBuf>,
     pub plot: Option<PathBuf>,
+    /// `--multires` and its options.
+    pub multires: Option<crate::multires::MultiresOptions>,
     /// `--checkpoint DIR` (kept) and `--checkpoint-every`.
     pub checkpoint: Option<PathBuf>,
     pub checkpoint_every: usize,
@@ -176,12 +178,21 @@ impl Config {
                 }
                 let mut engine = engine(&a.smoothing.engine)?;
                 engine.with_stats = a.report.is_some();
+                let options = options(
+                    a.smoothing.method,
+                    a.smoothing.iterations,
+                    &a.smoothing.params,
+                );
+                let multires = a.multires.resolve(&options)?;
+                if multires.is_some() && a.cluster.checkpoint.is_some() {
+                    return Err(Error::Config(
+                        "--multires cannot be combined with --checkpoint (it runs in one process)"
+                            .into(),
+                    ));
+                }
                 Config::Smooth(SmoothConfig {
-                    options: options(
-                        a.smoothing.method,
-                        a.smoothing.iterations,
-                        &a.smoothing.params,
-                    ),
+                    multires,
+                    options,
                     engine,
                     input: a.input,
                     output: a.output,

@@ -18,6 +18,7 @@ pub mod args;
 pub mod batch;
 pub mod commands;
 pub mod config;
+pub mod multires;
 pub mod output;
 pub mod plot;
 pub mod progress;

@@ -107,8 +107,11 @@ pub struct SmoothReport {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub cluster: Option<crate::cluster::ClusterStats>,
     pub summary: Summary,
-    /// One row per iteration.
+    /// One row per iteration (with `--multires`: of the input level).
     pub iterations: Vec<IterationRecord>,
+    /// Per level of `--multires`: vertices, method, iterations, seconds.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub multires: Option<crate::multires::MultiresStats>,
 }
 
 /// The JSON of `vcsmooth info --json`: the path, the format and every [`MeshInfo`] field.

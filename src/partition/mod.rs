@@ -88,7 +88,7 @@ pub fn reorder(
 }
 
 /// Interleave the low 21 bits of x, y, z into a 63-bit Morton key.
-fn morton3(x: u64, y: u64, z: u64) -> u64 {
+pub(crate) fn morton3(x: u64, y: u64, z: u64) -> u64 {
     fn spread(mut v: u64) -> u64 {
         v &= 0x1f_ffff;
         v = (v | v << 32) & 0x1f_0000_0000_ffff;

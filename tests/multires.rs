@@ -1,0 +1,367 @@
+//! `smooth --multires` (issue #6): volume and roughness on the real scans, the hierarchy's
+//! sanity, bit-identical output for any thread count and between in-core and scratch storage,
+//! fixed vertices, and usage errors.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use glam::DVec3;
+use vcsmooth::driver::{Prepared, Quiet, thread_pool};
+use vcsmooth::mesh::Storage;
+use vcsmooth::multires::{self, MultiresOptions, Transfer, cluster};
+use vcsmooth::{Mesh, Method, Options, Topology, generate, io, metrics};
+
+fn shared_meshes() -> Vec<PathBuf> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/meshes");
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap_or_else(|e| panic!("{}: {e} (the tests need ../shared)", dir.display()))
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "ply"))
+        .collect();
+    files.sort();
+    assert_eq!(files.len(), 6, "expected the six scans of ../shared/meshes");
+    files
+}
+
+fn noisy_sphere(k: u32, sigma: f64, seed: u64) -> Mesh {
+    let mut m = generate::icosphere(k);
+    generate::add_normal_noise(&mut m, sigma, seed);
+    m
+}
+
+/// Multires-smooth `mesh` on `threads` threads with patches of `patch`; positions in input order.
+fn run(
+    mesh: &Mesh,
+    opts: &Options,
+    m: &MultiresOptions,
+    threads: usize,
+    patch: usize,
+) -> (Vec<DVec3>, multires::MultiresStats) {
+    let pool = thread_pool(Some(threads)).unwrap();
+    pool.install(|| {
+        let storage = Storage::heap();
+        let mut prep = Prepared::new(&storage, &mesh.positions, &mesh.triangles, patch).unwrap();
+        let (_, stats) =
+            multires::smooth_prepared(&mut prep, &storage, opts, m, patch, &mut Quiet).unwrap();
+        let mut out = vec![DVec3::ZERO; mesh.positions.len()];
+        prep.positions_in_input_order(&mut out);
+        (out, stats)
+    })
+}
+
+fn opts(iterations: usize) -> Options {
+    Options {
+        method: Method::Vcs,
+        iterations,
+        ..Default::default()
+    }
+}
+
+#[test]
+fn real_scans_keep_their_volume_and_get_smoother_with_fixed_vertices_unmoved() {
+    for path in shared_meshes() {
+        let mut mesh = io::read_mesh(&path).unwrap();
+        let topo = Topology::build(mesh.positions.len(), &mesh.triangles).unwrap();
+        let edge = metrics::mean_edge_length(&mesh.positions, &topo);
+        // Noise along the coordinate axes scaled to the scan (the scans are not all closed).
+        let mut rng = 0x9e3779b97f4a7c15u64;
+        for (v, p) in mesh.positions.iter_mut().enumerate() {
+            if topo.is_fixed(v as u32) {
+                continue;
+            }
+            let mut r = || {
+                rng ^= rng << 13;
+                rng ^= rng >> 7;
+                rng ^= rng << 17;
+                (rng >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+            };
+            *p += DVec3::new(r(), r(), r()) * (0.4 * edge);
+        }
+        let origin = metrics::centroid(&mesh.positions);
+        let v_in = metrics::volume_about(&mesh.positions, &mesh.triangles, origin);
+        let r_in = metrics::roughness(&mesh.positions, &mesh.triangles, &topo);
+        let (out, stats) = run(&mesh, &opts(5), &MultiresOptions::default(), 2, 4096);
+        let v_out = metrics::volume_about(&out, &mesh.triangles, origin);
+        let r_out = metrics::roughness(&out, &mesh.triangles, &topo);
+        let name = path.file_name().unwrap().to_string_lossy();
+        let change = ((v_out - v_in) / v_in).abs();
+        assert!(change < 1e-9, "{name}: volume changed by {change:e}");
+        assert!(r_out < 0.8 * r_in, "{name}: roughness {r_in} -> {r_out}");
+        assert_eq!(stats.levels.len(), 2, "{name}: {:?}", stats.levels);
+        assert!(stats.levels[1].vertices * 4 < stats.levels[0].vertices);
+        for (v, (a, b)) in mesh.positions.iter().zip(&out).enumerate() {
+            if topo.is_fixed(v as u32) {
+                assert_eq!(a, b, "{name}: fixed vertex {v} moved");
+            }
+        }
+        // After rounding to float, as written: still well under the issue's 0.05 %.
+        let rounded: Vec<DVec3> = out.iter().map(|p| p.as_vec3().as_dvec3()).collect();
+        let v_f32 = metrics::volume_about(&rounded, &mesh.triangles, origin);
+        assert!(((v_f32 - v_in) / v_in).abs() < 1e-6, "{name}");
+    }
+}
+
+#[test]
+fn hierarchy_maps_every_fine_vertex_to_a_valid_coarse_one() {
+    let mesh = noisy_sphere(5, 0.3, 3);
+    let topo = Topology::build(mesh.positions.len(), &mesh.triangles).unwrap();
+    let edge = metrics::mean_edge_length(&mesh.positions, &topo);
+    let c = cluster::cluster(
+        &Storage::heap(),
+        &mesh.positions,
+        &mesh.triangles,
+        &topo,
+        4.0 * edge,
+    )
+    .unwrap();
+    let n = c.positions.len();
+    assert!(
+        n > 20 && n * 8 < mesh.positions.len(),
+        "{n} coarse vertices"
+    );
+    assert_eq!(c.map.len(), mesh.positions.len());
+    let mut used = vec![false; n];
+    for (v, &r) in c.map.iter().enumerate() {
+        assert!((r as usize) < n, "vertex {v} maps to {r} of {n}");
+        used[r as usize] = true;
+        // A representative stays near its members (within about two cells).
+        assert!(mesh.positions[v].distance(c.positions[r as usize]) < 8.0 * edge);
+    }
+    assert!(
+        used.iter().all(|&u| u),
+        "a coarse vertex represents nothing"
+    );
+    let mut seen = std::collections::HashSet::new();
+    for t in c.triangles.iter() {
+        assert!(t.iter().all(|&v| (v as usize) < n));
+        assert!(
+            t[0] != t[1] && t[1] != t[2] && t[0] != t[2],
+            "degenerate {t:?}"
+        );
+        let mut s = *t;
+        s.sort();
+        assert!(seen.insert(s), "duplicate {t:?}");
+    }
+    // The coarse sphere is a sphere: every representative near the unit sphere, and closed
+    // enough to have a volume close to the fine one.
+    for p in c.positions.iter() {
+        assert!((p.length() - 1.0).abs() < 0.05, "{p}");
+    }
+    let ratio = metrics::volume(&c.positions, &c.triangles)
+        / metrics::volume(&mesh.positions, &mesh.triangles);
+    assert!((ratio - 1.0).abs() < 0.02, "coarse/fine volume {ratio}");
+}
+
+#[test]
+fn multires_smooths_a_sphere_without_shrinking_and_every_transfer_works() {
+    let mesh = noisy_sphere(5, 0.3, 11);
+    let clean = generate::icosphere(5);
+    let topo = Topology::build(mesh.positions.len(), &mesh.triangles).unwrap();
+    let r_in = metrics::roughness(&mesh.positions, &mesh.triangles, &topo);
+    let v_in = metrics::volume(&mesh.positions, &mesh.triangles);
+    for transfer in Transfer::ALL {
+        for fine_method in [Method::Laplacian, Method::Taubin] {
+            let m = MultiresOptions {
+                transfer,
+                fine_method,
+                ..Default::default()
+            };
+            let (out, stats) = run(&mesh, &opts(8), &m, 2, 2048);
+            let r = metrics::roughness(&out, &mesh.triangles, &topo);
+            let v = metrics::volume(&out, &mesh.triangles);
+            assert!(
+                r < 0.5 * r_in,
+                "{transfer:?} {fine_method}: roughness {r_in} -> {r}"
+            );
+            assert!(
+                ((v - v_in) / v_in).abs() < 1e-9,
+                "{transfer:?} {fine_method}"
+            );
+            assert!(stats.volume_error < 1e-12);
+            assert_eq!(stats.levels.len(), 2);
+            assert!(stats.levels[1].vertices * 4 < stats.levels[0].vertices);
+            let rms = (out
+                .iter()
+                .zip(clean.positions.iter())
+                .map(|(a, b)| a.distance_squared(*b))
+                .sum::<f64>()
+                / out.len() as f64)
+                .sqrt();
+            let noise_rms = (mesh
+                .positions
+                .iter()
+                .zip(clean.positions.iter())
+                .map(|(a, b)| a.distance_squared(*b))
+                .sum::<f64>()
+                / out.len() as f64)
+                .sqrt();
+            assert!(
+                rms < noise_rms,
+                "{transfer:?} {fine_method}: {rms} vs noise {noise_rms}"
+            );
+        }
+    }
+}
+
+#[test]
+fn output_is_bit_identical_for_any_thread_count() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/meshes/armadillo-86k.ply");
+    let mut mesh = io::read_mesh(&path).unwrap();
+    let topo = Topology::build(mesh.positions.len(), &mesh.triangles).unwrap();
+    let edge = metrics::mean_edge_length(&mesh.positions, &topo);
+    for (v, p) in mesh.positions.iter_mut().enumerate() {
+        let s = ((v as f64) * 12.9898).sin() * 43758.5453;
+        *p += DVec3::splat((s - s.floor() - 0.5) * 0.5 * edge);
+    }
+    let m = MultiresOptions {
+        levels: 3,
+        cell_factor: 3.0,
+        ..Default::default()
+    };
+    let (one, _) = run(&mesh, &opts(3), &m, 1, 1024);
+    for threads in [2, 5] {
+        let (other, _) = run(&mesh, &opts(3), &m, threads, 1024);
+        assert!(one == other, "{threads} threads differ from 1");
+    }
+}
+
+fn vcsmooth(args: &[String]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_vcsmooth"))
+        .args(args)
+        .output()
+        .expect("run vcsmooth")
+}
+
+fn ok(o: Output) -> String {
+    assert!(
+        o.status.success(),
+        "stderr: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn strings(a: &[&str]) -> Vec<String> {
+    a.iter().map(|s| s.to_string()).collect()
+}
+
+/// In-core and scratch-mapped (`--memory-budget 64M`) runs write the same bytes, with 1 and 2
+/// threads; the report has one row per level; no scratch is left behind.
+#[test]
+fn in_core_equals_out_of_core_through_the_cli() {
+    let dir = tempfile::tempdir().unwrap();
+    let scratch = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in.ply").display().to_string();
+    // Level 8 (1.3M triangles) is the smallest sphere whose in-core estimate exceeds 64M.
+    ok(vcsmooth(&strings(&[
+        "generate",
+        "sphere",
+        &input,
+        "--subdivisions",
+        "8",
+        "--noise",
+        "0.3",
+    ])));
+    let run = |name: &str, extra: &[&str]| -> (Vec<u8>, serde_json::Value) {
+        let out = dir.path().join(format!("{name}.ply")).display().to_string();
+        let report = dir
+            .path()
+            .join(format!("{name}.json"))
+            .display()
+            .to_string();
+        let mut args = strings(&[
+            "smooth",
+            &input,
+            &out,
+            "--multires",
+            "--iterations",
+            "2",
+            "--coarse-iterations",
+            "1",
+            "--patch-size",
+            "8192",
+            "--report",
+            &report,
+        ]);
+        args.extend(strings(extra));
+        let text = ok(vcsmooth(&args));
+        assert!(
+            text.contains("level") && text.contains("laplacian"),
+            "{text}"
+        );
+        let json = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+        (std::fs::read(&out).unwrap(), json)
+    };
+    let (heap, r) = run("heap", &["--threads", "1"]);
+    assert_eq!(r["memory"]["storage"], "heap");
+    let levels = r["multires"]["levels"].as_array().unwrap();
+    assert_eq!(levels.len(), 2);
+    assert_eq!(levels[0]["method"], "laplacian");
+    assert_eq!(levels[1]["method"], "vcs");
+    assert!(levels[1]["vertices"].as_u64() < levels[0]["vertices"].as_u64());
+    let v = r["output"]["stats"]["volume"].as_f64().unwrap()
+        / r["input"]["stats"]["volume"].as_f64().unwrap();
+    assert!((v - 1.0).abs() < 1e-9, "volume ratio {v}");
+    let sdir = scratch.path().display().to_string();
+    let (mapped, rm) = run(
+        "mapped",
+        &[
+            "--threads",
+            "2",
+            "--memory-budget",
+            "64M",
+            "--scratch",
+            &sdir,
+        ],
+    );
+    assert_eq!(rm["memory"]["storage"], "scratch");
+    assert!(
+        mapped == heap,
+        "scratch-mapped multires run differs from in-core"
+    );
+    assert_eq!(
+        std::fs::read_dir(scratch.path()).unwrap().count(),
+        0,
+        "scratch left behind"
+    );
+}
+
+#[test]
+fn usage_errors_are_one_line_and_write_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in.ply").display().to_string();
+    let out = dir.path().join("out.ply");
+    ok(vcsmooth(&strings(&[
+        "generate",
+        "sphere",
+        &input,
+        "--subdivisions",
+        "2",
+    ])));
+    let o = out.display().to_string();
+    for (extra, needle) in [
+        (
+            vec!["--multires", "--method", "laplacian"],
+            "--multires runs vcs or vcs-triangle",
+        ),
+        (
+            vec!["--multires", "--fine-method", "vcs"],
+            "--fine-method must be laplacian or taubin",
+        ),
+        (vec!["--levels", "3"], "--multires"),
+        (vec!["--multires", "--levels", "1"], "--levels"),
+        (vec!["--multires", "--cell-factor", "0.5"], "cell factor"),
+        (vec!["--multires", "--transfer", "nearest"], "--transfer"),
+    ] {
+        let mut args = strings(&["smooth", &input, &o]);
+        args.extend(strings(&extra));
+        let r = vcsmooth(&args);
+        let err = String::from_utf8_lossy(&r.stderr);
+        assert_eq!(r.status.code(), Some(2), "{extra:?}: {err}");
+        assert!(err.contains(needle), "{extra:?}: {err}");
+        assert!(!out.exists(), "{extra:?} wrote an output");
+    }
+    // The smallest meshes still work: a coarse level that does not shrink is simply not built.
+    ok(vcsmooth(&strings(&["smooth", &input, &o, "--multires"])));
+    assert!(out.exists());
+}
