@@ -171,7 +171,7 @@ fn smooth_report(
     if let Some(c) = &run.cluster {
         writeln!(
             out,
-            "cluster: {}, {}-{} owned vertices and up to {} held per rank, {} halo values per iteration (largest rank {}/iteration), largest rank peak {}; resumed after {}, checkpoint every {}",
+            "cluster: {}, {}-{} owned vertices and up to {} held per rank, {} halo values per iteration (largest rank {}/iteration), largest rank peak {} ({} while smoothing); resumed after {}, checkpoint every {}",
             count(c.ranks, "rank"),
             c.owned_vertices_min,
             c.owned_vertices_max,
@@ -179,6 +179,7 @@ fn smooth_report(
             c.halo_values_per_iteration,
             crate::resources::format_size(c.halo_bytes_per_iteration_max),
             crate::resources::format_size(c.peak_anon_max),
+            crate::resources::format_size(c.smoothing_peak_anon_max),
             count(c.resumed_after, "iteration"),
             count(c.checkpoint_every, "iteration"),
         )

@@ -81,8 +81,10 @@ pub struct ClusterStats {
     /// Vertex values sent per iteration, all ranks together, and the largest share of one rank.
     pub halo_values_per_iteration: u64,
     pub halo_bytes_per_iteration_max: u64,
-    /// Largest peak anonymous memory of a rank.
+    /// Largest peak anonymous memory of a rank over the whole run (rank 0's includes preparing
+    /// the plan), and while smoothing only.
     pub peak_anon_max: u64,
+    pub smoothing_peak_anon_max: u64,
 }
 
 /// Smooth `input` into `output` with the ranks of `comm` (see the module doc). Every rank calls
@@ -119,6 +121,7 @@ pub fn run_file(
     agree(comm, made, "rank 0 could not prepare the plan")?;
 
     // 2. Every rank maps the plan and finds its part.
+    let smoothing_sampler = resources::PeakSampler::start(std::time::Duration::from_millis(20));
     let opened = work.open_plan().and_then(|plan| {
         let state = work.read_state()?;
         if state.done > opts.iterations {
@@ -144,6 +147,8 @@ pub fn run_file(
     let smoothed = rank.iterate(opts, cluster.checkpoint_every, observer);
     let (state, traffic) = agree(comm, smoothed, "another rank failed while smoothing")?;
     t.smoothing = clock.elapsed().as_secs_f64();
+    let smoothing_peak = smoothing_sampler.peak() as f64;
+    drop(smoothing_sampler);
 
     // 4. Rank 0 writes the output in the input's order.
     let clock = Instant::now();
@@ -166,7 +171,7 @@ pub fn run_file(
     let values = traffic.values as f64 / iterations_run;
     let bytes = traffic.bytes as f64 / iterations_run;
     let peak = sampler.peak() as f64;
-    let maxima = comm.max(&[owned, -owned, region, bytes, peak]);
+    let maxima = comm.max(&[owned, -owned, region, bytes, peak, smoothing_peak]);
     let sums = comm.sum(&[values]);
     let doc = &plan.doc;
     let halo = &doc.halo;
@@ -206,6 +211,7 @@ pub fn run_file(
             halo_values_per_iteration: sums[0] as u64,
             halo_bytes_per_iteration_max: maxima[3] as u64,
             peak_anon_max: maxima[4] as u64,
+            smoothing_peak_anon_max: maxima[5] as u64,
         }),
     })
 }
