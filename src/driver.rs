@@ -360,33 +360,43 @@ fn sweep_colours(
         for &p in next {
             prefetch.hint(patches[p as usize].vertices.clone());
         }
-        let stats = colour
-            .par_iter()
-            .map_init(Workspace::default, |ws, &p| {
-                let (mut pv, mut sv) = (pos_view, sums_view);
-                let patch = &patches[p as usize];
-                if opts.method == Method::VcsTriangle {
-                    let faces = patch.triangles.clone();
-                    stencil::sweep_triangles(topo, tris, &mut pv, &mut sv, faces, params, ws)
-                } else {
-                    stencil::sweep_edges(
-                        topo,
-                        tris,
-                        &mut pv,
-                        &mut sv,
-                        patch.edges(topo),
-                        params,
-                        ws,
-                    )
-                }
-            })
-            .reduce(SweepStats::default, |mut a, b| {
-                a.add(&b);
-                a
-            });
+        let mine: Vec<Patch> = colour
+            .iter()
+            .map(|&p| patches[p as usize].clone())
+            .collect();
+        let stats = sweep_patches(topo, tris, pos_view, sums_view, &mine, opts.method, params);
         total.add(&stats);
     }
     total
+}
+
+/// The stencils of `patches` (all of one colour, so they touch disjoint data), in parallel on the
+/// current rayon pool through the shared views, each patch's in ascending order.
+pub(crate) fn sweep_patches(
+    topo: &Topology,
+    tris: &[[u32; 3]],
+    pos: SharedField,
+    sums: SharedField,
+    patches: &[Patch],
+    method: Method,
+    params: StencilParams,
+) -> SweepStats {
+    patches
+        .par_iter()
+        .map_init(Workspace::default, |ws, patch| {
+            let (mut pv, mut sv) = (pos, sums);
+            if method == Method::VcsTriangle {
+                let faces = patch.triangles.clone();
+                stencil::sweep_triangles(topo, tris, &mut pv, &mut sv, faces, params, ws)
+            } else {
+                let edges = patch.edges(topo);
+                stencil::sweep_edges(topo, tris, &mut pv, &mut sv, edges, params, ws)
+            }
+        })
+        .reduce(SweepStats::default, |mut a, b| {
+            a.add(&b);
+            a
+        })
 }
 
 /// Fixed-size chunks make the parallel sums below independent of the thread count.

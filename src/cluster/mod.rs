@@ -47,11 +47,9 @@ use crate::driver::{
 };
 use crate::error::{Error, Result};
 use crate::mesh::Buf;
+use crate::partition::Patch;
 use crate::schedule::SharedField;
-use crate::smooth::{
-    self, Method, Options, SweepStats, laplacian,
-    stencil::{self, Workspace},
-};
+use crate::smooth::{self, Method, Options, SweepStats, laplacian};
 use crate::{io, metrics, resources};
 
 /// Rings of the region around a rank's owned vertices (see the module doc).
@@ -693,10 +691,11 @@ impl<'a> RankRun<'a> {
         let params = driver::stencil_params(opts);
         let mut total = SweepStats::default();
         for colour in &self.plan.doc.colours {
-            let mine: Vec<usize> = colour
+            let mine: Vec<Patch> = colour
                 .iter()
                 .map(|&p| p as usize)
                 .filter(|p| self.part.patches.contains(p))
+                .map(|p| self.plan.doc.patch(p))
                 .collect();
             let before = snapshot(self.part, &self.pos, &self.sums);
             // SAFETY: the patches of one colour touch disjoint positions and sums (the colouring
@@ -707,39 +706,9 @@ impl<'a> RankRun<'a> {
                     SharedField::new(&mut self.sums),
                 )
             };
-            let doc = &self.plan.doc;
-            let stats = self.pool.install(|| {
-                mine.par_iter()
-                    .map_init(Workspace::default, |ws, &p| {
-                        let (mut pv, mut sv) = (pv, sv);
-                        let patch = doc.patch(p);
-                        if opts.method == Method::VcsTriangle {
-                            stencil::sweep_triangles(
-                                topo,
-                                tris,
-                                &mut pv,
-                                &mut sv,
-                                patch.triangles,
-                                params,
-                                ws,
-                            )
-                        } else {
-                            stencil::sweep_edges(
-                                topo,
-                                tris,
-                                &mut pv,
-                                &mut sv,
-                                patch.edges(topo),
-                                params,
-                                ws,
-                            )
-                        }
-                    })
-                    .reduce(SweepStats::default, |mut a, b| {
-                        a.add(&b);
-                        a
-                    })
-            });
+            let stats = self
+                .pool
+                .install(|| driver::sweep_patches(topo, tris, pv, sv, &mine, opts.method, params));
             total.add(&stats);
             send_changes(
                 self.comm,

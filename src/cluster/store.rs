@@ -177,19 +177,19 @@ impl WorkDir {
         for stale in [PLAN, STATE] {
             match fs::remove_file(self.path(stale)) {
                 Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
-                    return Err(Error::io(&self.path(stale), e));
+                    return Err(Error::io(self.path(stale), e));
                 }
                 _ => {}
             }
         }
-        let (vv_offsets, vv, vf_offsets, vf, fixed) = prep.topology.parts();
+        let parts = prep.topology.parts();
         self.write_array("order.u32", &prep.reordered.order)?;
         self.write_array("triangles.u32", &prep.reordered.triangles)?;
-        self.write_array("vv_offsets.u64", vv_offsets)?;
-        self.write_array("vv.u32", vv)?;
-        self.write_array("vf_offsets.u64", vf_offsets)?;
-        self.write_array("vf.u32", vf)?;
-        self.write_array("fixed.u8", fixed)?;
+        self.write_array("vv_offsets.u64", parts.vv_offsets)?;
+        self.write_array("vv.u32", parts.vv)?;
+        self.write_array("vf_offsets.u64", parts.vf_offsets)?;
+        self.write_array("vf.u32", parts.vf)?;
+        self.write_array("fixed.u8", parts.fixed)?;
         for slot in [0, 1] {
             let name = format!("positions-{slot}.f64");
             self.write_array(&name, &prep.reordered.positions)?;

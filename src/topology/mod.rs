@@ -29,6 +29,19 @@ pub struct Topology {
     pub stats: TopologyStats,
 }
 
+/// The arrays of a [`Topology`], as [`Topology::parts`] lends them and
+/// [`Topology::from_parts`] takes them back.
+pub struct TopologyParts<'a> {
+    /// Vertex → vertex CSR offsets (`len + 1`) and neighbour indices.
+    pub vv_offsets: &'a [usize],
+    pub vv: &'a [u32],
+    /// Vertex → face CSR offsets (`len + 1`) and triangle indices.
+    pub vf_offsets: &'a [usize],
+    pub vf: &'a [u32],
+    /// One byte per vertex, 1 = fixed.
+    pub fixed: &'a [u8],
+}
+
 /// What the topology build counted.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct TopologyStats {
@@ -203,16 +216,15 @@ impl Topology {
         })
     }
 
-    /// The arrays, for storing a plan on disk: vertex→vertex offsets and indices, vertex→face
-    /// offsets and indices, fixed mask.
-    pub fn parts(&self) -> (&[usize], &[u32], &[usize], &[u32], &[u8]) {
-        (
-            &self.vv_offsets,
-            &self.vv,
-            &self.vf_offsets,
-            &self.vf,
-            &self.fixed,
-        )
+    /// The arrays, for storing a plan on disk.
+    pub fn parts(&self) -> TopologyParts<'_> {
+        TopologyParts {
+            vv_offsets: &self.vv_offsets,
+            vv: &self.vv,
+            vf_offsets: &self.vf_offsets,
+            vf: &self.vf,
+            fixed: &self.fixed,
+        }
     }
 
     /// A topology from arrays written by [`Topology::parts`] (e.g. mapped from a plan on disk).
