@@ -346,7 +346,7 @@ fn usage_errors_are_one_line_and_write_nothing() {
         ),
         (
             vec!["--multires", "--fine-method", "vcs"],
-            "--fine-method must be laplacian or taubin",
+            "expected laplacian or taubin",
         ),
         (vec!["--levels", "3"], "--multires"),
         (vec!["--multires", "--levels", "1"], "--levels"),

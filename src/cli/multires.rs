@@ -22,7 +22,7 @@ pub struct MultiresArgs {
     #[arg(long, value_name = "N", requires = "multires")]
     pub coarse_iterations: Option<usize>,
     /// Method on the input level: laplacian or taubin [default: laplacian].
-    #[arg(long, value_name = "M", requires = "multires")]
+    #[arg(long, value_name = "M", requires = "multires", value_parser = fine_method)]
     pub fine_method: Option<Method>,
     /// How fine vertices follow their coarse representative [default: interpolate].
     #[arg(long, value_enum, value_name = "HOW", requires = "multires")]
@@ -111,4 +111,14 @@ pub fn print_multires(
     );
     out.write_all(text.as_bytes())
         .map_err(super::output::stdout_error)
+}
+
+/// Only the Jacobi methods make sense on the fine level (the point of the mode is to avoid the
+/// stencil methods there).
+fn fine_method(s: &str) -> std::result::Result<Method, String> {
+    match s {
+        "laplacian" => Ok(Method::Laplacian),
+        "taubin" => Ok(Method::Taubin),
+        _ => Err("expected laplacian or taubin".into()),
+    }
 }
