@@ -13,6 +13,7 @@ pub mod bench;
 pub mod cli;
 pub mod driver;
 pub mod error;
+pub mod fused;
 pub mod generate;
 pub mod io;
 pub mod mesh;

@@ -222,6 +222,13 @@ impl Topology {
         &self.vv[self.vv_offsets[v]..self.vv_offsets[v + 1]]
     }
 
+    /// The vertex→vertex CSR arrays: the neighbours of `v` are `vv[offsets[v]..offsets[v + 1]]`.
+    /// Every id in `vv` is below [`Topology::len`].
+    #[inline]
+    pub fn csr(&self) -> (&[usize], &[u32]) {
+        (&self.vv_offsets, &self.vv)
+    }
+
     /// Number of neighbours of `v`.
     #[inline]
     pub fn deg(&self, v: u32) -> usize {
