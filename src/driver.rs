@@ -47,6 +47,17 @@ pub struct IterationRecord {
 pub trait Observer: Send {
     /// Called after each iteration with its record and the total number of iterations.
     fn iteration(&mut self, _record: &IterationRecord, _total: usize) {}
+
+    /// Whether iteration `iteration` (1-based) of `total` needs its statistics: volume, area and
+    /// displacement. Each costs passes over the whole mesh (volume and area: one over the
+    /// triangles, about as long as a `taubin` iteration; displacement for the stencil methods: a
+    /// copy and a pass over the positions). When this returns false the volume and area fields of
+    /// the record are NaN (`null` in JSON), and so are the displacements of the stencil methods
+    /// (`laplacian` and `taubin` measure theirs within the sweep, at no extra pass); the sweep and
+    /// its counts are the same. Default: every iteration.
+    fn statistics(&self, _iteration: usize, _total: usize) -> bool {
+        true
+    }
 }
 
 /// An observer that ignores everything.
@@ -147,6 +158,7 @@ fn iterate(
     let mut at = At::Pos;
     let mut pairs = None;
     for it in 1..=opts.iterations {
+        let measure = observer.statistics(it, opts.iterations);
         let start = Instant::now();
         // The Jacobi steps measure the displacement in the same pass (their time includes it); the
         // stencil methods compare with a copy of the positions taken before the sweep, after the
@@ -185,7 +197,9 @@ fn iterate(
                 (s, start.elapsed().as_secs_f64(), moved)
             }
             Method::Lem | Method::Vcs | Method::VcsTriangle => {
-                prev.copy_from_slice(pos);
+                if measure {
+                    prev.copy_from_slice(pos);
+                }
                 // `scratch` holds the neighbour sums, fresh each iteration.
                 const CHUNK: usize = 1 << 14;
                 scratch
@@ -194,7 +208,16 @@ fn iterate(
                     .for_each(|(c, out)| smooth::neighbor_sums_into(topo, pos, out, c * CHUNK));
                 let s = stencil_sweep(pos, scratch);
                 let seconds = start.elapsed().as_secs_f64();
-                (s, seconds, displacement_par(pos, prev))
+                let moved = if measure {
+                    displacement_par(pos, prev)
+                } else {
+                    StepStats {
+                        moved: 0,
+                        max_displacement: f64::NAN,
+                        sum_displacement: f64::NAN,
+                    }
+                };
+                (s, seconds, moved)
             }
         };
         let current: &[DVec3] = match at {
@@ -202,7 +225,11 @@ fn iterate(
             At::Scratch => scratch,
             At::Prev => prev,
         };
-        let (volume, area) = volume_area_par(current, tris, origin);
+        let (volume, area) = if measure {
+            volume_area_par(current, tris, origin)
+        } else {
+            (f64::NAN, f64::NAN)
+        };
         let record = IterationRecord {
             iteration: it,
             volume,
@@ -274,7 +301,9 @@ fn sweep_stats(topo: &Topology, applied: u64) -> SweepStats {
 }
 
 fn percent(x: f64, reference: f64) -> f64 {
-    if reference == 0.0 {
+    if x.is_nan() {
+        f64::NAN
+    } else if reference == 0.0 {
         100.0
     } else {
         100.0 * x / reference

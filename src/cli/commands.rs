@@ -27,6 +27,7 @@ use crate::{generate, io, metrics};
 pub fn smooth(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) -> Result<()> {
     progress.phase(format!("smoothing {}", cfg.input.display()));
     progress.iterations(cfg.options.method.name(), cfg.options.iterations);
+    progress.statistics_of_last_only(cfg.stats == super::args::Stats::Last);
     let run = driver::run_file(&cfg.input, &cfg.output, &cfg.options, &cfg.engine, progress)?;
     let records = &run.records;
 

@@ -90,6 +90,8 @@ pub struct SmoothConfig {
     pub engine: EngineConfig,
     pub report: Option<PathBuf>,
     pub plot: Option<PathBuf>,
+    /// Which iterations measure their statistics.
+    pub stats: super::args::Stats,
     /// The command line as given, recorded in the report.
     pub argv: Vec<String>,
 }
@@ -149,6 +151,12 @@ impl Config {
                 }
                 if let Some(p) = &a.plot {
                     svg_output(p)?;
+                    if a.stats != super::args::Stats::Every {
+                        return Err(Error::Config(
+                            "--plot draws the volume of every iteration: it needs --stats every"
+                                .into(),
+                        ));
+                    }
                 }
                 let mut engine = engine(&a.smoothing.engine)?;
                 engine.with_stats = a.report.is_some();
@@ -163,6 +171,7 @@ impl Config {
                     output: a.output,
                     report: a.report,
                     plot: a.plot,
+                    stats: a.stats,
                     argv,
                 })
             }
