@@ -161,8 +161,8 @@ fn iterate(
         let measure = observer.statistics(it, opts.iterations);
         let start = Instant::now();
         // The Jacobi steps measure the displacement in the same pass (their time includes it); the
-        // stencil methods compare with a copy of the positions taken before the sweep, after the
-        // timed part.
+        // stencil methods compare with a copy of the positions taken before the sweep (timed, as
+        // it always was), in a pass after the timed part.
         let (stencils, seconds, moved) = match opts.method {
             Method::Taubin => {
                 let plan = pairs.get_or_insert_with(|| {
