@@ -40,6 +40,8 @@ pub struct IterationRecord {
     /// Mean distance moved over the movable (non-fixed) vertices.
     pub mean_displacement: f64,
     pub stencils: SweepStats,
+    /// Seconds of the sweep: for `laplacian` and `taubin` with the displacement, which they
+    /// measure in the same pass; never the volume and area statistics.
     pub seconds: f64,
 }
 
