@@ -19,11 +19,12 @@ use crate::metrics::{self, MeshInfo};
 use crate::partition::{self, Patch, Reordered};
 use crate::schedule::{self, Prefetch, Schedule, SharedField};
 use crate::smooth::{
-    self, Method, Options, SweepStats, laplacian,
+    self, Method, Options, SweepStats,
+    laplacian::{self, Previous, StepStats},
     stencil::{self, StencilParams, Workspace},
 };
 use crate::topology::Topology;
-use crate::{io, resources};
+use crate::{fused, io, resources};
 
 /// Statistics of one iteration, relative to the input where a percentage is given.
 #[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize)]
@@ -39,6 +40,8 @@ pub struct IterationRecord {
     /// Mean distance moved over the movable (non-fixed) vertices.
     pub mean_displacement: f64,
     pub stencils: SweepStats,
+    /// Seconds of the sweep: for `laplacian` and `taubin` with the displacement, which they
+    /// measure in the same pass; never the volume and area statistics.
     pub seconds: f64,
 }
 
@@ -46,6 +49,17 @@ pub struct IterationRecord {
 pub trait Observer: Send {
     /// Called after each iteration with its record and the total number of iterations.
     fn iteration(&mut self, _record: &IterationRecord, _total: usize) {}
+
+    /// Whether iteration `iteration` (1-based) of `total` needs its statistics: volume, area and
+    /// displacement. Each costs passes over the whole mesh (volume and area: one over the
+    /// triangles, about as long as a `taubin` iteration; displacement for the stencil methods: a
+    /// copy and a pass over the positions). When this returns false the volume and area fields of
+    /// the record are NaN (`null` in JSON), and so are the displacements of the stencil methods
+    /// (`laplacian` and `taubin` measure theirs within the sweep, at no extra pass); the sweep and
+    /// its counts are the same. Default: every iteration.
+    fn statistics(&self, _iteration: usize, _total: usize) -> bool {
+        true
+    }
 }
 
 /// An observer that ignores everything.
@@ -90,7 +104,15 @@ fn run(
     opts: &Options,
     observer: &mut dyn Observer,
 ) -> Result<Vec<IterationRecord>> {
-    let mut prev = vec![DVec3::ZERO; pos.len()];
+    // The stencil methods' copy before each sweep, for the displacement, or taubin's third buffer.
+    let mut prev = vec![
+        DVec3::ZERO;
+        if opts.method == Method::Laplacian {
+            0
+        } else {
+            pos.len()
+        }
+    ];
     let mut scratch = vec![DVec3::ZERO; pos.len()];
     let params = stencil_params(opts);
     let mut ws = Workspace::default();
@@ -132,43 +154,111 @@ fn iterate(
     let (v_in, a_in) = volume_area_par(pos, tris, origin);
     let movable = (topo.len() - topo.stats.fixed_vertices).max(1);
     let mut records = Vec::with_capacity(opts.iterations);
+    // Where the current positions are: `laplacian` ping-pongs between `pos` and `scratch`, `taubin`
+    // between `pos` and `prev` (through `scratch`, see `crate::fused`), so that no iteration copies
+    // the positions; the stencil methods work in place in `pos`.
+    let mut at = At::Pos;
+    let mut pairs = None;
     for it in 1..=opts.iterations {
+        let measure = observer.statistics(it, opts.iterations);
         let start = Instant::now();
-        prev.copy_from_slice(pos);
-        let stencils = match opts.method {
-            Method::Laplacian => jacobi(topo, prev, pos, opts.lambda),
+        // The Jacobi steps measure the displacement in the same pass (their time includes it); the
+        // stencil methods compare with a copy of the positions taken before the sweep (timed, as
+        // it always was), in a pass after the timed part.
+        let (stencils, seconds, moved) = match opts.method {
             Method::Taubin => {
-                let mut s = jacobi(topo, prev, scratch, opts.lambda);
-                s.add(&jacobi(topo, scratch, pos, opts.mu));
-                s
+                let plan = pairs.get_or_insert_with(|| {
+                    fused::PairPlan::new(topo, rayon::current_num_threads())
+                });
+                let (a, c): (&[DVec3], &mut [DVec3]) = if at == At::Prev {
+                    (prev, pos)
+                } else {
+                    (pos, prev)
+                };
+                at = if at == At::Prev { At::Pos } else { At::Prev };
+                let (applied, moved) = fused::pair(plan, topo, a, scratch, c, opts.lambda, opts.mu);
+                let s = SweepStats {
+                    applied,
+                    skipped_fixed: 2 * topo.len() as u64 - applied,
+                    ..Default::default()
+                };
+                (s, start.elapsed().as_secs_f64(), moved)
+            }
+            Method::Laplacian => {
+                let (src, dst): (&[DVec3], &mut [DVec3]) = if at == At::Scratch {
+                    (scratch, pos)
+                } else {
+                    (pos, scratch)
+                };
+                at = if at == At::Scratch {
+                    At::Pos
+                } else {
+                    At::Scratch
+                };
+                let (s, moved) = jacobi_measured(topo, src, dst, opts.lambda, Previous::Src);
+                (s, start.elapsed().as_secs_f64(), moved)
             }
             Method::Lem | Method::Vcs | Method::VcsTriangle => {
+                if measure {
+                    prev.copy_from_slice(pos);
+                }
                 // `scratch` holds the neighbour sums, fresh each iteration.
                 const CHUNK: usize = 1 << 14;
                 scratch
                     .par_chunks_mut(CHUNK)
                     .enumerate()
                     .for_each(|(c, out)| smooth::neighbor_sums_into(topo, pos, out, c * CHUNK));
-                stencil_sweep(pos, scratch)
+                let s = stencil_sweep(pos, scratch);
+                let seconds = start.elapsed().as_secs_f64();
+                let moved = if measure {
+                    displacement_par(pos, prev)
+                } else {
+                    StepStats {
+                        moved: 0,
+                        max_displacement: f64::NAN,
+                        sum_displacement: f64::NAN,
+                    }
+                };
+                (s, seconds, moved)
             }
         };
-        let seconds = start.elapsed().as_secs_f64();
-        let (max_d, sum_d) = displacement_par(pos, prev);
-        let (volume, area) = volume_area_par(pos, tris, origin);
+        let current: &[DVec3] = match at {
+            At::Pos => pos,
+            At::Scratch => scratch,
+            At::Prev => prev,
+        };
+        let (volume, area) = if measure {
+            volume_area_par(current, tris, origin)
+        } else {
+            (f64::NAN, f64::NAN)
+        };
         let record = IterationRecord {
             iteration: it,
             volume,
             volume_pct: percent(volume, v_in),
             area_pct: percent(area, a_in),
-            max_displacement: max_d,
-            mean_displacement: sum_d / movable as f64,
+            max_displacement: moved.max_displacement,
+            mean_displacement: moved.sum_displacement / movable as f64,
             stencils,
             seconds,
         };
         observer.iteration(&record, opts.iterations);
         records.push(record);
     }
+    match at {
+        At::Pos => {}
+        At::Scratch => pos.copy_from_slice(scratch),
+        At::Prev => pos.copy_from_slice(prev),
+    }
     records
+}
+
+/// Which buffer of [`iterate`] holds the current positions.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum At {
+    Pos,
+    Scratch,
+    Prev,
 }
 
 pub(crate) fn stencil_params(opts: &Options) -> StencilParams {
@@ -178,24 +268,44 @@ pub(crate) fn stencil_params(opts: &Options) -> StencilParams {
     }
 }
 
-/// A Jacobi step over all vertices, split into fixed-size chunks across the pool's threads.
-fn jacobi(topo: &Topology, src: &[DVec3], dst: &mut [DVec3], lambda: f64) -> SweepStats {
-    const CHUNK: usize = 1 << 14;
-    let applied = dst
-        .par_chunks_mut(CHUNK)
+/// Vertices per work item of the Jacobi steps and of the statistics sums. Fixed-size chunks, combined
+/// in chunk order, make every result independent of the thread count.
+const JACOBI_CHUNK: usize = 1 << 14;
+
+/// A Jacobi step over all vertices, split into fixed-size chunks across the pool's threads, that
+/// also measures the displacement from the previous positions (see [`Previous`]).
+fn jacobi_measured(
+    topo: &Topology,
+    src: &[DVec3],
+    dst: &mut [DVec3],
+    lambda: f64,
+    previous: Previous,
+) -> (SweepStats, StepStats) {
+    let parts: Vec<StepStats> = dst
+        .par_chunks_mut(JACOBI_CHUNK)
         .enumerate()
-        .map(|(c, out)| laplacian::jacobi_step(topo, src, out, c * CHUNK, lambda))
-        .sum::<u64>();
-    let skipped_fixed = topo.len() as u64 - applied;
+        .map(|(c, out)| {
+            laplacian::jacobi_step_measured(topo, src, out, c * JACOBI_CHUNK, lambda, previous)
+        })
+        .collect();
+    let total = parts
+        .into_iter()
+        .fold(StepStats::default(), StepStats::then);
+    (sweep_stats(topo, total.moved), total)
+}
+
+fn sweep_stats(topo: &Topology, applied: u64) -> SweepStats {
     SweepStats {
         applied,
-        skipped_fixed,
+        skipped_fixed: topo.len() as u64 - applied,
         ..Default::default()
     }
 }
 
 pub(crate) fn percent(x: f64, reference: f64) -> f64 {
-    if reference == 0.0 {
+    if x.is_nan() {
+        f64::NAN
+    } else if reference == 0.0 {
         100.0
     } else {
         100.0 * x / reference
@@ -313,7 +423,12 @@ impl Prepared {
         } = self;
         let tris: &[[u32; 3]] = &reordered.triangles;
         let n = reordered.positions.len();
-        let mut prev: Buf<DVec3> = storage.zeroed(n)?;
+        // The stencil methods' copy before each sweep, for the displacement, or taubin's third buffer.
+        let mut prev: Buf<DVec3> = storage.zeroed(if opts.method == Method::Laplacian {
+            0
+        } else {
+            n
+        })?;
         let mut scratch: Buf<DVec3> = storage.zeroed(n)?;
         let advisors: Vec<_> = [reordered.positions.advisor(), scratch.advisor()]
             .into_iter()
@@ -407,10 +522,15 @@ pub(crate) fn volume_area_par(pos: &[DVec3], tris: &[[u32; 3]], origin: DVec3) -
     let parts: Vec<(f64, f64)> = tris
         .par_chunks(SUM_CHUNK)
         .map(|chunk| {
-            chunk.iter().fold((0.0, 0.0), |(v, a), t| {
-                let [p, q, r] = t.map(|i| pos[i as usize] - origin);
-                (v + p.dot(q.cross(r)), a + (q - p).cross(r - p).length())
-            })
+            let (mut v, mut a) = (0.0, 0.0);
+            for &[i, j, k] in chunk {
+                let p = pos[i as usize] - origin;
+                let q = pos[j as usize] - origin;
+                let r = pos[k as usize] - origin;
+                v += p.dot(q.cross(r));
+                a += (q - p).cross(r - p).length();
+            }
+            (v, a)
         })
         .collect();
     let (v, a) = parts
@@ -420,7 +540,7 @@ pub(crate) fn volume_area_par(pos: &[DVec3], tris: &[[u32; 3]], origin: DVec3) -
 }
 
 /// Largest and summed vertex displacement between `a` and `b`.
-pub(crate) fn displacement_par(a: &[DVec3], b: &[DVec3]) -> (f64, f64) {
+pub(crate) fn displacement_par(a: &[DVec3], b: &[DVec3]) -> StepStats {
     let parts: Vec<(f64, f64)> = a
         .par_chunks(SUM_CHUNK)
         .zip(b.par_chunks(SUM_CHUNK))
@@ -431,9 +551,14 @@ pub(crate) fn displacement_par(a: &[DVec3], b: &[DVec3]) -> (f64, f64) {
             })
         })
         .collect();
-    parts
+    let (max, sum) = parts
         .iter()
-        .fold((0.0, 0.0), |(m, s), &(pm, ps)| (m.max(pm), s + ps))
+        .fold((0.0f64, 0.0), |(m, s), &(pm, ps)| (m.max(pm), s + ps));
+    StepStats {
+        moved: 0,
+        max_displacement: max,
+        sum_displacement: sum,
+    }
 }
 
 pub(crate) fn validate(opts: &Options) -> Result<()> {

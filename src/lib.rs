@@ -15,6 +15,7 @@ pub mod cli;
 pub mod cluster;
 pub mod driver;
 pub mod error;
+pub mod fused;
 pub mod generate;
 pub mod io;
 pub mod mesh;

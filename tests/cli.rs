@@ -666,3 +666,73 @@ fn generate_mesh_from_a_scan_streams_a_refined_copy() {
     fails(&o, 2, &["--subdivide", "PLY"]);
     assert!(!dir.path().join("x.ply").exists() && !dir.path().join("x.obj").exists());
 }
+
+#[test]
+fn stats_last_measures_only_the_last_iteration_and_changes_nothing_else() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in.ply");
+    ok(vcsmooth([
+        "generate",
+        "sphere",
+        input.to_str().unwrap(),
+        "--subdivisions",
+        "3",
+        "--noise",
+        "0.3",
+    ]));
+    for method in METHODS {
+        let mut outputs = Vec::new();
+        let mut reports = Vec::new();
+        for stats in ["every", "last"] {
+            let out = dir.path().join(format!("{method}-{stats}.ply"));
+            let report = dir.path().join(format!("{method}-{stats}.json"));
+            let text = ok(vcsmooth([
+                "smooth",
+                input.to_str().unwrap(),
+                out.to_str().unwrap(),
+                "--method",
+                method,
+                "--iterations",
+                "3",
+                "--stats",
+                stats,
+                "--report",
+                report.to_str().unwrap(),
+            ]));
+            if stats == "last" {
+                // The table shows '-' for what was not measured.
+                let row = text
+                    .lines()
+                    .find(|l| l.trim_start().starts_with("1 "))
+                    .unwrap();
+                assert!(row.contains(" - "), "{method}: {row}");
+            }
+            outputs.push(std::fs::read(&out).unwrap());
+            reports.push(read_json(&report));
+        }
+        assert!(outputs[0] == outputs[1], "{method}: outputs differ");
+        let (every, last) = (&reports[0]["iterations"], &reports[1]["iterations"]);
+        for i in 0..2 {
+            assert!(last[i]["volume_pct"].is_null() && last[i]["area_pct"].is_null());
+            assert_eq!(last[i]["stencils"], every[i]["stencils"], "{method}");
+        }
+        for key in ["volume", "volume_pct", "area_pct", "max_displacement"] {
+            assert_eq!(last[2][key], every[2][key], "{method}: {key}");
+        }
+        assert_eq!(
+            reports[0]["summary"]["volume_pct"],
+            reports[1]["summary"]["volume_pct"]
+        );
+    }
+    let plot = dir.path().join("p.svg");
+    let o = vcsmooth([
+        "smooth",
+        input.to_str().unwrap(),
+        dir.path().join("o.ply").to_str().unwrap(),
+        "--stats",
+        "last",
+        "--plot",
+        plot.to_str().unwrap(),
+    ]);
+    fails(&o, 2, &["--plot", "--stats every"]);
+}

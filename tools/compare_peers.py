@@ -498,7 +498,7 @@ def run_vcsmooth(binary, method, noisy, workdir, a):
     out = os.path.join(workdir, f"vcsmooth-{method}.ply")
     rep = os.path.join(workdir, f"vcsmooth-{method}.json")
     cmd = [binary, "smooth", noisy, out, "--method", method, "--iterations", str(a.iterations),
-           "--threads", str(a.threads), "--report", rep]
+           "--threads", str(a.threads), "--stats", "last", "--report", rep]
     if method in ("laplacian", "taubin"):
         cmd += ["--lambda", repr(a.lam)]
     if method == "taubin":
@@ -751,7 +751,8 @@ def print_table(res):
     for b in body:
         print(line(b))
     print("median s: smoothing call only (vcsmooth: sum of per-iteration seconds of its report; the note adds "
-          "its whole smoothing phase, with per-iteration metrics, and its topology build).")
+          "its whole smoothing phase, run with --stats last: volume and area after the last iteration "
+          "only, as the peers compute none; and its topology build).")
     print("+setup s: peers build their adjacency inside the timed call; for vcsmooth this adds its topology "
           "build to the median, the same work.")
     print("x same-kind: time / fastest peer of the same kind (laplacian; taubin or windowed-sinc); "

@@ -147,8 +147,21 @@ pub struct SmoothArgs {
     /// Write an SVG plot of volume % per iteration.
     #[arg(long, value_name = "FILE.svg")]
     pub plot: Option<PathBuf>,
+    /// Which iterations measure volume, area and displacement (each costs passes over the whole mesh, about one taubin iteration for volume and area); the others show '-' in the table and null in the report.
+    #[arg(long, value_enum, value_name = "WHEN", default_value_t = Stats::Every)]
+    pub stats: Stats,
     #[command(flatten)]
     pub cluster: ClusterArgs,
+}
+
+/// When `smooth` measures the per-iteration statistics.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Stats {
+    /// After every iteration.
+    Every,
+    /// After the last iteration only.
+    Last,
 }
 
 /// Checkpoints and MPI ranks (see the README's "One mesh over MPI ranks").

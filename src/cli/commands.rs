@@ -32,6 +32,7 @@ pub fn smooth(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) 
         let Some(cluster) = cfg.cluster(comm.size()) else {
             progress.phase(format!("smoothing {}", cfg.input.display()));
             progress.iterations(cfg.options.method.name(), cfg.options.iterations);
+            progress.statistics_of_last_only(cfg.stats == super::args::Stats::Last);
             let (run, multires) = match &cfg.multires {
                 None => (
                     driver::run_file(&cfg.input, &cfg.output, &cfg.options, &cfg.engine, progress)?,

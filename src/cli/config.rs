@@ -95,6 +95,8 @@ pub struct SmoothConfig {
     /// `--checkpoint DIR` (kept) and `--checkpoint-every`.
     pub checkpoint: Option<PathBuf>,
     pub checkpoint_every: usize,
+    /// Which iterations measure their statistics.
+    pub stats: super::args::Stats,
     /// The command line as given, recorded in the report.
     pub argv: Vec<String>,
 }
@@ -175,6 +177,12 @@ impl Config {
                 }
                 if let Some(p) = &a.plot {
                     svg_output(p)?;
+                    if a.stats != super::args::Stats::Every {
+                        return Err(Error::Config(
+                            "--plot draws the volume of every iteration: it needs --stats every"
+                                .into(),
+                        ));
+                    }
                 }
                 let mut engine = engine(&a.smoothing.engine)?;
                 engine.with_stats = a.report.is_some();
@@ -200,6 +208,7 @@ impl Config {
                     plot: a.plot,
                     checkpoint: a.cluster.checkpoint,
                     checkpoint_every: a.cluster.checkpoint_every as usize,
+                    stats: a.stats,
                     argv,
                 })
             }

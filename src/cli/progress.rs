@@ -12,6 +12,8 @@ use crate::driver::{IterationRecord, Observer};
 /// a bar for iterations.
 pub struct Progress {
     bar: Option<ProgressBar>,
+    /// Measure the statistics of the last iteration only (`smooth --stats last`).
+    last_only: bool,
 }
 
 impl Progress {
@@ -26,12 +28,18 @@ impl Progress {
 
     /// A display that draws nothing.
     pub fn hidden() -> Self {
-        Progress { bar: None }
+        Progress {
+            bar: None,
+            last_only: false,
+        }
     }
 
     fn visible() -> Self {
         let bar = ProgressBar::with_draw_target(None, ProgressDrawTarget::stderr());
-        Progress { bar: Some(bar) }
+        Progress {
+            bar: Some(bar),
+            last_only: false,
+        }
     }
 
     /// Show that a phase (e.g. "reading in.ply") is under way.
@@ -65,6 +73,11 @@ impl Progress {
         }
     }
 
+    /// Ask for the statistics of the last iteration only (see [`Observer::statistics`]).
+    pub fn statistics_of_last_only(&mut self, yes: bool) {
+        self.last_only = yes;
+    }
+
     /// Remove the display (before printing results).
     pub fn finish(&self) {
         if let Some(bar) = &self.bar {
@@ -83,7 +96,13 @@ impl Observer for Progress {
     fn iteration(&mut self, record: &IterationRecord, _total: usize) {
         if let Some(bar) = &self.bar {
             bar.set_position(record.iteration as u64);
-            bar.set_message(format!("volume {:.6} %", record.volume_pct));
+            if record.volume_pct.is_finite() {
+                bar.set_message(format!("volume {:.6} %", record.volume_pct));
+            }
         }
+    }
+
+    fn statistics(&self, iteration: usize, total: usize) -> bool {
+        !self.last_only || iteration == total
     }
 }

@@ -176,15 +176,17 @@ pub fn print_iterations(out: &mut dyn Write, records: &[IterationRecord]) -> Res
         "rejected",
         "seconds"
     );
+    // Statistics not measured (`smooth --stats last`) are NaN: shown as '-'.
+    let measured = |x: f64, text: String| if x.is_nan() { "-".into() } else { text };
     for r in records {
         let s = &r.stencils;
         text += &format!(
-            "{:>5} {:>12.6} {:>10.4} {:>11.4e} {:>11.4e} {:>10} {:>9} {:>10} {:>9} {:>9.3}\n",
+            "{:>5} {:>12} {:>10} {:>11} {:>11} {:>10} {:>9} {:>10} {:>9} {:>9.3}\n",
             r.iteration,
-            r.volume_pct,
-            r.area_pct,
-            r.max_displacement,
-            r.mean_displacement,
+            measured(r.volume_pct, format!("{:.6}", r.volume_pct)),
+            measured(r.area_pct, format!("{:.4}", r.area_pct)),
+            measured(r.max_displacement, format!("{:.4e}", r.max_displacement)),
+            measured(r.mean_displacement, format!("{:.4e}", r.mean_displacement)),
             s.applied,
             s.skipped_fixed,
             s.skipped_degenerate,

@@ -606,7 +606,8 @@ impl<'a> RankRun<'a> {
     ) -> IterationRecord {
         let owned = self.owned();
         let (now, before) = (&self.pos[owned.clone()], &self.prev[owned]);
-        let (max_d, sum_d) = self.pool.install(|| driver::displacement_par(now, before));
+        let moved = self.pool.install(|| driver::displacement_par(now, before));
+        let (max_d, sum_d) = (moved.max_displacement, moved.sum_displacement);
         let (volume, area) = self.volume_area(origin);
         let counts = [
             stencils.applied,

@@ -425,6 +425,25 @@ impl FaceBuilder {
         self.faces += 1;
     }
 
+    /// For a builder with no face yet and at least `count` preallocated slots: let `fill` write
+    /// `count` triangles into the slots at once; if it says it wrote them all, they count as
+    /// `count` triangle faces, else the builder is left with no face (and the slots unspecified).
+    pub(crate) fn fill_triangles(
+        &mut self,
+        count: usize,
+        fill: impl FnOnce(&mut [[u32; 3]]) -> bool,
+    ) -> bool {
+        if self.faces != 0 || self.filled != 0 || self.triangles.len() < count {
+            return false;
+        }
+        if !fill(&mut self.triangles[..count]) {
+            return false;
+        }
+        self.filled = count;
+        self.faces = count;
+        true
+    }
+
     /// Faces so far.
     pub(crate) fn len(&self) -> usize {
         self.faces

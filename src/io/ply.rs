@@ -19,6 +19,7 @@ use std::io::{self, Write};
 use std::sync::Arc;
 
 use glam::DVec3;
+use rayon::prelude::*;
 
 use super::{FaceBuilder, Faces, Format, Precision, Source, bad_index, ply_ascii, vertex_normals};
 use crate::mesh::Mesh;
@@ -922,32 +923,43 @@ fn decode_positions(
     Ok(pos)
 }
 
-/// Fixed-stride decode of three coordinates of one type (`N` bytes each) at offsets `at`.
-/// Returns the first non-finite position with its record number.
+/// Vertices per parallel work item of the binary decoders.
+const DECODE_CHUNK: usize = 1 << 15;
+
+/// Fixed-stride decode of three coordinates of one type (`N` bytes each) at offsets `at`, in
+/// parallel over fixed-size chunks of vertices. Returns the first non-finite position with its
+/// record number (the lowest, whatever the thread count).
 #[inline]
 fn decode_fixed<const N: usize>(
     records: &[u8],
     stride: usize,
     at: [usize; 3],
-    value: impl Fn([u8; N]) -> f64,
+    value: impl Fn([u8; N]) -> f64 + Sync,
     positions: &mut [DVec3],
 ) -> Result<(), (usize, DVec3)> {
-    for (i, (r, out)) in records
-        .chunks_exact(stride)
-        .zip(positions.iter_mut())
+    let failures: Vec<(usize, DVec3)> = positions
+        .par_chunks_mut(DECODE_CHUNK)
+        .zip(records.par_chunks(DECODE_CHUNK * stride))
         .enumerate()
-    {
-        let p = DVec3::new(
-            value(bytes_at(r, at[0])),
-            value(bytes_at(r, at[1])),
-            value(bytes_at(r, at[2])),
-        );
-        if !p.is_finite() {
-            return Err((i, p));
-        }
-        *out = p;
+        .filter_map(|(c, (out, records))| {
+            for (i, (r, out)) in records.chunks_exact(stride).zip(out).enumerate() {
+                let p = DVec3::new(
+                    value(bytes_at(r, at[0])),
+                    value(bytes_at(r, at[1])),
+                    value(bytes_at(r, at[2])),
+                );
+                if !p.is_finite() {
+                    return Some((c * DECODE_CHUNK + i, p));
+                }
+                *out = p;
+            }
+            None
+        })
+        .collect();
+    match failures.first() {
+        Some(&f) => Err(f),
+        None => Ok(()),
     }
-    Ok(())
 }
 
 /// [`decode_fixed`] for coordinates of mixed or integer types.
@@ -1008,9 +1020,29 @@ fn faces_u8_32(
     vertices: u32,
     origin: Origin,
     faces: &mut FaceBuilder,
-    index: impl Fn([u8; 4]) -> i64,
+    index: impl Fn([u8; 4]) -> i64 + Sync,
 ) -> Fallible<usize> {
     let valid = |v: i64| (0..i64::from(vertices)).contains(&v);
+    // The common case first: every face a triangle with valid indices, 13-byte records decoded in
+    // parallel. Anything else (a polygon, a bad index, a short body) is left to the sequential
+    // loop below, which finds and reports the first problem exactly as it always has.
+    let len = el.count.checked_mul(13);
+    if let Some(body) = len.and_then(|len| data.get(..len)) {
+        let parallel = faces.fill_triangles(el.count, |out| {
+            out.par_chunks_mut(DECODE_CHUNK)
+                .zip(body.par_chunks(DECODE_CHUNK * 13))
+                .all(|(out, records)| {
+                    records.chunks_exact(13).zip(out).all(|(r, t)| {
+                        let v = [1, 5, 9].map(|at| index(bytes_at(r, at)));
+                        *t = v.map(|v| v as u32);
+                        r[0] == 3 && v.iter().all(|&v| valid(v))
+                    })
+                })
+        });
+        if parallel {
+            return Ok(body.len());
+        }
+    }
     let mut corners = Vec::new();
     let mut pos = 0;
     for i in 0..el.count {

@@ -1018,3 +1018,72 @@ fn source_debug_does_not_dump_data() {
         "{text}"
     );
 }
+
+/// The parallel binary decoders (fixed-size chunks of vertices and triangles) against the
+/// sequential rules: the first bad record is the one reported, wherever the chunk boundaries fall,
+/// and a polygon far into the face list still goes through the general path.
+#[test]
+fn parallel_binary_decode_reports_the_first_problem_and_handles_late_polygons() {
+    let n = 100_000usize; // several decoder chunks of vertices and of faces
+    let header = |faces: usize| {
+        format!(
+            "element vertex {n}\nproperty float x\nproperty float y\nproperty float z\n\
+             element face {faces}\nproperty list uchar int vertex_indices\n"
+        )
+    };
+    let coords: Vec<f32> = (0..3 * n).map(|i| (i % 97) as f32).collect();
+    let tris: Vec<[i32; 3]> = (0..n as i32 - 2).map(|i| [i, i + 1, i + 2]).collect();
+    let body = |coords: &[f32], faces: &[Vec<i32>]| {
+        let mut b = floats(coords);
+        for f in faces {
+            b.extend(face(f));
+        }
+        b
+    };
+    let faces: Vec<Vec<i32>> = tris.iter().map(|t| t.to_vec()).collect();
+
+    let ok = parse_as(
+        &binary_ply(&header(faces.len()), &body(&coords, &faces)),
+        "a.ply",
+    )
+    .unwrap();
+    assert_eq!(ok.triangles.len(), tris.len());
+    assert_eq!(ok.triangles[77_777], [77_777, 77_778, 77_779]);
+    assert_eq!(ok.positions[n - 1].z, coords[3 * n - 1] as f64);
+
+    // Two bad indices in different chunks: the first is reported.
+    let mut bad = faces.clone();
+    bad[90_000][1] = n as i32;
+    bad[70_000][2] = -1;
+    let e = parse_as(
+        &binary_ply(&header(bad.len()), &body(&coords, &bad)),
+        "b.ply",
+    )
+    .unwrap_err();
+    assert!(e.contains("face 70000") || e.contains("70000"), "{e}");
+    assert!(!e.contains("90000"), "{e}");
+
+    // Two non-finite coordinates in different chunks: the first vertex is reported.
+    let mut nan = coords.clone();
+    nan[3 * 80_000] = f32::NAN;
+    nan[3 * 40_000 + 1] = f32::INFINITY;
+    let e = parse_as(
+        &binary_ply(&header(faces.len()), &body(&nan, &faces)),
+        "c.ply",
+    )
+    .unwrap_err();
+    assert!(e.contains("40000") && !e.contains("80000"), "{e}");
+
+    // A quad late in the list: fan-triangulated, everything before it intact.
+    let mut quad = faces.clone();
+    quad[95_000] = vec![1, 2, 3, 4];
+    let m = parse_as(
+        &binary_ply(&header(quad.len()), &body(&coords, &quad)),
+        "d.ply",
+    )
+    .unwrap();
+    assert_eq!(m.triangles.len(), tris.len() + 1);
+    assert_eq!(m.triangles[94_999], [94_999, 95_000, 95_001]);
+    assert_eq!(&m.triangles[95_000..95_002], &[[1, 2, 3], [1, 3, 4]]);
+    assert_eq!(m.source.polygons_triangulated, 1);
+}

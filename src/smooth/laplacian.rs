@@ -26,22 +26,154 @@ pub fn jacobi_step(
     first: usize,
     lambda: f64,
 ) -> u64 {
-    // The mask and the old positions of the range as slices: one bounds check for the range
+    step::<NO_MEASURE, false>(topo, src, 0, dst, first, lambda, &[]).moved
+}
+
+/// What a measured Jacobi step did over its vertex range.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct StepStats {
+    /// Vertices moved (not fixed).
+    pub moved: u64,
+    /// Largest distance a vertex of the range moved.
+    pub max_displacement: f64,
+    /// Sum of the distances the vertices of the range moved (fixed ones count 0).
+    pub sum_displacement: f64,
+}
+
+impl StepStats {
+    /// Combine with the statistics of the following range (sums in range order, so a fixed split
+    /// into ranges gives the same result for any number of threads).
+    pub fn then(self, o: StepStats) -> StepStats {
+        StepStats {
+            moved: self.moved + o.moved,
+            max_displacement: self.max_displacement.max(o.max_displacement),
+            sum_displacement: self.sum_displacement + o.sum_displacement,
+        }
+    }
+}
+
+/// Where a measured step finds each vertex's previous position.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Previous<'a> {
+    /// In `src` (a step between two buffers: `p' = p + λ L(p)` moved `p` by `|p' − p|`).
+    Src,
+    /// In `dst`, about to be overwritten (the second step of a λ|μ pair that goes back into the
+    /// buffer the pair started from: the pair moved the vertex by `|p'' − p|`).
+    Dst,
+    /// In this slice, one entry per vertex of the range (the second step of a λ|μ pair that goes
+    /// into a third buffer).
+    Slice(&'a [DVec3]),
+}
+
+/// [`jacobi_step`] that also measures how far each vertex moved from its previous position (see
+/// [`Previous`]), in the same pass. The positions written are bit-identical to [`jacobi_step`]'s.
+pub fn jacobi_step_measured(
+    topo: &Topology,
+    src: &[DVec3],
+    dst: &mut [DVec3],
+    first: usize,
+    lambda: f64,
+    previous: Previous,
+) -> StepStats {
+    jacobi_step_window(topo, src, 0, dst, first, lambda, previous)
+}
+
+/// [`jacobi_step_measured`] reading from a window of the positions: `src[k]` is vertex
+/// `src_first + k`, and must cover the vertices `first .. first + dst.len()` and all their
+/// neighbours (panics otherwise). Bit-identical to a step that reads the whole array.
+pub fn jacobi_step_window(
+    topo: &Topology,
+    src: &[DVec3],
+    src_first: usize,
+    dst: &mut [DVec3],
+    first: usize,
+    lambda: f64,
+    previous: Previous,
+) -> StepStats {
+    let n = dst.len();
+    let whole = src_first == 0 && src.len() >= topo.len();
+    let own = &src[first - src_first..first - src_first + n];
+    match (previous, whole) {
+        (Previous::Src, true) => step::<FROM_SRC, false>(topo, src, 0, dst, first, lambda, own),
+        (Previous::Dst, true) => step::<FROM_DST, false>(topo, src, 0, dst, first, lambda, own),
+        (Previous::Slice(old), true) => {
+            step::<FROM_SRC, false>(topo, src, 0, dst, first, lambda, &old[..n])
+        }
+        (Previous::Src, false) => {
+            step::<FROM_SRC, true>(topo, src, src_first, dst, first, lambda, own)
+        }
+        (Previous::Dst, false) => {
+            step::<FROM_DST, true>(topo, src, src_first, dst, first, lambda, own)
+        }
+        (Previous::Slice(old), false) => {
+            step::<FROM_SRC, true>(topo, src, src_first, dst, first, lambda, &old[..n])
+        }
+    }
+}
+
+const NO_MEASURE: u8 = 0;
+/// Measure against the `old` slice given to [`step`].
+const FROM_SRC: u8 = 1;
+/// Measure against the value of `dst` being overwritten.
+const FROM_DST: u8 = 2;
+
+/// The Jacobi kernel. The CSR arrays are walked directly (one offset load per vertex, the
+/// neighbour slice cut from a running position) and, when `src` holds every vertex
+/// (`WINDOW == false`), neighbour positions are gathered without a bounds check per neighbour:
+/// this loop is most of the time of `laplacian` and `taubin`. `old` is what `FROM_SRC` measures
+/// against, one entry per vertex of the range.
+#[inline(always)]
+fn step<const MEASURE: u8, const WINDOW: bool>(
+    topo: &Topology,
+    src: &[DVec3],
+    src_first: usize,
+    dst: &mut [DVec3],
+    first: usize,
+    lambda: f64,
+    old: &[DVec3],
+) -> StepStats {
+    let n = dst.len();
+    let (offsets, vv) = topo.csr();
+    if !WINDOW {
+        // The unchecked gather below relies on this: every id in `vv` is below `topo.len()` (the
+        // topology's invariant, checked when it is built), so it is below `src.len()`.
+        assert!(src_first == 0 && src.len() >= topo.len());
+    }
+    // The mask, offsets and old positions of the range as slices: one bounds check for the range
     // instead of one per vertex.
-    let fixed = &topo.fixed_mask()[first..first + dst.len()];
-    let own = &src[first..first + dst.len()];
-    let mut moved = 0;
-    for (k, ((out, &fix), &p)) in dst.iter_mut().zip(fixed).zip(own).enumerate() {
-        *out = if fix != 0 {
+    let fixed = &topo.fixed_mask()[first..first + n];
+    let own = &src[first - src_first..first - src_first + n];
+    let offsets = &offsets[first..first + n + 1];
+    let old = if MEASURE == FROM_SRC { &old[..n] } else { old };
+    let mut st = StepStats::default();
+    for k in 0..n {
+        let p = own[k];
+        let new = if fixed[k] != 0 {
             p
         } else {
-            moved += 1;
-            let nbrs = topo.neighbors((first + k) as u32);
-            let sum = nbrs.iter().fold(DVec3::ZERO, |s, &u| s + src[u as usize]);
+            st.moved += 1;
+            let nbrs = &vv[offsets[k]..offsets[k + 1]];
+            let mut sum = DVec3::ZERO;
+            for &u in nbrs {
+                sum += if WINDOW {
+                    // Below `src_first` wraps to a huge index: a panic, never a wrong read.
+                    src[(u as usize).wrapping_sub(src_first)]
+                } else {
+                    // SAFETY: `u < topo.len() <= src.len()` (asserted above).
+                    unsafe { *src.get_unchecked(u as usize) }
+                };
+            }
             p + lambda * (sum * inv_deg(nbrs.len()) - p)
         };
+        if MEASURE != NO_MEASURE {
+            let before = if MEASURE == FROM_SRC { old[k] } else { dst[k] };
+            let d = new.distance(before);
+            st.max_displacement = st.max_displacement.max(d);
+            st.sum_displacement += d;
+        }
+        dst[k] = new;
     }
-    moved
+    st
 }
 
 #[cfg(test)]

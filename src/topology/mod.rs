@@ -159,7 +159,7 @@ impl Topology {
                 for (k, (deg, fix)) in degs.iter_mut().zip(fixed.iter_mut()).enumerate() {
                     let v = (c * CHUNK + k) as u32;
                     let faces = &vf[vf_offsets[v as usize]..vf_offsets[v as usize + 1]];
-                    let a = analyse_vertex(v, faces, triangles, scratch, None);
+                    let a = analyse_vertex(v, faces, triangles, scratch);
                     *deg = a.degree;
                     st.edges += a.edges;
                     st.boundary_edges += a.boundary_edges;
@@ -196,13 +196,7 @@ impl Topology {
                 for v in range {
                     let faces = &vf[vf_offsets[v]..vf_offsets[v + 1]];
                     let deg = vv_offsets[v + 1] - vv_offsets[v];
-                    analyse_vertex(
-                        v as u32,
-                        faces,
-                        triangles,
-                        scratch,
-                        Some(&mut out[at..at + deg]),
-                    );
+                    write_neighbors(v as u32, faces, triangles, scratch, &mut out[at..at + deg]);
                     at += deg;
                 }
             });
@@ -295,6 +289,13 @@ impl Topology {
         &self.vv[self.vv_offsets[v]..self.vv_offsets[v + 1]]
     }
 
+    /// The vertex→vertex CSR arrays: the neighbours of `v` are `vv[offsets[v]..offsets[v + 1]]`.
+    /// Every id in `vv` is below [`Topology::len`].
+    #[inline]
+    pub fn csr(&self) -> (&[usize], &[u32]) {
+        (&self.vv_offsets, &self.vv)
+    }
+
     /// Number of neighbours of `v`.
     #[inline]
     pub fn deg(&self, v: u32) -> usize {
@@ -384,13 +385,12 @@ struct VertexAnalysis {
     fixed: bool,
 }
 
-/// Classify vertex `v` from its (non-degenerate) faces; writes its sorted neighbours to `out` if given.
+/// Classify vertex `v` from its (non-degenerate) faces.
 fn analyse_vertex(
     v: u32,
     faces: &[u32],
     triangles: &[[u32; 3]],
     s: &mut VertexScratch,
-    out: Option<&mut [u32]>,
 ) -> VertexAnalysis {
     s.link.clear();
     s.corners.clear();
@@ -448,10 +448,28 @@ fn analyse_vertex(
         a.fixed = true;
         a.non_manifold_vertex = true;
     }
-    if let Some(out) = out {
-        out.copy_from_slice(nbrs);
-    }
     a
+}
+
+/// The sorted distinct neighbours of `v` into `out` (of the length pass 1 found): the list
+/// [`analyse_vertex`] writes, without the link analysis pass 1 already made (that analysis, the
+/// union-find over the link, was a third of the build's instructions when pass 2 repeated it).
+fn write_neighbors(
+    v: u32,
+    faces: &[u32],
+    triangles: &[[u32; 3]],
+    s: &mut VertexScratch,
+    out: &mut [u32],
+) {
+    s.corners.clear();
+    for &t in faces {
+        let (b, c) = opposite_edge(&triangles[t as usize], v);
+        s.corners.push(b);
+        s.corners.push(c);
+    }
+    s.corners.sort_unstable();
+    s.corners.dedup();
+    out.copy_from_slice(&s.corners);
 }
 
 fn is_degenerate(t: &[u32; 3]) -> bool {
