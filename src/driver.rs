@@ -678,6 +678,15 @@ pub struct PhaseTimings {
     pub total: f64,
 }
 
+impl PhaseTimings {
+    /// Take the reorder, topology and partition seconds of a preparation.
+    pub fn add_preparation(&mut self, p: &PrepTimings) {
+        self.reorder += p.reorder;
+        self.topology += p.topology;
+        self.partition += p.partition;
+    }
+}
+
 /// Read `input`, smooth it patch-parallel with `opts`, write `output` (atomically, in the input's
 /// vertex order and layout). The one place that wires I/O, partition, schedule and kernels.
 pub fn run_file(
@@ -733,9 +742,7 @@ pub fn run_file_with(
             engine.patch_size,
         )
         .map_err(|e| e.in_file(input))?;
-        t.reorder = prep.timings.reorder;
-        t.topology = prep.timings.topology;
-        t.partition = prep.timings.partition;
+        t.add_preparation(&prep.timings);
         // The plan holds its own (reordered) copy: the input-order positions are not needed until
         // the write, so their memory is given back while smoothing (the peak of an in-core run).
         let n = mesh.positions.len();

@@ -49,6 +49,17 @@ fn generate(dir: &Path, level: u32) -> PathBuf {
     p
 }
 
+/// The reference: `vcsmooth smooth input dir/plain.ply args...` in one process, without MPI.
+fn single_process(dir: &Path, input: &Path, args: &[&str]) -> PathBuf {
+    let plain = dir.join("plain.ply");
+    ok(Command::new(BIN)
+        .args(["smooth", input.to_str().unwrap(), plain.to_str().unwrap()])
+        .args(args)
+        .output()
+        .unwrap());
+    plain
+}
+
 #[test]
 fn mpi_ranks_1_2_3_are_bit_identical_to_one_process() {
     let tmp = tempfile::tempdir().unwrap();
@@ -67,12 +78,7 @@ fn mpi_ranks_1_2_3_are_bit_identical_to_one_process() {
             "--patch-size",
             "2048",
         ];
-        let plain = tmp.path().join("plain.ply");
-        ok(Command::new(BIN)
-            .args(["smooth", input.to_str().unwrap(), plain.to_str().unwrap()])
-            .args(common)
-            .output()
-            .unwrap());
+        let plain = single_process(tmp.path(), input, &common);
         for ranks in [1, 2, 3] {
             let out = tmp.path().join(format!("mpi{ranks}.ply"));
             let text = ok(mpirun(
@@ -112,12 +118,7 @@ fn mpi_run_killed_and_resumed_equals_uninterrupted() {
         "--threads",
         "1",
     ];
-    let plain = tmp.path().join("plain.ply");
-    ok(Command::new(BIN)
-        .args(["smooth", input.to_str().unwrap(), plain.to_str().unwrap()])
-        .args(common)
-        .output()
-        .unwrap());
+    let plain = single_process(tmp.path(), &input, &common);
     let ck = tmp.path().join("ck");
     let out = tmp.path().join("out.ply");
     let args = [

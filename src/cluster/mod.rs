@@ -254,9 +254,7 @@ fn ensure_plan(
         engine.patch_size,
     )
     .map_err(|e| e.in_file(input))?;
-    t.reorder = prep.timings.reorder;
-    t.topology = prep.timings.topology;
-    t.partition = prep.timings.partition;
+    t.add_preparation(&prep.timings);
     // Measured always: a resumed run may ask for a report that the first run did not.
     let input_stats = Some(prep.info(&mesh.source));
     drop(mesh);
