@@ -217,37 +217,38 @@ fn a_damaged_plan_is_an_error_on_every_rank_not_a_panic() {
     )
     .unwrap();
     std::fs::remove_file(&out).unwrap();
-    // An out-of-range neighbour in the adjacency, and a truncated positions slot.
-    let vv = work.join("vv.u32");
-    let mut bytes = std::fs::read(&vv).unwrap();
-    bytes[4..8].copy_from_slice(&u32::MAX.to_le_bytes());
-    std::fs::write(&vv, bytes).unwrap();
     let more = Options {
         iterations: 2,
         ..opts
     };
-    let err = run_ranks(
-        2,
-        &input,
-        &out,
-        &more,
-        &engine(100, 1),
-        &settings(&work, true, 1),
-    )
-    .unwrap_err();
+    let resume = || {
+        let settings = settings(&work, true, 1);
+        run_ranks(2, &input, &out, &more, &engine(100, 1), &settings).unwrap_err()
+    };
+    // An out-of-range neighbour in the adjacency.
+    let vv = work.join("vv.u32");
+    let good = std::fs::read(&vv).unwrap();
+    let mut bad = good.clone();
+    bad[4..8].copy_from_slice(&u32::MAX.to_le_bytes());
+    std::fs::write(&vv, bad).unwrap();
+    let err = resume();
     assert!(err.to_string().contains("damaged"), "{err}");
     assert!(!out.exists());
-    let state = work.join("state.json");
-    std::fs::write(&state, "{ not json").unwrap();
-    let err = run_ranks(
-        2,
-        &input,
-        &out,
-        &more,
-        &engine(100, 1),
-        &settings(&work, true, 1),
-    )
-    .unwrap_err();
+    std::fs::write(&vv, good).unwrap();
+    // A truncated positions slot.
+    for slot in ["positions-0.f64", "positions-1.f64"] {
+        let f = std::fs::OpenOptions::new()
+            .write(true)
+            .open(work.join(slot))
+            .unwrap();
+        f.set_len(100).unwrap();
+    }
+    let err = resume();
+    assert!(err.to_string().contains("positions-"), "{err}");
+    assert!(!out.exists());
+    // An unreadable state.
+    std::fs::write(work.join("state.json"), "{ not json").unwrap();
+    let err = resume();
     assert!(err.to_string().contains("state.json"), "{err}");
     assert!(!out.exists());
 }
