@@ -808,19 +808,29 @@ impl Prepared {
 
     /// The decomposition's figures for reports.
     pub fn plan_stats(&self) -> PlanStats {
-        let halo = &self.schedule.halo;
-        PlanStats {
-            patch_size: self.patches.first().map_or(0, |p| p.vertices.len()),
-            patches: self.patches.len(),
-            colours: self.schedule.colours.len(),
-            halo_min: halo.iter().copied().min().unwrap_or(0),
-            halo_mean: halo.iter().map(|&h| h as f64).sum::<f64>() / halo.len().max(1) as f64,
-            halo_max: halo.iter().copied().max().unwrap_or(0),
-            crossing_edge_stencils: self
-                .patches
+        PlanStats::new(
+            self.patches.first().map_or(0, |p| p.vertices.len()),
+            self.schedule.colours.len(),
+            &self.schedule.halo,
+            self.patches
                 .iter()
                 .map(|p| p.crossing_edges(&self.topology))
                 .sum(),
+        )
+    }
+}
+
+impl PlanStats {
+    /// The figures of a plan of `halo.len()` patches (one halo count each), on the current pool.
+    pub fn new(patch_size: usize, colours: usize, halo: &[u32], crossing: u64) -> PlanStats {
+        PlanStats {
+            patch_size,
+            patches: halo.len(),
+            colours,
+            halo_min: halo.iter().copied().min().unwrap_or(0),
+            halo_mean: halo.iter().map(|&h| h as f64).sum::<f64>() / halo.len().max(1) as f64,
+            halo_max: halo.iter().copied().max().unwrap_or(0),
+            crossing_edge_stencils: crossing,
             threads: rayon::current_num_threads(),
         }
     }

@@ -19,25 +19,22 @@ pub trait Comm {
 
     /// Element-wise sums over all ranks, added in rank order (the same bits on every rank).
     fn sum(&self, x: &[f64]) -> Vec<f64> {
-        let bits: Vec<u64> = x.iter().map(|v| v.to_bits()).collect();
-        let got = self.exchange(vec![bits; self.size()]);
-        let mut out = vec![0.0; x.len()];
-        for part in &got {
-            for (o, b) in out.iter_mut().zip(part) {
-                *o += f64::from_bits(*b);
-            }
-        }
-        out
+        self.reduce(x, 0.0, |a, b| a + b)
     }
 
     /// Element-wise maxima over all ranks.
     fn max(&self, x: &[f64]) -> Vec<f64> {
+        self.reduce(x, f64::NEG_INFINITY, f64::max)
+    }
+
+    /// Element-wise `op` over all ranks' `x`, folded from `init` in rank order.
+    fn reduce(&self, x: &[f64], init: f64, op: fn(f64, f64) -> f64) -> Vec<f64> {
         let bits: Vec<u64> = x.iter().map(|v| v.to_bits()).collect();
         let got = self.exchange(vec![bits; self.size()]);
-        let mut out = vec![f64::NEG_INFINITY; x.len()];
+        let mut out = vec![init; x.len()];
         for part in &got {
             for (o, b) in out.iter_mut().zip(part) {
-                *o = o.max(f64::from_bits(*b));
+                *o = op(*o, f64::from_bits(*b));
             }
         }
         out

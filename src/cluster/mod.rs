@@ -172,7 +172,6 @@ pub fn run_file(
     let maxima = comm.max(&[owned, -owned, region, bytes, peak, smoothing_peak]);
     let sums = comm.sum(&[values]);
     let doc = &plan.doc;
-    let halo = &doc.halo;
     Ok(FileRun {
         input_format: io::Format::from_extension(input),
         vertices: doc.vertices,
@@ -180,16 +179,14 @@ pub fn run_file(
         records: state.records,
         input_stats: engine.with_stats.then(|| doc.input_stats.clone()).flatten(),
         output_stats,
-        plan: PlanStats {
-            patch_size: doc.key.patch_size,
-            patches: doc.patches.len(),
-            colours: doc.colours.len(),
-            halo_min: halo.iter().copied().min().unwrap_or(0),
-            halo_mean: halo.iter().map(|&h| h as f64).sum::<f64>() / halo.len().max(1) as f64,
-            halo_max: halo.iter().copied().max().unwrap_or(0),
-            crossing_edge_stencils: doc.crossing_edge_stencils,
-            threads: pool.current_num_threads(),
-        },
+        plan: pool.install(|| {
+            PlanStats::new(
+                doc.key.patch_size,
+                doc.colours.len(),
+                &doc.halo,
+                doc.crossing_edge_stencils,
+            )
+        }),
         memory: MemoryStats {
             budget,
             storage: "cluster",
@@ -613,7 +610,7 @@ impl<'a> RankRun<'a> {
             stencils.skipped_degenerate,
             stencils.rejected,
         ];
-        let mut local = vec![sum_d, seconds];
+        let mut local = vec![sum_d];
         local.extend(counts.iter().map(|&c| c as f64));
         let sums = self.comm.sum(&local);
         let maxima = self.comm.max(&[max_d, seconds]);
@@ -625,10 +622,10 @@ impl<'a> RankRun<'a> {
             max_displacement: maxima[0],
             mean_displacement: sums[0] / movable as f64,
             stencils: SweepStats {
-                applied: sums[2] as u64,
-                skipped_fixed: sums[3] as u64,
-                skipped_degenerate: sums[4] as u64,
-                rejected: sums[5] as u64,
+                applied: sums[1] as u64,
+                skipped_fixed: sums[2] as u64,
+                skipped_degenerate: sums[3] as u64,
+                rejected: sums[4] as u64,
             },
             seconds: maxima[1],
         }
@@ -681,10 +678,8 @@ impl<'a> RankRun<'a> {
                     })
             });
             for &v in self.part.rings[..2].iter().flatten() {
-                sums[v as usize] = topo
-                    .neighbors(v)
-                    .iter()
-                    .fold(DVec3::ZERO, |s, &u| s + pos[u as usize]);
+                let v = v as usize;
+                smooth::neighbor_sums_into(topo, pos, &mut sums[v..v + 1], v);
             }
         }
         let params = driver::stencil_params(opts);
