@@ -23,8 +23,9 @@ use crate::smooth::{
     laplacian::{self, Previous, StepStats},
     stencil::{self, StencilParams, Workspace},
 };
+use crate::tiled::{self, TilePlan};
 use crate::topology::Topology;
-use crate::{fused, io, resources};
+use crate::{io, resources};
 
 /// Statistics of one iteration, relative to the input where a percentage is given.
 #[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize)]
@@ -104,10 +105,10 @@ fn run(
     opts: &Options,
     observer: &mut dyn Observer,
 ) -> Result<Vec<IterationRecord>> {
-    // The stencil methods' copy before each sweep, for the displacement, or taubin's third buffer.
+    // The stencil methods' copy before each sweep, for the displacement.
     let mut prev = vec![
         DVec3::ZERO;
-        if opts.method == Method::Laplacian {
+        if opts.method.is_jacobi() {
             0
         } else {
             pos.len()
@@ -124,6 +125,7 @@ fn run(
         &mut scratch,
         opts,
         observer,
+        true,
         |pos, sums| {
             if opts.method == Method::VcsTriangle {
                 let faces = 0..triangles.len() as u32;
@@ -136,8 +138,9 @@ fn run(
     Ok(records)
 }
 
-/// The iteration loop both engines share: Jacobi methods here, stencil methods through
-/// `stencil_sweep(positions, neighbour sums)`; then the per-iteration statistics.
+/// The iteration loop both engines share: Jacobi methods in [`jacobi_rounds`], stencil methods
+/// through `stencil_sweep(positions, neighbour sums)`; then the per-iteration statistics.
+/// `tiles`: whether the Jacobi methods may hold a [`TilePlan`] on the heap (the mesh is in memory).
 #[allow(clippy::too_many_arguments)]
 fn iterate(
     topo: &Topology,
@@ -147,118 +150,187 @@ fn iterate(
     scratch: &mut [DVec3],
     opts: &Options,
     observer: &mut dyn Observer,
+    tiles: bool,
     mut stencil_sweep: impl FnMut(&mut [DVec3], &mut [DVec3]) -> SweepStats,
 ) -> Vec<IterationRecord> {
-    // A fixed reference point, so that the volume of an open mesh is followed consistently.
-    let origin = metrics::centroid(pos);
-    let (v_in, a_in) = volume_area_par(pos, tris, origin);
-    let movable = (topo.len() - topo.stats.fixed_vertices).max(1);
+    let stats = Statistics::new(topo, tris, pos);
+    if opts.method.is_jacobi() {
+        return jacobi_rounds(topo, &stats, pos, scratch, opts, observer, tiles);
+    }
     let mut records = Vec::with_capacity(opts.iterations);
-    // Where the current positions are: `laplacian` ping-pongs between `pos` and `scratch`, `taubin`
-    // between `pos` and `prev` (through `scratch`, see `crate::fused`), so that no iteration copies
-    // the positions; the stencil methods work in place in `pos`.
-    let mut at = At::Pos;
-    let mut pairs = None;
     for it in 1..=opts.iterations {
         let measure = observer.statistics(it, opts.iterations);
         let start = Instant::now();
-        // The Jacobi steps measure the displacement in the same pass (their time includes it); the
-        // stencil methods compare with a copy of the positions taken before the sweep (timed, as
-        // it always was), in a pass after the timed part.
-        let (stencils, seconds, moved) = match opts.method {
-            Method::Taubin => {
-                let plan = pairs.get_or_insert_with(|| {
-                    fused::PairPlan::new(topo, rayon::current_num_threads())
-                });
-                let (a, c): (&[DVec3], &mut [DVec3]) = if at == At::Prev {
-                    (prev, pos)
-                } else {
-                    (pos, prev)
-                };
-                at = if at == At::Prev { At::Pos } else { At::Prev };
-                let (applied, moved) = fused::pair(plan, topo, a, scratch, c, opts.lambda, opts.mu);
-                let s = SweepStats {
-                    applied,
-                    skipped_fixed: 2 * topo.len() as u64 - applied,
-                    ..Default::default()
-                };
-                (s, start.elapsed().as_secs_f64(), moved)
-            }
-            Method::Laplacian => {
-                let (src, dst): (&[DVec3], &mut [DVec3]) = if at == At::Scratch {
-                    (scratch, pos)
-                } else {
-                    (pos, scratch)
-                };
-                at = if at == At::Scratch {
-                    At::Pos
-                } else {
-                    At::Scratch
-                };
-                let (s, moved) = jacobi_measured(topo, src, dst, opts.lambda, Previous::Src);
-                (s, start.elapsed().as_secs_f64(), moved)
-            }
-            Method::Lem | Method::Vcs | Method::VcsTriangle => {
-                if measure {
-                    prev.copy_from_slice(pos);
-                }
-                // `scratch` holds the neighbour sums, fresh each iteration.
-                const CHUNK: usize = 1 << 14;
-                scratch
-                    .par_chunks_mut(CHUNK)
-                    .enumerate()
-                    .for_each(|(c, out)| smooth::neighbor_sums_into(topo, pos, out, c * CHUNK));
-                let s = stencil_sweep(pos, scratch);
-                let seconds = start.elapsed().as_secs_f64();
-                let moved = if measure {
-                    displacement_par(pos, prev)
-                } else {
-                    StepStats {
-                        moved: 0,
-                        max_displacement: f64::NAN,
-                        sum_displacement: f64::NAN,
-                    }
-                };
-                (s, seconds, moved)
-            }
-        };
-        let current: &[DVec3] = match at {
-            At::Pos => pos,
-            At::Scratch => scratch,
-            At::Prev => prev,
-        };
-        let (volume, area) = if measure {
-            volume_area_par(current, tris, origin)
-        } else {
-            (f64::NAN, f64::NAN)
-        };
-        let record = IterationRecord {
-            iteration: it,
-            volume,
-            volume_pct: percent(volume, v_in),
-            area_pct: percent(area, a_in),
-            max_displacement: moved.max_displacement,
-            mean_displacement: moved.sum_displacement / movable as f64,
-            stencils,
-            seconds,
-        };
+        if measure {
+            prev.copy_from_slice(pos);
+        }
+        // `scratch` holds the neighbour sums, fresh each iteration.
+        const CHUNK: usize = 1 << 14;
+        scratch
+            .par_chunks_mut(CHUNK)
+            .enumerate()
+            .for_each(|(c, out)| smooth::neighbor_sums_into(topo, pos, out, c * CHUNK));
+        let sweep = stencil_sweep(pos, scratch);
+        // Timed as it always was: the sweep, not the displacement pass that follows it.
+        let seconds = start.elapsed().as_secs_f64();
+        let moved = measure.then(|| displacement_par(pos, prev));
+        let record = stats.record(it, pos, moved, sweep, seconds);
         observer.iteration(&record, opts.iterations);
         records.push(record);
-    }
-    match at {
-        At::Pos => {}
-        At::Scratch => pos.copy_from_slice(scratch),
-        At::Prev => pos.copy_from_slice(prev),
     }
     records
 }
 
-/// Which buffer of [`iterate`] holds the current positions.
-#[derive(Clone, Copy, PartialEq, Eq)]
-enum At {
-    Pos,
-    Scratch,
-    Prev,
+/// What the per-iteration records are relative to.
+struct Statistics<'a> {
+    tris: &'a [[u32; 3]],
+    /// A fixed reference point, so that the volume of an open mesh is followed consistently.
+    origin: DVec3,
+    volume: f64,
+    area: f64,
+    movable: usize,
+}
+
+impl<'a> Statistics<'a> {
+    fn new(topo: &Topology, tris: &'a [[u32; 3]], pos: &[DVec3]) -> Self {
+        let origin = metrics::centroid(pos);
+        let (volume, area) = volume_area_par(pos, tris, origin);
+        Statistics {
+            tris,
+            origin,
+            volume,
+            area,
+            movable: (topo.len() - topo.stats.fixed_vertices).max(1),
+        }
+    }
+
+    /// The record of iteration `it` that ended at `pos`; `moved` is its displacement when the
+    /// statistics were wanted (then the volume and area are measured too), `None` otherwise.
+    fn record(
+        &self,
+        it: usize,
+        pos: &[DVec3],
+        moved: Option<StepStats>,
+        stencils: SweepStats,
+        seconds: f64,
+    ) -> IterationRecord {
+        let (volume, area) = match moved {
+            Some(_) => volume_area_par(pos, self.tris, self.origin),
+            None => (f64::NAN, f64::NAN),
+        };
+        let moved = moved.unwrap_or(StepStats {
+            moved: 0,
+            max_displacement: f64::NAN,
+            sum_displacement: f64::NAN,
+        });
+        IterationRecord {
+            iteration: it,
+            volume,
+            volume_pct: percent(volume, self.volume),
+            area_pct: percent(area, self.area),
+            max_displacement: moved.max_displacement,
+            mean_displacement: moved.sum_displacement / self.movable as f64,
+            stencils,
+            seconds,
+        }
+    }
+}
+
+/// `laplacian` and `taubin`: rounds of Jacobi steps, ping-ponging between `pos` and `scratch`
+/// (the result ends in `pos`).
+///
+/// With a [`TilePlan`] (when `tiles` and the mesh allows one) a round runs several iterations in
+/// one pass over memory: up to the plan's depth in steps, and never past an iteration whose
+/// statistics are wanted (it ends the round, and its displacement is measured in the round). The
+/// iterations of a round share its time equally in their records, the plan's construction
+/// counted in the first. Without a plan every iteration is one or two plain steps over
+/// fixed-size chunks. Both give bit-identical positions.
+fn jacobi_rounds(
+    topo: &Topology,
+    stats: &Statistics,
+    pos: &mut [DVec3],
+    scratch: &mut [DVec3],
+    opts: &Options,
+    observer: &mut dyn Observer,
+    tiles: bool,
+) -> Vec<IterationRecord> {
+    let total = opts.iterations;
+    let factors: &[f64] = if opts.method == Method::Taubin {
+        &[opts.lambda, opts.mu]
+    } else {
+        &[opts.lambda]
+    };
+    let mut start = Instant::now();
+    let plan = if tiles && total > 0 {
+        TilePlan::new(topo)
+    } else {
+        None
+    };
+    let per_round = plan
+        .as_ref()
+        .map_or(1, |p| (p.depth() / factors.len()).max(1));
+    let movable = (topo.len() - topo.stats.fixed_vertices) as u64;
+    let sweep = SweepStats {
+        applied: movable * factors.len() as u64,
+        skipped_fixed: (topo.len() as u64 - movable) * factors.len() as u64,
+        ..Default::default()
+    };
+    let mut records = Vec::with_capacity(total);
+    // Whether the current positions are in `scratch` (else in `pos`).
+    let mut in_scratch = false;
+    let mut first = 1;
+    while first <= total {
+        let mut last = first;
+        while last < total && last - first + 1 < per_round && !observer.statistics(last, total) {
+            last += 1;
+        }
+        let measure = observer.statistics(last, total);
+        let (src, dst): (&[DVec3], &mut [DVec3]) = if in_scratch {
+            (scratch, pos)
+        } else {
+            (pos, scratch)
+        };
+        let moved = match &plan {
+            Some(plan) => {
+                let steps: Vec<f64> = (first..=last).flat_map(|_| factors.to_vec()).collect();
+                let measured = measure.then_some(steps.len() - factors.len());
+                let st = tiled::round(plan, src, dst, &steps, measured);
+                in_scratch = !in_scratch;
+                measure.then_some(st)
+            }
+            None if factors.len() == 1 => {
+                in_scratch = !in_scratch;
+                let moved = jacobi_measured(topo, src, dst, factors[0], Previous::Src).1;
+                measure.then_some(moved)
+            }
+            None => {
+                // The pair goes `src` → `dst` → `src`: the μ step measures against the position
+                // it overwrites, the one before the pair.
+                jacobi_measured(topo, src, dst, factors[0], Previous::Src);
+                let (src, dst): (&[DVec3], &mut [DVec3]) = if in_scratch {
+                    (pos, scratch)
+                } else {
+                    (scratch, pos)
+                };
+                let moved = jacobi_measured(topo, src, dst, factors[1], Previous::Dst).1;
+                measure.then_some(moved)
+            }
+        };
+        let seconds = start.elapsed().as_secs_f64() / (last - first + 1) as f64;
+        let current: &[DVec3] = if in_scratch { scratch } else { pos };
+        for it in first..=last {
+            let moved = if it == last { moved } else { None };
+            let record = stats.record(it, current, moved, sweep, seconds);
+            observer.iteration(&record, total);
+            records.push(record);
+        }
+        first = last + 1;
+        start = Instant::now();
+    }
+    if in_scratch {
+        pos.copy_from_slice(scratch);
+    }
+    records
 }
 
 pub(crate) fn stencil_params(opts: &Options) -> StencilParams {
@@ -423,12 +495,8 @@ impl Prepared {
         } = self;
         let tris: &[[u32; 3]] = &reordered.triangles;
         let n = reordered.positions.len();
-        // The stencil methods' copy before each sweep, for the displacement, or taubin's third buffer.
-        let mut prev: Buf<DVec3> = storage.zeroed(if opts.method == Method::Laplacian {
-            0
-        } else {
-            n
-        })?;
+        // The stencil methods' copy before each sweep, for the displacement.
+        let mut prev: Buf<DVec3> = storage.zeroed(if opts.method.is_jacobi() { 0 } else { n })?;
         let mut scratch: Buf<DVec3> = storage.zeroed(n)?;
         let advisors: Vec<_> = [reordered.positions.advisor(), scratch.advisor()]
             .into_iter()
@@ -445,6 +513,7 @@ impl Prepared {
                 &mut scratch,
                 opts,
                 observer,
+                !storage.is_mapped(),
                 |pos, sums| sweep_colours(topo, tris, pos, sums, patches, schedule, opts, prefetch),
             )
         }))

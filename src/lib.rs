@@ -15,7 +15,6 @@ pub mod cli;
 pub mod cluster;
 pub mod driver;
 pub mod error;
-pub mod fused;
 pub mod generate;
 pub mod io;
 pub mod mesh;
@@ -26,6 +25,7 @@ pub mod refine;
 pub mod resources;
 pub mod schedule;
 pub mod smooth;
+pub mod tiled;
 pub mod topology;
 
 pub use error::{Error, Result};

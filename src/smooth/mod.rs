@@ -35,6 +35,11 @@ pub enum Method {
 }
 
 impl Method {
+    /// `laplacian` and `taubin`: Jacobi steps over all vertices, no stencils.
+    pub fn is_jacobi(self) -> bool {
+        matches!(self, Method::Laplacian | Method::Taubin)
+    }
+
     /// Every method, in documentation order.
     pub const ALL: [Method; 5] = [
         Method::Laplacian,

@@ -1,0 +1,657 @@
+//! Several Jacobi steps per pass over memory, tile by tile (temporal blocking), for `laplacian`
+//! and `taubin`.
+//!
+//! A Jacobi step on a mesh larger than the caches streams the positions and the adjacency through
+//! memory once; ten steps stream them ten times, and that traffic, not arithmetic, is what a plain
+//! step waits for. Here the (Morton-ordered) vertices are cut into tiles of [`TILE`] consecutive
+//! vertices. A round of `k ≤ depth` steps gathers, for each tile, the positions of its own vertices
+//! and of the `k` rings of vertices around them into a small local array, runs the `k` steps there
+//! (step `s` on the tile and its `k − 1 − s` inner rings, the values the next step still reads) and
+//! writes the tile's own vertices back: the mesh passes through memory once per round, the steps
+//! run in cache. The rings are computed redundantly by neighbouring tiles; that costs arithmetic,
+//! which is cheap next to the traffic saved.
+//!
+//! A tile's own vertices keep their order, so an *interior* one (all neighbours own) reads its
+//! neighbour list straight from the [`Topology`], its ids shifted by the tile's first vertex. The
+//! others — own vertices on the tile's edge and the ring vertices — get a local row: the same
+//! neighbour list, in the same order, in 16-bit local ids. The kernel does the same floating-point
+//! operations in the same order as [`crate::smooth::laplacian::jacobi_step`], so the result is
+//! bit-identical to `k` plain steps for any tile size, depth and thread count. Positions are held
+//! locally as four lanes (x, y, z, 0), so that a neighbour is added with whole-vector instructions;
+//! each lane sees the operations of the scalar kernel.
+//!
+//! The plan (local rows, ring vertices to gather) is about 6 bytes per vertex on a Morton-ordered
+//! surface (5.8 on a 2.6M-vertex sphere with the defaults). It is built once per run, in one
+//! breadth-first pass per tile, and lives on the heap, so the engine uses it only when the mesh is
+//! in memory.
+
+use std::cell::RefCell;
+use std::ops::Range;
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+use crate::smooth::laplacian::StepStats;
+use crate::topology::Topology;
+
+/// Own vertices per tile. With [`DEPTH`] rings a tile of a Morton-ordered surface holds ~1.3× as
+/// many vertices (1.29 on a 2.6M-vertex sphere): 2.7 MiB of local positions, in the second- and
+/// third-level caches. Tiles of 16,384 fit the second level better but recompute 1.43× the
+/// vertices; on the 2-core machine measured both ran at the same speed within noise, 8,192 was
+/// slower (overhead 1.61).
+pub const TILE: usize = 32768;
+
+/// Most steps per round. Deeper rounds pass over memory less often but recompute more ring
+/// vertices and take longer to plan; taubin's iterations are two steps, so an even depth keeps its
+/// rounds whole. Depths 4 to 10 ran 10 taubin iterations on 5.2M triangles within noise of each
+/// other (the fastest runs all 0.20–0.21 s); 8 keeps the plan small.
+pub const DEPTH: usize = 8;
+
+/// Local indices are 16-bit: a tile and its rings may hold at most this many vertices.
+const MAX_LOCAL: usize = 1 << 16;
+
+/// The rounds' schedule for one topology: per tile, its rings and local adjacency.
+#[derive(Debug, Clone)]
+pub struct TilePlan<'t> {
+    topo: &'t Topology,
+    tile: usize,
+    depth: usize,
+    tiles: Vec<Tile>,
+}
+
+#[derive(Debug, Clone, Default)]
+struct Tile {
+    /// The first own vertex (the tile owns `start .. start + ring_end[0]`).
+    start: usize,
+    /// Local vertex count after ring `r` (`r = 0`: the own vertices), `depth + 1` entries.
+    ring_end: Vec<u32>,
+    /// Global ids of the ring vertices, ring by ring, each in order of discovery: local id
+    /// `ring_end[0] + j` is vertex `gather[j]`.
+    gather: Vec<u32>,
+    /// One entry per row `0 .. ring_end[depth - 1]`: [`INTERIOR`] for an own vertex whose
+    /// neighbours are all own (read from the topology, local id = global id − `start`), else the
+    /// length of its row in `nbrs` (0: a fixed vertex, copied unchanged).
+    kinds: Vec<u8>,
+    /// Local adjacency of the rows that are not interior, row after row.
+    nbrs: Vec<u16>,
+}
+
+/// The kind of a row that reads its neighbours from the topology.
+const INTERIOR: u8 = u8::MAX;
+
+/// A position as four lanes, so that a neighbour is added with vector instructions.
+#[derive(Debug, Clone, Copy, Default)]
+#[repr(C, align(32))]
+struct P4([f64; 4]);
+
+impl P4 {
+    #[inline(always)]
+    fn of(p: DVec3) -> P4 {
+        P4([p.x, p.y, p.z, 0.0])
+    }
+
+    #[inline(always)]
+    fn vec(self) -> DVec3 {
+        DVec3::new(self.0[0], self.0[1], self.0[2])
+    }
+}
+
+impl<'t> TilePlan<'t> {
+    /// The plan with the default tile size and depth, or `None` where a tile and its rings would
+    /// exceed the 16-bit local indices (a vertex of enormous degree) or a vertex that is not fixed
+    /// has no neighbours; callers then run plain steps, which give the same result.
+    pub fn new(topo: &'t Topology) -> Option<TilePlan<'t>> {
+        TilePlan::with(topo, TILE, DEPTH)
+    }
+
+    /// The plan for tiles of `tile` own vertices (1 ..= 65,536) and rounds of at most `depth` steps
+    /// (≥ 1).
+    pub fn with(topo: &'t Topology, tile: usize, depth: usize) -> Option<TilePlan<'t>> {
+        assert!((1..=MAX_LOCAL).contains(&tile) && depth >= 1);
+        let n = topo.len();
+        let tiles = (0..n.div_ceil(tile))
+            .into_par_iter()
+            .map_init(RingIds::default, |ids, t| {
+                build_tile(topo, t * tile..((t + 1) * tile).min(n), depth, ids)
+            })
+            .collect::<Option<Vec<Tile>>>()?;
+        Some(TilePlan {
+            topo,
+            tile,
+            depth,
+            tiles,
+        })
+    }
+
+    /// Most steps one [`TilePlan::round`] can run.
+    pub fn depth(&self) -> usize {
+        self.depth
+    }
+
+    /// Local vertices over own vertices, summed over the tiles (for tests and tuning).
+    pub fn overhead(&self) -> f64 {
+        let local: usize = self
+            .tiles
+            .iter()
+            .map(|t| t.ring_end[self.depth] as usize)
+            .sum();
+        local as f64 / self.topo.len().max(1) as f64
+    }
+
+    /// Bytes the plan holds.
+    pub fn bytes(&self) -> usize {
+        self.tiles
+            .iter()
+            .map(|t| 4 * (t.ring_end.len() + t.gather.len()) + t.kinds.len() + 2 * t.nbrs.len())
+            .sum()
+    }
+}
+
+/// Rings and local adjacency of the tile owning `own`, in one breadth-first pass: expanding the
+/// vertices of ring `r − 1` (in local order) discovers ring `r` (local ids in order of discovery)
+/// and writes their rows at the same time.
+#[inline(never)]
+fn build_tile(topo: &Topology, own: Range<usize>, depth: usize, ids: &mut RingIds) -> Option<Tile> {
+    let (offsets, vv) = topo.csr();
+    let fixed = topo.fixed_mask();
+    let nbrs_of = |v: usize| &vv[offsets[v]..offsets[v + 1]];
+    let is_own = |u: u32| (u as usize).wrapping_sub(own.start) < own.len();
+    ids.clear();
+    let mut kinds: Vec<u8> = Vec::with_capacity(own.len() * 5 / 4);
+    let mut nbrs: Vec<u16> = Vec::new();
+    let mut gather: Vec<u32> = Vec::new();
+    let mut ring_end = vec![own.len() as u32];
+    // The row of `v`, its neighbours outside the tile joining the next ring. `None`: the tile
+    // does not fit 16-bit ids, or the row cannot be expressed (see below).
+    let mut row = |v: usize, gather: &mut Vec<u32>| -> Option<u8> {
+        if fixed[v] != 0 {
+            // Copied unchanged: its neighbours are not needed.
+            return Some(0);
+        }
+        let nb = nbrs_of(v);
+        if nb.is_empty() || nb.len() >= INTERIOR as usize {
+            // No neighbour: `jacobi_step` would move it (towards the origin), which an empty row
+            // cannot say; 255 or more: the length does not fit the kind byte. Both are left to
+            // plain steps.
+            return None;
+        }
+        for &u in nb {
+            let l = if is_own(u) {
+                u as usize - own.start
+            } else {
+                let next = own.len() + gather.len();
+                let l = ids.get_or_insert(u, next as u32) as usize;
+                if l == next {
+                    gather.push(u);
+                }
+                l
+            };
+            if l >= MAX_LOCAL {
+                return None;
+            }
+            nbrs.push(l as u16);
+        }
+        Some(nb.len() as u8)
+    };
+    // Own vertices: interior (every neighbour own: read from the topology, no row here), fixed,
+    // or on the edge of the tile (their rows discover ring 1).
+    for v in own.clone() {
+        let nb = nbrs_of(v);
+        let interior = fixed[v] == 0 && !nb.is_empty() && nb.iter().all(|&u| is_own(u));
+        kinds.push(if interior {
+            INTERIOR
+        } else {
+            row(v, &mut gather)?
+        });
+    }
+    ring_end.push((own.len() + gather.len()) as u32);
+    // Rings 1 .. depth − 1 get rows, which discover the next ring.
+    for r in 1..depth {
+        let ring = ring_end[r - 1] as usize - own.len()..ring_end[r] as usize - own.len();
+        for j in ring {
+            // The ring's rows are scattered over the topology's arrays: ask for them ahead.
+            if let Some(&v) = gather.get(j + 16) {
+                prefetch(&offsets[v as usize]);
+            }
+            if let Some(&v) = gather.get(j + 8) {
+                prefetch(&vv[offsets[v as usize]..]);
+            }
+            let kind = row(gather[j] as usize, &mut gather)?;
+            kinds.push(kind);
+        }
+        ring_end.push((own.len() + gather.len()) as u32);
+    }
+    // What the kernel's unchecked reads rely on: a row of ring `r` reads only rings up to `r + 1`,
+    // which the step that computes the row has gathered or computed. True by construction (an id
+    // is given as the next ring's next vertex); checked, since memory safety rests on it.
+    let mut at = 0;
+    for (i, &kind) in kinds.iter().enumerate() {
+        if kind != INTERIOR {
+            let ring = ring_end.partition_point(|&e| e as usize <= i);
+            let row = &nbrs[at..at + kind as usize];
+            assert!(row.iter().all(|&l| (l as u32) < ring_end[ring + 1]));
+            at += kind as usize;
+        }
+    }
+    Some(Tile {
+        start: own.start,
+        ring_end,
+        gather,
+        kinds,
+        nbrs,
+    })
+}
+
+/// Hint the CPU to bring the cache line at `p` closer (no effect on results).
+#[inline(always)]
+fn prefetch<T: ?Sized>(p: &T) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: a prefetch only hints the cache; `p` is a valid reference anyway.
+    unsafe {
+        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        _mm_prefetch::<_MM_HINT_T0>((p as *const T).cast::<i8>());
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = p;
+}
+
+/// Global id → local id of one tile's ring vertices (open addressing, linear probing); reused
+/// from tile to tile by each thread.
+#[derive(Default)]
+struct RingIds {
+    keys: Vec<u32>,
+    values: Vec<u32>,
+    len: usize,
+}
+
+impl RingIds {
+    const EMPTY: u32 = u32::MAX;
+
+    fn clear(&mut self) {
+        if self.keys.is_empty() {
+            self.keys = vec![Self::EMPTY; 1 << 12];
+            self.values = vec![0; 1 << 12];
+        } else {
+            self.keys.fill(Self::EMPTY);
+        }
+        self.len = 0;
+    }
+
+    /// The slot of `u`, or the empty slot where it would go.
+    fn slot(&self, u: u32) -> usize {
+        let mask = self.keys.len() - 1;
+        let mut i = (u.wrapping_mul(0x9e37_79b1) as usize) & mask;
+        while self.keys[i] != u && self.keys[i] != Self::EMPTY {
+            i = (i + 1) & mask;
+        }
+        i
+    }
+
+    /// The value of `u`; if absent, `u` is added with `value`, which is returned.
+    fn get_or_insert(&mut self, u: u32, value: u32) -> u32 {
+        let i = self.slot(u);
+        if self.keys[i] == u {
+            return self.values[i];
+        }
+        self.keys[i] = u;
+        self.values[i] = value;
+        self.len += 1;
+        if 2 * self.len > self.keys.len() {
+            let old: Vec<(u32, u32)> = self
+                .keys
+                .iter()
+                .zip(&self.values)
+                .filter(|(k, _)| **k != Self::EMPTY)
+                .map(|(&k, &v)| (k, v))
+                .collect();
+            self.keys = vec![Self::EMPTY; 2 * self.keys.len()];
+            self.values = vec![0; self.keys.len()];
+            for (k, v) in old {
+                let i = self.slot(k);
+                self.keys[i] = k;
+                self.values[i] = v;
+            }
+        }
+        value
+    }
+}
+
+/// Per-thread local arrays, kept between tiles and rounds.
+#[derive(Default)]
+struct Local {
+    a: Vec<P4>,
+    b: Vec<P4>,
+    before: Vec<P4>,
+}
+
+thread_local! {
+    static LOCAL: RefCell<Local> = RefCell::new(Local::default());
+}
+
+/// One round: `factors.len()` Jacobi steps `p ← p + f L(p)` (one factor per step, at most
+/// [`TilePlan::depth`]), from `src` into `dst`, on the current rayon pool. With `measure = Some(s)`
+/// also measures how far each vertex moved from its position before step `s` to the end (the last
+/// iteration of the round); its `moved` counts the vertices that are not fixed. Bit-identical to
+/// the steps run one by one with [`crate::smooth::laplacian::jacobi_step`]; the statistics are
+/// summed tile by tile in tile order, so they do not depend on the thread count either.
+///
+/// # Panics
+/// If the slices do not have one entry per vertex, or there are more factors than the plan's
+/// depth.
+pub fn round(
+    plan: &TilePlan,
+    src: &[DVec3],
+    dst: &mut [DVec3],
+    factors: &[f64],
+    measure: Option<usize>,
+) -> StepStats {
+    let n = plan.topo.len();
+    assert!(src.len() == n && dst.len() == n);
+    assert!(!factors.is_empty() && factors.len() <= plan.depth);
+    assert!(measure.is_none_or(|s| s < factors.len()));
+    let per_tile: Vec<StepStats> = dst
+        .par_chunks_mut(plan.tile)
+        .zip(plan.tiles.par_iter())
+        .map(|(out, tile)| {
+            LOCAL.with_borrow_mut(|local| {
+                run_tile(plan.topo, tile, src, out, factors, measure, local)
+            })
+        })
+        .collect();
+    per_tile
+        .into_iter()
+        .fold(StepStats::default(), StepStats::then)
+}
+
+fn run_tile(
+    topo: &Topology,
+    tile: &Tile,
+    src: &[DVec3],
+    out: &mut [DVec3],
+    factors: &[f64],
+    measure: Option<usize>,
+    local: &mut Local,
+) -> StepStats {
+    let k = factors.len();
+    let own = tile.ring_end[0] as usize;
+    let len = tile.ring_end[k] as usize;
+    let Local { a, b, before } = local;
+    if a.len() < len {
+        a.resize(len, P4::default());
+        b.resize(len, P4::default());
+    }
+    for (l, p) in a.iter_mut().zip(&src[tile.start..tile.start + own]) {
+        *l = P4::of(*p);
+    }
+    let gather = &tile.gather[..len - own];
+    for (j, (l, &g)) in a[own..len].iter_mut().zip(gather).enumerate() {
+        if let Some(&ahead) = gather.get(j + 8) {
+            prefetch(&src[ahead as usize]);
+        }
+        *l = P4::of(src[g as usize]);
+    }
+    let (offsets, vv) = topo.csr();
+    let interior = Interior {
+        offsets: &offsets[tile.start..tile.start + own + 1],
+        vv,
+        start: tile.start,
+    };
+    for (s, &f) in factors.iter().enumerate() {
+        if measure == Some(s) {
+            before.clear();
+            before.extend_from_slice(&a[..own]);
+        }
+        // Step `s` updates the rows the following steps still read: the own vertices and the
+        // rings inside ring `k − s`.
+        let rows = tile.ring_end[k - 1 - s] as usize;
+        let reach = tile.ring_end[k - s] as usize;
+        relax(
+            &interior,
+            &tile.kinds[..rows],
+            &tile.nbrs,
+            &a[..reach],
+            &mut b[..rows],
+            f,
+        );
+        std::mem::swap(a, b);
+    }
+    let mut st = StepStats::default();
+    for (i, (o, l)) in out.iter_mut().zip(&a[..own]).enumerate() {
+        *o = l.vec();
+        if measure.is_some() {
+            let d = o.distance(before[i].vec());
+            st.moved += (tile.kinds[i] != 0) as u64;
+            st.max_displacement = st.max_displacement.max(d);
+            st.sum_displacement += d;
+        }
+    }
+    st
+}
+
+/// Where the interior rows of a tile find their neighbours: the topology's adjacency of the own
+/// vertices `start ..`, whose ids minus `start` are local ids.
+struct Interior<'a> {
+    offsets: &'a [usize],
+    vv: &'a [u32],
+    start: usize,
+}
+
+/// `1/d` for every length a local row can have: the same correctly rounded values as the
+/// scalar kernel's table.
+static INV_DEGREE: [f64; 256] = {
+    let mut t = [0.0; 256];
+    let mut d = 1;
+    while d < 256 {
+        t[d] = 1.0 / d as f64;
+        d += 1;
+    }
+    t
+};
+
+/// One step over the rows `0 .. kinds.len()` of a tile (its own vertices and inner rings, up to
+/// ring `r`), reading `src` (the local vertices up to ring `r + 1`) and writing `dst`. The same
+/// operations, in the same order, as the scalar kernel (a sum from zero in adjacency order, then
+/// `p + f (sum / deg − p)`), lane by lane. With AVX a neighbour is one 4-lane add.
+fn relax(inner: &Interior, kinds: &[u8], nbrs: &[u16], src: &[P4], dst: &mut [P4], f: f64) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx") {
+        // SAFETY: the CPU has AVX (just checked).
+        return unsafe { relax_avx(inner, kinds, nbrs, src, dst, f) };
+    }
+    relax_lanes(inner, kinds, nbrs, src, dst, f)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+unsafe fn relax_avx(
+    inner: &Interior,
+    kinds: &[u8],
+    nbrs: &[u16],
+    src: &[P4],
+    dst: &mut [P4],
+    f: f64,
+) {
+    relax_lanes(inner, kinds, nbrs, src, dst, f)
+}
+
+#[inline(always)]
+fn relax_lanes(inner: &Interior, kinds: &[u8], nbrs: &[u16], src: &[P4], dst: &mut [P4], f: f64) {
+    // Every step computes at least the own vertices, and `src` holds the rows and the next ring.
+    let own = inner.offsets.len() - 1;
+    assert!(kinds.len() == dst.len() && src.len() >= dst.len() && dst.len() >= own);
+    let mut nbrs = nbrs;
+    let (dst_own, dst_rings) = dst.split_at_mut(own);
+    let (kinds_own, kinds_rings) = kinds.split_at(own);
+    let rows = dst_own.iter_mut().zip(kinds_own).zip(&src[..own]);
+    for (((out, &kind), p), w) in rows.zip(inner.offsets.windows(2)) {
+        *out = if kind == INTERIOR {
+            let row = &inner.vv[w[0]..w[1]];
+            let mut sum = [0.0f64; 4];
+            for &u in row {
+                // SAFETY: `build_tile` marks a row interior only when every neighbour is an own
+                // vertex, so `u − start < own ≤ src.len()` (asserted above).
+                add(&mut sum, unsafe {
+                    src.get_unchecked(u as usize - inner.start)
+                });
+            }
+            let d = row.len();
+            let inv = if d < INV_DEGREE.len() {
+                INV_DEGREE[d]
+            } else {
+                1.0 / d as f64
+            };
+            relaxed(*p, sum, inv, f)
+        } else {
+            local_row(kind, &mut nbrs, src, *p, f)
+        };
+    }
+    for ((out, &kind), p) in dst_rings.iter_mut().zip(kinds_rings).zip(&src[own..]) {
+        *out = local_row(kind, &mut nbrs, src, *p, f);
+    }
+}
+
+/// A row of `kind` local neighbours taken from the front of `nbrs` (0: a fixed vertex).
+#[inline(always)]
+fn local_row(kind: u8, nbrs: &mut &[u16], src: &[P4], p: P4, f: f64) -> P4 {
+    if kind == 0 {
+        return p;
+    }
+    let (row, rest) = nbrs.split_at(kind as usize);
+    *nbrs = rest;
+    let mut sum = [0.0f64; 4];
+    for &u in row {
+        // SAFETY: `build_tile` checked that a row of ring `r` names only local vertices of rings
+        // up to `r + 1`, which is what `src` holds (`run_tile` passes `a[..ring_end[r + 1]]` with
+        // the rows up to ring `r`).
+        add(&mut sum, unsafe { src.get_unchecked(u as usize) });
+    }
+    relaxed(p, sum, INV_DEGREE[kind as usize], f)
+}
+
+#[inline(always)]
+fn add(sum: &mut [f64; 4], q: &P4) {
+    for (s, x) in sum.iter_mut().zip(q.0) {
+        *s += x;
+    }
+}
+
+/// `p + f (sum · inv − p)`, lane by lane: the scalar kernel's expression.
+#[inline(always)]
+fn relaxed(p: P4, sum: [f64; 4], inv: f64, f: f64) -> P4 {
+    let mut r = [0.0f64; 4];
+    for l in 0..4 {
+        r[l] = p.0[l] + f * (sum[l] * inv - p.0[l]);
+    }
+    P4(r)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::generate;
+    use crate::smooth::laplacian;
+
+    /// A noisy sphere in a random vertex order (so that rings reach far), with an open hole (so
+    /// that some vertices are fixed).
+    fn shuffled_open_sphere() -> (Topology, Vec<DVec3>) {
+        let mut mesh = generate::icosphere(5);
+        generate::add_normal_noise(&mut mesh, 0.3, 4);
+        let n = mesh.positions.len();
+        let mut perm: Vec<u32> = (0..n as u32).collect();
+        let mut x = 0x9e37_79b9_7f4a_7c15u64;
+        for i in (1..n).rev() {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            perm.swap(i, (x % (i as u64 + 1)) as usize);
+        }
+        let mut pos = vec![DVec3::ZERO; n];
+        for (old, &new) in perm.iter().enumerate() {
+            pos[new as usize] = mesh.positions[old];
+        }
+        let mut tris: Vec<[u32; 3]> = mesh
+            .triangles
+            .iter()
+            .map(|t| t.map(|v| perm[v as usize]))
+            .collect();
+        tris.truncate(tris.len() - 3);
+        let topo = Topology::build(n, &tris).unwrap();
+        assert!(topo.stats.fixed_vertices > 0);
+        (topo, pos)
+    }
+
+    #[test]
+    fn a_round_equals_plain_steps_for_any_tile_depth_and_thread_count() {
+        let (topo, pos) = shuffled_open_sphere();
+        let n = pos.len();
+        let factors = [0.5, -0.53, 0.5, -0.53, 0.5, -0.53];
+        // The plain steps, and the displacement over the last two.
+        let mut want = vec![pos.clone()];
+        for &f in &factors {
+            let mut next = vec![DVec3::ZERO; n];
+            laplacian::jacobi_step(&topo, want.last().unwrap(), &mut next, 0, f);
+            want.push(next);
+        }
+        for (tile, depth) in [(1, 6), (97, 3), (1000, 6), (n, 8)] {
+            let plan = TilePlan::with(&topo, tile, depth).unwrap();
+            for threads in [1, 2, 3] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                for k in 1..=depth.min(factors.len()) {
+                    let mut got = vec![DVec3::ZERO; n];
+                    let st =
+                        pool.install(|| round(&plan, &pos, &mut got, &factors[..k], Some(k - 1)));
+                    assert_eq!(
+                        got, want[k],
+                        "tile {tile}, depth {depth}, {threads} threads, {k} steps"
+                    );
+                    let d: Vec<f64> = (0..n)
+                        .map(|v| want[k][v].distance(want[k - 1][v]))
+                        .collect();
+                    let max = d.iter().cloned().fold(0.0, f64::max);
+                    assert_eq!(st.max_displacement, max);
+                    let sum: f64 = d.iter().sum();
+                    assert!((st.sum_displacement - sum).abs() <= 1e-12 * sum);
+                    assert_eq!(st.moved as usize, n - topo.stats.fixed_vertices);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn statistics_do_not_depend_on_the_thread_count() {
+        let (topo, pos) = shuffled_open_sphere();
+        let plan = TilePlan::with(&topo, 300, 4).unwrap();
+        let run = |threads| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let mut out = vec![DVec3::ZERO; pos.len()];
+            pool.install(|| round(&plan, &pos, &mut out, &[0.5, -0.53], Some(0)))
+        };
+        assert_eq!(run(1), run(4));
+    }
+
+    #[test]
+    fn rings_of_an_ordered_sphere_stay_small() {
+        // Morton-ordered (as the engine orders every mesh), the rings cost a fraction of the tile.
+        let mesh = generate::icosphere(6);
+        let storage = crate::mesh::Storage::heap();
+        let r = crate::partition::reorder(&storage, &mesh.positions, &mesh.triangles).unwrap();
+        let topo = Topology::build(r.positions.len(), &r.triangles).unwrap();
+        let plan = TilePlan::with(&topo, 4096, 8).unwrap();
+        assert!(plan.overhead() < 2.0, "{}", plan.overhead());
+    }
+
+    #[test]
+    fn a_vertex_of_huge_degree_gives_no_plan() {
+        // A fan of 70,000 triangles around one vertex: its first ring alone exceeds 16-bit ids.
+        let m = 70_000u32;
+        let tris: Vec<[u32; 3]> = (0..m).map(|k| [0, 1 + k, 1 + (k + 1) % m]).collect();
+        let topo = Topology::build(m as usize + 1, &tris).unwrap();
+        assert!(TilePlan::with(&topo, 1, 2).is_none());
+    }
+}
