@@ -31,6 +31,7 @@ use std::ops::Range;
 use glam::DVec3;
 use rayon::prelude::*;
 
+use crate::smooth::INV_DEGREE;
 use crate::smooth::laplacian::StepStats;
 use crate::topology::Topology;
 
@@ -435,18 +436,6 @@ struct Interior<'a> {
     vv: &'a [u32],
     start: usize,
 }
-
-/// `1/d` for every length a local row can have: the same correctly rounded values as the
-/// scalar kernel's table.
-static INV_DEGREE: [f64; 256] = {
-    let mut t = [0.0; 256];
-    let mut d = 1;
-    while d < 256 {
-        t[d] = 1.0 / d as f64;
-        d += 1;
-    }
-    t
-};
 
 /// One step over the rows `0 .. kinds.len()` of a tile (its own vertices and inner rings, up to
 /// ring `r`), reading `src` (the local vertices up to ring `r + 1`) and writing `dst`. The same

@@ -162,11 +162,12 @@ impl Field for [DVec3] {
     }
 }
 
-/// `1/d` for the degrees of nearly every vertex, so that the kernels load it instead of dividing.
-const INV_SMALL: [f64; 32] = {
-    let mut t = [0.0; 32];
+/// `1/d` for the degrees of nearly every vertex, so that the kernels load it instead of dividing
+/// (and every degree a byte can hold, for the local rows of [`crate::tiled`]).
+pub(crate) static INV_DEGREE: [f64; 256] = {
+    let mut t = [0.0; 256];
     let mut d = 1;
-    while d < 32 {
+    while d < 256 {
         t[d] = 1.0 / d as f64;
         d += 1;
     }
@@ -177,7 +178,7 @@ const INV_SMALL: [f64; 32] = {
 /// gives, so results do not depend on which path a degree takes.
 #[inline]
 pub(crate) fn inv_deg(d: usize) -> f64 {
-    match INV_SMALL.get(d) {
+    match INV_DEGREE.get(d) {
         Some(&x) => x,
         None => 1.0 / d as f64,
     }
