@@ -42,7 +42,9 @@ pub struct IterationRecord {
     pub mean_displacement: f64,
     pub stencils: SweepStats,
     /// Seconds of the sweep: for `laplacian` and `taubin` with the displacement, which they
-    /// measure in the same pass; never the volume and area statistics.
+    /// measure in the same pass; never the volume and area statistics. Iterations that ran as one
+    /// round of Jacobi steps (see [`Observer::statistics`]) share its time equally, the round that
+    /// builds the tile plan counting its construction.
     pub seconds: f64,
 }
 
@@ -55,9 +57,10 @@ pub trait Observer: Send {
     /// displacement. Each costs passes over the whole mesh (volume and area: one over the
     /// triangles, about as long as a `taubin` iteration; displacement for the stencil methods: a
     /// copy and a pass over the positions). When this returns false the volume and area fields of
-    /// the record are NaN (`null` in JSON), and so are the displacements of the stencil methods
-    /// (`laplacian` and `taubin` measure theirs within the sweep, at no extra pass); the sweep and
-    /// its counts are the same. Default: every iteration.
+    /// the record are NaN (`null` in JSON), and so are the displacements; the sweep and its counts
+    /// are the same. `laplacian` and `taubin` run the iterations up to the next one that wants its
+    /// statistics as one round, several steps per pass over memory (bit-identical results), so
+    /// asking for fewer statistics also makes them faster. Default: every iteration.
     fn statistics(&self, _iteration: usize, _total: usize) -> bool {
         true
     }

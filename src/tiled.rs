@@ -124,7 +124,7 @@ impl<'t> TilePlan<'t> {
         })
     }
 
-    /// Most steps one [`TilePlan::round`] can run.
+    /// Most steps one [`round`] can run.
     pub fn depth(&self) -> usize {
         self.depth
     }
