@@ -472,17 +472,16 @@ fn relax_lanes(inner: &Interior, kinds: &[u8], nbrs: &[u16], src: &[P4], dst: &m
     let (dst_own, dst_rings) = dst.split_at_mut(own);
     let (kinds_own, kinds_rings) = kinds.split_at(own);
     let rows = dst_own.iter_mut().zip(kinds_own).zip(&src[..own]);
+    // The own vertices' positions indexed by global id: `own_base + u` is `src[u − start]` for
+    // an own vertex `u` (one address computation less per neighbour than the subtraction).
+    let own_base = src.as_ptr().wrapping_sub(inner.start);
     for (((out, &kind), p), w) in rows.zip(inner.offsets.windows(2)) {
         *out = if kind == INTERIOR {
             let row = &inner.vv[w[0]..w[1]];
-            let mut sum = [0.0f64; 4];
-            for &u in row {
-                // SAFETY: `build_tile` marks a row interior only when every neighbour is an own
-                // vertex, so `u − start < own ≤ src.len()` (asserted above).
-                add(&mut sum, unsafe {
-                    src.get_unchecked(u as usize - inner.start)
-                });
-            }
+            // SAFETY: `build_tile` marks a row interior only when every neighbour is an own
+            // vertex, so `start ≤ u < start + own` and `own_base + u` is `src[u − start]`, in
+            // bounds (`own ≤ src.len()`, asserted above) and derived from `src`.
+            let sum = row_sum(row, |u| unsafe { *own_base.wrapping_add(u as usize) });
             let d = row.len();
             let inv = if d < INV_DEGREE.len() {
                 INV_DEGREE[d]
@@ -507,14 +506,39 @@ fn local_row(kind: u8, nbrs: &mut &[u16], src: &[P4], p: P4, f: f64) -> P4 {
     }
     let (row, rest) = nbrs.split_at(kind as usize);
     *nbrs = rest;
-    let mut sum = [0.0f64; 4];
-    for &u in row {
-        // SAFETY: `build_tile` checked that a row of ring `r` names only local vertices of rings
-        // up to `r + 1`, which is what `src` holds (`run_tile` passes `a[..ring_end[r + 1]]` with
-        // the rows up to ring `r`).
-        add(&mut sum, unsafe { src.get_unchecked(u as usize) });
-    }
+    // SAFETY: `build_tile` checked that a row of ring `r` names only local vertices of rings up
+    // to `r + 1`, which is what `src` holds (`run_tile` passes `a[..ring_end[r + 1]]` with the
+    // rows up to ring `r`).
+    let sum = row_sum(row, |u| unsafe { *src.get_unchecked(u as usize) });
     relaxed(p, sum, INV_DEGREE[kind as usize], f)
+}
+
+/// The sum of the positions of a row, from zero, in the row's order. Degrees 5 to 7 (most vertices
+/// of a surface) are unrolled: no loop branch, and the same additions in the same order.
+#[inline(always)]
+fn row_sum<T: Copy>(row: &[T], get: impl Fn(T) -> P4) -> [f64; 4] {
+    #[inline(always)]
+    fn unrolled<const K: usize, T: Copy>(row: &[T], get: &impl Fn(T) -> P4) -> [f64; 4] {
+        let mut sum = [0.0f64; 4];
+        if let Ok(row) = <&[T; K]>::try_from(row) {
+            for &u in row {
+                add(&mut sum, &get(u));
+            }
+        }
+        sum
+    }
+    match row.len() {
+        5 => unrolled::<5, T>(row, &get),
+        6 => unrolled::<6, T>(row, &get),
+        7 => unrolled::<7, T>(row, &get),
+        _ => {
+            let mut sum = [0.0f64; 4];
+            for &u in row {
+                add(&mut sum, &get(u));
+            }
+            sum
+        }
+    }
 }
 
 #[inline(always)]
