@@ -242,12 +242,12 @@ impl<'a> Statistics<'a> {
 /// `laplacian` and `taubin`: rounds of Jacobi steps, ping-ponging between `pos` and `scratch`
 /// (the result ends in `pos`).
 ///
-/// With a [`TilePlan`] (when `tiles` and the mesh allows one) a round runs several iterations in
-/// one pass over memory: up to the plan's depth in steps, and never past an iteration whose
-/// statistics are wanted (it ends the round, and its displacement is measured in the round). The
-/// iterations of a round share its time equally in their records, the plan's construction
-/// counted in the first. Without a plan every iteration is one or two plain steps over
-/// fixed-size chunks. Both give bit-identical positions.
+/// With a [`TilePlan`] (when `tiles`, and as long as every tile can be planned) a round runs
+/// several iterations in one pass over memory: up to the plan's depth in steps, and never past an
+/// iteration whose statistics are wanted (it ends the round, and its displacement is measured in
+/// the round). The iterations of a round share its time equally in their records; the first round
+/// also plans the tiles. Without a plan every iteration is one or two plain steps over fixed-size
+/// chunks. Both give bit-identical positions.
 fn jacobi_rounds(
     topo: &Topology,
     stats: &Statistics,
@@ -264,14 +264,8 @@ fn jacobi_rounds(
         &[opts.lambda]
     };
     let mut start = Instant::now();
-    let plan = if tiles && total > 0 {
-        TilePlan::new(topo)
-    } else {
-        None
-    };
-    let per_round = plan
-        .as_ref()
-        .map_or(1, |p| (p.depth() / factors.len()).max(1));
+    // Planned tile by tile by the first round (see `TilePlan::new`); dropped if a tile cannot be.
+    let mut plan = tiles.then(|| TilePlan::new(topo));
     let movable = (topo.len() - topo.stats.fixed_vertices) as u64;
     let sweep = SweepStats {
         applied: movable * factors.len() as u64,
@@ -283,6 +277,9 @@ fn jacobi_rounds(
     let mut in_scratch = false;
     let mut first = 1;
     while first <= total {
+        let per_round = plan
+            .as_ref()
+            .map_or(1, |p| (p.depth() / factors.len()).max(1));
         let mut last = first;
         while last < total && last - first + 1 < per_round && !observer.statistics(last, total) {
             last += 1;
@@ -294,10 +291,15 @@ fn jacobi_rounds(
             (pos, scratch)
         };
         let moved = match &plan {
-            Some(plan) => {
+            Some(tiled) => {
                 let steps: Vec<f64> = (first..=last).flat_map(|_| factors.to_vec()).collect();
                 let measured = measure.then_some(steps.len() - factors.len());
-                let st = tiled::round(plan, src, dst, &steps, measured);
+                let Some(st) = tiled::round(tiled, src, dst, &steps, measured) else {
+                    // A tile could not be planned: the same iterations in plain steps, from the
+                    // untouched `src`.
+                    plan = None;
+                    continue;
+                };
                 in_scratch = !in_scratch;
                 measure.then_some(st)
             }

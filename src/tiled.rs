@@ -27,6 +27,7 @@
 
 use std::cell::RefCell;
 use std::ops::Range;
+use std::sync::OnceLock;
 
 use glam::DVec3;
 use rayon::prelude::*;
@@ -57,7 +58,9 @@ pub struct TilePlan<'t> {
     topo: &'t Topology,
     tile: usize,
     depth: usize,
-    tiles: Vec<Tile>,
+    /// Each tile's rings and rows, built by the first round that runs it (`None`: it cannot be
+    /// planned, see [`TilePlan::new`]).
+    tiles: Vec<OnceLock<Option<Tile>>>,
 }
 
 #[derive(Debug, Clone, Default)]
@@ -98,30 +101,52 @@ impl P4 {
 }
 
 impl<'t> TilePlan<'t> {
-    /// The plan with the default tile size and depth, or `None` where a tile and its rings would
-    /// exceed the 16-bit local indices (a vertex of enormous degree) or a vertex that is not fixed
-    /// has no neighbours; callers then run plain steps, which give the same result.
-    pub fn new(topo: &'t Topology) -> Option<TilePlan<'t>> {
-        TilePlan::with(topo, TILE, DEPTH)
+    /// The plan with the default tile size and depth. Tiles are planned by the first round that
+    /// runs them (in the thread that runs them, while their adjacency is in cache), so that round
+    /// pays for the plan. A tile cannot be planned when it and its rings exceed the 16-bit local
+    /// ids (a vertex of enormous degree, or a vertex order without locality) or a vertex that is
+    /// not fixed has no neighbours: [`round`] then returns `None`, and callers run plain steps,
+    /// which give the same result.
+    pub fn new(topo: &'t Topology) -> TilePlan<'t> {
+        TilePlan::lazy(topo, TILE, DEPTH)
     }
 
-    /// The plan for tiles of `tile` own vertices (1 ..= 65,536) and rounds of at most `depth` steps
-    /// (≥ 1).
-    pub fn with(topo: &'t Topology, tile: usize, depth: usize) -> Option<TilePlan<'t>> {
+    /// A plan for tiles of `tile` own vertices (1 ..= 65,536) and rounds of at most `depth` steps
+    /// (≥ 1), its tiles planned as rounds reach them.
+    pub fn lazy(topo: &'t Topology, tile: usize, depth: usize) -> TilePlan<'t> {
         assert!((1..=MAX_LOCAL).contains(&tile) && depth >= 1);
-        let n = topo.len();
-        let tiles = (0..n.div_ceil(tile))
-            .into_par_iter()
-            .map_init(RingIds::default, |ids, t| {
-                build_tile(topo, t * tile..((t + 1) * tile).min(n), depth, ids)
-            })
-            .collect::<Option<Vec<Tile>>>()?;
-        Some(TilePlan {
+        TilePlan {
             topo,
             tile,
             depth,
-            tiles,
-        })
+            tiles: (0..topo.len().div_ceil(tile))
+                .map(|_| OnceLock::new())
+                .collect(),
+        }
+    }
+
+    /// [`TilePlan::lazy`] with every tile planned now; `None` if one cannot be.
+    pub fn with(topo: &'t Topology, tile: usize, depth: usize) -> Option<TilePlan<'t>> {
+        let plan = TilePlan::lazy(topo, tile, depth);
+        let planned = (0..plan.tiles.len())
+            .into_par_iter()
+            .all(|t| plan.tile(t).is_some());
+        planned.then_some(plan)
+    }
+
+    /// Tile `t`, planned if it was not yet.
+    fn tile(&self, t: usize) -> Option<&Tile> {
+        let own = t * self.tile..((t + 1) * self.tile).min(self.topo.len());
+        self.tiles[t]
+            .get_or_init(|| {
+                RING_IDS.with_borrow_mut(|ids| build_tile(self.topo, own, self.depth, ids))
+            })
+            .as_ref()
+    }
+
+    /// The planned tiles.
+    fn planned(&self) -> impl Iterator<Item = &Tile> {
+        self.tiles.iter().filter_map(|t| t.get()?.as_ref())
     }
 
     /// Most steps one [`round`] can run.
@@ -132,8 +157,7 @@ impl<'t> TilePlan<'t> {
     /// Local vertices over own vertices, summed over the tiles (for tests and tuning).
     pub fn overhead(&self) -> f64 {
         let local: usize = self
-            .tiles
-            .iter()
+            .planned()
             .map(|t| t.ring_end[self.depth] as usize)
             .sum();
         local as f64 / self.topo.len().max(1) as f64
@@ -141,8 +165,7 @@ impl<'t> TilePlan<'t> {
 
     /// Bytes the plan holds.
     pub fn bytes(&self) -> usize {
-        self.tiles
-            .iter()
+        self.planned()
             .map(|t| 4 * (t.ring_end.len() + t.gather.len()) + t.kinds.len() + 2 * t.nbrs.len())
             .sum()
     }
@@ -327,6 +350,7 @@ struct Local {
 
 thread_local! {
     static LOCAL: RefCell<Local> = RefCell::new(Local::default());
+    static RING_IDS: RefCell<RingIds> = RefCell::new(RingIds::default());
 }
 
 /// One round: `factors.len()` Jacobi steps `p ← p + f L(p)` (one factor per step, at most
@@ -334,7 +358,9 @@ thread_local! {
 /// also measures how far each vertex moved from its position before step `s` to the end (the last
 /// iteration of the round); its `moved` counts the vertices that are not fixed. Bit-identical to
 /// the steps run one by one with [`crate::smooth::laplacian::jacobi_step`]; the statistics are
-/// summed tile by tile in tile order, so they do not depend on the thread count either.
+/// summed tile by tile in tile order, so they do not depend on the thread count either. `None`
+/// when a tile cannot be planned (see [`TilePlan::new`]): then `dst` holds nothing useful, `src`
+/// is untouched.
 ///
 /// # Panics
 /// If the slices do not have one entry per vertex, or there are more factors than the plan's
@@ -345,23 +371,26 @@ pub fn round(
     dst: &mut [DVec3],
     factors: &[f64],
     measure: Option<usize>,
-) -> StepStats {
+) -> Option<StepStats> {
     let n = plan.topo.len();
     assert!(src.len() == n && dst.len() == n);
     assert!(!factors.is_empty() && factors.len() <= plan.depth);
     assert!(measure.is_none_or(|s| s < factors.len()));
     let per_tile: Vec<StepStats> = dst
         .par_chunks_mut(plan.tile)
-        .zip(plan.tiles.par_iter())
-        .map(|(out, tile)| {
-            LOCAL.with_borrow_mut(|local| {
+        .enumerate()
+        .map(|(t, out)| {
+            let tile = plan.tile(t)?;
+            Some(LOCAL.with_borrow_mut(|local| {
                 run_tile(plan.topo, tile, src, out, factors, measure, local)
-            })
+            }))
         })
-        .collect();
-    per_tile
-        .into_iter()
-        .fold(StepStats::default(), StepStats::then)
+        .collect::<Option<_>>()?;
+    Some(
+        per_tile
+            .into_iter()
+            .fold(StepStats::default(), StepStats::then),
+    )
 }
 
 fn run_tile(
@@ -614,8 +643,9 @@ mod tests {
                     .unwrap();
                 for k in 1..=depth.min(factors.len()) {
                     let mut got = vec![DVec3::ZERO; n];
-                    let st =
-                        pool.install(|| round(&plan, &pos, &mut got, &factors[..k], Some(k - 1)));
+                    let st = pool
+                        .install(|| round(&plan, &pos, &mut got, &factors[..k], Some(k - 1)))
+                        .unwrap();
                     assert_eq!(
                         got, want[k],
                         "tile {tile}, depth {depth}, {threads} threads, {k} steps"
@@ -644,6 +674,7 @@ mod tests {
                 .unwrap();
             let mut out = vec![DVec3::ZERO; pos.len()];
             pool.install(|| round(&plan, &pos, &mut out, &[0.5, -0.53], Some(0)))
+                .unwrap()
         };
         assert_eq!(run(1), run(4));
     }
@@ -666,5 +697,10 @@ mod tests {
         let tris: Vec<[u32; 3]> = (0..m).map(|k| [0, 1 + k, 1 + (k + 1) % m]).collect();
         let topo = Topology::build(m as usize + 1, &tris).unwrap();
         assert!(TilePlan::with(&topo, 1, 2).is_none());
+        // Planned by the first round instead: the round says so and leaves its input alone.
+        let pos: Vec<DVec3> = (0..=m).map(|k| DVec3::new(k as f64, 1.0, 0.0)).collect();
+        let mut out = vec![DVec3::ZERO; pos.len()];
+        let plan = TilePlan::lazy(&topo, 1, 2);
+        assert!(round(&plan, &pos, &mut out, &[0.5], None).is_none());
     }
 }
