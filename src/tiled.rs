@@ -21,9 +21,10 @@
 //! each lane sees the operations of the scalar kernel.
 //!
 //! The plan (local rows, ring vertices to gather) is about 6 bytes per vertex on a Morton-ordered
-//! surface (5.8 on a 2.6M-vertex sphere with the defaults). It is built once per run, in one
-//! breadth-first pass per tile, and lives on the heap, so the engine uses it only when the mesh is
-//! in memory.
+//! surface (5.8 on a 2.6M-vertex sphere with the defaults). The first round builds it, tile by
+//! tile in the thread that then runs the tile (one breadth-first pass, its adjacency still in
+//! cache for the steps); it lives on the heap, so the engine uses it only when the mesh is in
+//! memory.
 
 use std::cell::RefCell;
 use std::ops::Range;
