@@ -305,7 +305,7 @@ fn jacobi_rounds(
             }
             None if factors.len() == 1 => {
                 in_scratch = !in_scratch;
-                let moved = jacobi_measured(topo, src, dst, factors[0], Previous::Src).1;
+                let moved = jacobi_measured(topo, src, dst, factors[0], Previous::Src);
                 measure.then_some(moved)
             }
             None => {
@@ -317,7 +317,7 @@ fn jacobi_rounds(
                 } else {
                     (scratch, pos)
                 };
-                let moved = jacobi_measured(topo, src, dst, factors[1], Previous::Dst).1;
+                let moved = jacobi_measured(topo, src, dst, factors[1], Previous::Dst);
                 measure.then_some(moved)
             }
         };
@@ -357,7 +357,7 @@ fn jacobi_measured(
     dst: &mut [DVec3],
     lambda: f64,
     previous: Previous,
-) -> (SweepStats, StepStats) {
+) -> StepStats {
     let parts: Vec<StepStats> = dst
         .par_chunks_mut(JACOBI_CHUNK)
         .enumerate()
@@ -365,18 +365,9 @@ fn jacobi_measured(
             laplacian::jacobi_step_measured(topo, src, out, c * JACOBI_CHUNK, lambda, previous)
         })
         .collect();
-    let total = parts
+    parts
         .into_iter()
-        .fold(StepStats::default(), StepStats::then);
-    (sweep_stats(topo, total.moved), total)
-}
-
-fn sweep_stats(topo: &Topology, applied: u64) -> SweepStats {
-    SweepStats {
-        applied,
-        skipped_fixed: topo.len() as u64 - applied,
-        ..Default::default()
-    }
+        .fold(StepStats::default(), StepStats::then)
 }
 
 pub(crate) fn percent(x: f64, reference: f64) -> f64 {

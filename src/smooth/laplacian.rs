@@ -26,7 +26,7 @@ pub fn jacobi_step(
     first: usize,
     lambda: f64,
 ) -> u64 {
-    step::<NO_MEASURE, false>(topo, src, 0, dst, first, lambda, &[]).moved
+    step::<NO_MEASURE>(topo, src, dst, first, lambda).moved
 }
 
 /// What a measured Jacobi step did over its vertex range.
@@ -53,16 +53,13 @@ impl StepStats {
 }
 
 /// Where a measured step finds each vertex's previous position.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Previous<'a> {
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Previous {
     /// In `src` (a step between two buffers: `p' = p + λ L(p)` moved `p` by `|p' − p|`).
     Src,
     /// In `dst`, about to be overwritten (the second step of a λ|μ pair that goes back into the
     /// buffer the pair started from: the pair moved the vertex by `|p'' − p|`).
     Dst,
-    /// In this slice, one entry per vertex of the range (the second step of a λ|μ pair that goes
-    /// into a third buffer).
-    Slice(&'a [DVec3]),
 }
 
 /// [`jacobi_step`] that also measures how far each vertex moved from its previous position (see
@@ -75,76 +72,40 @@ pub fn jacobi_step_measured(
     lambda: f64,
     previous: Previous,
 ) -> StepStats {
-    jacobi_step_window(topo, src, 0, dst, first, lambda, previous)
-}
-
-/// [`jacobi_step_measured`] reading from a window of the positions: `src[k]` is vertex
-/// `src_first + k`, and must cover the vertices `first .. first + dst.len()` and all their
-/// neighbours (panics otherwise). Bit-identical to a step that reads the whole array.
-pub fn jacobi_step_window(
-    topo: &Topology,
-    src: &[DVec3],
-    src_first: usize,
-    dst: &mut [DVec3],
-    first: usize,
-    lambda: f64,
-    previous: Previous,
-) -> StepStats {
-    let n = dst.len();
-    let whole = src_first == 0 && src.len() >= topo.len();
-    let own = &src[first - src_first..first - src_first + n];
-    match (previous, whole) {
-        (Previous::Src, true) => step::<FROM_SRC, false>(topo, src, 0, dst, first, lambda, own),
-        (Previous::Dst, true) => step::<FROM_DST, false>(topo, src, 0, dst, first, lambda, own),
-        (Previous::Slice(old), true) => {
-            step::<FROM_SRC, false>(topo, src, 0, dst, first, lambda, &old[..n])
-        }
-        (Previous::Src, false) => {
-            step::<FROM_SRC, true>(topo, src, src_first, dst, first, lambda, own)
-        }
-        (Previous::Dst, false) => {
-            step::<FROM_DST, true>(topo, src, src_first, dst, first, lambda, own)
-        }
-        (Previous::Slice(old), false) => {
-            step::<FROM_SRC, true>(topo, src, src_first, dst, first, lambda, &old[..n])
-        }
+    match previous {
+        Previous::Src => step::<FROM_SRC>(topo, src, dst, first, lambda),
+        Previous::Dst => step::<FROM_DST>(topo, src, dst, first, lambda),
     }
 }
 
 const NO_MEASURE: u8 = 0;
-/// Measure against the `old` slice given to [`step`].
+/// Measure against the vertex's position in `src`.
 const FROM_SRC: u8 = 1;
 /// Measure against the value of `dst` being overwritten.
 const FROM_DST: u8 = 2;
 
 /// The Jacobi kernel. The CSR arrays are walked directly (one offset load per vertex, the
-/// neighbour slice cut from a running position) and, when `src` holds every vertex
-/// (`WINDOW == false`), neighbour positions are gathered without a bounds check per neighbour:
-/// this loop is most of the time of `laplacian` and `taubin`. `old` is what `FROM_SRC` measures
-/// against, one entry per vertex of the range.
+/// neighbour slice cut from a running position) and neighbour positions are gathered without a
+/// bounds check per neighbour: this loop is the time of `laplacian` and `taubin` when they run
+/// plain steps (out of core, and in the cluster engine).
 #[inline(always)]
-fn step<const MEASURE: u8, const WINDOW: bool>(
+fn step<const MEASURE: u8>(
     topo: &Topology,
     src: &[DVec3],
-    src_first: usize,
     dst: &mut [DVec3],
     first: usize,
     lambda: f64,
-    old: &[DVec3],
 ) -> StepStats {
     let n = dst.len();
     let (offsets, vv) = topo.csr();
-    if !WINDOW {
-        // The unchecked gather below relies on this: every id in `vv` is below `topo.len()` (the
-        // topology's invariant, checked when it is built), so it is below `src.len()`.
-        assert!(src_first == 0 && src.len() >= topo.len());
-    }
+    // The unchecked gather below relies on this: every id in `vv` is below `topo.len()` (the
+    // topology's invariant, checked when it is built), so it is below `src.len()`.
+    assert!(src.len() >= topo.len());
     // The mask, offsets and old positions of the range as slices: one bounds check for the range
     // instead of one per vertex.
     let fixed = &topo.fixed_mask()[first..first + n];
-    let own = &src[first - src_first..first - src_first + n];
+    let own = &src[first..first + n];
     let offsets = &offsets[first..first + n + 1];
-    let old = if MEASURE == FROM_SRC { &old[..n] } else { old };
     let mut st = StepStats::default();
     for k in 0..n {
         let p = own[k];
@@ -155,18 +116,13 @@ fn step<const MEASURE: u8, const WINDOW: bool>(
             let nbrs = &vv[offsets[k]..offsets[k + 1]];
             let mut sum = DVec3::ZERO;
             for &u in nbrs {
-                sum += if WINDOW {
-                    // Below `src_first` wraps to a huge index: a panic, never a wrong read.
-                    src[(u as usize).wrapping_sub(src_first)]
-                } else {
-                    // SAFETY: `u < topo.len() <= src.len()` (asserted above).
-                    unsafe { *src.get_unchecked(u as usize) }
-                };
+                // SAFETY: `u < topo.len() <= src.len()` (asserted above).
+                sum += unsafe { *src.get_unchecked(u as usize) };
             }
             p + lambda * (sum * inv_deg(nbrs.len()) - p)
         };
         if MEASURE != NO_MEASURE {
-            let before = if MEASURE == FROM_SRC { old[k] } else { dst[k] };
+            let before = if MEASURE == FROM_SRC { p } else { dst[k] };
             let d = new.distance(before);
             st.max_displacement = st.max_displacement.max(d);
             st.sum_displacement += d;
