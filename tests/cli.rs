@@ -617,7 +617,7 @@ fn smooth_output_identical_across_threads_and_memory_budgets() {
 #[test]
 fn generate_mesh_from_a_scan_streams_a_refined_copy() {
     let dir = tempfile::tempdir().unwrap();
-    let base = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/meshes/fertility-9k.ply");
+    let base = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fertility-9k.ply");
     let out = dir.path().join("fine.ply");
     ok(vcsmooth([
         "generate",

@@ -11,7 +11,7 @@ use vcsmooth::{Method, Options, generate, io};
 
 fn scan(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/meshes")
+        .join("tests/data")
         .join(name)
 }
 

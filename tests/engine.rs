@@ -1,4 +1,4 @@
-//! The engine's invariants (DESIGN.md), on the real scans in ../shared/meshes and on generated meshes:
+//! The engine's invariants (DESIGN.md), on the real scans in tests/data and on generated meshes:
 //! volume preservation, fixed boundaries, orientation, rigid-motion invariance, determinism, and the
 //! paper's sphere experiment.
 
@@ -9,7 +9,7 @@ use vcsmooth::driver::{self, IterationRecord, Quiet};
 use vcsmooth::{Mesh, Method, Options, Topology, generate, io, metrics};
 
 fn shared_meshes() -> Vec<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/meshes");
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data");
     let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
         .unwrap_or_else(|e| {
             panic!(
@@ -21,13 +21,13 @@ fn shared_meshes() -> Vec<PathBuf> {
         .filter(|p| p.extension().is_some_and(|x| x == "ply"))
         .collect();
     files.sort();
-    assert_eq!(files.len(), 6, "expected the six scans of ../shared/meshes");
+    assert_eq!(files.len(), 6, "expected the six scans of tests/data");
     files
 }
 
 fn shared(name: &str) -> Mesh {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/meshes")
+        .join("tests/data")
         .join(name);
     io::read_mesh(&path).unwrap()
 }

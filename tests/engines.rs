@@ -63,7 +63,7 @@ fn single_process(dir: &Path, input: &Path, args: &[&str]) -> PathBuf {
 #[test]
 fn mpi_ranks_1_2_3_are_bit_identical_to_one_process() {
     let tmp = tempfile::tempdir().unwrap();
-    let armadillo = root().join("../shared/meshes/armadillo-86k.ply");
+    let armadillo = root().join("tests/data/armadillo-86k.ply");
     let sphere = generate(tmp.path(), 6);
     for (input, method) in [
         (&armadillo, "vcs"),

@@ -12,14 +12,14 @@ use vcsmooth::multires::{self, MultiresOptions, Transfer, cluster};
 use vcsmooth::{Mesh, Method, Options, Topology, generate, io, metrics};
 
 fn shared_meshes() -> Vec<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/meshes");
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data");
     let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
         .unwrap_or_else(|e| panic!("{}: {e} (the tests need ../shared)", dir.display()))
         .map(|e| e.unwrap().path())
         .filter(|p| p.extension().is_some_and(|x| x == "ply"))
         .collect();
     files.sort();
-    assert_eq!(files.len(), 6, "expected the six scans of ../shared/meshes");
+    assert_eq!(files.len(), 6, "expected the six scans of tests/data");
     files
 }
 
@@ -205,7 +205,7 @@ fn multires_smooths_a_sphere_without_shrinking_and_every_transfer_works() {
 
 #[test]
 fn output_is_bit_identical_for_any_thread_count() {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/meshes/armadillo-86k.ply");
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/armadillo-86k.ply");
     let mut mesh = io::read_mesh(&path).unwrap();
     let topo = Topology::build(mesh.positions.len(), &mesh.triangles).unwrap();
     let edge = metrics::mean_edge_length(&mesh.positions, &topo);

@@ -17,7 +17,7 @@ fn noisy_sphere(k: u32) -> Mesh {
 fn shared(name: &str) -> Mesh {
     io::read_mesh(
         &Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../shared/meshes")
+            .join("tests/data")
             .join(name),
     )
     .unwrap()

@@ -12,7 +12,7 @@ use vcsmooth::topology::Topology;
 use vcsmooth::{Mesh, generate, io, metrics};
 
 fn meshes_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/meshes")
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data")
 }
 
 fn bbox_diagonal(pos: &[DVec3]) -> f64 {

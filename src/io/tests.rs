@@ -123,7 +123,7 @@ fn triangle_ply() -> (Vec<u8>, usize) {
 }
 
 fn meshes_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/meshes")
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data")
 }
 
 fn oracle_read(bytes: &[u8]) -> Ply<DefaultElement> {
@@ -482,8 +482,7 @@ fn the_shared_meshes_read_with_their_documented_counts() {
     ];
     for (name, vertices, faces) in expected {
         let path = meshes_dir().join(name);
-        let mesh =
-            read_mesh(&path).unwrap_or_else(|e| panic!("{e} (the tests read ../shared/meshes)"));
+        let mesh = read_mesh(&path).unwrap_or_else(|e| panic!("{e} (the tests read tests/data)"));
         assert_eq!(
             (mesh.positions.len(), mesh.triangles.len()),
             (vertices, faces),

@@ -1,0 +1,501 @@
+//! Results are a contract: the output bytes of a fixed set of runs are hashed and compared with
+//! `tests/golden/hashes.txt`. A refactor or an optimisation changes none of them. A change that
+//! must change a result re-records the file on purpose and says why in its commit:
+//! `VCSMOOTH_GOLDEN=record cargo test golden` rewrites it.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use vcsmooth::cluster::{self, ClusterSettings, Local};
+use vcsmooth::driver::{EngineSettings, Quiet};
+use vcsmooth::{Method, Options};
+
+fn data(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name)
+}
+
+fn hashes_file() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden/hashes.txt")
+}
+
+/// 64-bit FNV-1a: stable across platforms and Rust versions (std's hasher is not).
+fn fnv1a(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| {
+        (h ^ b as u64).wrapping_mul(0x0000_0100_0000_01b3)
+    })
+}
+
+fn vcsmooth<S: AsRef<std::ffi::OsStr>>(args: &[S]) {
+    let out = Command::new(env!("CARGO_BIN_EXE_vcsmooth"))
+        .args(args)
+        .output()
+        .expect("run vcsmooth");
+    assert!(
+        out.status.success(),
+        "vcsmooth {:?} failed: {}",
+        args.iter().map(|a| a.as_ref()).collect::<Vec<_>>(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// One golden run: `vcsmooth smooth IN OUT ARGS...` (or another command when `command` says so).
+struct Run {
+    name: &'static str,
+    input: PathBuf,
+    ext: &'static str,
+    args: &'static [&'static str],
+}
+
+/// The runs: every method on 1 and 2 threads with many patches, heap and scratch storage,
+/// `--reject-energy-increase`, `--stats last`, multires, the output formats, real scans (open,
+/// inward-oriented, with unreferenced vertices).
+fn runs(sphere: &Path, torus: &Path, big: &Path) -> Vec<Run> {
+    let mut runs = Vec::new();
+    let methods = ["laplacian", "taubin", "lem", "vcs", "vcs-triangle"];
+    for (m, t) in methods
+        .iter()
+        .flat_map(|m| ["1", "2"].into_iter().map(move |t| (*m, t)))
+    {
+        let args: &'static [&'static str] = Box::leak(
+            vec![
+                "--method",
+                m,
+                "--iterations",
+                "4",
+                "--threads",
+                t,
+                "--patch-size",
+                "300",
+            ]
+            .into_boxed_slice(),
+        );
+        runs.push(Run {
+            name: Box::leak(format!("sphere4-{m}-t{t}").into_boxed_str()),
+            input: sphere.to_path_buf(),
+            ext: "ply",
+            args,
+        });
+    }
+    let more: [(&'static str, &Path, &'static str, &'static [&'static str]); 16] = [
+        (
+            "sphere4-vcs-reject",
+            sphere,
+            "ply",
+            &[
+                "--method",
+                "vcs",
+                "--iterations",
+                "5",
+                "--reject-energy-increase",
+                "--patch-size",
+                "300",
+            ],
+        ),
+        (
+            "sphere4-lem-reject",
+            sphere,
+            "ply",
+            &[
+                "--method",
+                "lem",
+                "--iterations",
+                "5",
+                "--reject-energy-increase",
+            ],
+        ),
+        (
+            "sphere4-vcs-triangle-reject",
+            sphere,
+            "ply",
+            &[
+                "--method",
+                "vcs-triangle",
+                "--iterations",
+                "3",
+                "--reject-energy-increase",
+                "--threads",
+                "2",
+                "--patch-size",
+                "300",
+            ],
+        ),
+        (
+            "sphere4-laplacian-stats-last",
+            sphere,
+            "ply",
+            &[
+                "--method",
+                "laplacian",
+                "--iterations",
+                "13",
+                "--stats",
+                "last",
+                "--threads",
+                "2",
+            ],
+        ),
+        (
+            "sphere4-taubin-stats-last",
+            sphere,
+            "ply",
+            &[
+                "--method",
+                "taubin",
+                "--iterations",
+                "11",
+                "--stats",
+                "last",
+                "--lambda",
+                "0.6",
+                "--mu",
+                "-0.62",
+            ],
+        ),
+        (
+            "sphere4-vcs-stats-last",
+            sphere,
+            "ply",
+            &[
+                "--method",
+                "vcs",
+                "--iterations",
+                "3",
+                "--stats",
+                "last",
+                "--threads",
+                "2",
+                "--patch-size",
+                "300",
+            ],
+        ),
+        (
+            "torus-vcs-obj",
+            torus,
+            "obj",
+            &["--method", "vcs", "--iterations", "3"],
+        ),
+        (
+            "torus-taubin-off",
+            torus,
+            "off",
+            &["--method", "taubin", "--iterations", "3"],
+        ),
+        (
+            "torus-vcs-stl",
+            torus,
+            "stl",
+            &["--method", "vcs", "--iterations", "2"],
+        ),
+        ("torus-convert-ply", torus, "ply", &["--iterations", "0"]),
+        (
+            "bunny-vcs",
+            &data("stanford-bunny.ply"),
+            "ply",
+            &[
+                "--method",
+                "vcs",
+                "--iterations",
+                "3",
+                "--threads",
+                "2",
+                "--patch-size",
+                "4096",
+            ],
+        ),
+        (
+            "horse-vcs-triangle",
+            &data("horse.ply"),
+            "ply",
+            &[
+                "--method",
+                "vcs-triangle",
+                "--iterations",
+                "2",
+                "--threads",
+                "2",
+                "--patch-size",
+                "4096",
+            ],
+        ),
+        (
+            "demosthenes-taubin",
+            &data("demosthenes-17k.ply"),
+            "ply",
+            &["--method", "taubin", "--iterations", "9", "--stats", "last"],
+        ),
+        (
+            "armadillo-multires",
+            &data("armadillo-86k.ply"),
+            "ply",
+            &["--multires", "--iterations", "3", "--threads", "2"],
+        ),
+        (
+            "kitten-multires-3-taubin",
+            &data("kitten-25k.ply"),
+            "ply",
+            &[
+                "--multires",
+                "--levels",
+                "3",
+                "--coarse-iterations",
+                "4",
+                "--fine-method",
+                "taubin",
+                "--iterations",
+                "2",
+                "--transfer",
+                "smooth",
+            ],
+        ),
+        (
+            "fertility-lem",
+            &data("fertility-9k.ply"),
+            "ply",
+            &[
+                "--method",
+                "lem",
+                "--iterations",
+                "3",
+                "--threads",
+                "1",
+                "--patch-size",
+                "1000",
+            ],
+        ),
+    ];
+    for (name, input, ext, args) in more {
+        runs.push(Run {
+            name,
+            input: input.to_path_buf(),
+            ext,
+            args,
+        });
+    }
+    // Scratch storage (memory-mapped arrays): the smallest sphere that exceeds the 64 MiB minimum budget.
+    for (name, args) in [
+        (
+            "sphere8-vcs-scratch",
+            &[
+                "--method",
+                "vcs",
+                "--iterations",
+                "1",
+                "--threads",
+                "2",
+                "--patch-size",
+                "4096",
+                "--memory-budget",
+                "64M",
+            ][..],
+        ),
+        (
+            "sphere8-taubin-scratch",
+            &[
+                "--method",
+                "taubin",
+                "--iterations",
+                "2",
+                "--threads",
+                "2",
+                "--memory-budget",
+                "64M",
+            ][..],
+        ),
+        (
+            "sphere8-vcs-heap",
+            &[
+                "--method",
+                "vcs",
+                "--iterations",
+                "1",
+                "--threads",
+                "1",
+                "--patch-size",
+                "4096",
+            ][..],
+        ),
+    ] {
+        runs.push(Run {
+            name,
+            input: big.to_path_buf(),
+            ext: "ply",
+            args,
+        });
+    }
+    runs
+}
+
+fn read_expected() -> BTreeMap<String, String> {
+    let text = std::fs::read_to_string(hashes_file()).unwrap_or_default();
+    text.lines()
+        .filter(|l| !l.trim().is_empty() && !l.starts_with('#'))
+        .map(|l| {
+            let (name, hash) = l.split_once(' ').expect("`name hash` per line");
+            (name.to_string(), hash.trim().to_string())
+        })
+        .collect()
+}
+
+#[test]
+fn golden_outputs_are_unchanged() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |name: &str| dir.path().join(name);
+    let mut got = BTreeMap::new();
+    let mut hash_file = |name: &str, path: &Path| {
+        let bytes = std::fs::read(path).unwrap();
+        got.insert(name.to_string(), format!("{:016x}", fnv1a(&bytes)));
+    };
+
+    // Generated inputs are golden too: `generate` must keep writing the same bytes.
+    let (sphere, torus, big) = (p("sphere4.ply"), p("torus.obj"), p("sphere8.ply"));
+    vcsmooth(&[
+        "generate",
+        "sphere",
+        sphere.to_str().unwrap(),
+        "--subdivisions",
+        "4",
+        "--noise",
+        "0.3",
+        "--seed",
+        "7",
+    ]);
+    vcsmooth(&[
+        "generate",
+        "torus",
+        torus.to_str().unwrap(),
+        "--subdivisions",
+        "3",
+        "--noise",
+        "0.2",
+        "--seed",
+        "3",
+    ]);
+    vcsmooth(&[
+        "generate",
+        "sphere",
+        big.to_str().unwrap(),
+        "--subdivisions",
+        "8",
+        "--noise",
+        "0.3",
+    ]);
+    let sub = p("kitten-sub.ply");
+    vcsmooth(&[
+        "generate",
+        "mesh",
+        sub.to_str().unwrap(),
+        "--from",
+        data("kitten-25k.ply").to_str().unwrap(),
+        "--subdivide",
+        "1",
+        "--noise",
+        "0.2",
+    ]);
+    for (name, path) in [
+        ("gen-sphere4", &sphere),
+        ("gen-torus-obj", &torus),
+        ("gen-sphere8", &big),
+        ("gen-kitten-sub1", &sub),
+    ] {
+        hash_file(name, path);
+    }
+
+    for run in runs(&sphere, &torus, &big) {
+        let out = p(&format!("{}.{}", run.name, run.ext));
+        let mut args: Vec<std::ffi::OsString> = vec![
+            "smooth".into(),
+            run.input.clone().into(),
+            out.clone().into(),
+        ];
+        args.extend(run.args.iter().map(Into::into));
+        vcsmooth(&args);
+        hash_file(run.name, &out);
+    }
+
+    // The paper's adaptive refinement: subdivide + vcs rounds.
+    let refined = p("fertility-refine.ply");
+    vcsmooth(&[
+        "refine",
+        data("fertility-9k.ply").to_str().unwrap(),
+        refined.to_str().unwrap(),
+        "--max-edge",
+        "4",
+        "--rounds",
+        "2",
+        "--iterations",
+        "2",
+    ]);
+    hash_file("fertility-refine", &refined);
+
+    // Thread ranks of the cluster engine (the same code path MPI ranks take).
+    for (method, iterations) in [(Method::Vcs, 2), (Method::Taubin, 3)] {
+        let name = format!("armadillo-ranks3-{}", method.name());
+        let out = p(&format!("{name}.ply"));
+        let work = p(&format!("{name}-work"));
+        let opts = Options {
+            method,
+            iterations,
+            ..Options::default()
+        };
+        let engine = EngineSettings {
+            threads: Some(2),
+            patch_size: 2048,
+            ..EngineSettings::default()
+        };
+        let settings = ClusterSettings {
+            work_dir: work,
+            keep: false,
+            checkpoint_every: 1,
+        };
+        let input = data("armadillo-86k.ply");
+        std::thread::scope(|s| {
+            let handles: Vec<_> = Local::group(3)
+                .into_iter()
+                .map(|c| {
+                    let (input, out, opts, engine, settings) =
+                        (&input, &out, &opts, &engine, &settings);
+                    s.spawn(move || {
+                        cluster::run_file(&c, input, out, opts, engine, settings, &mut Quiet)
+                            .map(|_| ())
+                    })
+                })
+                .collect();
+            for h in handles {
+                h.join().unwrap().unwrap();
+            }
+        });
+        hash_file(&name, &out);
+    }
+
+    if std::env::var("VCSMOOTH_GOLDEN").as_deref() == Ok("record") {
+        let mut text = String::from(
+            "# Output hashes (64-bit FNV-1a of the file bytes) of the runs in tests/golden.rs.\n# Re-record only on purpose: VCSMOOTH_GOLDEN=record cargo test golden\n",
+        );
+        for (name, hash) in &got {
+            text.push_str(&format!("{name} {hash}\n"));
+        }
+        std::fs::create_dir_all(hashes_file().parent().unwrap()).unwrap();
+        std::fs::write(hashes_file(), text).unwrap();
+        return;
+    }
+    let expected = read_expected();
+    let mut wrong = Vec::new();
+    for (name, hash) in &got {
+        match expected.get(name) {
+            Some(e) if e == hash => {}
+            Some(e) => wrong.push(format!("{name}: expected {e}, got {hash}")),
+            None => wrong.push(format!("{name}: no recorded hash (got {hash})")),
+        }
+    }
+    for name in expected.keys().filter(|n| !got.contains_key(*n)) {
+        wrong.push(format!("{name}: recorded but not run"));
+    }
+    assert!(
+        wrong.is_empty(),
+        "golden outputs changed:\n{}",
+        wrong.join("\n")
+    );
+}
