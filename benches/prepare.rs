@@ -1,4 +1,4 @@
-//! The plan's phases, each on the output of the one before, as `driver::Prepared::new` runs them:
+//! The plan's phases, each on the output of the one before, as `engine::Prepared::new` runs them:
 //! Morton reorder, topology (CSR adjacency, fixed mask), partition (patches) + schedule (conflict
 //! graph colouring). On the armadillo scan, a 1.3M-triangle icosphere and a 4.2M-triangle torus;
 //! throughput in triangles, on all cores.
@@ -10,7 +10,7 @@ mod common;
 use std::hint::black_box;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use vcsmooth::driver::DEFAULT_PATCH_SIZE;
+use vcsmooth::engine::DEFAULT_PATCH_SIZE;
 use vcsmooth::mesh::Storage;
 use vcsmooth::{Topology, partition, schedule};
 

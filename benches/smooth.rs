@@ -15,7 +15,7 @@ mod common;
 use std::time::Duration;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use vcsmooth::driver::{DEFAULT_PATCH_SIZE, Prepared, Quiet};
+use vcsmooth::engine::{DEFAULT_PATCH_SIZE, Prepared, Quiet};
 use vcsmooth::mesh::Storage;
 use vcsmooth::{Method, Options};
 

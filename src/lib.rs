@@ -9,23 +9,18 @@
 //! [`driver`] is the one place that wires them together; [`cluster`] spreads the same patches over
 //! MPI ranks, with checkpoints.
 
-pub mod batch;
-pub mod bench;
 pub mod cli;
 pub mod cluster;
-pub mod driver;
+pub mod engine;
 pub mod error;
-pub mod generate;
 pub mod io;
 pub mod mesh;
 pub mod metrics;
+pub mod modes;
 pub mod multires;
 pub mod partition;
-pub mod refine;
-pub mod resources;
 pub mod schedule;
 pub mod smooth;
-pub mod tiled;
 pub mod topology;
 
 pub use error::{Error, Result};

@@ -65,8 +65,8 @@ Example: vcsmooth bench --sizes 1M,4M --methods laplacian,taubin,vcs --threads 1
 pub struct BenchArgs {
     /// Comma-separated mesh sizes: triangle counts (decimal K/M/G suffixes), each mapped to the icosphere level with the nearest triangle count (1M → level 8, 1.31M triangles; 4M → level 9, 5.24M), or icoK for level K exactly.
     #[arg(long, value_name = "SIZE,...", value_delimiter = ',', default_value = "1M",
-          value_parser = crate::bench::parse_size)]
-    pub sizes: Vec<crate::bench::SizeSpec>,
+          value_parser = crate::modes::bench::parse_size)]
+    pub sizes: Vec<crate::modes::bench::SizeSpec>,
     /// Comma-separated methods to time.
     #[arg(long, value_enum, value_delimiter = ',', value_name = "M,M,...",
           default_values_t = [Method::Laplacian, Method::Taubin, Method::Vcs])]
@@ -202,7 +202,7 @@ pub struct EngineArgs {
     #[arg(long, value_name = "VERTICES", value_parser = clap::value_parser!(u64).range(1..u32::MAX as u64), allow_negative_numbers = true)]
     pub patch_size: Option<u64>,
     /// Anonymous memory allowed, with K/M/G/T suffixes (binary units); larger meshes go to memory-mapped scratch files [default: 3/4 of available memory].
-    #[arg(long, value_name = "SIZE", value_parser = crate::resources::parse_size)]
+    #[arg(long, value_name = "SIZE", value_parser = crate::engine::memory::parse_size)]
     pub memory_budget: Option<u64>,
     /// Directory for scratch files (removed on exit, even on error) [default: the output's directory].
     #[arg(long, value_name = "DIR")]

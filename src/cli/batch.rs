@@ -1,6 +1,6 @@
 //! `vcsmooth batch` (many meshes, one share per job-array task; `--summary` gathers the markers)
 //! and `vcsmooth slurm-script` (a ready Slurm array job for a batch). The logic lives in
-//! [`crate::batch`]; this module holds the flags, their resolution and the printing.
+//! [`crate::modes::batch`]; this module holds the flags, their resolution and the printing.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -11,10 +11,10 @@ use clap::{Args as ClapArgs, ValueEnum};
 use super::config::EngineConfig;
 use super::output::{print_json, stdout_error, write_json};
 use super::progress::Progress;
-use crate::batch::{self as core, Marker, MeshRow};
-use crate::driver;
+use crate::engine;
 use crate::error::{Error, Result};
 use crate::io::Format;
+use crate::modes::batch::{self as core, Marker, MeshRow};
 use crate::smooth::Options;
 
 /// Output formats of `batch --format`.
@@ -333,7 +333,7 @@ fn run_share(
         progress.phase(format!("smoothing {}", input.display()));
         progress.iterations(smooth.options.method.name(), smooth.options.iterations);
         let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            driver::run_file(input, &output, &smooth.options, &smooth.engine, progress)
+            engine::run_file(input, &output, &smooth.options, &smooth.engine, progress)
         }));
         let result = match result {
             Ok(r) => r.and_then(|run| {
@@ -587,7 +587,7 @@ pub fn slurm_script(cfg: &SlurmScriptConfig, out: &mut dyn Write) -> Result<()> 
     let version = env!("CARGO_PKG_VERSION");
     let n = inputs.len();
     let last = tasks - 1;
-    let largest_size = crate::resources::format_size(largest.0);
+    let largest_size = crate::engine::memory::format_size(largest.0);
     let largest_name = largest.1.display();
     let time = cfg
         .time

@@ -16,11 +16,12 @@ use super::report::{
     CompareDoc, CurveDoc, CurvesDoc, FileStats, InfoDoc, SmoothReport, Summary, Timings, Tool,
     count, format_name, print_comparison, print_curves, print_info, print_iterations,
 };
-use crate::driver::{self, IterationRecord};
+use crate::engine::{self, IterationRecord};
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
+use crate::mesh::generate;
 use crate::topology::Topology;
-use crate::{generate, io, metrics};
+use crate::{io, metrics};
 
 /// `vcsmooth smooth`: read → reorder → topology → partition → smooth → write mesh → write report
 /// and plot → print table.
@@ -35,7 +36,7 @@ pub fn smooth(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) 
             progress.statistics_of_last_only(cfg.stats == super::args::Stats::Last);
             let (run, multires) = match &cfg.multires {
                 None => (
-                    driver::run_file(&cfg.input, &cfg.output, &cfg.options, &cfg.engine, progress)?,
+                    engine::run_file(&cfg.input, &cfg.output, &cfg.options, &cfg.engine, progress)?,
                     None,
                 ),
                 Some(m) => {
@@ -67,7 +68,7 @@ pub fn smooth(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) 
             ));
             progress.iterations(cfg.options.method.name(), cfg.options.iterations);
         }
-        let observer: &mut dyn driver::Observer = if lead { progress } else { &mut driver::Quiet };
+        let observer: &mut dyn engine::Observer = if lead { progress } else { &mut engine::Quiet };
         let run = crate::cluster::run_file(
             comm,
             &cfg.input,
@@ -94,7 +95,7 @@ pub fn smooth(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) 
 /// The report, plot and table of a finished `smooth`.
 fn smooth_report(
     cfg: &SmoothConfig,
-    run: &driver::FileRun,
+    run: &engine::FileRun,
     multires: Option<crate::multires::MultiresStats>,
     progress: &mut Progress,
     out: &mut dyn Write,
@@ -165,8 +166,8 @@ fn smooth_report(
         p.threads,
         p.crossing_edge_stencils,
         m.storage,
-        crate::resources::format_size(m.budget),
-        crate::resources::format_size(m.peak_anon)
+        crate::engine::memory::format_size(m.budget),
+        crate::engine::memory::format_size(m.peak_anon)
     )
     .map_err(stdout_error)?;
     if let Some(c) = &run.cluster {
@@ -178,9 +179,9 @@ fn smooth_report(
             c.owned_vertices_max,
             c.region_vertices_max,
             c.halo_values_per_iteration,
-            crate::resources::format_size(c.halo_bytes_per_iteration_max),
-            crate::resources::format_size(c.peak_anon_max),
-            crate::resources::format_size(c.smoothing_peak_anon_max),
+            crate::engine::memory::format_size(c.halo_bytes_per_iteration_max),
+            crate::engine::memory::format_size(c.peak_anon_max),
+            crate::engine::memory::format_size(c.smoothing_peak_anon_max),
             count(c.resumed_after, "iteration"),
             count(c.checkpoint_every, "iteration"),
         )
@@ -324,7 +325,7 @@ pub fn curves(cfg: &CurvesConfig, progress: &mut Progress, out: &mut dyn Write) 
         let mut positions = mesh.positions.clone();
         progress.iterations(method.name(), options.iterations);
         let clock = Instant::now();
-        let records = driver::smooth_positions(
+        let records = engine::smooth_positions(
             &topo,
             &mesh.triangles,
             &mut positions,
@@ -439,13 +440,13 @@ fn gib(bytes: u64) -> String {
     format!("{:.1} GiB", bytes as f64 / (1u64 << 30) as f64)
 }
 
-/// `vcsmooth bench`: throughput on generated meshes (see [`crate::bench`]), as a table or JSON.
+/// `vcsmooth bench`: throughput on generated meshes (see [`crate::modes::bench`]), as a table or JSON.
 pub fn bench(
     cfg: &super::config::BenchConfig,
     progress: &mut Progress,
     out: &mut dyn Write,
 ) -> Result<()> {
-    let report = crate::bench::run(&cfg.settings, &mut |m| progress.phase(m))?;
+    let report = crate::modes::bench::run(&cfg.settings, &mut |m| progress.phase(m))?;
     progress.finish();
     if cfg.json {
         let doc = super::report::BenchDoc {
@@ -470,7 +471,7 @@ pub fn demo(cfg: &DemoConfig, progress: &mut Progress, out: &mut dyn Write) -> R
     let clean = generate::icosphere(cfg.subdivisions);
     let mut noisy = clean.clone();
     generate::add_normal_noise(&mut noisy, cfg.noise, 1);
-    let pool = driver::thread_pool(cfg.engine.threads)?;
+    let pool = engine::thread_pool(cfg.engine.threads)?;
     let storage = Storage::heap();
     let clean_topo = Topology::build(clean.positions.len(), &clean.triangles)?;
     let rough_clean = metrics::roughness(&clean.positions, &clean.triangles, &clean_topo);
@@ -502,7 +503,7 @@ pub fn demo(cfg: &DemoConfig, progress: &mut Progress, out: &mut dyn Write) -> R
         };
         progress.iterations(method.name(), cfg.iterations);
         let (records, positions) = pool.install(|| -> Result<_> {
-            let mut prep = driver::Prepared::new(
+            let mut prep = engine::Prepared::new(
                 &storage,
                 &noisy.positions,
                 &noisy.triangles,

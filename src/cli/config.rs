@@ -29,13 +29,13 @@ pub enum Config {
 /// `vcsmooth bench`.
 #[derive(Debug, Clone)]
 pub struct BenchConfig {
-    pub settings: crate::bench::BenchSettings,
+    pub settings: crate::modes::bench::BenchSettings,
     pub json: bool,
 }
 
 impl BenchConfig {
     fn from_args(a: super::args::BenchArgs) -> Result<BenchConfig> {
-        let defaults = crate::bench::BenchSettings::default();
+        let defaults = crate::modes::bench::BenchSettings::default();
         let mut methods: Vec<Method> = Vec::new();
         for m in a.methods {
             if !methods.contains(&m) {
@@ -48,8 +48,8 @@ impl BenchConfig {
                 threads.push(t as usize);
             }
         }
-        let settings = crate::bench::BenchSettings {
-            sizes: crate::bench::normalize_sizes(a.sizes),
+        let settings = crate::modes::bench::BenchSettings {
+            sizes: crate::modes::bench::normalize_sizes(a.sizes),
             methods,
             threads: if threads.is_empty() {
                 defaults.threads
@@ -61,7 +61,7 @@ impl BenchConfig {
             patch_size: a.patch_size.map_or(defaults.patch_size, |p| p as usize),
             dir: a.dir.unwrap_or(defaults.dir),
         };
-        crate::bench::check(&settings)?;
+        crate::modes::bench::check(&settings)?;
         Ok(BenchConfig {
             settings,
             json: a.json,
@@ -79,7 +79,7 @@ pub struct DemoConfig {
 }
 
 /// How the engine runs (threads, patch size, memory budget, scratch directory).
-pub type EngineConfig = crate::driver::EngineSettings;
+pub type EngineConfig = crate::engine::EngineSettings;
 
 /// `vcsmooth smooth`.
 #[derive(Debug, Clone)]
@@ -324,7 +324,7 @@ pub(super) fn options(method: Method, iterations: usize, p: &MethodParams) -> Op
 
 pub(super) fn engine(e: &EngineArgs) -> Result<EngineConfig> {
     if let Some(b) = e.memory_budget {
-        crate::resources::check_budget(b)?;
+        crate::engine::memory::check_budget(b)?;
     }
     if let Some(dir) = &e.scratch {
         if !dir.is_dir() {
@@ -338,7 +338,7 @@ pub(super) fn engine(e: &EngineArgs) -> Result<EngineConfig> {
         threads: e.threads.map(|t| t as usize),
         patch_size: e
             .patch_size
-            .map_or(crate::driver::DEFAULT_PATCH_SIZE, |p| p as usize),
+            .map_or(crate::engine::DEFAULT_PATCH_SIZE, |p| p as usize),
         memory_budget: e.memory_budget,
         scratch: e.scratch.clone(),
         with_stats: false,

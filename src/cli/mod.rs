@@ -4,7 +4,7 @@
 //! 2. [`Config`] — the resolved, validated command ([`config`]): output formats known, plot files
 //!    SVG, target directories present, so a run fails before it reads or smooths anything.
 //! 3. [`run`] — executes a [`Config`] through the library, rendering the driver's
-//!    [`crate::driver::Observer`] as an indicatif progress bar ([`progress`]) when stderr is a terminal.
+//!    [`crate::engine::Observer`] as an indicatif progress bar ([`progress`]) when stderr is a terminal.
 //!
 //! [`main_with`] ties them together for the binary and returns the exit code: 0 on success, 2 for
 //! usage errors (clap's, and options that resolve to nothing valid), 1 for failures at run time.

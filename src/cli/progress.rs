@@ -6,7 +6,7 @@ use std::time::Duration;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
-use crate::driver::{IterationRecord, Observer};
+use crate::engine::{IterationRecord, Observer};
 
 /// Progress display for one command: a spinner for phases (reading, building topology, writing),
 /// a bar for iterations.

@@ -1,5 +1,5 @@
 //! `vcsmooth subdivide` and `vcsmooth refine`: the paper's adaptive subdivision (§4) and its
-//! refine-and-smooth workflow (Figs. 5–7), through [`crate::refine`]. Both read the whole mesh,
+//! refine-and-smooth workflow (Figs. 5–7), through [`crate::modes::refine`]. Both read the whole mesh,
 //! work in memory and write the result atomically only when everything succeeded.
 
 use std::io::Write;
@@ -11,7 +11,7 @@ use super::output::stdout_error;
 use super::progress::Progress;
 use crate::error::{Error, Result};
 use crate::io;
-use crate::refine::{self, RefineOptions};
+use crate::modes::refine::{self, RefineOptions};
 use crate::smooth::Method;
 
 /// `vcsmooth subdivide IN OUT --max-edge DELTA`

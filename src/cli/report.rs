@@ -8,7 +8,7 @@ use serde::Serialize;
 
 use super::config::EngineConfig;
 use super::output::stdout_error;
-use crate::driver::IterationRecord;
+use crate::engine::IterationRecord;
 use crate::error::Result;
 use crate::io::Format;
 use crate::metrics::{Comparison, MeshInfo};
@@ -100,9 +100,9 @@ pub struct SmoothReport {
     pub input: FileStats,
     /// Statistics of the smoothed f64 positions (before the output format's rounding).
     pub output: FileStats,
-    pub plan: crate::driver::PlanStats,
-    pub memory: crate::driver::MemoryStats,
-    pub timings: crate::driver::PhaseTimings,
+    pub plan: crate::engine::PlanStats,
+    pub memory: crate::engine::MemoryStats,
+    pub timings: crate::engine::PhaseTimings,
     /// Ranks, halo traffic and checkpoints, for runs of the cluster engine.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub cluster: Option<crate::cluster::ClusterStats>,
@@ -343,25 +343,25 @@ mod tests {
     }
 }
 
-/// The JSON of `vcsmooth bench --json`: the tool and every figure of [`crate::bench::BenchReport`].
+/// The JSON of `vcsmooth bench --json`: the tool and every figure of [`crate::modes::bench::BenchReport`].
 #[derive(Debug, Clone, Serialize)]
 pub struct BenchDoc {
     pub tool: Tool,
     #[serde(flatten)]
-    pub report: crate::bench::BenchReport,
+    pub report: crate::modes::bench::BenchReport,
 }
 
 /// Print the tables of `vcsmooth bench`: per size (PLY I/O, memory), per thread count (plan), per
 /// method (throughput).
-pub fn print_bench(out: &mut dyn Write, r: &crate::bench::BenchReport) -> Result<()> {
-    use crate::resources::format_size;
+pub fn print_bench(out: &mut dyn Write, r: &crate::modes::bench::BenchReport) -> Result<()> {
+    use crate::engine::memory::format_size;
     let s = &r.settings;
     let load = r.machine.load_average.map_or(String::from("unknown"), |l| {
         format!("{:.2} {:.2} {:.2}", l[0], l[1], l[2])
     });
     let mut t = format!(
         "noisy icospheres (noise {} × mean edge), {} × {} (median); {} cores, load average {load}\n\n",
-        crate::bench::NOISE,
+        crate::modes::bench::NOISE,
         count(s.iterations, "iteration"),
         count(s.repeats, "repeat"),
         r.machine.cores,

@@ -1,6 +1,6 @@
 //! One mesh over several processes (MPI ranks), with checkpoints.
 //!
-//! The unit of distribution is the patch of the out-of-core engine ([`crate::driver::Prepared`]):
+//! The unit of distribution is the patch of the out-of-core engine ([`crate::engine::Prepared`]):
 //! rank 0 prepares the plan once (Morton reorder, adjacency, patches, colours) into a work
 //! directory on a shared file system ([`store`]); every rank maps it and owns a contiguous block of
 //! patches, i.e. a contiguous range `A` of reordered vertices. A rank keeps positions and
@@ -41,7 +41,8 @@ use rayon::prelude::*;
 pub use comm::{Comm, Local, Single};
 use store::{Plan, PlanKey, Reference, StateDoc, WorkDir};
 
-use crate::driver::{
+use crate::engine::memory as resources;
+use crate::engine::{
     self, EngineSettings, FileRun, IterationRecord, MemoryStats, Observer, PhaseTimings, PlanStats,
     Prepared,
 };
@@ -50,7 +51,7 @@ use crate::mesh::Buf;
 use crate::partition::Patch;
 use crate::schedule::SharedField;
 use crate::smooth::{self, Method, Options, SweepStats, laplacian};
-use crate::{io, metrics, resources};
+use crate::{io, metrics};
 
 /// Rings of the region around a rank's owned vertices (see the module doc).
 const REGION_RINGS: usize = 3;
@@ -97,7 +98,7 @@ pub fn run_file(
     cluster: &ClusterSettings,
     observer: &mut dyn Observer,
 ) -> Result<FileRun> {
-    driver::validate(opts)?;
+    engine::validate(opts)?;
     if cluster.checkpoint_every == 0 {
         return Err(Error::Config(
             "--checkpoint-every must be at least 1".into(),
@@ -106,7 +107,7 @@ pub fn run_file(
     let start = Instant::now();
     let sampler = resources::PeakSampler::start(std::time::Duration::from_millis(20));
     let budget = engine.budget()?;
-    let pool = driver::thread_pool(engine.threads)?;
+    let pool = engine::thread_pool(engine.threads)?;
     let work = WorkDir::new(&cluster.work_dir);
     let mut t = PhaseTimings::default();
 
@@ -240,9 +241,9 @@ fn ensure_plan(
         return Ok(());
     }
     let clock = Instant::now();
-    let storage = driver::storage_for(input, output, engine, budget)?;
+    let storage = engine::storage_for(input, output, engine, budget)?;
     let mesh = io::read_mesh_in(input, &storage)?;
-    driver::check_in_memory_budget(input, &storage, &mesh, budget)?;
+    engine::check_in_memory_budget(input, &storage, &mesh, budget)?;
     t.ingest = clock.elapsed().as_secs_f64();
     let prep = Prepared::new(
         &storage,
@@ -268,7 +269,7 @@ fn write_output(
     engine: &EngineSettings,
     budget: u64,
 ) -> Result<Option<metrics::MeshInfo>> {
-    let storage = driver::storage_for(input, output, engine, budget)?;
+    let storage = engine::storage_for(input, output, engine, budget)?;
     let mut mesh = io::read_mesh_in(input, &storage)?;
     if mesh.positions.len() != plan.doc.vertices || mesh.triangles.len() != plan.doc.triangles {
         return Err(Error::invalid(
@@ -585,7 +586,7 @@ impl<'a> RankRun<'a> {
         let pos: &[DVec3] = &self.pos;
         let (v, a) = self
             .pool
-            .install(|| driver::volume_area_par(pos, tris, origin));
+            .install(|| engine::volume_area_par(pos, tris, origin));
         let total = self.comm.sum(&[v, a]);
         (total[0], total[1])
     }
@@ -601,7 +602,7 @@ impl<'a> RankRun<'a> {
     ) -> IterationRecord {
         let owned = self.owned();
         let (now, before) = (&self.pos[owned.clone()], &self.prev[owned]);
-        let moved = self.pool.install(|| driver::displacement_par(now, before));
+        let moved = self.pool.install(|| engine::displacement_par(now, before));
         let (max_d, sum_d) = (moved.max_displacement, moved.sum_displacement);
         let (volume, area) = self.volume_area(origin);
         let counts = [
@@ -617,8 +618,8 @@ impl<'a> RankRun<'a> {
         IterationRecord {
             iteration,
             volume,
-            volume_pct: driver::percent(volume, reference.volume),
-            area_pct: driver::percent(area, reference.area),
+            volume_pct: engine::percent(volume, reference.volume),
+            area_pct: engine::percent(area, reference.area),
             max_displacement: maxima[0],
             mean_displacement: sums[0] / movable as f64,
             stencils: SweepStats {
@@ -682,7 +683,7 @@ impl<'a> RankRun<'a> {
                 smooth::neighbor_sums_into(topo, pos, &mut sums[v..v + 1], v);
             }
         }
-        let params = driver::stencil_params(opts);
+        let params = engine::stencil_params(opts);
         let mut total = SweepStats::default();
         for colour in &self.plan.doc.colours {
             let mine: Vec<Patch> = colour
@@ -702,7 +703,7 @@ impl<'a> RankRun<'a> {
             };
             let stats = self
                 .pool
-                .install(|| driver::sweep_patches(topo, tris, pv, sv, &mine, opts.method, params));
+                .install(|| engine::sweep_patches(topo, tris, pv, sv, &mine, opts.method, params));
             total.add(&stats);
             send_changes(
                 self.comm,

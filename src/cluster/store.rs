@@ -20,7 +20,7 @@ use std::path::{Path, PathBuf};
 
 use glam::DVec3;
 
-use crate::driver::{IterationRecord, Prepared};
+use crate::engine::{IterationRecord, Prepared};
 use crate::error::{Error, Result};
 use crate::mesh::Buf;
 use crate::mesh::storage::{Pod, as_bytes};

@@ -33,5 +33,6 @@ impl Mesh {
     }
 }
 
+pub mod generate;
 pub mod storage;
 pub use storage::{Buf, Storage};

@@ -108,7 +108,7 @@ impl Storage {
             Error::Config(format!(
                 "{}: cannot reserve {} of scratch space ({e}); free space there or choose another --scratch",
                 dir.display(),
-                crate::resources::format_size(bytes as u64)
+                crate::engine::memory::format_size(bytes as u64)
             ))
         })?;
         if bytes == 0 {
@@ -194,7 +194,7 @@ impl<T: Pod> Buf<T> {
             .map_err(|e| {
                 Error::Config(format!(
                     "cannot map {} of address space: {e}",
-                    crate::resources::format_size(bytes as u64)
+                    crate::engine::memory::format_size(bytes as u64)
                 ))
             })?;
         // Anonymous memory has no file to read ahead: no advice mapping.

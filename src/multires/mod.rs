@@ -28,7 +28,7 @@ use std::time::Instant;
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::driver::{self, EngineSettings, FileRun, IterationRecord, Observer, Prepared, Quiet};
+use crate::engine::{self, EngineSettings, FileRun, IterationRecord, Observer, Prepared, Quiet};
 use crate::error::{Error, Result};
 use crate::mesh::{Buf, Storage};
 use crate::metrics;
@@ -353,7 +353,7 @@ fn par_centroid(pos: &[DVec3]) -> DVec3 {
 }
 
 /// Read `input`, smooth it in multiresolution on the patch engine (heap or scratch as `engine`
-/// says, exactly as [`driver::run_file`]), write `output`.
+/// says, exactly as [`engine::run_file`]), write `output`.
 pub fn run_file(
     input: &Path,
     output: &Path,
@@ -364,7 +364,7 @@ pub fn run_file(
 ) -> Result<(FileRun, MultiresStats)> {
     validate(opts, m)?;
     let mut stats = None;
-    let run = driver::run_file_with(
+    let run = engine::run_file_with(
         input,
         output,
         opts,

@@ -268,7 +268,7 @@ fn volume_gradient(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::generate;
+    use crate::mesh::generate;
 
     #[test]
     fn restore_volume_reaches_the_target_and_leaves_fixed_vertices() {

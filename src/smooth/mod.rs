@@ -19,6 +19,7 @@ use glam::DVec3;
 
 pub mod laplacian;
 pub mod stencil;
+pub mod tiled;
 
 pub use crate::topology::Topology;
 
@@ -163,7 +164,7 @@ impl Field for [DVec3] {
 }
 
 /// `1/d` for the degrees of nearly every vertex, so that the kernels load it instead of dividing
-/// (and every degree a byte can hold, for the local rows of [`crate::tiled`]).
+/// (and every degree a byte can hold, for the local rows of [`crate::smooth::tiled`]).
 pub(crate) static INV_DEGREE: [f64; 256] = {
     let mut t = [0.0; 256];
     let mut d = 1;

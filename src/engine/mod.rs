@@ -7,6 +7,8 @@
 //! - `laplacian`, `taubin`: Jacobi (every vertex from the previous positions), so the order is
 //!   irrelevant and any thread count gives bit-identical output.
 
+pub mod memory;
+
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -14,18 +16,19 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
+use crate::io;
 use crate::mesh::{Buf, Storage};
 use crate::metrics::{self, MeshInfo};
 use crate::partition::{self, Patch, Reordered};
 use crate::schedule::{self, Prefetch, Schedule, SharedField};
+use crate::smooth::tiled::{self, TilePlan};
 use crate::smooth::{
     self, Method, Options, SweepStats,
     laplacian::{self, Previous, StepStats},
     stencil::{self, StencilParams, Workspace},
 };
-use crate::tiled::{self, TilePlan};
 use crate::topology::Topology;
-use crate::{io, resources};
+use memory as resources;
 
 /// Statistics of one iteration, relative to the input where a percentage is given.
 #[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize)]
@@ -383,10 +386,10 @@ pub(crate) fn percent(x: f64, reference: f64) -> f64 {
 /// Smooth a whole in-memory mesh: builds its topology and runs [`smooth_positions`].
 ///
 /// ```no_run
-/// let mut mesh = vcsmooth::generate::icosphere(3);
-/// vcsmooth::generate::add_normal_noise(&mut mesh, 0.3, 7);
+/// let mut mesh = vcsmooth::mesh::generate::icosphere(3);
+/// vcsmooth::mesh::generate::add_normal_noise(&mut mesh, 0.3, 7);
 /// let opts = vcsmooth::Options::default(); // vcs, 10 iterations
-/// let records = vcsmooth::driver::smooth_mesh(&mut mesh, &opts, None, &mut vcsmooth::driver::Quiet)?;
+/// let records = vcsmooth::engine::smooth_mesh(&mut mesh, &opts, None, &mut vcsmooth::engine::Quiet)?;
 /// assert!((records.last().unwrap().volume_pct - 100.0).abs() < 1e-6);
 /// # Ok::<(), vcsmooth::Error>(())
 /// ```

@@ -22,7 +22,7 @@
 //!    buffers, as an in-core `smooth` run holds them. Sizes run smallest first so that memory
 //!    freed by a smaller size but kept by the allocator cannot inflate a larger size's figure.
 //!
-//! [`IterationRecord::seconds`]: crate::driver::IterationRecord
+//! [`IterationRecord::seconds`]: crate::engine::IterationRecord
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -30,11 +30,13 @@ use std::time::{Duration, Instant};
 use glam::DVec3;
 use serde::Serialize;
 
-use crate::driver::{self, Prepared, Quiet};
+use crate::engine::memory as resources;
+use crate::engine::{self, Prepared, Quiet};
 use crate::error::{Error, Result};
+use crate::io;
+use crate::mesh::generate;
 use crate::mesh::{Mesh, Storage};
 use crate::smooth::{Method, Options};
-use crate::{generate, io, resources};
 
 /// Noise of the generated meshes, × the mean edge length.
 pub const NOISE: f64 = 0.3;
@@ -145,7 +147,7 @@ impl Default for BenchSettings {
             threads: default_threads(),
             iterations: 3,
             repeats: 3,
-            patch_size: driver::DEFAULT_PATCH_SIZE,
+            patch_size: engine::DEFAULT_PATCH_SIZE,
             dir: std::env::temp_dir(),
         }
     }
@@ -444,7 +446,7 @@ fn run_threads(
     threads: usize,
     phase: &mut dyn FnMut(String),
 ) -> Result<ThreadRun> {
-    let pool = driver::thread_pool(Some(threads))?;
+    let pool = engine::thread_pool(Some(threads))?;
     let storage = Storage::heap();
     phase(format!("{}: preparing on {threads} threads", size.label));
     let (mut prep, prepare) = pool.install(|| prepare(settings, &storage, mesh))?;

@@ -5,7 +5,7 @@
 //!   edge midpoints, so they lie on the input's triangles and the volume of a closed mesh does not
 //!   change (up to rounding); a closed manifold stays closed and manifold, orientation is kept,
 //!   and an open mesh keeps its boundary (its boundary edges are split, never moved).
-//! - [`refine`] alternates [`subdivide`] and whole-mesh smoothing ([`crate::driver::smooth_mesh`])
+//! - [`refine`] alternates [`subdivide`] and whole-mesh smoothing ([`crate::engine::smooth_mesh`])
 //!   for a number of rounds, recording volume, counts and edge lengths per round.
 //!
 //! # Scheme: conforming longest-edge bisection (Rivara)
@@ -43,7 +43,7 @@
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::driver::{self, Observer};
+use crate::engine::{self, Observer};
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
 use crate::metrics;
@@ -372,7 +372,7 @@ pub fn refine(
         let volume_before = metrics::volume(&mesh.positions, &mesh.triangles);
         let subdivision = subdivide(mesh, opts.max_edge)?;
         let volume_subdivided = metrics::volume(&mesh.positions, &mesh.triangles);
-        driver::smooth_mesh(mesh, &opts.smoothing, threads, observer)?;
+        engine::smooth_mesh(mesh, &opts.smoothing, threads, observer)?;
         records.push(RoundRecord {
             round,
             subdivision,
@@ -388,7 +388,7 @@ pub fn refine(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::generate;
+    use crate::mesh::generate;
     use crate::topology::Topology;
 
     fn edges_ok(mesh: &Mesh, delta: f64) {

@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::driver::{EngineSettings, FileRun};
+use crate::engine::{EngineSettings, FileRun};
 use crate::error::{Error, Result};
 use crate::io::Format;
 use crate::smooth::Options;

@@ -591,7 +591,7 @@ fn relaxed(p: P4, sum: [f64; 4], inv: f64, f: f64) -> P4 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::generate;
+    use crate::mesh::generate;
     use crate::smooth::laplacian;
 
     /// A noisy sphere in a random vertex order (so that rings reach far), with an open hole (so
