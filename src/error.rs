@@ -1,14 +1,31 @@
-//! The library's error type: one variant per kind of failure (invalid input, I/O, configuration),
-//! each carrying enough context for a one-line message that names the file and the problem.
+//! The library's error type: one variant per kind of failure (invalid input, topology, parameter,
+//! I/O, resource, …), each carrying enough context for a one-line message that names the file and
+//! the problem.
+//!
+//! Messages use the library's own vocabulary: a parameter is named as in the options structs
+//! (`patch_size`, `memory_budget`, …), never as a command-line flag. The command line renders
+//! [`Error::Parameter`] with its flags (`crate::cli::flags`).
 
 use std::path::PathBuf;
 
 /// Everything that can go wrong in vcsmooth's library code.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
-    /// The file's content is malformed or unsupported. `what` names the element and the offset or line.
+    /// A file is malformed or unsupported: its content (`what` names the element and the offset or
+    /// line), or for an output its name (an unknown extension).
     #[error("{}: {what}", path.display())]
     InvalidInput { path: PathBuf, what: String },
+    /// Connectivity the engine cannot handle: more vertices or triangles than 32-bit ids address,
+    /// a triangle that indexes a vertex that does not exist, arrays of mismatched sizes, two meshes
+    /// that should share their triangles but do not. `path` names the mesh once it is known (see
+    /// [`Error::in_file`]).
+    #[error("{}{what}", file_prefix(path.as_deref()))]
+    Topology { path: Option<PathBuf>, what: String },
+    /// A parameter out of its range, or one that does not fit the others. `name` is the library's
+    /// name of the parameter (the field of the options struct: `patch_size`, `iterations`, …);
+    /// `problem` follows it and says what is allowed, e.g. `must be at least 1`.
+    #[error("{name} {problem}")]
+    Parameter { name: &'static str, problem: String },
     /// The operating system refused a read, write, rename or map.
     #[error("{}: {source}", path.display())]
     Io {
@@ -16,9 +33,36 @@ pub enum Error {
         #[source]
         source: std::io::Error,
     },
-    /// Options that cannot work together or are out of range (e.g. `--iterations 0` where that is refused).
+    /// Not enough of a resource: memory, disk space, address space, threads.
+    #[error("{what}")]
+    Resource { what: String },
+    /// Work that was not all done: inputs of a batch that failed or have no result. Each failure
+    /// was reported on its own; this is the summary.
+    #[error("{what}")]
+    Incomplete { what: String },
+    /// Another rank of a cluster run failed (and reports its own error); `what` says at which step.
+    #[error("{what}")]
+    Peer { what: String },
+    /// The error of one rank of a cluster run.
+    #[error("rank {rank}: {source}")]
+    Rank {
+        rank: usize,
+        #[source]
+        source: Box<Error>,
+    },
+    /// A command line that asks for something impossible, in words the command line chose (its
+    /// flags and arguments). Raised only by [`crate::cli`].
+    #[error("{what}")]
+    Usage { what: String },
+    /// Temporary: the engine and cluster modules still raise this until they use the kinds above.
     #[error("{0}")]
     Config(String),
+}
+
+/// `"<path>: "`, or nothing without a path.
+fn file_prefix(path: Option<&std::path::Path>) -> String {
+    path.map(|p| format!("{}: ", p.display()))
+        .unwrap_or_default()
 }
 
 impl Error {
@@ -29,9 +73,36 @@ impl Error {
             what: what.into(),
         }
     }
-    /// Name `path` in an error that names no file (a [`Error::Config`] raised while working on it).
+    /// Shorthand for [`Error::Topology`] (with no file yet: see [`Error::in_file`]).
+    pub fn topology(what: impl Into<String>) -> Self {
+        Error::Topology {
+            path: None,
+            what: what.into(),
+        }
+    }
+
+    /// Shorthand for [`Error::Parameter`]: `name` as in the options struct, `problem` following it.
+    pub fn parameter(name: &'static str, problem: impl Into<String>) -> Self {
+        Error::Parameter {
+            name,
+            problem: problem.into(),
+        }
+    }
+
+    /// Shorthand for [`Error::Resource`].
+    pub fn resource(what: impl Into<String>) -> Self {
+        Error::Resource { what: what.into() }
+    }
+
+    /// Name `path` in an error about a mesh that names no file yet (an [`Error::Topology`] raised
+    /// while working on it). Other errors are returned unchanged.
     pub fn in_file(self, path: &std::path::Path) -> Self {
         match self {
+            Error::Topology { path: None, what } => Error::Topology {
+                path: Some(path.to_path_buf()),
+                what,
+            },
+            // Temporary, with the `Config` variant.
             Error::Config(what) => Error::invalid(path, what),
             other => other,
         }

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use vcsmooth::cluster::{self, ClusterSettings, Local};
-use vcsmooth::driver::{EngineSettings, Quiet};
+use vcsmooth::engine::{EngineSettings, Quiet};
 use vcsmooth::{Method, Options};
 
 fn data(name: &str) -> PathBuf {

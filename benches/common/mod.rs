@@ -16,7 +16,8 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use criterion::{BenchmarkGroup, SamplingMode, measurement::WallTime};
-use vcsmooth::{Mesh, generate, io};
+use vcsmooth::mesh::shapes;
+use vcsmooth::{Mesh, io};
 
 /// Noise of the generated meshes, × the mean edge length.
 pub const NOISE: f64 = 0.3;
@@ -50,8 +51,8 @@ pub fn armadillo() -> Option<Named> {
 
 /// Noisy icosphere level 8: 1 310 720 triangles.
 pub fn one_million() -> Named {
-    let mut mesh = generate::icosphere(8);
-    generate::add_normal_noise(&mut mesh, NOISE, 1);
+    let mut mesh = shapes::icosphere(8);
+    shapes::add_normal_noise(&mut mesh, NOISE, 1);
     Named {
         name: "icosphere8-1.3M",
         mesh,
@@ -62,8 +63,8 @@ pub fn one_million() -> Named {
 
 /// Noisy torus level 7: 4 194 304 triangles.
 pub fn four_million() -> Named {
-    let mut mesh = generate::torus(7);
-    generate::add_normal_noise(&mut mesh, NOISE, 1);
+    let mut mesh = shapes::torus(7);
+    shapes::add_normal_noise(&mut mesh, NOISE, 1);
     Named {
         name: "torus7-4.2M",
         mesh,

@@ -170,7 +170,9 @@ impl BatchConfig {
             });
         }
         let (Some(inputs), Some(outdir)) = (a.inputs, a.outdir) else {
-            return Err(Error::Config("batch needs LIST_OR_DIR and OUTDIR".into()));
+            return Err(Error::Usage {
+                what: "batch needs LIST_OR_DIR and OUTDIR".into(),
+            });
         };
         Ok(BatchConfig::Run {
             inputs,
@@ -198,19 +200,20 @@ pub struct SlurmScriptConfig {
 
 impl SlurmScriptConfig {
     pub fn from_args(a: SlurmScriptArgs) -> Result<SlurmScriptConfig> {
-        for (what, v) in [
-            ("--partition", &a.partition),
-            ("--time", &a.time),
-            ("--job-name", &Some(a.job_name.clone())),
+        for (name, v) in [
+            ("partition", &a.partition),
+            ("time", &a.time),
+            ("job_name", &Some(a.job_name.clone())),
         ] {
             if let Some(v) = v {
                 if v.is_empty()
                     || v.chars()
                         .any(|c| c.is_whitespace() || c == '\'' || c == '"')
                 {
-                    return Err(Error::Config(format!(
-                        "{what} '{v}' must be one word without quotes"
-                    )));
+                    return Err(super::flags::parameter(
+                        name,
+                        format!("'{v}' must be one word without quotes"),
+                    ));
                 }
             }
         }
@@ -390,7 +393,7 @@ fn run_share(
             }
             Err(e) => {
                 failed += 1;
-                eprintln!("vcsmooth: error: {}", one_line(&e.to_string()));
+                eprintln!("vcsmooth: error: {}", one_line(&super::flags::message(&e)));
             }
         }
     }
@@ -401,9 +404,11 @@ fn run_share(
     )
     .map_err(stdout_error)?;
     if failed > 0 {
-        return Err(Error::Config(format!(
-            "{failed} of the inputs of task {index} of {count} failed (see above); rerun the task to retry them"
-        )));
+        return Err(Error::Incomplete {
+            what: format!(
+                "{failed} of the inputs of task {index} of {count} failed (see above); rerun the task to retry them"
+            ),
+        });
     }
     Ok(())
 }
@@ -451,11 +456,9 @@ fn summary(
         if !s.unreadable.is_empty() {
             what.push(format!("{} markers are unreadable", s.unreadable.len()));
         }
-        return Err(Error::Config(format!(
-            "{}: {}",
-            outdir.display(),
-            what.join("; ")
-        )));
+        return Err(Error::Incomplete {
+            what: format!("{}: {}", outdir.display(), what.join("; ")),
+        });
     }
     Ok(())
 }

@@ -19,7 +19,7 @@ use super::report::{
 use crate::engine::{self, IterationRecord};
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
-use crate::mesh::generate;
+use crate::mesh::shapes;
 use crate::topology::Topology;
 use crate::{io, metrics};
 
@@ -33,7 +33,6 @@ pub fn smooth(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) 
         let Some(cluster) = cfg.cluster(comm.size()) else {
             progress.phase(format!("smoothing {}", cfg.input.display()));
             progress.iterations(cfg.options.method.name(), cfg.options.iterations);
-            progress.statistics_of_last_only(cfg.stats == super::args::Stats::Last);
             let (run, multires) = match &cfg.multires {
                 None => (
                     engine::run_file(&cfg.input, &cfg.output, &cfg.options, &cfg.engine, progress)?,
@@ -54,8 +53,9 @@ pub fn smooth(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) 
             return smooth_report(cfg, &run, multires, progress, out);
         };
         if cfg.multires.is_some() {
-            return Err(Error::Config(
-                "--multires runs in one process; it cannot be combined with --checkpoint or MPI ranks".into(),
+            return Err(super::flags::parameter(
+                "multires",
+                "runs in one process; it cannot be combined with --checkpoint or MPI ranks",
             ));
         }
         let lead = comm.rank() == 0;
@@ -80,7 +80,10 @@ pub fn smooth(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) 
         )
         .map_err(|e| {
             if comm.size() > 1 {
-                Error::Config(format!("rank {}: {e}", comm.rank()))
+                Error::Rank {
+                    rank: comm.rank(),
+                    source: Box::new(e),
+                }
             } else {
                 e
             }
@@ -95,7 +98,7 @@ pub fn smooth(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) 
 /// The report, plot and table of a finished `smooth`.
 fn smooth_report(
     cfg: &SmoothConfig,
-    run: &engine::FileRun,
+    run: &engine::Report,
     multires: Option<crate::multires::MultiresStats>,
     progress: &mut Progress,
     out: &mut dyn Write,
@@ -221,10 +224,10 @@ pub fn compare(cfg: &CompareConfig, progress: &mut Progress, out: &mut dyn Write
     let b = io::read_mesh(&cfg.b)?;
     progress.phase("comparing");
     let comparison = metrics::compare(&a, &b).map_err(|e| match e {
-        Error::Config(what) => Error::invalid(
-            &cfg.b,
-            format!("{what} (compared with {})", cfg.a.display()),
-        ),
+        Error::Topology { path: None, what } => Error::Topology {
+            path: Some(cfg.b.clone()),
+            what: format!("{what} (compared with {})", cfg.a.display()),
+        },
         other => other,
     })?;
     progress.finish();
@@ -287,13 +290,13 @@ pub fn generate(cfg: &GenerateConfig, progress: &mut Progress, out: &mut dyn Wri
 
     progress.phase(format!("generating {} level {k}", shape_name(cfg.shape)));
     let mut mesh = match cfg.shape {
-        Shape::Sphere => generate::icosphere(k),
+        Shape::Sphere => shapes::icosphere(k),
         // `mesh` always takes the streamed path above.
-        Shape::Torus | Shape::Mesh => generate::torus(k),
+        Shape::Torus | Shape::Mesh => shapes::torus(k),
     };
     if cfg.noise > 0.0 {
         progress.phase("adding noise");
-        generate::add_normal_noise(&mut mesh, cfg.noise, cfg.seed);
+        shapes::add_normal_noise(&mut mesh, cfg.noise, cfg.seed);
     }
     progress.phase(format!("writing {}", cfg.output.display()));
     io::write_mesh(&cfg.output, &mesh)?;
@@ -314,7 +317,21 @@ pub fn generate(cfg: &GenerateConfig, progress: &mut Progress, out: &mut dyn Wri
 /// `vcsmooth curves`: every method from the same input positions; the plot, then the table.
 pub fn curves(cfg: &CurvesConfig, progress: &mut Progress, out: &mut dyn Write) -> Result<()> {
     progress.phase(format!("reading {}", cfg.input.display()));
-    let (mesh, topo) = read_with_topology(&cfg.input, progress, &mut Timings::default())?;
+    let mesh = io::read_mesh(&cfg.input)?;
+    progress.phase("building topology");
+    let pool = engine::thread_pool(cfg.engine.threads)?;
+    let storage = crate::mesh::Storage::heap();
+    // Every method from the input in its own order (the sequential reference order).
+    let mut plan = pool
+        .install(|| {
+            engine::Plan::new(
+                &storage,
+                &mesh.positions,
+                &mesh.triangles,
+                engine::Layout::Whole,
+            )
+        })
+        .map_err(|e| e.in_file(&cfg.input))?;
 
     let mut docs = Vec::with_capacity(cfg.methods.len());
     for &method in &cfg.methods {
@@ -322,18 +339,12 @@ pub fn curves(cfg: &CurvesConfig, progress: &mut Progress, out: &mut dyn Write) 
             method,
             ..cfg.options
         };
-        let mut positions = mesh.positions.clone();
+        plan.set_positions_from_input(&mesh.positions);
         progress.iterations(method.name(), options.iterations);
         let clock = Instant::now();
-        let records = engine::smooth_positions(
-            &topo,
-            &mesh.triangles,
-            &mut positions,
-            &options,
-            cfg.engine.threads,
-            progress,
-        )
-        .map_err(|e| e.in_file(&cfg.input))?;
+        let records = pool
+            .install(|| plan.smooth(&storage, &options, engine::Statistics::Every, progress))
+            .map_err(|e| e.in_file(&cfg.input))?;
         docs.push(CurveDoc {
             method,
             volume_pct: volume_curve(&records),
@@ -412,8 +423,8 @@ fn shape_name(s: Shape) -> &'static str {
 /// The largest subdivision level the generator accepts for `shape`.
 fn max_subdivisions(shape: Shape) -> u32 {
     match shape {
-        Shape::Sphere => generate::ICOSPHERE_MAX_SUBDIVISIONS,
-        Shape::Torus => generate::TORUS_MAX_SUBDIVISIONS,
+        Shape::Sphere => shapes::ICOSPHERE_MAX_SUBDIVISIONS,
+        Shape::Torus => shapes::TORUS_MAX_SUBDIVISIONS,
         Shape::Mesh => 0,
     }
 }
@@ -468,9 +479,9 @@ pub fn demo(cfg: &DemoConfig, progress: &mut Progress, out: &mut dyn Write) -> R
         "generating a noisy sphere (level {})",
         cfg.subdivisions
     ));
-    let clean = generate::icosphere(cfg.subdivisions);
+    let clean = shapes::icosphere(cfg.subdivisions);
     let mut noisy = clean.clone();
-    generate::add_normal_noise(&mut noisy, cfg.noise, 1);
+    shapes::add_normal_noise(&mut noisy, cfg.noise, 1);
     let pool = engine::thread_pool(cfg.engine.threads)?;
     let storage = Storage::heap();
     let clean_topo = Topology::build(clean.positions.len(), &clean.triangles)?;
@@ -503,13 +514,13 @@ pub fn demo(cfg: &DemoConfig, progress: &mut Progress, out: &mut dyn Write) -> R
         };
         progress.iterations(method.name(), cfg.iterations);
         let (records, positions) = pool.install(|| -> Result<_> {
-            let mut prep = engine::Prepared::new(
+            let mut prep = engine::Plan::new(
                 &storage,
                 &noisy.positions,
                 &noisy.triangles,
-                cfg.engine.patch_size,
+                engine::Layout::Patches(cfg.engine.patch_size),
             )?;
-            let records = prep.smooth(&storage, &opts, progress)?;
+            let records = prep.smooth(&storage, &opts, engine::Statistics::Every, progress)?;
             let mut positions = noisy.positions.clone();
             prep.positions_in_input_order(&mut positions);
             Ok((records, positions))
@@ -552,9 +563,9 @@ fn generate_streamed(
             io::read_mesh(path)?
         }
         (None, Shape::Sphere) => {
-            generate::icosphere(cfg.subdivisions.min(generate::ICOSPHERE_MAX_SUBDIVISIONS))
+            shapes::icosphere(cfg.subdivisions.min(shapes::ICOSPHERE_MAX_SUBDIVISIONS))
         }
-        (None, _) => generate::torus(cfg.subdivisions.min(generate::TORUS_MAX_SUBDIVISIONS)),
+        (None, _) => shapes::torus(cfg.subdivisions.min(shapes::TORUS_MAX_SUBDIVISIONS)),
     };
     let levels = cfg.subdivide.unwrap_or(0);
     progress.phase(format!(
@@ -562,8 +573,17 @@ fn generate_streamed(
         cfg.output.display(),
         1u64 << (2 * levels)
     ));
-    let n = generate::write_subdivided(&base, levels, cfg.noise, cfg.seed, &cfg.output)
+    let n = shapes::Subdivision::new(&base, levels, cfg.noise, cfg.seed)
         .map_err(|e| e.in_file(&cfg.output))?;
+    let comment = format!(
+        "vcsmooth generate: {} triangles x {}^2",
+        n.base_triangles(),
+        n.pieces()
+    );
+    io::write_ply_streamed(&cfg.output, n.vertices(), n.triangles(), &[&comment], |w| {
+        n.for_each_vertex(|p| w.vertex(p))?;
+        n.for_each_triangle(|t| w.triangle(t))
+    })?;
     progress.finish();
     writeln!(
         out,
@@ -571,8 +591,8 @@ fn generate_streamed(
         cfg.output.display(),
         base.triangles.len(),
         cfg.from.as_ref().map_or_else(|| shape_name(cfg.shape).to_string(), |p| p.display().to_string()),
-        n.vertices,
-        n.triangles,
+        n.vertices(),
+        n.triangles(),
         cfg.noise,
         cfg.seed
     )
@@ -588,8 +608,8 @@ mod tests {
         assert_eq!(triangles_at(Shape::Sphere, 3), 1280);
         for shape in [Shape::Sphere, Shape::Torus] {
             let mesh = match shape {
-                Shape::Sphere => generate::icosphere(1),
-                _ => generate::torus(1),
+                Shape::Sphere => shapes::icosphere(1),
+                _ => shapes::torus(1),
             };
             assert_eq!(triangles_at(shape, 1), mesh.triangles.len() as u64);
             assert!(triangles_at(shape, max_subdivisions(shape)) < 1 << 31);

@@ -6,6 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use super::args::{Args, Command, EngineArgs, MethodParams, Shape};
+use super::flags;
 use crate::error::{Error, Result};
 use crate::io::Format;
 use crate::smooth::{Method, Options};
@@ -178,14 +179,18 @@ impl Config {
                 if let Some(p) = &a.plot {
                     svg_output(p)?;
                     if a.stats != super::args::Stats::Every {
-                        return Err(Error::Config(
-                            "--plot draws the volume of every iteration: it needs --stats every"
-                                .into(),
+                        return Err(flags::parameter(
+                            "plot",
+                            "draws the volume of every iteration: it needs --stats every",
                         ));
                     }
                 }
                 let mut engine = engine(&a.smoothing.engine)?;
                 engine.with_stats = a.report.is_some();
+                engine.statistics = match a.stats {
+                    super::args::Stats::Every => crate::engine::Statistics::Every,
+                    super::args::Stats::Last => crate::engine::Statistics::Last,
+                };
                 let options = options(
                     a.smoothing.method,
                     a.smoothing.iterations,
@@ -193,9 +198,9 @@ impl Config {
                 );
                 let multires = a.multires.resolve(&options)?;
                 if multires.is_some() && a.cluster.checkpoint.is_some() {
-                    return Err(Error::Config(
-                        "--multires cannot be combined with --checkpoint (it runs in one process)"
-                            .into(),
+                    return Err(flags::parameter(
+                        "multires",
+                        "cannot be combined with --checkpoint (it runs in one process)",
                     ));
                 }
                 Config::Smooth(SmoothConfig {
@@ -224,36 +229,39 @@ impl Config {
             Command::Generate(a) => {
                 mesh_output(&a.output)?;
                 if a.noise < 0.0 {
-                    return Err(Error::Config(format!(
-                        "--noise must be at least 0, got {}",
-                        a.noise
-                    )));
+                    return Err(flags::parameter(
+                        "noise",
+                        format!("must be at least 0, got {}", a.noise),
+                    ));
                 }
                 let subdivisions = match (a.shape, a.subdivisions, &a.from) {
                     (Shape::Mesh, None, Some(_)) => 0,
                     (Shape::Mesh, _, None) => {
-                        return Err(Error::Config("generate mesh needs --from MESH".into()));
+                        return Err(Error::Usage {
+                            what: "generate mesh needs --from MESH".into(),
+                        });
                     }
                     (Shape::Mesh, Some(_), _) => {
-                        return Err(Error::Config(
-                            "--subdivisions is for sphere and torus; refine a mesh with --subdivide".into(),
+                        return Err(flags::parameter(
+                            "subdivisions",
+                            "is for sphere and torus; refine a mesh with --subdivide",
                         ));
                     }
                     (_, _, Some(_)) => {
-                        return Err(Error::Config("--from goes with the shape `mesh`".into()));
+                        return Err(flags::parameter("from", "goes with the shape `mesh`"));
                     }
                     (_, None, None) => {
-                        return Err(Error::Config(
-                            "generate sphere|torus needs --subdivisions K".into(),
-                        ));
+                        return Err(Error::Usage {
+                            what: "generate sphere|torus needs --subdivisions K".into(),
+                        });
                     }
                     (_, Some(k), None) => k,
                 };
                 if a.subdivide.is_some() && output_format(&a.output) != Some(Format::Ply) {
-                    return Err(Error::Config(format!(
-                        "{}: --subdivide streams binary PLY only; use a .ply output",
-                        a.output.display()
-                    )));
+                    return Err(Error::invalid(
+                        &a.output,
+                        "--subdivide streams binary PLY only; use a .ply output",
+                    ));
                 }
                 Config::Generate(GenerateConfig {
                     shape: a.shape,
@@ -274,7 +282,7 @@ impl Config {
                     }
                 }
                 if methods.is_empty() {
-                    return Err(Error::Config("--methods names no method".into()));
+                    return Err(flags::parameter("methods", "names no method"));
                 }
                 Config::Curves(CurvesConfig {
                     options: options(methods[0], a.iterations as usize, &a.params),
@@ -287,10 +295,10 @@ impl Config {
             }
             Command::Demo(a) => {
                 if !(a.noise.is_finite() && a.noise >= 0.0) {
-                    return Err(Error::Config(format!(
-                        "--noise must be a finite number ≥ 0, got {}",
-                        a.noise
-                    )));
+                    return Err(flags::parameter(
+                        "noise",
+                        format!("must be a finite number ≥ 0, got {}", a.noise),
+                    ));
                 }
                 Config::Demo(DemoConfig {
                     subdivisions: a.subdivisions,
@@ -328,10 +336,10 @@ pub(super) fn engine(e: &EngineArgs) -> Result<EngineConfig> {
     }
     if let Some(dir) = &e.scratch {
         if !dir.is_dir() {
-            return Err(Error::Config(format!(
-                "{}: --scratch must be an existing directory",
-                dir.display()
-            )));
+            return Err(Error::invalid(
+                dir,
+                "--scratch must be an existing directory",
+            ));
         }
     }
     Ok(EngineConfig {
@@ -342,6 +350,7 @@ pub(super) fn engine(e: &EngineArgs) -> Result<EngineConfig> {
         memory_budget: e.memory_budget,
         scratch: e.scratch.clone(),
         with_stats: false,
+        statistics: crate::engine::Statistics::Every,
     })
 }
 
@@ -383,7 +392,9 @@ fn svg_output(path: &Path) -> Result<()> {
 /// Check that the directory `path` would be created in exists.
 fn parent_exists(path: &Path) -> Result<()> {
     if path.as_os_str().is_empty() {
-        return Err(Error::Config("an output file name is empty".into()));
+        return Err(Error::Usage {
+            what: "an output file name is empty".into(),
+        });
     }
     match path.parent() {
         Some(dir) if !dir.as_os_str().is_empty() && !dir.is_dir() => Err(Error::invalid(

@@ -18,6 +18,7 @@ pub mod args;
 pub mod batch;
 pub mod commands;
 pub mod config;
+pub mod flags;
 pub mod multires;
 pub mod output;
 pub mod plot;
@@ -60,14 +61,14 @@ where
     let config = match Config::from_args(args, argv) {
         Ok(c) => c,
         Err(e) => {
-            print_error(&e.to_string());
+            print_error(&flags::message(&e));
             return ExitCode::from(EXIT_USAGE);
         }
     };
     match run(&config) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            print_error(&e.to_string());
+            print_error(&flags::message(&e));
             ExitCode::from(EXIT_FAILURE)
         }
     }

@@ -34,7 +34,7 @@ pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<()> {
 /// Print `value` as pretty JSON to `out`.
 pub fn print_json<T: serde::Serialize>(out: &mut dyn Write, value: &T) -> Result<()> {
     let text = serde_json::to_string_pretty(value)
-        .map_err(|e| Error::Config(format!("cannot encode JSON: {e}")))?;
+        .map_err(|e| Error::invalid("<stdout>", format!("cannot encode JSON: {e}")))?;
     writeln!(out, "{text}").map_err(stdout_error)
 }
 

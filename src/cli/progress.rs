@@ -12,8 +12,6 @@ use crate::engine::{IterationRecord, Observer};
 /// a bar for iterations.
 pub struct Progress {
     bar: Option<ProgressBar>,
-    /// Measure the statistics of the last iteration only (`smooth --stats last`).
-    last_only: bool,
 }
 
 impl Progress {
@@ -28,18 +26,12 @@ impl Progress {
 
     /// A display that draws nothing.
     pub fn hidden() -> Self {
-        Progress {
-            bar: None,
-            last_only: false,
-        }
+        Progress { bar: None }
     }
 
     fn visible() -> Self {
         let bar = ProgressBar::with_draw_target(None, ProgressDrawTarget::stderr());
-        Progress {
-            bar: Some(bar),
-            last_only: false,
-        }
+        Progress { bar: Some(bar) }
     }
 
     /// Show that a phase (e.g. "reading in.ply") is under way.
@@ -73,11 +65,6 @@ impl Progress {
         }
     }
 
-    /// Ask for the statistics of the last iteration only (see [`Observer::statistics`]).
-    pub fn statistics_of_last_only(&mut self, yes: bool) {
-        self.last_only = yes;
-    }
-
     /// Remove the display (before printing results).
     pub fn finish(&self) {
         if let Some(bar) = &self.bar {
@@ -100,9 +87,5 @@ impl Observer for Progress {
                 bar.set_message(format!("volume {:.6} %", record.volume_pct));
             }
         }
-    }
-
-    fn statistics(&self, iteration: usize, total: usize) -> bool {
-        !self.last_only || iteration == total
     }
 }

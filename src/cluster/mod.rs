@@ -35,22 +35,20 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use glam::DVec3;
-use rayon::prelude::*;
-
 pub use comm::{Comm, Local, Single};
-use store::{Plan, PlanKey, Reference, StateDoc, WorkDir};
+use glam::DVec3;
+use store::{Plan, PlanKey, StateDoc, WorkDir};
 
+use crate::engine::iterate::{Buffers, Reference, Share, Sweep, iterate};
 use crate::engine::memory as resources;
 use crate::engine::{
-    self, EngineSettings, FileRun, IterationRecord, MemoryStats, Observer, PhaseTimings, PlanStats,
-    Prepared,
+    self, EngineSettings, IterationRecord, Layout, MemoryStats, Observer, PhaseTimings, PlanStats,
+    Report, Statistics,
 };
 use crate::error::{Error, Result};
 use crate::mesh::Buf;
 use crate::partition::Patch;
-use crate::schedule::SharedField;
-use crate::smooth::{self, Method, Options, SweepStats, laplacian};
+use crate::smooth::Options;
 use crate::{io, metrics};
 
 /// Rings of the region around a rank's owned vertices (see the module doc).
@@ -97,8 +95,8 @@ pub fn run_file(
     engine: &EngineSettings,
     cluster: &ClusterSettings,
     observer: &mut dyn Observer,
-) -> Result<FileRun> {
-    engine::validate(opts)?;
+) -> Result<Report> {
+    opts.check()?;
     if cluster.checkpoint_every == 0 {
         return Err(Error::Config(
             "--checkpoint-every must be at least 1".into(),
@@ -141,9 +139,21 @@ pub fn run_file(
     // 3. Smooth from the checkpoint on.
     let clock = Instant::now();
     let resumed_after = state.done;
-    let rank = RankRun::new(comm, &pool, &plan, &part, &work, state);
-    let rank = agree(comm, rank, "another rank could not load its part")?;
-    let smoothed = rank.iterate(opts, cluster.checkpoint_every, observer);
+    let rank = RankRun {
+        comm,
+        pool: &pool,
+        plan: &plan,
+        part: &part,
+        work: &work,
+        state,
+        checkpoint_every: cluster.checkpoint_every,
+        last: opts.iterations,
+        halo: part.rings[..2].concat(),
+        before: Vec::new(),
+        traffic: Traffic::default(),
+    };
+    let arrays = agree(comm, rank.load(), "another rank could not load its part")?;
+    let smoothed = rank.iterate(arrays, opts, engine.statistics, observer);
     let (state, traffic) = agree(comm, smoothed, "another rank failed while smoothing")?;
     t.smoothing = clock.elapsed().as_secs_f64();
     let smoothing_peak = smoothing_sampler.peak() as f64;
@@ -173,7 +183,7 @@ pub fn run_file(
     let maxima = comm.max(&[owned, -owned, region, bytes, peak, smoothing_peak]);
     let sums = comm.sum(&[values]);
     let doc = &plan.doc;
-    Ok(FileRun {
+    Ok(Report {
         input_format: io::Format::from_extension(input),
         vertices: doc.vertices,
         triangles: doc.triangles,
@@ -245,11 +255,11 @@ fn ensure_plan(
     let mesh = io::read_mesh_in(input, &storage)?;
     engine::check_in_memory_budget(input, &storage, &mesh, budget)?;
     t.ingest = clock.elapsed().as_secs_f64();
-    let prep = Prepared::new(
+    let prep = engine::Plan::new(
         &storage,
         &mesh.positions,
         &mesh.triangles,
-        engine.patch_size,
+        Layout::Patches(engine.patch_size),
     )
     .map_err(|e| e.in_file(input))?;
     t.add_preparation(&prep.timings);
@@ -467,7 +477,7 @@ struct Traffic {
     bytes: u64,
 }
 
-/// One rank's arrays and loop.
+/// One rank: its arrays, and its side of the engine's loop ([`Share`]).
 struct RankRun<'a> {
     comm: &'a dyn Comm,
     /// The rank's threads (the communicator stays on the calling thread).
@@ -476,255 +486,84 @@ struct RankRun<'a> {
     part: &'a Part,
     work: &'a WorkDir,
     state: StateDoc,
-    /// Positions, neighbour sums (or the Taubin half-step) and previous positions, by global id.
-    pos: Buf<DVec3>,
-    sums: Buf<DVec3>,
-    prev: Buf<DVec3>,
+    checkpoint_every: usize,
+    /// The last iteration (always checkpointed).
+    last: usize,
+    /// Rings 1 and 2: the vertices outside the owned range whose neighbour sums the stencils read.
+    halo: Vec<u32>,
+    /// The shared vertices' positions and sums before the current colour (see [`snapshot`]).
+    before: Vec<[DVec3; 2]>,
     traffic: Traffic,
 }
 
 impl<'a> RankRun<'a> {
-    fn new(
-        comm: &'a dyn Comm,
-        pool: &'a rayon::ThreadPool,
-        plan: &'a Plan,
-        part: &'a Part,
-        work: &'a WorkDir,
-        state: StateDoc,
-    ) -> Result<RankRun<'a>> {
-        let n = plan.doc.vertices;
+    /// The rank's arrays, by global id: positions (owned and the region's rings from the
+    /// checkpoint), the second buffer and the previous positions; only the region's pages are
+    /// ever touched.
+    fn load(&self) -> Result<[Buf<DVec3>; 3]> {
+        let n = self.plan.doc.vertices;
         let mut pos: Buf<DVec3> = Buf::sparse(n)?;
-        let saved = work.map_positions(state.slot, n)?;
-        let (lo, hi) = (part.owned.start as usize, part.owned.end as usize);
-        pos[lo..hi].copy_from_slice(&saved[lo..hi]);
-        for &v in part.rings.iter().flatten() {
+        let saved = self.work.map_positions(self.state.slot, n)?;
+        let owned = self.owned();
+        pos[owned.clone()].copy_from_slice(&saved[owned]);
+        for &v in self.part.rings.iter().flatten() {
             pos[v as usize] = saved[v as usize];
         }
-        Ok(RankRun {
-            comm,
-            pool,
-            plan,
-            part,
-            work,
-            state,
-            pos,
-            sums: Buf::sparse(n)?,
-            prev: Buf::sparse(n)?,
-            traffic: Traffic::default(),
-        })
+        Ok([pos, Buf::sparse(n)?, Buf::sparse(n)?])
+    }
+
+    /// Iterations `done + 1 ..= opts.iterations` through the engine's loop, with checkpoints;
+    /// returns the final state.
+    fn iterate(
+        mut self,
+        arrays: [Buf<DVec3>; 3],
+        opts: &Options,
+        when: Statistics,
+        observer: &mut dyn Observer,
+    ) -> Result<(StateDoc, Traffic)> {
+        let [mut pos, mut scratch, mut prev] = arrays;
+        let patches: Vec<Patch> = (0..self.plan.doc.patches.len())
+            .map(|p| self.plan.doc.patch(p))
+            .collect();
+        let plan = self.plan;
+        let mesh = Sweep {
+            topo: &plan.topology,
+            tris: &plan.triangles,
+            patches: &patches,
+            colours: &plan.doc.colours,
+            prefetch: None,
+            tiles: false,
+        };
+        let reference = match self.state.reference {
+            Some(r) => r,
+            None => {
+                let r = Reference::measure(&mesh, &pos, &self);
+                self.state.reference = Some(r);
+                r
+            }
+        };
+        let first = self.state.done + 1;
+        let buffers = Buffers {
+            pos: &mut pos,
+            scratch: &mut scratch,
+            prev: &mut prev,
+        };
+        iterate(
+            &mesh, buffers, opts, first, when, &reference, &mut self, observer,
+        )?;
+        Ok((self.state, self.traffic))
     }
 
     fn owned(&self) -> Range<usize> {
         self.part.owned.start as usize..self.part.owned.end as usize
     }
 
-    /// Iterations `done + 1 ..= opts.iterations`, with checkpoints; returns the final state.
-    fn iterate(
-        mut self,
-        opts: &Options,
-        every: usize,
-        observer: &mut dyn Observer,
-    ) -> Result<(StateDoc, Traffic)> {
-        let reference = match self.state.reference {
-            Some(r) => r,
-            None => {
-                let r = self.reference();
-                self.state.reference = Some(r);
-                r
-            }
-        };
-        let origin = DVec3::from_array(reference.origin);
-        let movable = (self.plan.doc.vertices - self.plan.topology.stats.fixed_vertices).max(1);
-        for it in self.state.done + 1..=opts.iterations {
-            let clock = Instant::now();
-            let owned = self.owned();
-            // Previous positions: owned (displacement) and ring 1 (the Jacobi steps read them).
-            self.prev[owned.clone()].copy_from_slice(&self.pos[owned.clone()]);
-            for &v in &self.part.rings[0] {
-                self.prev[v as usize] = self.pos[v as usize];
-            }
-            let stencils = match opts.method {
-                Method::Laplacian => self.jacobi(Src::Prev, Dst::Pos, opts.lambda),
-                Method::Taubin => {
-                    let mut s = self.jacobi(Src::Prev, Dst::Sums, opts.lambda);
-                    s.add(&self.jacobi(Src::Sums, Dst::Pos, opts.mu));
-                    s
-                }
-                Method::Lem | Method::Vcs | Method::VcsTriangle => self.sweep(opts),
-            };
-            let seconds = clock.elapsed().as_secs_f64();
-            let record = self.record(it, origin, &reference, movable, stencils, seconds);
-            if self.comm.rank() == 0 {
-                observer.iteration(&record, opts.iterations);
-            }
-            self.state.records.push(record);
-            if it % every == 0 || it == opts.iterations {
-                self.checkpoint(it)?;
-            }
-        }
-        Ok((self.state, self.traffic))
-    }
-
-    /// The input's centroid, volume and area (every rank gets the same bits).
-    fn reference(&self) -> Reference {
-        let owned = self.owned();
-        let s = self.pos[owned].iter().fold(DVec3::ZERO, |s, p| s + *p);
-        let total = self.comm.sum(&s.to_array());
-        let n = self.plan.doc.vertices.max(1) as f64;
-        let origin = DVec3::from_slice(&total) / n;
-        let (v, a) = self.volume_area(origin);
-        Reference {
-            origin: origin.to_array(),
-            volume: v,
-            area: a,
-        }
-    }
-
-    fn volume_area(&self, origin: DVec3) -> (f64, f64) {
-        let tris = &self.plan.triangles
-            [self.part.triangles.start as usize..self.part.triangles.end as usize];
-        let pos: &[DVec3] = &self.pos;
-        let (v, a) = self
-            .pool
-            .install(|| engine::volume_area_par(pos, tris, origin));
-        let total = self.comm.sum(&[v, a]);
-        (total[0], total[1])
-    }
-
-    fn record(
-        &self,
-        iteration: usize,
-        origin: DVec3,
-        reference: &Reference,
-        movable: usize,
-        stencils: SweepStats,
-        seconds: f64,
-    ) -> IterationRecord {
-        let owned = self.owned();
-        let (now, before) = (&self.pos[owned.clone()], &self.prev[owned]);
-        let moved = self.pool.install(|| engine::displacement_par(now, before));
-        let (max_d, sum_d) = (moved.max_displacement, moved.sum_displacement);
-        let (volume, area) = self.volume_area(origin);
-        let counts = [
-            stencils.applied,
-            stencils.skipped_fixed,
-            stencils.skipped_degenerate,
-            stencils.rejected,
-        ];
-        let mut local = vec![sum_d];
-        local.extend(counts.iter().map(|&c| c as f64));
-        let sums = self.comm.sum(&local);
-        let maxima = self.comm.max(&[max_d, seconds]);
-        IterationRecord {
-            iteration,
-            volume,
-            volume_pct: engine::percent(volume, reference.volume),
-            area_pct: engine::percent(area, reference.area),
-            max_displacement: maxima[0],
-            mean_displacement: sums[0] / movable as f64,
-            stencils: SweepStats {
-                applied: sums[1] as u64,
-                skipped_fixed: sums[2] as u64,
-                skipped_degenerate: sums[3] as u64,
-                rejected: sums[4] as u64,
-            },
-            seconds: maxima[1],
-        }
-    }
-
-    /// One Jacobi step over the owned vertices, then the owned values others hold are sent.
-    fn jacobi(&mut self, src: Src, dst: Dst, lambda: f64) -> SweepStats {
-        const CHUNK: usize = 1 << 14;
-        let owned = self.owned();
-        let (src, out): (&[DVec3], &mut [DVec3]) = match (src, dst) {
-            (Src::Prev, Dst::Pos) => (&self.prev, &mut self.pos[owned.clone()]),
-            (Src::Prev, Dst::Sums) => (&self.prev, &mut self.sums[owned.clone()]),
-            (Src::Sums, Dst::Pos) => (&self.sums, &mut self.pos[owned.clone()]),
-            (Src::Sums, Dst::Sums) => unreachable!("a step never reads what it writes"),
-        };
-        let topo = &self.plan.topology;
-        let applied = self.pool.install(|| {
-            out.par_chunks_mut(CHUNK)
-                .enumerate()
-                .map(|(c, o)| laplacian::jacobi_step(topo, src, o, owned.start + c * CHUNK, lambda))
-                .sum::<u64>()
-        });
-        let field = match dst {
-            Dst::Pos => &mut self.pos,
-            Dst::Sums => &mut self.sums,
-        };
-        send_owned(self.comm, self.part, field, &mut self.traffic);
-        SweepStats {
-            applied,
-            skipped_fixed: owned.len() as u64 - applied,
-            ..Default::default()
-        }
-    }
-
-    /// One Gauss–Seidel pass of the stencil method, colour by colour, exchanging after each.
-    fn sweep(&mut self, opts: &Options) -> SweepStats {
-        let topo = &self.plan.topology;
-        let tris: &[[u32; 3]] = &self.plan.triangles;
-        // Neighbour sums for every vertex a stencil of ours reads: owned, rings 1 and 2.
-        let owned = self.owned();
-        {
-            let (pos, sums) = (&self.pos, &mut self.sums);
-            const CHUNK: usize = 1 << 14;
-            self.pool.install(|| {
-                sums[owned.clone()]
-                    .par_chunks_mut(CHUNK)
-                    .enumerate()
-                    .for_each(|(c, out)| {
-                        smooth::neighbor_sums_into(topo, pos, out, owned.start + c * CHUNK)
-                    })
-            });
-            for &v in self.part.rings[..2].iter().flatten() {
-                let v = v as usize;
-                smooth::neighbor_sums_into(topo, pos, &mut sums[v..v + 1], v);
-            }
-        }
-        let params = engine::stencil_params(opts);
-        let mut total = SweepStats::default();
-        for colour in &self.plan.doc.colours {
-            let mine: Vec<Patch> = colour
-                .iter()
-                .map(|&p| p as usize)
-                .filter(|p| self.part.patches.contains(p))
-                .map(|p| self.plan.doc.patch(p))
-                .collect();
-            let before = snapshot(self.part, &self.pos, &self.sums);
-            // SAFETY: the patches of one colour touch disjoint positions and sums (the colouring
-            // invariant of `schedule`), and the arrays are used only through the views meanwhile.
-            let (pv, sv) = unsafe {
-                (
-                    SharedField::new(&mut self.pos),
-                    SharedField::new(&mut self.sums),
-                )
-            };
-            let stats = self
-                .pool
-                .install(|| engine::sweep_patches(topo, tris, pv, sv, &mine, opts.method, params));
-            total.add(&stats);
-            send_changes(
-                self.comm,
-                self.part,
-                &before,
-                &mut self.pos,
-                &mut self.sums,
-                &mut self.traffic,
-            );
-        }
-        total
-    }
-
     /// Write the owned positions of iteration `it` into the free slot; once all ranks have,
     /// rank 0 switches the state to it.
-    fn checkpoint(&mut self, it: usize) -> Result<()> {
+    fn checkpoint(&mut self, it: usize, pos: &[DVec3]) -> Result<()> {
         let slot = 1 - self.state.slot;
         let owned = self.owned();
-        let written = self
-            .work
-            .write_positions(slot, owned.start, &self.pos[owned]);
+        let written = self.work.write_positions(slot, owned.start, &pos[owned]);
         agree(
             self.comm,
             written,
@@ -745,16 +584,66 @@ impl<'a> RankRun<'a> {
     }
 }
 
-#[derive(Clone, Copy)]
-enum Src {
-    Prev,
-    Sums,
-}
+impl Share for RankRun<'_> {
+    fn owned(&self) -> Range<usize> {
+        RankRun::owned(self)
+    }
 
-#[derive(Clone, Copy)]
-enum Dst {
-    Pos,
-    Sums,
+    fn triangles(&self) -> Range<usize> {
+        self.part.triangles.start as usize..self.part.triangles.end as usize
+    }
+
+    fn runs_patch(&self, p: usize) -> bool {
+        self.part.patches.contains(&p)
+    }
+
+    fn halo_sums(&self) -> &[u32] {
+        &self.halo
+    }
+
+    fn colour_start(&mut self, pos: &[DVec3], sums: &[DVec3]) {
+        self.before = snapshot(self.part, pos, sums);
+    }
+
+    fn colour_end(&mut self, pos: &mut [DVec3], sums: &mut [DVec3]) {
+        send_changes(
+            self.comm,
+            self.part,
+            &self.before,
+            pos,
+            sums,
+            &mut self.traffic,
+        );
+    }
+
+    fn step_end(&mut self, field: &mut [DVec3]) {
+        send_owned(self.comm, self.part, field, &mut self.traffic);
+    }
+
+    fn sum(&self, local: &[f64]) -> Vec<f64> {
+        self.comm.sum(local)
+    }
+
+    fn max(&self, local: &[f64]) -> Vec<f64> {
+        self.comm.max(local)
+    }
+
+    fn iteration_end(&mut self, record: &IterationRecord, pos: &[DVec3]) -> Result<()> {
+        self.state.records.push(*record);
+        let it = record.iteration;
+        if it % self.checkpoint_every == 0 || it == self.last {
+            self.checkpoint(it, pos)?;
+        }
+        Ok(())
+    }
+
+    fn leads(&self) -> bool {
+        self.comm.rank() == 0
+    }
+
+    fn pool(&self) -> Option<&rayon::ThreadPool> {
+        Some(self.pool)
+    }
 }
 
 /// Positions and sums of the shared vertices, to find what a colour phase changed.

@@ -20,7 +20,7 @@ use std::path::{Path, PathBuf};
 
 use glam::DVec3;
 
-use crate::engine::{IterationRecord, Prepared};
+use crate::engine::{self, IterationRecord};
 use crate::error::{Error, Result};
 use crate::mesh::Buf;
 use crate::mesh::storage::{Pod, as_bytes};
@@ -103,12 +103,7 @@ impl PlanDoc {
 
 /// Reference values of the input, fixed when the run first starts, so that a resumed run reports
 /// percentages relative to the input as an uninterrupted one does.
-#[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize)]
-pub struct Reference {
-    pub origin: [f64; 3],
-    pub volume: f64,
-    pub area: f64,
-}
+pub use crate::engine::Reference;
 
 /// `state.json`: iterations completed, which positions slot holds them, and their records.
 #[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
@@ -165,10 +160,10 @@ impl WorkDir {
         write_json(&self.path(STATE), state)
     }
 
-    /// Store `prep` (fresh from [`Prepared::new`]) as the plan, replacing whatever plan was there.
+    /// Store `prep` (fresh from [`engine::Plan::new`]) as the plan, replacing whatever plan was there.
     pub fn write_plan(
         &self,
-        prep: &Prepared,
+        prep: &engine::Plan,
         key: PlanKey,
         input_stats: Option<MeshInfo>,
     ) -> Result<()> {
@@ -195,7 +190,7 @@ impl WorkDir {
             self.write_array(&name, &prep.reordered.positions)?;
         }
         self.write_state(&StateDoc::default())?;
-        let stats = prep.plan_stats();
+        let stats = prep.stats();
         let doc = PlanDoc {
             key,
             vertices: prep.reordered.positions.len(),

@@ -6,6 +6,12 @@
 //! - [`write_mesh`] picks the writer from the output's extension (`.ply .obj .off .stl`, any case)
 //!   and writes atomically: a temporary file beside the target, flushed, synced and renamed into
 //!   place only when complete; on failure nothing is left under the target's name.
+//! - [`write_ply_streamed`] writes a mesh larger than memory as binary PLY, its vertices and
+//!   triangles handed over one at a time (e.g. by [`crate::mesh::shapes::Subdivision`]): the same
+//!   header and records as [`write_mesh`] writes for that mesh, written atomically too.
+//! - [`write_ply_streamed`] writes a mesh larger than memory as binary PLY, its vertices and
+//!   triangles handed over one at a time (e.g. by [`crate::mesh::shapes::Subdivision`]): the same
+//!   header and records as [`write_mesh`] writes for that mesh, written atomically too.
 //!
 //! # Formats
 //!
@@ -82,6 +88,7 @@ mod off;
 mod ply;
 mod ply_ascii;
 mod stl;
+mod stream;
 
 pub(crate) use atomic::write_atomically;
 
@@ -92,6 +99,7 @@ use std::path::Path;
 use std::sync::Arc;
 
 pub use ply::{PlyEncoding, PlyLayout};
+pub use stream::{PlyStream, write_ply_streamed};
 
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
@@ -238,10 +246,10 @@ fn read_mesh_observed(
 /// Write `mesh` to `path`, choosing the format from the extension, atomically.
 pub fn write_mesh(path: &Path, mesh: &Mesh) -> Result<()> {
     let format = Format::from_extension(path).ok_or_else(|| {
-        Error::Config(format!(
-            "{}: unknown output extension (use .ply, .obj, .off or .stl)",
-            path.display()
-        ))
+        Error::invalid(
+            path,
+            "unknown output extension (use .ply, .obj, .off or .stl)",
+        )
     })?;
     // Everything that can make a mesh unwritable is found here, before a file exists.
     check_mesh(mesh)

@@ -251,43 +251,120 @@ impl PlyLayout {
     /// The layout of a mesh without a PLY source: binary little-endian `x y z` in the mesh's
     /// precision and the smallest list types that hold its faces (`uchar` / `int` in practice).
     fn plain(mesh: &Mesh) -> PlyLayout {
-        let coordinate = match mesh.source.precision {
+        let faces = Faces::of(mesh);
+        let records = PlainRecords::new(
+            mesh.positions.len(),
+            faces.max_corners(),
+            mesh.source.precision,
+        );
+        records.layout(mesh.positions.len(), faces.len(), Vec::new())
+    }
+}
+
+/// The record types of the plain layout (a mesh without a PLY source, and the streamed output of
+/// `io::stream`): `x y z` of one floating-point type, then `list <count> <index> vertex_indices`.
+/// Its encoders, [`put_xyz`] and [`put_face`], are the ones every binary PLY writer uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct PlainRecords {
+    pub(crate) coordinate: Scalar,
+    pub(crate) count: Scalar,
+    pub(crate) index: Scalar,
+}
+
+impl PlainRecords {
+    /// The types for `vertices` vertices and faces of at most `max_corners` corners: `float` or
+    /// `double` as `precision` says, the smallest count type that holds `max_corners` (`uchar`
+    /// for triangles), `int` indices (`uint` beyond `i32::MAX` vertices).
+    pub(crate) fn new(vertices: usize, max_corners: usize, precision: Precision) -> Self {
+        let coordinate = match precision {
             Precision::Float => Scalar::F32,
             Precision::Double => Scalar::F64,
         };
-        let faces = Faces::of(mesh);
         let count = [Scalar::U8, Scalar::U16, Scalar::U32]
             .into_iter()
-            .find(|t| t.holds(faces.max_corners() as f64))
+            .find(|t| t.holds(max_corners as f64))
             .unwrap_or(Scalar::U32);
-        let index = if mesh.positions.len() <= i32::MAX as usize {
+        let index = if vertices <= i32::MAX as usize {
             Scalar::I32
         } else {
             Scalar::U32
         };
+        PlainRecords {
+            coordinate,
+            count,
+            index,
+        }
+    }
+
+    /// The binary little-endian header model of `vertices` vertices and `faces` faces, with the
+    /// header lines `meta` (each a whole `comment …` or `obj_info …` line).
+    pub(crate) fn layout(self, vertices: usize, faces: usize, meta: Vec<String>) -> PlyLayout {
         let prop = |name: &str, kind| Property {
             name: name.into(),
             kind,
         };
         PlyLayout {
             encoding: PlyEncoding::BinaryLittleEndian,
-            meta: Vec::new(),
+            meta,
             elements: vec![
                 Element {
                     name: "vertex".into(),
-                    count: mesh.positions.len(),
+                    count: vertices,
                     props: ["x", "y", "z"]
-                        .map(|n| prop(n, Kind::Scalar(coordinate)))
+                        .map(|n| prop(n, Kind::Scalar(self.coordinate)))
                         .into(),
                     records: None,
                 },
                 Element {
                     name: "face".into(),
-                    count: faces.len(),
-                    props: vec![prop("vertex_indices", Kind::List(count, index))],
+                    count: faces,
+                    props: vec![prop("vertex_indices", Kind::List(self.count, self.index))],
                     records: None,
                 },
             ],
+        }
+    }
+}
+
+/// Appends the binary record of `x y z`, each of type `coordinate` (floats round to nearest).
+#[inline]
+pub(crate) fn put_xyz(coordinate: Scalar, p: DVec3, buf: &mut Vec<u8>) {
+    match coordinate {
+        Scalar::F32 => {
+            for x in [p.x, p.y, p.z] {
+                buf.extend_from_slice(&(x as f32).to_le_bytes());
+            }
+        }
+        Scalar::F64 => {
+            for x in [p.x, p.y, p.z] {
+                buf.extend_from_slice(&x.to_le_bytes());
+            }
+        }
+        t => {
+            let (at, size) = (buf.len(), t.size());
+            buf.resize(at + 3 * size, 0);
+            for (c, x) in [p.x, p.y, p.z].into_iter().enumerate() {
+                t.put(x, &mut buf[at + c * size..]);
+            }
+        }
+    }
+}
+
+/// Appends the binary record of a face, `list <count> <index>`: its corner count, then its
+/// vertex ids (writers check that the types hold them first).
+#[inline]
+pub(crate) fn put_face(count: Scalar, index: Scalar, corners: &[u32], buf: &mut Vec<u8>) {
+    if (count, index) == (Scalar::U8, Scalar::I32) {
+        buf.push(corners.len() as u8);
+        for &v in corners {
+            buf.extend_from_slice(&(v as i32).to_le_bytes());
+        }
+    } else {
+        let at = buf.len();
+        buf.resize(at + count.size() + corners.len() * index.size(), 0);
+        count.put(corners.len() as f64, &mut buf[at..]);
+        for (k, &v) in corners.iter().enumerate() {
+            index.put(v.into(), &mut buf[at + count.size() + k * index.size()..]);
         }
     }
 }
@@ -1209,33 +1286,10 @@ pub(crate) fn write(out: &mut impl Write, mesh: &Mesh) -> io::Result<()> {
     let faces = Faces::of(mesh);
     let ascii = layout.encoding == PlyEncoding::Ascii;
 
-    out.write_all(b"ply\n")?;
-    let encoding = if ascii {
-        "ascii"
-    } else {
-        "binary_little_endian"
-    };
-    writeln!(out, "format {encoding} 1.0")?;
-    for line in &layout.meta {
-        writeln!(out, "{line}")?;
-    }
-    for (e, el) in layout.elements.iter().enumerate() {
-        let count = match face {
-            Some(f) if f.element == e => faces.len(),
-            _ => el.count,
-        };
-        writeln!(out, "element {} {count}", el.name)?;
-        for p in &el.props {
-            match p.kind {
-                Kind::Scalar(t) => writeln!(out, "property {} {}", t.name(), p.name)?,
-                Kind::List(c, t) => {
-                    writeln!(out, "property list {} {} {}", c.name(), t.name(), p.name)?
-                }
-            }
-        }
-    }
-    out.write_all(b"end_header\n")?;
-
+    write_header(out, &layout, |e, el| match face {
+        Some(f) if f.element == e => faces.len(),
+        _ => el.count,
+    })?;
     for (e, el) in layout.elements.iter().enumerate() {
         if e == roles.vertex {
             write_vertices(out, el, mesh, ascii)?;
@@ -1246,6 +1300,36 @@ pub(crate) fn write(out: &mut impl Write, mesh: &Mesh) -> io::Result<()> {
         }
     }
     Ok(())
+}
+
+/// Writes the header of `layout` (big-endian is written as little-endian), with `count(e, el)`
+/// records for element `e`; every PLY writer's header.
+pub(crate) fn write_header(
+    out: &mut impl Write,
+    layout: &PlyLayout,
+    count: impl Fn(usize, &Element) -> usize,
+) -> io::Result<()> {
+    out.write_all(b"ply\n")?;
+    let encoding = match layout.encoding {
+        PlyEncoding::Ascii => "ascii",
+        PlyEncoding::BinaryLittleEndian | PlyEncoding::BinaryBigEndian => "binary_little_endian",
+    };
+    writeln!(out, "format {encoding} 1.0")?;
+    for line in &layout.meta {
+        writeln!(out, "{line}")?;
+    }
+    for (e, el) in layout.elements.iter().enumerate() {
+        writeln!(out, "element {} {}", el.name, count(e, el))?;
+        for p in &el.props {
+            match p.kind {
+                Kind::Scalar(t) => writeln!(out, "property {} {}", t.name(), p.name)?,
+                Kind::List(c, t) => {
+                    writeln!(out, "property list {} {} {}", c.name(), t.name(), p.name)?
+                }
+            }
+        }
+    }
+    out.write_all(b"end_header\n")
 }
 
 /// Writes little-endian records as they are, or as ASCII lines.
@@ -1317,16 +1401,27 @@ fn write_vertices(out: &mut impl Write, el: &Element, mesh: &Mesh, ascii: bool) 
         .map(|&(k, t, v)| (el.offset(k), t, v))
         .collect();
     const CHUNK: usize = 1 << 15; // records per buffer
-    let plain_xyz = [0, 1, 2].map(|c| (4 * c, Scalar::F32, Value::Coordinate(c)));
-    if !ascii && el.records.is_none() && stride == 12 && targets[..] == plain_xyz[..] {
-        // The common layout, `x y z float` and nothing else: encode straight from the positions.
-        let mut buf = Vec::with_capacity(CHUNK * 12);
+    // The plain layout, `x y z` of one floating-point type and nothing else: encode straight
+    // from the positions.
+    let plain = match &el.props[..] {
+        [x, y, z] if [&x.name, &y.name, &z.name] == ["x", "y", "z"] => {
+            match [x, y, z].map(|p| p.kind) {
+                [Kind::Scalar(t), Kind::Scalar(u), Kind::Scalar(v)]
+                    if t == u && u == v && matches!(t, Scalar::F32 | Scalar::F64) =>
+                {
+                    Some(t)
+                }
+                _ => None,
+            }
+        }
+        _ => None,
+    };
+    if let (false, None, Some(coordinate)) = (ascii, &el.records, plain) {
+        let mut buf = Vec::with_capacity(CHUNK * stride);
         for chunk in mesh.positions.chunks(CHUNK) {
             buf.clear();
             for p in chunk {
-                for x in [p.x, p.y, p.z] {
-                    buf.extend_from_slice(&(x as f32).to_le_bytes());
-                }
+                put_xyz(coordinate, *p, &mut buf);
             }
             out.write_all(&buf)?;
         }
@@ -1366,10 +1461,7 @@ fn write_faces(
         for chunk in faces.triangles.chunks(FLUSH / 13) {
             buf.clear();
             for t in chunk {
-                buf.push(3);
-                for &v in t {
-                    buf.extend_from_slice(&(v as i32).to_le_bytes());
-                }
+                put_face(Scalar::U8, Scalar::I32, t, &mut buf);
             }
             out.write_all(&buf)?;
         }
@@ -1377,19 +1469,7 @@ fn write_faces(
     }
     let mut buf = Vec::with_capacity(FLUSH + 1024);
     faces.try_for_each(|corners| {
-        if (count, index) == (Scalar::U8, Scalar::I32) {
-            buf.push(corners.len() as u8);
-            for &v in corners {
-                buf.extend_from_slice(&(v as i32).to_le_bytes());
-            }
-        } else {
-            let base = buf.len();
-            buf.resize(base + count.size() + corners.len() * index.size(), 0);
-            count.put(corners.len() as f64, &mut buf[base..]);
-            for (k, &v) in corners.iter().enumerate() {
-                index.put(v.into(), &mut buf[base + count.size() + k * index.size()..]);
-            }
-        }
+        put_face(count, index, corners, &mut buf);
         if buf.len() >= FLUSH {
             emit(out, &el.props, &buf, ascii)?;
             buf.clear();

@@ -944,7 +944,7 @@ fn failed_writes_leave_no_file() {
 
     let e = write_mesh(&dir.path().join("mesh.xyz"), &octahedron()).unwrap_err();
     assert!(
-        matches!(e, Error::Config(_))
+        matches!(e, Error::InvalidInput { .. })
             && e.to_string().contains("mesh.xyz: unknown output extension"),
         "{e}"
     );

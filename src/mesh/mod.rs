@@ -33,6 +33,6 @@ impl Mesh {
     }
 }
 
-pub mod generate;
+pub mod shapes;
 pub mod storage;
 pub use storage::{Buf, Storage};

@@ -60,10 +60,13 @@ impl Storage {
     pub fn scratch(dir: &Path) -> Result<Self> {
         let meta = std::fs::metadata(dir).map_err(|e| Error::io(dir, e))?;
         if !meta.is_dir() {
-            return Err(Error::Config(format!(
-                "{}: scratch path is not a directory",
-                dir.display()
-            )));
+            return Err(Error::io(
+                dir,
+                std::io::Error::new(
+                    std::io::ErrorKind::NotADirectory,
+                    "scratch path is not a directory",
+                ),
+            ));
         }
         Ok(Storage {
             scratch: Some(dir.to_path_buf()),
@@ -89,8 +92,8 @@ impl Storage {
             return Ok(Buf::from_vec(vec![zero::<T>(); len]));
         };
         let bytes = len.checked_mul(std::mem::size_of::<T>()).ok_or_else(|| {
-            Error::Config(format!(
-                "array of {len} elements overflows the address space"
+            Error::resource(format!(
+                "an array of {len} elements overflows the address space"
             ))
         })?;
         let n = self.counter.fetch_add(1, Ordering::Relaxed);
@@ -105,8 +108,8 @@ impl Storage {
         let removed = std::fs::remove_file(&path);
         removed.map_err(|e| Error::io(&path, e))?;
         reserve(&file, bytes as u64).map_err(|e| {
-            Error::Config(format!(
-                "{}: cannot reserve {} of scratch space ({e}); free space there or choose another --scratch",
+            Error::resource(format!(
+                "{}: cannot reserve {} of scratch space ({e}); free space there or choose another scratch directory",
                 dir.display(),
                 crate::engine::memory::format_size(bytes as u64)
             ))
@@ -180,8 +183,8 @@ impl<T: Pod> Buf<T> {
     /// vertex id but touches only its region, so its memory follows the region, not the mesh.
     pub fn sparse(len: usize) -> Result<Buf<T>> {
         let bytes = len.checked_mul(std::mem::size_of::<T>()).ok_or_else(|| {
-            Error::Config(format!(
-                "array of {len} elements overflows the address space"
+            Error::resource(format!(
+                "an array of {len} elements overflows the address space"
             ))
         })?;
         if bytes == 0 {
@@ -192,7 +195,7 @@ impl<T: Pod> Buf<T> {
             .no_reserve_swap()
             .map_anon()
             .map_err(|e| {
-                Error::Config(format!(
+                Error::resource(format!(
                     "cannot map {} of address space: {e}",
                     crate::engine::memory::format_size(bytes as u64)
                 ))

@@ -35,30 +35,30 @@ pub struct Comparison {
 
 /// Compare `b` against `a`; an error if their vertex counts or triangles differ.
 ///
-/// The error is [`Error::Config`] naming the first difference (the caller adds the file names).
+/// The error is [`Error::Topology`] naming the first difference (the caller adds the file names).
 pub fn compare(a: &Mesh, b: &Mesh) -> Result<Comparison> {
     let (na, nb) = (a.positions.len(), b.positions.len());
     if na != nb {
-        return Err(Error::Config(format!(
+        return Err(Error::topology(format!(
             "the meshes differ in connectivity: {na} vertices against {nb}"
         )));
     }
     let (ta, tb) = (&a.triangles, &b.triangles);
     if ta.len() != tb.len() {
-        return Err(Error::Config(format!(
+        return Err(Error::topology(format!(
             "the meshes differ in connectivity: {} triangles against {}",
             ta.len(),
             tb.len()
         )));
     }
     if let Some(k) = ta.iter().zip(tb).position(|(x, y)| x != y) {
-        return Err(Error::Config(format!(
+        return Err(Error::topology(format!(
             "the meshes differ in connectivity: triangle {k} is {:?} against {:?}",
             ta[k], tb[k]
         )));
     }
     if let Some(k) = ta.iter().position(|t| t.iter().any(|&v| v as usize >= na)) {
-        return Err(Error::Config(format!(
+        return Err(Error::topology(format!(
             "triangle {k} indexes a vertex out of range (0..{na})"
         )));
     }
@@ -131,7 +131,7 @@ fn ratio(num: f64, den: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::generate::{add_normal_noise, icosphere, torus};
+    use crate::mesh::shapes::{add_normal_noise, icosphere, torus};
 
     #[test]
     fn a_mesh_against_itself() {
@@ -191,7 +191,7 @@ mod tests {
         let a = icosphere(1);
         let b = icosphere(2);
         let e = compare(&a, &b).unwrap_err();
-        assert!(matches!(e, Error::Config(_)));
+        assert!(matches!(e, Error::Topology { path: None, .. }));
         assert!(e.to_string().contains("vertices"), "{e}");
 
         let mut c = a.clone();

@@ -194,7 +194,7 @@ fn two_common(a: &[u32], b: &[u32]) -> Option<[u32; 2]> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::generate::{add_normal_noise, icosphere};
+    use crate::mesh::shapes::{add_normal_noise, icosphere};
 
     fn topo(m: &Mesh) -> Topology {
         Topology::build(m.positions.len(), &m.triangles).unwrap()

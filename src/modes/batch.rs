@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::engine::{EngineSettings, FileRun};
+use crate::engine::{EngineSettings, Report};
 use crate::error::{Error, Result};
 use crate::io::Format;
 use crate::smooth::Options;
@@ -97,7 +97,7 @@ pub fn share(inputs: usize, index: usize, count: usize) -> Vec<usize> {
     (index..inputs).step_by(count).collect()
 }
 
-/// The array task this process is, from the flags if given, else from Slurm's environment
+/// The array task this process is, from `index` and `count` if given, else from Slurm's environment
 /// (`SLURM_ARRAY_TASK_ID` minus `SLURM_ARRAY_TASK_MIN`, of `SLURM_ARRAY_TASK_COUNT` or else
 /// `MAX − MIN + 1`), else task 0 of 1.
 pub fn resolve_task(
@@ -105,23 +105,22 @@ pub fn resolve_task(
     count: Option<usize>,
     env: &dyn Fn(&str) -> Option<String>,
 ) -> Result<(usize, usize)> {
-    let num = |name: &str| -> Result<Option<usize>> {
-        match env(name) {
-            None => Ok(None),
-            Some(v) if v.trim().is_empty() => Ok(None),
-            Some(v) => v
-                .trim()
-                .parse()
-                .map(Some)
-                .map_err(|_| Error::Config(format!("{name}={v} is not a task number"))),
-        }
-    };
+    let num =
+        |name: &'static str| -> Result<Option<usize>> {
+            match env(name) {
+                None => Ok(None),
+                Some(v) if v.trim().is_empty() => Ok(None),
+                Some(v) => v.trim().parse().map(Some).map_err(|_| {
+                    Error::parameter(name, format!("must be a task number, got '{v}'"))
+                }),
+            }
+        };
     let min = num("SLURM_ARRAY_TASK_MIN")?;
     let index = match index {
         Some(i) => i,
         None => match num("SLURM_ARRAY_TASK_ID")? {
             Some(id) => id.checked_sub(min.unwrap_or(0)).ok_or_else(|| {
-                Error::Config("SLURM_ARRAY_TASK_ID is below SLURM_ARRAY_TASK_MIN".into())
+                Error::parameter("SLURM_ARRAY_TASK_ID", "is below SLURM_ARRAY_TASK_MIN")
             })?,
             None => 0,
         },
@@ -139,13 +138,16 @@ pub fn resolve_task(
         },
     };
     if count == 0 {
-        return Err(Error::Config("--task-count must be at least 1".into()));
+        return Err(Error::parameter("task_count", "must be at least 1"));
     }
     if index >= count {
-        return Err(Error::Config(format!(
-            "task index {index} is not below the task count {count} (an array with a step or \
-             holes needs --task-index and --task-count)"
-        )));
+        return Err(Error::parameter(
+            "task_index",
+            format!(
+                "{index} is not below the task count {count} (an array with a step or holes \
+                 needs the task index and count given explicitly)"
+            ),
+        ));
     }
     Ok((index, count))
 }
@@ -217,7 +219,7 @@ pub struct MeshRow {
 }
 
 /// A success marker, `OUTDIR/.done/<stem>.json`: the summary row flattened at the top, then the
-/// options, the engine settings and the whole [`FileRun`] report.
+/// options, the engine settings and the whole [`Report`] report.
 #[derive(Debug, Clone, Serialize)]
 pub struct Marker<'a> {
     pub format: &'static str,
@@ -226,7 +228,7 @@ pub struct Marker<'a> {
     pub row: MeshRow,
     pub options: &'a Options,
     pub engine: &'a EngineSettings,
-    pub run: &'a FileRun,
+    pub run: &'a Report,
 }
 
 /// What a marker is read as (the rest of it is ignored).

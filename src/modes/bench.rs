@@ -10,7 +10,7 @@
 //!    [`io::write_mesh`] as `smooth` uses it: atomic, so it includes an `fsync` (use a tmpfs such
 //!    as `/dev/shm` as the directory to measure the encoder and the page cache alone); the read
 //!    comes from the page cache (the file was just written);
-//! 3. for each thread count: builds the plan ([`Prepared::new`]: reorder, topology, partition and
+//! 3. for each thread count: builds the plan ([`Plan::new`]: reorder, topology, partition and
 //!    schedule) `repeats` times (median), then for each method runs `repeats` smoothing runs of
 //!    `iterations` iterations from the same noisy positions. Seconds per iteration are the median
 //!    over all iterations of all repeats of [`IterationRecord::seconds`] (the sweep alone, without
@@ -27,14 +27,13 @@
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use glam::DVec3;
 use serde::Serialize;
 
 use crate::engine::memory as resources;
-use crate::engine::{self, Prepared, Quiet};
+use crate::engine::{self, Layout, Plan, Quiet, Statistics};
 use crate::error::{Error, Result};
 use crate::io;
-use crate::mesh::generate;
+use crate::mesh::shapes;
 use crate::mesh::{Mesh, Storage};
 use crate::smooth::{Method, Options};
 
@@ -68,7 +67,7 @@ pub fn icosphere_triangles(level: u32) -> u64 {
 /// (81 920), `1K` → level 3 (1 280).
 pub fn parse_size(s: &str) -> std::result::Result<SizeSpec, String> {
     let t = s.trim();
-    let max = generate::ICOSPHERE_MAX_SUBDIVISIONS;
+    let max = shapes::ICOSPHERE_MAX_SUBDIVISIONS;
     let lower = t.to_ascii_lowercase();
     if let Some(level) = lower.strip_prefix("ico") {
         let level: u32 = level
@@ -293,24 +292,35 @@ pub fn median(xs: &[f64]) -> f64 {
 /// Check settings before any work: non-empty lists, counts ≥ 1, an existing directory, and enough
 /// available memory for the largest size.
 pub fn check(settings: &BenchSettings) -> Result<()> {
-    if settings.sizes.is_empty() || settings.methods.is_empty() || settings.threads.is_empty() {
-        return Err(Error::Config(
-            "--sizes, --methods and --threads must each name at least one value".into(),
-        ));
+    for (name, empty) in [
+        ("sizes", settings.sizes.is_empty()),
+        ("methods", settings.methods.is_empty()),
+        ("threads", settings.threads.is_empty()),
+    ] {
+        if empty {
+            return Err(Error::parameter(name, "must name at least one value"));
+        }
     }
     if settings.threads.contains(&0) {
-        return Err(Error::Config("--threads must be at least 1".into()));
+        return Err(Error::parameter("threads", "must be at least 1"));
     }
-    if settings.iterations == 0 || settings.repeats == 0 || settings.patch_size == 0 {
-        return Err(Error::Config(
-            "--iterations, --repeats and --patch-size must be at least 1".into(),
-        ));
+    for (name, n) in [
+        ("iterations", settings.iterations),
+        ("repeats", settings.repeats),
+        ("patch_size", settings.patch_size),
+    ] {
+        if n == 0 {
+            return Err(Error::parameter(name, "must be at least 1"));
+        }
     }
     if !settings.dir.is_dir() {
-        return Err(Error::Config(format!(
-            "{}: --dir must be an existing directory",
-            settings.dir.display()
-        )));
+        return Err(Error::parameter(
+            "dir",
+            format!(
+                "must be an existing directory, not {}",
+                settings.dir.display()
+            ),
+        ));
     }
     let largest = settings
         .sizes
@@ -321,8 +331,8 @@ pub fn check(settings: &BenchSettings) -> Result<()> {
     let need = largest.saturating_mul(BYTES_PER_TRIANGLE_ESTIMATE);
     if let Some(available) = resources::mem_available() {
         if need > available {
-            return Err(Error::Config(format!(
-                "--sizes: {largest} triangles need about {} of memory, but only {} is available",
+            return Err(Error::resource(format!(
+                "the largest size, {largest} triangles, needs about {} of memory, but only {} is available",
                 resources::format_size(need),
                 resources::format_size(available)
             )));
@@ -369,8 +379,8 @@ fn run_size(
         size.label, size.level, size.triangles
     ));
     let clock = Instant::now();
-    let mut mesh = generate::icosphere(size.level);
-    generate::add_normal_noise(&mut mesh, NOISE, 1);
+    let mut mesh = shapes::icosphere(size.level);
+    shapes::add_normal_noise(&mut mesh, NOISE, 1);
     let generate_seconds = clock.elapsed().as_secs_f64();
 
     let sampler = resources::PeakSampler::start(Duration::from_millis(10));
@@ -450,7 +460,7 @@ fn run_threads(
     let storage = Storage::heap();
     phase(format!("{}: preparing on {threads} threads", size.label));
     let (mut prep, prepare) = pool.install(|| prepare(settings, &storage, mesh))?;
-    let plan = prep.plan_stats();
+    let plan = prep.stats();
     let triangles = mesh.triangles.len() as f64;
     let mut methods = Vec::with_capacity(settings.methods.len());
     for &method in &settings.methods {
@@ -467,8 +477,9 @@ fn run_threads(
         let mut stencils = 0;
         let mut volume_pct = 100.0;
         for _ in 0..settings.repeats {
-            reset_positions(&mut prep, &mesh.positions);
-            let records = pool.install(|| prep.smooth(&storage, &opts, &mut Quiet))?;
+            prep.set_positions_from_input(&mesh.positions);
+            let records =
+                pool.install(|| prep.smooth(&storage, &opts, Statistics::Every, &mut Quiet))?;
             seconds.extend(records.iter().map(|r| r.seconds));
             if let Some(last) = records.last() {
                 stencils = last.stencils.considered();
@@ -501,17 +512,17 @@ fn prepare(
     settings: &BenchSettings,
     storage: &Storage,
     mesh: &Mesh,
-) -> Result<(Prepared, PrepareResult)> {
+) -> Result<(Plan, PrepareResult)> {
     let mut timings = Vec::with_capacity(settings.repeats);
     let mut prep = None;
     for _ in 0..settings.repeats {
         drop(prep.take());
         let clock = Instant::now();
-        let p = Prepared::new(
+        let p = Plan::new(
             storage,
             &mesh.positions,
             &mesh.triangles,
-            settings.patch_size,
+            Layout::Patches(settings.patch_size),
         )?;
         let total = clock.elapsed().as_secs_f64();
         timings.push(PrepareResult {
@@ -522,17 +533,9 @@ fn prepare(
         });
         prep = Some(p);
     }
-    let prep = prep.ok_or_else(|| Error::Config("--repeats must be at least 1".into()))?;
+    let prep = prep.ok_or_else(|| Error::parameter("repeats", "must be at least 1"))?;
     timings.sort_by(|a, b| a.total_seconds.total_cmp(&b.total_seconds));
     Ok((prep, timings[timings.len() / 2]))
-}
-
-/// Put the input's positions back into the plan (in its reordered numbering).
-fn reset_positions(prep: &mut Prepared, input: &[DVec3]) {
-    let reordered = &mut prep.reordered;
-    for (p, &old) in reordered.positions.iter_mut().zip(reordered.order.iter()) {
-        *p = input[old as usize];
-    }
 }
 
 #[cfg(test)]
@@ -566,8 +569,8 @@ mod tests {
         assert_eq!(level("ICO9"), 9);
         assert_eq!(parse_size("ico2").unwrap().triangles, 320);
         assert_eq!(
-            level(&format!("ico{}", generate::ICOSPHERE_MAX_SUBDIVISIONS)),
-            generate::ICOSPHERE_MAX_SUBDIVISIONS
+            level(&format!("ico{}", shapes::ICOSPHERE_MAX_SUBDIVISIONS)),
+            shapes::ICOSPHERE_MAX_SUBDIVISIONS
         );
     }
 

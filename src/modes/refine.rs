@@ -75,9 +75,10 @@ pub fn check_max_edge(max_edge: f64) -> Result<()> {
     if max_edge.is_finite() && max_edge > 0.0 {
         Ok(())
     } else {
-        Err(Error::Config(format!(
-            "--max-edge must be a finite length > 0, got {max_edge}"
-        )))
+        Err(Error::parameter(
+            "max_edge",
+            format!("must be a finite length > 0, got {max_edge}"),
+        ))
     }
 }
 
@@ -113,7 +114,7 @@ pub fn subdivide(mesh: &mut Mesh, max_edge: f64) -> Result<SubdivideStats> {
         .enumerate()
         .find(|(_, t)| t.iter().any(|&v| v as usize >= n))
     {
-        return Err(Error::Config(format!(
+        return Err(Error::topology(format!(
             "triangle {t} indexes a vertex out of range (0..{n})"
         )));
     }
@@ -133,8 +134,8 @@ pub fn subdivide(mesh: &mut Mesh, max_edge: f64) -> Result<SubdivideStats> {
         let mut tris: Vec<[u32; 3]> = mesh.triangles.to_vec();
         loop {
             if stats.passes >= MAX_PASSES {
-                return Err(Error::Config(format!(
-                    "subdivision did not reach --max-edge {max_edge} after {MAX_PASSES} passes"
+                return Err(Error::topology(format!(
+                    "subdivision did not bring every edge down to {max_edge} after {MAX_PASSES} passes"
                 )));
             }
             if !bisect_pass(&mut pos, &mut tris, limit2, max_edge)? {
@@ -155,10 +156,13 @@ pub fn subdivide(mesh: &mut Mesh, max_edge: f64) -> Result<SubdivideStats> {
 }
 
 fn too_many(triangles: f64, max_edge: f64) -> Error {
-    Error::Config(format!(
-        "--max-edge {max_edge} would create at least {triangles:.3e} triangles, more than the \
-         limit of 2^31; choose a larger --max-edge"
-    ))
+    Error::parameter(
+        "max_edge",
+        format!(
+            "{max_edge} would create at least {triangles:.3e} triangles, more than the limit of \
+             2^31; choose a larger one"
+        ),
+    )
 }
 
 /// Longest edge of `triangles` (0 for none).
@@ -267,9 +271,10 @@ fn bisect_pass(
         return Err(too_many(new_triangles as f64, max_edge));
     }
     if pos.len() + new_vertices > u32::MAX as usize {
-        return Err(Error::Config(format!(
-            "--max-edge {max_edge} would create more than 2^32 vertices; choose a larger --max-edge"
-        )));
+        return Err(Error::parameter(
+            "max_edge",
+            format!("{max_edge} would create more than 2^32 vertices; choose a larger one"),
+        ));
     }
     // Midpoints, one per marked edge, in ascending edge-key order.
     let mut mid = vec![u32::MAX; n_edges];
@@ -372,7 +377,11 @@ pub fn refine(
         let volume_before = metrics::volume(&mesh.positions, &mesh.triangles);
         let subdivision = subdivide(mesh, opts.max_edge)?;
         let volume_subdivided = metrics::volume(&mesh.positions, &mesh.triangles);
-        engine::smooth_mesh(mesh, &opts.smoothing, threads, observer)?;
+        let settings = engine::EngineSettings {
+            threads,
+            ..Default::default()
+        };
+        engine::smooth_in_order(mesh, &opts.smoothing, &settings, observer)?;
         records.push(RoundRecord {
             round,
             subdivision,
@@ -388,7 +397,7 @@ pub fn refine(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::generate;
+    use crate::mesh::shapes;
     use crate::topology::Topology;
 
     fn edges_ok(mesh: &Mesh, delta: f64) {
@@ -419,7 +428,7 @@ mod tests {
 
     #[test]
     fn nothing_to_do_keeps_mesh_and_source() {
-        let mut m = generate::icosphere(1);
+        let mut m = shapes::icosphere(1);
         let before = m.triangles.to_vec();
         let s = subdivide(&mut m, 10.0).unwrap();
         assert_eq!(s.passes, 0);
@@ -429,7 +438,7 @@ mod tests {
 
     #[test]
     fn bad_delta_and_huge_estimate_refused() {
-        let mut m = generate::icosphere(0);
+        let mut m = shapes::icosphere(0);
         for d in [0.0, -1.0, f64::NAN, f64::INFINITY] {
             assert!(subdivide(&mut m, d).is_err());
         }

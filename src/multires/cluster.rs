@@ -46,9 +46,10 @@ pub fn cluster(
 ) -> Result<Clustered> {
     let n = pos.len();
     if !(cell.is_finite() && cell > 0.0) {
-        return Err(Error::Config(format!(
-            "multires: the clustering cell size must be positive, got {cell}"
-        )));
+        return Err(Error::parameter(
+            "cell",
+            format!("must be a finite length > 0, got {cell}"),
+        ));
     }
     let (lo, hi) = pos
         .iter()

@@ -2,10 +2,10 @@
 //! al. 2002 (§4): the volume constraint matters on coarse meshes and hardly on dense ones, so run
 //! `vcs` where the mesh is coarse and a cheap Jacobi filter where it is dense.
 //!
-//! 1. **Hierarchy** ([`cluster`]): level 0 is the input on the patch engine ([`Prepared`]); level
+//! 1. **Hierarchy** ([`cluster`]): level 0 is the input on the patch engine ([`Plan`]); level
 //!    k + 1 clusters level k's vertices into grid cubes of `cell_factor` × level k's mean edge
 //!    length, with quadric placement, and is then given level 0's volume back
-//!    ([`transfer::restore_volume`]). Every level is a [`Prepared`] plan on the same [`Storage`]
+//!    ([`transfer::restore_volume`]). Every level is a [`Plan`] plan on the same [`Storage`]
 //!    (heap or memory-mapped scratch), so the whole mode runs out of core like `smooth`.
 //! 2. **Coarse levels**, coarsest first: the coarser level's total displacement is transferred
 //!    ([`transfer::apply`]), then `coarse_iterations` of `vcs` (or `vcs-triangle`) run on the
@@ -28,7 +28,10 @@ use std::time::Instant;
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::engine::{self, EngineSettings, FileRun, IterationRecord, Observer, Prepared, Quiet};
+use crate::engine::reduce;
+use crate::engine::{
+    self, EngineSettings, IterationRecord, Layout, Observer, Plan, Quiet, Report, Statistics,
+};
 use crate::error::{Error, Result};
 use crate::mesh::{Buf, Storage};
 use crate::metrics;
@@ -110,35 +113,44 @@ pub struct MultiresStats {
 /// Check that `opts` and `m` make a multiresolution run.
 pub fn validate(opts: &Options, m: &MultiresOptions) -> Result<()> {
     if !matches!(opts.method, Method::Vcs | Method::VcsTriangle) {
-        return Err(Error::Config(format!(
-            "--multires runs vcs or vcs-triangle on the coarse levels, not --method {} (the fine level's method is --fine-method laplacian|taubin)",
-            opts.method
-        )));
+        return Err(Error::parameter(
+            "multires",
+            format!(
+                "runs vcs or vcs-triangle on the coarse levels, not {} (the fine level runs laplacian or taubin)",
+                opts.method
+            ),
+        ));
     }
     if !matches!(m.fine_method, Method::Laplacian | Method::Taubin) {
-        return Err(Error::Config(format!(
-            "--fine-method must be laplacian or taubin, not {}",
-            m.fine_method
-        )));
+        return Err(Error::parameter(
+            "fine_method",
+            format!("must be laplacian or taubin, not {}", m.fine_method),
+        ));
     }
     if !(2..=MAX_LEVELS).contains(&m.levels) {
-        return Err(Error::Config(format!(
-            "--levels must be between 2 and {MAX_LEVELS} (the input counts as one), got {}",
-            m.levels
-        )));
+        return Err(Error::parameter(
+            "levels",
+            format!(
+                "must be between 2 and {MAX_LEVELS} (the input counts as one), got {}",
+                m.levels
+            ),
+        ));
     }
     if !(m.cell_factor.is_finite() && m.cell_factor > 1.0) {
-        return Err(Error::Config(format!(
-            "the clustering cell factor must be a number above 1, got {}",
-            m.cell_factor
-        )));
+        return Err(Error::parameter(
+            "cell_factor",
+            format!(
+                "must be a number above 1 (a cell factor of 1 or less builds no coarser level), got {}",
+                m.cell_factor
+            ),
+        ));
     }
     Ok(())
 }
 
 /// A coarse level: its plan, how the level below maps onto it, and its positions as built.
 struct Level {
-    prep: Prepared,
+    prep: Plan,
     /// `map[v]`: the vertex of this level (reordered id) representing vertex `v` of the level below.
     map: Buf<u32>,
     rest: Buf<DVec3>,
@@ -163,17 +175,18 @@ impl Level {
 /// levels on `storage` with `patch_size`. Returns level 0's iteration records (the last includes
 /// the final volume correction) and the per-level statistics.
 pub fn smooth_prepared(
-    prep: &mut Prepared,
+    prep: &mut Plan,
     storage: &Storage,
     opts: &Options,
     m: &MultiresOptions,
     patch_size: usize,
+    when: Statistics,
     observer: &mut dyn Observer,
 ) -> Result<(Vec<IterationRecord>, MultiresStats)> {
     validate(opts, m)?;
     let start = Instant::now();
-    let origin = par_centroid(&prep.reordered.positions);
-    let v0 = transfer::volume(&prep.reordered.positions, &prep.reordered.triangles, origin);
+    let origin = reduce::centroid(&prep.reordered.positions);
+    let v0 = reduce::volume(&prep.reordered.positions, &prep.reordered.triangles, origin);
     let pct = |v: f64| if v0 == 0.0 { 100.0 } else { 100.0 * v / v0 };
     let coarse_iterations = m.coarse_iterations.unwrap_or(opts.iterations);
 
@@ -197,7 +210,12 @@ pub fn smooth_prepared(
         if c.triangles.is_empty() || 2 * c.positions.len() > pos.len() {
             break;
         }
-        let mut coarse = Prepared::new(storage, &c.positions, &c.triangles, patch_size)?;
+        let mut coarse = Plan::new(
+            storage,
+            &c.positions,
+            &c.triangles,
+            Layout::Patches(patch_size),
+        )?;
         let mut rank: Buf<u32> = storage.zeroed(c.positions.len())?;
         for (new, &old) in coarse.reordered.order.iter().enumerate() {
             rank[old as usize] = new as u32;
@@ -222,7 +240,7 @@ pub fn smooth_prepared(
             fixed_vertices: coarse.topology.stats.fixed_vertices,
             method: opts.method,
             iterations: coarse_iterations,
-            volume_pct: pct(transfer::volume(&cp.positions, &cp.triangles, origin)),
+            volume_pct: pct(reduce::volume(&cp.positions, &cp.triangles, origin)),
             build_seconds: t.elapsed().as_secs_f64(),
             transfer_seconds: 0.0,
             smooth_seconds: 0.0,
@@ -262,7 +280,9 @@ pub fn smooth_prepared(
         }
         level.stats.transfer_seconds = t.elapsed().as_secs_f64();
         let t = Instant::now();
-        level.prep.smooth(storage, &coarse_opts, &mut Quiet)?;
+        level
+            .prep
+            .smooth(storage, &coarse_opts, Statistics::Every, &mut Quiet)?;
         level.stats.smooth_seconds = t.elapsed().as_secs_f64();
         let mut d: Buf<DVec3> = storage.zeroed(level.rest.len())?;
         let r = &level.prep.reordered;
@@ -303,13 +323,13 @@ pub fn smooth_prepared(
         method: m.fine_method,
         ..*opts
     };
-    let mut records = prep.smooth(storage, &fine_opts, observer)?;
+    let mut records = prep.smooth(storage, &fine_opts, when, observer)?;
     fine.smooth_seconds = t.elapsed().as_secs_f64();
 
     // 4. The final volume correction.
     let t = Instant::now();
     let r = &mut prep.reordered;
-    let before = pct(transfer::volume(&r.positions, &r.triangles, origin));
+    let before = pct(reduce::volume(&r.positions, &r.triangles, origin));
     let err = transfer::restore_volume(
         storage,
         &prep.topology,
@@ -319,7 +339,7 @@ pub fn smooth_prepared(
         origin,
     )?;
     if let Some(last) = records.last_mut() {
-        last.volume = transfer::volume(&r.positions, &r.triangles, origin);
+        last.volume = reduce::volume(&r.positions, &r.triangles, origin);
         last.volume_pct = pct(last.volume);
     }
     let correction_seconds = t.elapsed().as_secs_f64();
@@ -339,19 +359,6 @@ pub fn smooth_prepared(
     ))
 }
 
-/// Mean position, summed in fixed-size chunks.
-fn par_centroid(pos: &[DVec3]) -> DVec3 {
-    const CHUNK: usize = 1 << 14;
-    if pos.is_empty() {
-        return DVec3::ZERO;
-    }
-    let parts: Vec<DVec3> = pos
-        .par_chunks(CHUNK)
-        .map(|c| c.iter().fold(DVec3::ZERO, |s, p| s + *p))
-        .collect();
-    parts.iter().fold(DVec3::ZERO, |s, p| s + *p) / pos.len() as f64
-}
-
 /// Read `input`, smooth it in multiresolution on the patch engine (heap or scratch as `engine`
 /// says, exactly as [`engine::run_file`]), write `output`.
 pub fn run_file(
@@ -361,7 +368,7 @@ pub fn run_file(
     m: &MultiresOptions,
     engine: &EngineSettings,
     observer: &mut dyn Observer,
-) -> Result<(FileRun, MultiresStats)> {
+) -> Result<(Report, MultiresStats)> {
     validate(opts, m)?;
     let mut stats = None;
     let run = engine::run_file_with(
@@ -371,12 +378,21 @@ pub fn run_file(
         engine,
         observer,
         |prep, storage, obs| {
-            let (records, s) = smooth_prepared(prep, storage, opts, m, engine.patch_size, obs)
-                .map_err(|e| e.in_file(input))?;
+            let (records, s) = smooth_prepared(
+                prep,
+                storage,
+                opts,
+                m,
+                engine.patch_size,
+                engine.statistics,
+                obs,
+            )
+            .map_err(|e| e.in_file(input))?;
             stats = Some(s);
             Ok(records)
         },
     )?;
-    let stats = stats.ok_or_else(|| Error::Config("multires: no statistics".into()))?;
+    // `run_file_with` returns Ok only after the closure above succeeded.
+    let stats = stats.expect("run_file_with smooths before it succeeds");
     Ok((run, stats))
 }

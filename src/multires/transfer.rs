@@ -5,6 +5,7 @@
 use glam::DVec3;
 use rayon::prelude::*;
 
+use crate::engine::reduce::{self, CHUNK};
 use crate::error::Result;
 use crate::mesh::{Buf, Storage};
 use crate::smooth::laplacian;
@@ -40,9 +41,6 @@ impl Transfer {
         }
     }
 }
-
-/// Fixed-size chunks keep every parallel result independent of the thread count.
-const CHUNK: usize = 1 << 14;
 
 /// A coarse level as the transfer reads it.
 pub struct Coarse<'a> {
@@ -118,22 +116,6 @@ fn shepard(coarse: &Coarse, rep: u32, p: DVec3, radius2: f64) -> DVec3 {
     }
 }
 
-/// Signed volume about `origin`, summed in fixed-size chunks.
-pub fn volume(pos: &[DVec3], triangles: &[[u32; 3]], origin: DVec3) -> f64 {
-    let parts: Vec<f64> = triangles
-        .par_chunks(CHUNK)
-        .map(|ch| {
-            ch.iter()
-                .map(|t| {
-                    let [a, b, c] = t.map(|v| pos[v as usize] - origin);
-                    a.dot(b.cross(c))
-                })
-                .sum::<f64>()
-        })
-        .collect();
-    parts.iter().sum::<f64>() / 6.0
-}
-
 /// Translate every movable vertex along its volume gradient (the area-weighted normal / 3) by one
 /// common factor `t` so that the volume about `origin` becomes `target`: the global form of the vcs
 /// step 2. With the gradients `g` fixed, `V(p + t g)` is exactly a cubic in `t` (each triangle's
@@ -151,7 +133,7 @@ pub fn restore_volume(
     let n = pos.len();
     let scale = target.abs().max(f64::MIN_POSITIVE);
     let mut grad: Buf<DVec3> = storage.zeroed(n)?;
-    let mut err = (volume(pos, triangles, origin) - target) / scale;
+    let mut err = (reduce::volume(pos, triangles, origin) - target) / scale;
     for _ in 0..2 {
         if err.abs() <= 1e-14 {
             break;
@@ -175,7 +157,7 @@ pub fn restore_volume(
         pos.par_chunks_mut(CHUNK)
             .zip(grad.par_chunks(CHUNK))
             .for_each(|(p, g)| p.iter_mut().zip(g).for_each(|(p, g)| *p += t * *g));
-        err = (volume(pos, triangles, origin) - target) / scale;
+        err = (reduce::volume(pos, triangles, origin) - target) / scale;
     }
     Ok(err)
 }
@@ -268,13 +250,13 @@ fn volume_gradient(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::generate;
+    use crate::mesh::shapes;
 
     #[test]
     fn restore_volume_reaches_the_target_and_leaves_fixed_vertices() {
-        let mut m = generate::icosphere(3);
+        let mut m = shapes::icosphere(3);
         let topo = Topology::build(m.positions.len(), &m.triangles).unwrap();
-        let target = volume(&m.positions, &m.triangles, DVec3::ZERO);
+        let target = reduce::volume(&m.positions, &m.triangles, DVec3::ZERO);
         for p in m.positions.iter_mut() {
             *p *= 0.9;
         }
@@ -288,7 +270,7 @@ mod tests {
         )
         .unwrap();
         assert!(err.abs() < 1e-14, "{err:e}");
-        let v = volume(&m.positions, &m.triangles, DVec3::ZERO);
+        let v = reduce::volume(&m.positions, &m.triangles, DVec3::ZERO);
         assert!(((v - target) / target).abs() < 1e-14);
         // A uniform shrink comes back as a uniform inflation: still a sphere.
         let r: Vec<f64> = m.positions.iter().map(|p| p.length()).collect();
@@ -301,8 +283,8 @@ mod tests {
 
     #[test]
     fn a_common_displacement_reaches_every_fine_vertex_unchanged() {
-        let fine = generate::icosphere(3);
-        let coarse = generate::icosphere(1);
+        let fine = shapes::icosphere(3);
+        let coarse = shapes::icosphere(1);
         let ft = Topology::build(fine.positions.len(), &fine.triangles).unwrap();
         let ct = Topology::build(coarse.positions.len(), &coarse.triangles).unwrap();
         // Nearest coarse vertex as the representative.

@@ -24,14 +24,13 @@
 //! surface (5.8 on a 2.6M-vertex sphere with the defaults). The first round builds it, tile by
 //! tile in the thread that then runs the tile (one breadth-first pass, its adjacency still in
 //! cache for the steps); it lives on the heap, so the engine uses it only when the mesh is in
-//! memory.
+//! memory. The engine runs the tiles of a round in parallel; this module runs no threads.
 
 use std::cell::RefCell;
 use std::ops::Range;
 use std::sync::OnceLock;
 
 use glam::DVec3;
-use rayon::prelude::*;
 
 use crate::smooth::INV_DEGREE;
 use crate::smooth::laplacian::StepStats;
@@ -106,7 +105,7 @@ impl<'t> TilePlan<'t> {
     /// runs them (in the thread that runs them, while their adjacency is in cache), so that round
     /// pays for the plan. A tile cannot be planned when it and its rings exceed the 16-bit local
     /// ids (a vertex of enormous degree, or a vertex order without locality) or a vertex that is
-    /// not fixed has no neighbours: [`round`] then returns `None`, and callers run plain steps,
+    /// not fixed has no neighbours: [`TilePlan::run_tile`] then returns `None`, and callers run plain steps,
     /// which give the same result.
     pub fn new(topo: &'t Topology) -> TilePlan<'t> {
         TilePlan::lazy(topo, TILE, DEPTH)
@@ -126,15 +125,6 @@ impl<'t> TilePlan<'t> {
         }
     }
 
-    /// [`TilePlan::lazy`] with every tile planned now; `None` if one cannot be.
-    pub fn with(topo: &'t Topology, tile: usize, depth: usize) -> Option<TilePlan<'t>> {
-        let plan = TilePlan::lazy(topo, tile, depth);
-        let planned = (0..plan.tiles.len())
-            .into_par_iter()
-            .all(|t| plan.tile(t).is_some());
-        planned.then_some(plan)
-    }
-
     /// Tile `t`, planned if it was not yet.
     fn tile(&self, t: usize) -> Option<&Tile> {
         let own = t * self.tile..((t + 1) * self.tile).min(self.topo.len());
@@ -150,7 +140,7 @@ impl<'t> TilePlan<'t> {
         self.tiles.iter().filter_map(|t| t.get()?.as_ref())
     }
 
-    /// Most steps one [`round`] can run.
+    /// Most steps one round can run.
     pub fn depth(&self) -> usize {
         self.depth
     }
@@ -354,44 +344,40 @@ thread_local! {
     static RING_IDS: RefCell<RingIds> = RefCell::new(RingIds::default());
 }
 
-/// One round: `factors.len()` Jacobi steps `p ← p + f L(p)` (one factor per step, at most
-/// [`TilePlan::depth`]), from `src` into `dst`, on the current rayon pool. With `measure = Some(s)`
-/// also measures how far each vertex moved from its position before step `s` to the end (the last
-/// iteration of the round); its `moved` counts the vertices that are not fixed. Bit-identical to
-/// the steps run one by one with [`crate::smooth::laplacian::jacobi_step`]; the statistics are
-/// summed tile by tile in tile order, so they do not depend on the thread count either. `None`
-/// when a tile cannot be planned (see [`TilePlan::new`]): then `dst` holds nothing useful, `src`
-/// is untouched.
-///
-/// # Panics
-/// If the slices do not have one entry per vertex, or there are more factors than the plan's
-/// depth.
-pub fn round(
-    plan: &TilePlan,
-    src: &[DVec3],
-    dst: &mut [DVec3],
-    factors: &[f64],
-    measure: Option<usize>,
-) -> Option<StepStats> {
-    let n = plan.topo.len();
-    assert!(src.len() == n && dst.len() == n);
-    assert!(!factors.is_empty() && factors.len() <= plan.depth);
-    assert!(measure.is_none_or(|s| s < factors.len()));
-    let per_tile: Vec<StepStats> = dst
-        .par_chunks_mut(plan.tile)
-        .enumerate()
-        .map(|(t, out)| {
-            let tile = plan.tile(t)?;
-            Some(LOCAL.with_borrow_mut(|local| {
-                run_tile(plan.topo, tile, src, out, factors, measure, local)
-            }))
-        })
-        .collect::<Option<_>>()?;
-    Some(
-        per_tile
-            .into_iter()
-            .fold(StepStats::default(), StepStats::then),
-    )
+impl TilePlan<'_> {
+    /// Vertices per tile: tile `t` owns vertices `t · tile_size ..` (the last tile may be shorter).
+    pub fn tile_size(&self) -> usize {
+        self.tile
+    }
+
+    /// One round on tile `t`: `factors.len()` Jacobi steps `p ← p + f L(p)` (one factor per step,
+    /// at most [`TilePlan::depth`]) from `src` into `out`, the tile's own vertices of the result
+    /// (`out.len()` = the tile's length). Plans the tile first if no round has yet. With
+    /// `measure = Some(s)` also measures how far each vertex moved from its position before step
+    /// `s` to the end; its `moved` counts the tile's vertices that are not fixed. Bit-identical to
+    /// the steps run one by one with [`crate::smooth::laplacian::jacobi_step`]. `None` when the
+    /// tile cannot be planned (see [`TilePlan::new`]): then `out` is untouched.
+    ///
+    /// # Panics
+    /// If `src` does not have one entry per vertex, or there are more factors than the depth.
+    pub fn run_tile(
+        &self,
+        t: usize,
+        src: &[DVec3],
+        out: &mut [DVec3],
+        factors: &[f64],
+        measure: Option<usize>,
+    ) -> Option<StepStats> {
+        assert!(src.len() == self.topo.len());
+        assert!(!factors.is_empty() && factors.len() <= self.depth);
+        assert!(measure.is_none_or(|s| s < factors.len()));
+        let tile = self.tile(t)?;
+        Some(
+            LOCAL.with_borrow_mut(|local| {
+                run_tile(self.topo, tile, src, out, factors, measure, local)
+            }),
+        )
+    }
 }
 
 fn run_tile(
@@ -586,122 +572,4 @@ fn relaxed(p: P4, sum: [f64; 4], inv: f64, f: f64) -> P4 {
         r[l] = p.0[l] + f * (sum[l] * inv - p.0[l]);
     }
     P4(r)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::mesh::generate;
-    use crate::smooth::laplacian;
-
-    /// A noisy sphere in a random vertex order (so that rings reach far), with an open hole (so
-    /// that some vertices are fixed).
-    fn shuffled_open_sphere() -> (Topology, Vec<DVec3>) {
-        let mut mesh = generate::icosphere(5);
-        generate::add_normal_noise(&mut mesh, 0.3, 4);
-        let n = mesh.positions.len();
-        let mut perm: Vec<u32> = (0..n as u32).collect();
-        let mut x = 0x9e37_79b9_7f4a_7c15u64;
-        for i in (1..n).rev() {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            perm.swap(i, (x % (i as u64 + 1)) as usize);
-        }
-        let mut pos = vec![DVec3::ZERO; n];
-        for (old, &new) in perm.iter().enumerate() {
-            pos[new as usize] = mesh.positions[old];
-        }
-        let mut tris: Vec<[u32; 3]> = mesh
-            .triangles
-            .iter()
-            .map(|t| t.map(|v| perm[v as usize]))
-            .collect();
-        tris.truncate(tris.len() - 3);
-        let topo = Topology::build(n, &tris).unwrap();
-        assert!(topo.stats.fixed_vertices > 0);
-        (topo, pos)
-    }
-
-    #[test]
-    fn a_round_equals_plain_steps_for_any_tile_depth_and_thread_count() {
-        let (topo, pos) = shuffled_open_sphere();
-        let n = pos.len();
-        let factors = [0.5, -0.53, 0.5, -0.53, 0.5, -0.53];
-        // The plain steps, and the displacement over the last two.
-        let mut want = vec![pos.clone()];
-        for &f in &factors {
-            let mut next = vec![DVec3::ZERO; n];
-            laplacian::jacobi_step(&topo, want.last().unwrap(), &mut next, 0, f);
-            want.push(next);
-        }
-        for (tile, depth) in [(1, 6), (97, 3), (1000, 6), (n, 8)] {
-            let plan = TilePlan::with(&topo, tile, depth).unwrap();
-            for threads in [1, 2, 3] {
-                let pool = rayon::ThreadPoolBuilder::new()
-                    .num_threads(threads)
-                    .build()
-                    .unwrap();
-                for k in 1..=depth.min(factors.len()) {
-                    let mut got = vec![DVec3::ZERO; n];
-                    let st = pool
-                        .install(|| round(&plan, &pos, &mut got, &factors[..k], Some(k - 1)))
-                        .unwrap();
-                    assert_eq!(
-                        got, want[k],
-                        "tile {tile}, depth {depth}, {threads} threads, {k} steps"
-                    );
-                    let d: Vec<f64> = (0..n)
-                        .map(|v| want[k][v].distance(want[k - 1][v]))
-                        .collect();
-                    let max = d.iter().cloned().fold(0.0, f64::max);
-                    assert_eq!(st.max_displacement, max);
-                    let sum: f64 = d.iter().sum();
-                    assert!((st.sum_displacement - sum).abs() <= 1e-12 * sum);
-                    assert_eq!(st.moved as usize, n - topo.stats.fixed_vertices);
-                }
-            }
-        }
-    }
-
-    #[test]
-    fn statistics_do_not_depend_on_the_thread_count() {
-        let (topo, pos) = shuffled_open_sphere();
-        let plan = TilePlan::with(&topo, 300, 4).unwrap();
-        let run = |threads| {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap();
-            let mut out = vec![DVec3::ZERO; pos.len()];
-            pool.install(|| round(&plan, &pos, &mut out, &[0.5, -0.53], Some(0)))
-                .unwrap()
-        };
-        assert_eq!(run(1), run(4));
-    }
-
-    #[test]
-    fn rings_of_an_ordered_sphere_stay_small() {
-        // Morton-ordered (as the engine orders every mesh), the rings cost a fraction of the tile.
-        let mesh = generate::icosphere(6);
-        let storage = crate::mesh::Storage::heap();
-        let r = crate::partition::reorder(&storage, &mesh.positions, &mesh.triangles).unwrap();
-        let topo = Topology::build(r.positions.len(), &r.triangles).unwrap();
-        let plan = TilePlan::with(&topo, 4096, 8).unwrap();
-        assert!(plan.overhead() < 2.0, "{}", plan.overhead());
-    }
-
-    #[test]
-    fn a_vertex_of_huge_degree_gives_no_plan() {
-        // A fan of 70,000 triangles around one vertex: its first ring alone exceeds 16-bit ids.
-        let m = 70_000u32;
-        let tris: Vec<[u32; 3]> = (0..m).map(|k| [0, 1 + k, 1 + (k + 1) % m]).collect();
-        let topo = Topology::build(m as usize + 1, &tris).unwrap();
-        assert!(TilePlan::with(&topo, 1, 2).is_none());
-        // Planned by the first round instead: the round says so and leaves its input alone.
-        let pos: Vec<DVec3> = (0..=m).map(|k| DVec3::new(k as f64, 1.0, 0.0)).collect();
-        let mut out = vec![DVec3::ZERO; pos.len()];
-        let plan = TilePlan::lazy(&topo, 1, 2);
-        assert!(round(&plan, &pos, &mut out, &[0.5], None).is_none());
-    }
 }

@@ -100,7 +100,7 @@ impl Topology {
         triangles: &[[u32; 3]],
     ) -> Result<Topology> {
         if n_vertices > u32::MAX as usize || triangles.len() > u32::MAX as usize {
-            return Err(Error::Config(format!(
+            return Err(Error::topology(format!(
                 "{n_vertices} vertices / {} triangles exceed the 2^32 limit",
                 triangles.len()
             )));
@@ -116,7 +116,7 @@ impl Topology {
         let mut vf_offsets: Buf<usize> = storage.zeroed(n_vertices + 1)?;
         for (t, tri) in triangles.iter().enumerate() {
             if tri.iter().any(|&v| v as usize >= n_vertices) {
-                return Err(Error::Config(format!(
+                return Err(Error::topology(format!(
                     "triangle {t} indexes a vertex out of range (0..{n_vertices})"
                 )));
             }

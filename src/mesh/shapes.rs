@@ -1,9 +1,24 @@
-//! Generated test meshes: closed icospheres and tori, with seeded Gaussian noise along vertex normals.
+//! Pure shapes: the meshes `vcsmooth generate`, `demo`, `bench` and the tests start from. No
+//! files here: writing them is [`crate::io`]'s (see [`crate::io::write_mesh`] and, for the
+//! streamed [`Subdivision`], [`crate::io::write_ply_streamed`]).
 //!
-//! Every generator returns a closed, outward-oriented (positive volume) manifold mesh without
-//! duplicate vertices, with `source.input_faces` set to its triangle count and no other source
-//! layout (it is written as a plain `x y z` + triangle list). The noise uses its own tiny seeded
-//! generator (splitmix64 + Box–Muller), so a seed gives the same mesh on every run.
+//! - [`icosphere`]: the unit sphere (radius 1, centred at the origin), `20·4^k` triangles.
+//! - [`torus`]: around the z axis, major radius 1, minor radius 0.4, `256·4^k` triangles.
+//! - [`add_normal_noise`]: seeded Gaussian noise along the vertex normals, σ × the mean edge length.
+//! - [`Subdivision`]: a base mesh split flat into `4^L` triangles per triangle, produced one
+//!   vertex and one triangle at a time (for outputs larger than memory), or in memory
+//!   ([`Subdivision::to_mesh`]).
+//!
+//! Orientation: faces are counter-clockwise seen from outside, so the right-hand normal
+//! `(b − a) × (c − a)` points outward and a closed shape has positive signed volume
+//! ([`crate::metrics::volume`]). Lengths are in the shapes' own units (the sphere's radius is 1).
+//!
+//! [`icosphere`] and [`torus`] return closed, outward-oriented manifold meshes without duplicate
+//! vertices, with `source.input_faces` set to their triangle count and no other source layout
+//! (they are written as a plain `x y z` + triangle list). The noise uses its own tiny seeded
+//! generator (splitmix64 + Box–Muller), so a seed gives the same mesh on every run and platform.
+
+use std::collections::HashMap;
 
 use glam::DVec3;
 
@@ -238,181 +253,256 @@ pub fn add_normal_noise(mesh: &mut Mesh, sigma: f64, seed: u64) {
     }
 }
 
-/// Counts of a streamed mesh.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Streamed {
-    pub vertices: u64,
-    pub triangles: u64,
+/// Largest level [`Subdivision`] accepts: every base triangle becomes `4^15` ≈ 1.1·10⁹ triangles.
+pub const SUBDIVIDE_MAX_LEVELS: u32 = 15;
+
+/// Flat subdivision of a base mesh, every triangle split into `s²` (s = 2^`levels`), produced one
+/// vertex and one triangle at a time, so that a writer can stream meshes of hundreds of millions
+/// of triangles from a real scan: memory is the base mesh and its edge table, never the output.
+///
+/// - New vertices lie on the base triangles (a flat lattice: `A + i/s (B − A) + j/s (C − A)` in
+///   triangle `(A, B, C)`), shared along base edges, so a closed manifold base gives a closed
+///   manifold output with the same orientation, and without noise the same volume.
+/// - Vertex ids: the base vertices, then `s − 1` per base edge (edges in ascending `(i, j)` order,
+///   points numbered from the lower end), then the interior lattice points of each base triangle
+///   (row `j = 1..s`, then `i = 1..s−j`). [`Subdivision::for_each_vertex`] gives them in id order.
+/// - Triangles: the `s²` children of each base triangle in turn, in the parent's orientation.
+/// - Noise (`sigma > 0`): each vertex moves along its normal (the area-weighted base vertex
+///   normal, the sum of the edge's face normals, or the face normal) by Gaussian noise of standard
+///   deviation `sigma` × (base mean edge length / s), drawn from a hash of the seed and the vertex
+///   id, so a vertex's position does not depend on the order it is produced in.
+/// - Degenerate base triangles (a repeated index) are dropped.
+pub struct Subdivision<'a> {
+    positions: &'a [DVec3],
+    /// The base triangles that are not degenerate.
+    faces: Vec<[u32; 3]>,
+    /// Undirected base edges `[lo, hi]`, ascending, and each one's index.
+    edges: Vec<[u32; 2]>,
+    edge_id: HashMap<(u32, u32), u64>,
+    /// Area-weighted normals of the noise: per face, per base vertex, per edge.
+    face_normals: Vec<DVec3>,
+    vertex_normals: Vec<DVec3>,
+    edge_normals: Vec<DVec3>,
+    /// Pieces per base edge, `2^levels`.
+    s: u64,
+    /// Standard deviation of the noise (0: none).
+    scale: f64,
+    seed: u64,
+    vertices: u64,
+    triangles: u64,
 }
 
-/// Write `base` with every triangle split into `s²` (s = 2^`levels`) as a binary little-endian PLY
-/// (`x y z float`, `list uchar int`), streamed: memory is the base mesh and its edge table, never
-/// the output, so meshes of hundreds of millions of triangles come from a real scan.
-///
-/// New vertices lie on the base triangles (flat lattice), shared along base edges, so a closed
-/// manifold base gives a closed manifold output with the same orientation. Vertex ids: the base
-/// vertices, then `s − 1` per base edge (edges in ascending `(i, j)` order), then the interior
-/// lattice points of each base triangle. With `sigma > 0`, each vertex moves along its normal (base
-/// vertex normal, mean of the edge's face normals, or the face normal) by Gaussian noise of
-/// standard deviation `sigma` × (base mean edge length / s), drawn from a hash of the seed and the
-/// vertex id so the result does not depend on the write order. Degenerate base triangles are dropped.
-pub fn write_subdivided(
-    base: &Mesh,
-    levels: u32,
-    sigma: f64,
-    seed: u64,
-    out: &std::path::Path,
-) -> crate::Result<Streamed> {
-    use std::collections::HashMap;
-    use std::io::Write;
+impl<'a> Subdivision<'a> {
+    /// Prepares the subdivision of `base` into `4^levels` triangles per base triangle.
+    ///
+    /// # Errors
+    /// [`crate::Error::Parameter`] (`subdivision_levels`) when `levels > SUBDIVIDE_MAX_LEVELS`,
+    /// [`crate::Error::Topology`] when the output's vertex or triangle count does not fit 32-bit
+    /// indices; the topology's error when `base` has none.
+    pub fn new(base: &'a Mesh, levels: u32, sigma: f64, seed: u64) -> crate::Result<Self> {
+        if levels > SUBDIVIDE_MAX_LEVELS {
+            return Err(crate::Error::parameter(
+                "subdivision_levels",
+                format!("must be at most {SUBDIVIDE_MAX_LEVELS}, got {levels}"),
+            ));
+        }
+        let s = 1u64 << levels;
+        let topo = Topology::build(base.positions.len(), &base.triangles)?;
+        let pos: &[DVec3] = &base.positions;
+        let faces: Vec<[u32; 3]> = base
+            .triangles
+            .iter()
+            .copied()
+            .filter(|t| t[0] != t[1] && t[1] != t[2] && t[0] != t[2])
+            .collect();
+        let edges: Vec<[u32; 2]> = topo.edges().collect();
+        let edge_id: HashMap<(u32, u32), u64> = edges
+            .iter()
+            .enumerate()
+            .map(|(e, &[a, b])| ((a, b), e as u64))
+            .collect();
+        let per_edge = s - 1;
+        let per_face = (s - 1) * s.saturating_sub(2) / 2;
+        let vertices =
+            pos.len() as u64 + edges.len() as u64 * per_edge + faces.len() as u64 * per_face;
+        let triangles = faces.len() as u64 * s * s;
+        if vertices > u32::MAX as u64 || triangles > u32::MAX as u64 {
+            return Err(crate::Error::topology(format!(
+                "{levels} subdivision levels make {vertices} vertices and {triangles} triangles, beyond 32-bit indices"
+            )));
+        }
 
-    if levels > 15 {
-        return Err(crate::Error::Config(format!(
-            "--subdivide {levels} is too large (at most 15)"
-        )));
-    }
-    let s = 1u64 << levels;
-    let topo = Topology::build(base.positions.len(), &base.triangles)?;
-    let pos = &base.positions;
-    let tris: Vec<[u32; 3]> = base
-        .triangles
-        .iter()
-        .copied()
-        .filter(|t| t[0] != t[1] && t[1] != t[2] && t[0] != t[2])
-        .collect();
-    let edges: Vec<[u32; 2]> = topo.edges().collect();
-    let edge_id: HashMap<(u32, u32), u64> = edges
-        .iter()
-        .enumerate()
-        .map(|(e, &[a, b])| ((a, b), e as u64))
-        .collect();
-    let nv = pos.len() as u64;
-    let per_edge = s - 1;
-    let per_face = (s - 1) * s.saturating_sub(2) / 2;
-    let vertices = nv + edges.len() as u64 * per_edge + tris.len() as u64 * per_face;
-    let triangles = tris.len() as u64 * s * s;
-    if vertices > u32::MAX as u64 || triangles > u32::MAX as u64 {
-        return Err(crate::Error::Config(format!(
-            "--subdivide {levels} makes {vertices} vertices and {triangles} triangles, beyond 32-bit indices"
-        )));
-    }
-
-    // Normals for the noise: area-weighted per base vertex, per face, and per edge (sum of its faces).
-    let face_n: Vec<DVec3> = tris
-        .iter()
-        .map(|t| {
-            let [a, b, c] = t.map(|v| pos[v as usize]);
-            (b - a).cross(c - a)
+        let face_normals: Vec<DVec3> = faces
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|v| pos[v as usize]);
+                (b - a).cross(c - a)
+            })
+            .collect();
+        let mut vertex_normals = vec![DVec3::ZERO; pos.len()];
+        let mut edge_normals = vec![DVec3::ZERO; edges.len()];
+        for (t, n) in faces.iter().zip(&face_normals) {
+            for k in 0..3 {
+                vertex_normals[t[k] as usize] += *n;
+                let (a, b) = (t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3]));
+                edge_normals[edge_id[&(a, b)] as usize] += *n;
+            }
+        }
+        let scale = sigma * mean_edge_length(pos, &topo) / s as f64;
+        Ok(Subdivision {
+            positions: pos,
+            faces,
+            edges,
+            edge_id,
+            face_normals,
+            vertex_normals,
+            edge_normals,
+            s,
+            scale,
+            seed,
+            vertices,
+            triangles,
         })
-        .collect();
-    let mut vertex_n = vec![DVec3::ZERO; pos.len()];
-    let mut edge_n = vec![DVec3::ZERO; edges.len()];
-    for (t, n) in tris.iter().zip(&face_n) {
-        for k in 0..3 {
-            vertex_n[t[k] as usize] += *n;
-            let (a, b) = (t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3]));
-            edge_n[edge_id[&(a, b)] as usize] += *n;
-        }
     }
-    let scale = sigma * mean_edge_length(pos, &topo) / s as f64;
-    let noisy = |id: u64, p: DVec3, n: DVec3| -> DVec3 {
-        if scale == 0.0 || !scale.is_finite() {
-            return p;
-        }
-        match n.try_normalize() {
-            Some(n) => {
-                let moved = p + n
-                    * (scale
-                        * Gaussian::new(seed ^ id.wrapping_mul(0xD1B5_4A32_D192_ED03)).sample());
-                if moved.is_finite() { moved } else { p }
-            }
-            None => p,
-        }
-    };
 
-    // Global id of lattice point (i, j) of triangle t = (A, B, C): A + i/s (B − A) + j/s (C − A).
-    let edge_point = |u: u32, v: u32, k: u64| -> u64 {
-        // k segments from u towards v; edge vertices are numbered from the lower end.
-        let (lo, hi, k) = if u < v { (u, v, k) } else { (v, u, s - k) };
-        nv + edge_id[&(lo, hi)] * per_edge + (k - 1)
-    };
-    let interior_base = nv + edges.len() as u64 * per_edge;
-    let id = |t: usize, i: u64, j: u64| -> u64 {
-        let [a, b, c] = tris[t];
-        match (i, j) {
-            (0, 0) => a as u64,
-            _ if i == s => b as u64,
-            _ if j == s => c as u64,
-            (_, 0) => edge_point(a, b, i),
-            (0, _) => edge_point(a, c, j),
-            _ if i + j == s => edge_point(b, c, j),
-            _ => {
-                let row = (j - 1) * (s - 1) - (j - 1) * j / 2;
-                interior_base + t as u64 * per_face + row + (i - 1)
-            }
-        }
-    };
+    /// Vertices of the output.
+    pub fn vertices(&self) -> u64 {
+        self.vertices
+    }
 
-    crate::io::write_atomically(out, |w| {
-        write!(
-            w,
-            "ply\nformat binary_little_endian 1.0\ncomment vcsmooth generate: {} triangles x {s}^2\n\
-             element vertex {vertices}\nproperty float x\nproperty float y\nproperty float z\n\
-             element face {triangles}\nproperty list uchar int vertex_indices\nend_header\n",
-            tris.len()
-        )?;
-        let mut put = |p: DVec3| w.write_all(bytemuck_f32(p).as_slice());
+    /// Triangles of the output: `s²` × [`Subdivision::base_triangles`].
+    pub fn triangles(&self) -> u64 {
+        self.triangles
+    }
+
+    /// The base triangles that are subdivided (the non-degenerate ones).
+    pub fn base_triangles(&self) -> usize {
+        self.faces.len()
+    }
+
+    /// Pieces every base edge is split into, `s = 2^levels`.
+    pub fn pieces(&self) -> u64 {
+        self.s
+    }
+
+    /// Calls `f` with every output vertex position, in id order; stops at the first error.
+    pub fn for_each_vertex<E>(
+        &self,
+        mut f: impl FnMut(DVec3) -> std::result::Result<(), E>,
+    ) -> std::result::Result<(), E> {
+        let (pos, s) = (self.positions, self.s);
+        let nv = pos.len() as u64;
         for (v, p) in pos.iter().enumerate() {
-            put(noisy(v as u64, *p, vertex_n[v]))?;
+            f(self.noisy(v as u64, *p, self.vertex_normals[v]))?;
         }
-        for (e, &[a, b]) in edges.iter().enumerate() {
+        for (e, &[a, b]) in self.edges.iter().enumerate() {
             let (pa, pb) = (pos[a as usize], pos[b as usize]);
             for k in 1..s {
-                let id = nv + e as u64 * per_edge + (k - 1);
-                put(noisy(id, pa + (pb - pa) * (k as f64 / s as f64), edge_n[e]))?;
+                let id = nv + e as u64 * (s - 1) + (k - 1);
+                f(self.noisy(
+                    id,
+                    pa + (pb - pa) * (k as f64 / s as f64),
+                    self.edge_normals[e],
+                ))?;
             }
         }
-        for (t, tri) in tris.iter().enumerate() {
+        for (t, tri) in self.faces.iter().enumerate() {
             let [a, b, c] = tri.map(|v| pos[v as usize]);
             for j in 1..s {
                 for i in 1..s - j {
                     let p = a + (b - a) * (i as f64 / s as f64) + (c - a) * (j as f64 / s as f64);
-                    put(noisy(id(t, i, j), p, face_n[t]))?;
+                    f(self.noisy(self.id(t, i, j), p, self.face_normals[t]))?;
                 }
             }
         }
-        let mut face = [3u8; 13];
-        for t in 0..tris.len() {
+        Ok(())
+    }
+
+    /// Calls `f` with every output triangle, in order; stops at the first error.
+    pub fn for_each_triangle<E>(
+        &self,
+        mut f: impl FnMut([u32; 3]) -> std::result::Result<(), E>,
+    ) -> std::result::Result<(), E> {
+        let s = self.s;
+        // Ids fit u32: `new` checked the vertex count.
+        let tri = |q: [u64; 3]| q.map(|v| v as u32);
+        for t in 0..self.faces.len() {
             for j in 0..s {
                 for i in 0..s - j {
-                    let mut emit = |q: [u64; 3]| {
-                        for (k, v) in q.iter().enumerate() {
-                            face[1 + 4 * k..5 + 4 * k].copy_from_slice(&(*v as u32).to_le_bytes());
-                        }
-                        w.write_all(&face)
-                    };
-                    emit([id(t, i, j), id(t, i + 1, j), id(t, i, j + 1)])?;
+                    f(tri([
+                        self.id(t, i, j),
+                        self.id(t, i + 1, j),
+                        self.id(t, i, j + 1),
+                    ]))?;
                     if i + j + 1 < s {
-                        emit([id(t, i + 1, j), id(t, i + 1, j + 1), id(t, i, j + 1)])?;
+                        f(tri([
+                            self.id(t, i + 1, j),
+                            self.id(t, i + 1, j + 1),
+                            self.id(t, i, j + 1),
+                        ]))?;
                     }
                 }
             }
         }
         Ok(())
-    })?;
-    Ok(Streamed {
-        vertices,
-        triangles,
-    })
-}
-
-/// A position as three little-endian f32s.
-fn bytemuck_f32(p: DVec3) -> [u8; 12] {
-    let mut b = [0u8; 12];
-    for (k, x) in p.to_array().iter().enumerate() {
-        b[4 * k..4 * k + 4].copy_from_slice(&(*x as f32).to_le_bytes());
     }
-    b
+
+    /// The whole output in memory, as a generated mesh (`source.input_faces` = its triangles).
+    pub fn to_mesh(&self) -> Mesh {
+        let mut positions = Vec::with_capacity(self.vertices as usize);
+        let mut triangles = Vec::with_capacity(self.triangles as usize);
+        let _ = self.for_each_vertex(|p| {
+            positions.push(p);
+            Ok::<_, std::convert::Infallible>(())
+        });
+        let _ = self.for_each_triangle(|t| {
+            triangles.push(t);
+            Ok::<_, std::convert::Infallible>(())
+        });
+        generated(positions, triangles)
+    }
+
+    /// `p` moved along `n` by the noise of vertex `id` (unmoved without noise, normal or a finite
+    /// result).
+    fn noisy(&self, id: u64, p: DVec3, n: DVec3) -> DVec3 {
+        if self.scale == 0.0 || !self.scale.is_finite() {
+            return p;
+        }
+        match n.try_normalize() {
+            Some(n) => {
+                let z = Gaussian::new(self.seed ^ id.wrapping_mul(0xD1B5_4A32_D192_ED03)).sample();
+                let moved = p + n * (self.scale * z);
+                if moved.is_finite() { moved } else { p }
+            }
+            None => p,
+        }
+    }
+
+    /// Id of the point `k` pieces from base vertex `u` towards `v` on their edge (0 < k < s).
+    fn edge_point(&self, u: u32, v: u32, k: u64) -> u64 {
+        let (lo, hi, k) = if u < v { (u, v, k) } else { (v, u, self.s - k) };
+        self.positions.len() as u64 + self.edge_id[&(lo, hi)] * (self.s - 1) + (k - 1)
+    }
+
+    /// Id of lattice point `(i, j)` of base face `t = (A, B, C)`: `A + i/s (B − A) + j/s (C − A)`.
+    fn id(&self, t: usize, i: u64, j: u64) -> u64 {
+        let s = self.s;
+        let [a, b, c] = self.faces[t];
+        match (i, j) {
+            (0, 0) => a as u64,
+            _ if i == s => b as u64,
+            _ if j == s => c as u64,
+            (_, 0) => self.edge_point(a, b, i),
+            (0, _) => self.edge_point(a, c, j),
+            _ if i + j == s => self.edge_point(b, c, j),
+            _ => {
+                let per_face = (s - 1) * s.saturating_sub(2) / 2;
+                let interior = self.positions.len() as u64 + self.edges.len() as u64 * (s - 1);
+                let row = (j - 1) * (s - 1) - (j - 1) * j / 2;
+                interior + t as u64 * per_face + row + (i - 1)
+            }
+        }
+    }
 }
 
 /// Standard normal samples from splitmix64 through the Box–Muller transform (both outputs used).
@@ -461,34 +551,63 @@ mod tests {
     use std::f64::consts::PI;
 
     #[test]
-    fn streamed_subdivision_is_closed_keeps_the_surface_and_counts() {
+    fn subdivision_is_closed_keeps_the_surface_and_counts() {
         let base = icosphere(1);
-        let dir = tempfile::tempdir().unwrap();
-        let out = dir.path().join("sub.ply");
-        let n = write_subdivided(&base, 2, 0.0, 1, &out).unwrap();
-        assert_eq!(n.triangles, 80 * 16);
-        let m = crate::io::read_mesh(&out).unwrap();
-        assert_eq!(m.positions.len() as u64, n.vertices);
-        assert_eq!(m.triangles.len() as u64, n.triangles);
+        let sub = Subdivision::new(&base, 2, 0.0, 1).unwrap();
+        assert_eq!((sub.pieces(), sub.base_triangles()), (4, 80));
+        assert_eq!(sub.triangles(), 80 * 16);
+        let m = sub.to_mesh();
+        assert_eq!(m.positions.len() as u64, sub.vertices());
+        assert_eq!(m.triangles.len() as u64, sub.triangles());
         let i = info(&m, &topo(&m));
         assert!(i.closed && i.components == 1 && i.non_manifold_vertices == 0);
         assert_eq!(i.vertices as i64 - i.edges as i64 + i.triangles as i64, 2);
-        // Flat subdivision: the same volume as the base (up to f32 rounding of the file).
+        // The base vertices come first and unmoved; every new vertex lies on the base surface.
+        assert_eq!(bits(&m)[..base.positions.len()], bits(&base)[..]);
+        // Flat subdivision: the same volume as the base, same orientation.
         let (v0, v1) = (
             volume(&base.positions, &base.triangles),
             volume(&m.positions, &m.triangles),
         );
-        assert!(((v1 - v0) / v0).abs() < 1e-6, "{v0} vs {v1}");
-        // Noise moves vertices, deterministically.
-        let noisy = dir.path().join("noisy.ply");
-        write_subdivided(&base, 2, 0.3, 9, &noisy).unwrap();
-        let again = dir.path().join("again.ply");
-        write_subdivided(&base, 2, 0.3, 9, &again).unwrap();
-        assert_eq!(
-            std::fs::read(&noisy).unwrap(),
-            std::fs::read(&again).unwrap()
+        assert!(v1 > 0.0 && ((v1 - v0) / v0).abs() < 1e-12, "{v0} vs {v1}");
+        // Noise moves vertices, deterministically, and the same whatever the order of production.
+        let noisy = Subdivision::new(&base, 2, 0.3, 9).unwrap().to_mesh();
+        let again = Subdivision::new(&base, 2, 0.3, 9).unwrap().to_mesh();
+        assert_eq!(bits(&noisy), bits(&again));
+        assert_ne!(bits(&noisy), bits(&m));
+        assert_eq!(noisy.triangles, m.triangles);
+    }
+
+    #[test]
+    fn subdivision_level_zero_is_the_base_and_limits_are_refused() {
+        let base = torus(0);
+        let m = Subdivision::new(&base, 0, 0.0, 1).unwrap().to_mesh();
+        assert_eq!(bits(&m), bits(&base));
+        assert_eq!(m.triangles, base.triangles);
+        let e = Subdivision::new(&base, SUBDIVIDE_MAX_LEVELS + 1, 0.0, 1)
+            .err()
+            .unwrap();
+        assert!(e.to_string().contains("at most 15"), "{e}");
+        let e = Subdivision::new(&base, 15, 0.0, 1).err().unwrap();
+        assert!(e.to_string().contains("beyond 32-bit indices"), "{e}");
+    }
+
+    #[test]
+    fn subdivision_drops_degenerate_base_triangles() {
+        let base = Mesh::new(
+            vec![DVec3::ZERO, DVec3::X, DVec3::Y],
+            vec![[0, 1, 2], [0, 0, 1]],
         );
-        assert_ne!(std::fs::read(&noisy).unwrap(), std::fs::read(&out).unwrap());
+        let sub = Subdivision::new(&base, 1, 0.0, 1).unwrap();
+        assert_eq!(
+            (sub.base_triangles(), sub.triangles(), sub.vertices()),
+            (1, 4, 6)
+        );
+        let m = sub.to_mesh();
+        for t in m.triangles.iter() {
+            let [a, b, c] = t.map(|v| m.positions[v as usize]);
+            assert!((b - a).cross(c - a).z > 0.0, "orientation kept");
+        }
     }
 
     fn topo(m: &Mesh) -> Topology {

@@ -1,0 +1,500 @@
+//! The one iteration loop. Every run smooths through [`iterate`]: in-memory meshes, file runs in
+//! memory or in scratch files, multiresolution levels, benchmarks and the ranks of the cluster
+//! engine, which plug in through [`Share`].
+//!
+//! Order contract (part of the result's definition, so runs are reproducible):
+//! - `lem`, `vcs`, `vcs-triangle`: Gauss–Seidel, colour after colour of the plan's schedule; within
+//!   a colour the patches run in parallel (they touch disjoint data), each applying the stencils
+//!   it owns in ascending order: edge stencils `(i, j)`, `i < j`, by `(i, j)`; triangle stencils in
+//!   the plan's triangle order.
+//! - `laplacian`, `taubin`: Jacobi (every vertex from the previous positions), so the order is
+//!   irrelevant: the output is bit-identical for any thread count and tile size.
+
+use std::ops::Range;
+use std::time::Instant;
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+use super::observer::{IterationRecord, Observer, Statistics};
+use super::reduce;
+use crate::error::Result;
+use crate::partition::Patch;
+use crate::schedule::{Prefetch, SharedField};
+use crate::smooth::laplacian::{self, Previous, StepStats};
+use crate::smooth::stencil::{self, StencilParams, Workspace};
+use crate::smooth::tiled::TilePlan;
+use crate::smooth::{Method, Options, SweepStats};
+use crate::topology::Topology;
+
+/// A process's share of the work and its link to the processes holding the rest. A single process
+/// owns everything and shares nothing ([`Alone`]); a rank of the cluster engine owns a block of
+/// patches and brings the copies other ranks hold up to date after every colour and step.
+pub trait Share {
+    /// The vertices this process updates.
+    fn owned(&self) -> Range<usize>;
+    /// The triangles whose volume and area this process sums.
+    fn triangles(&self) -> Range<usize>;
+    /// Whether this process applies the stencils of patch `p`.
+    fn runs_patch(&self, p: usize) -> bool;
+    /// Vertices outside [`Share::owned`] whose neighbour sums its stencils read.
+    fn halo_sums(&self) -> &[u32];
+    /// Before the patches of a colour run.
+    fn colour_start(&mut self, pos: &[DVec3], sums: &[DVec3]);
+    /// After the patches of a colour ran: exchange what changed.
+    fn colour_end(&mut self, pos: &mut [DVec3], sums: &mut [DVec3]);
+    /// After a Jacobi step wrote the owned entries of `field`: exchange them.
+    fn step_end(&mut self, field: &mut [DVec3]);
+    /// Element-wise sums and maxima over all processes.
+    fn sum(&self, local: &[f64]) -> Vec<f64>;
+    fn max(&self, local: &[f64]) -> Vec<f64>;
+    /// After iteration `record.iteration`, whose positions are in `pos` (checkpoints go here).
+    fn iteration_end(&mut self, record: &IterationRecord, pos: &[DVec3]) -> Result<()>;
+    /// Whether this process reports to the observer.
+    fn leads(&self) -> bool;
+    /// The threads of the parallel work, when the loop itself runs outside them (a rank keeps its
+    /// communicator on the calling thread); `None`: the current pool.
+    fn pool(&self) -> Option<&rayon::ThreadPool>;
+}
+
+/// `f` on the share's threads.
+fn on_pool<R: Send>(share: &dyn Share, f: impl FnOnce() -> R + Send) -> R {
+    match share.pool() {
+        Some(pool) => pool.install(f),
+        None => f(),
+    }
+}
+
+/// The single process: owns all vertices and triangles.
+pub struct Alone {
+    pub vertices: usize,
+    pub triangles: usize,
+}
+
+impl Share for Alone {
+    fn owned(&self) -> Range<usize> {
+        0..self.vertices
+    }
+    fn triangles(&self) -> Range<usize> {
+        0..self.triangles
+    }
+    fn runs_patch(&self, _: usize) -> bool {
+        true
+    }
+    fn halo_sums(&self) -> &[u32] {
+        &[]
+    }
+    fn colour_start(&mut self, _: &[DVec3], _: &[DVec3]) {}
+    fn colour_end(&mut self, _: &mut [DVec3], _: &mut [DVec3]) {}
+    fn step_end(&mut self, _: &mut [DVec3]) {}
+    fn sum(&self, local: &[f64]) -> Vec<f64> {
+        local.to_vec()
+    }
+    fn max(&self, local: &[f64]) -> Vec<f64> {
+        local.to_vec()
+    }
+    fn iteration_end(&mut self, _: &IterationRecord, _: &[DVec3]) -> Result<()> {
+        Ok(())
+    }
+    fn leads(&self) -> bool {
+        true
+    }
+    fn pool(&self) -> Option<&rayon::ThreadPool> {
+        None
+    }
+}
+
+/// What the percentages of the records are relative to: the input's centroid (a fixed point, so
+/// that the volume of an open mesh is followed consistently), volume and area.
+#[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize)]
+pub struct Reference {
+    pub origin: [f64; 3],
+    pub volume: f64,
+    pub area: f64,
+}
+
+impl Reference {
+    /// Measured on the current positions (every process gets the same bits).
+    pub fn measure(mesh: &Sweep, pos: &[DVec3], share: &dyn Share) -> Reference {
+        let owned = &pos[share.owned()];
+        let sum = on_pool(share, || reduce::position_sum(owned));
+        let total = share.sum(&sum.to_array());
+        let origin = DVec3::from_slice(&total) / mesh.topo.len().max(1) as f64;
+        let (volume, area) = volume_area(mesh, pos, origin, share);
+        Reference {
+            origin: origin.to_array(),
+            volume,
+            area,
+        }
+    }
+}
+
+fn volume_area(mesh: &Sweep, pos: &[DVec3], origin: DVec3, share: &dyn Share) -> (f64, f64) {
+    let tris = &mesh.tris[share.triangles()];
+    let (v, a) = on_pool(share, || reduce::volume_area(pos, tris, origin));
+    let total = share.sum(&[v, a]);
+    (total[0], total[1])
+}
+
+/// The mesh as the loop sees it: topology, triangles, patches and their colours.
+pub struct Sweep<'a> {
+    pub topo: &'a Topology,
+    pub tris: &'a [[u32; 3]],
+    pub patches: &'a [Patch],
+    pub colours: &'a [Vec<u32>],
+    /// Read-ahead hints for memory-mapped arrays (the next colour's patches).
+    pub prefetch: Option<&'a Prefetch>,
+    /// Whether `laplacian` and `taubin` may hold a [`TilePlan`] on the heap (the mesh is in memory).
+    pub tiles: bool,
+}
+
+/// The arrays the loop works in, one entry per vertex each (a rank touches only its region).
+pub struct Buffers<'b> {
+    /// The positions: smoothed in place.
+    pub pos: &'b mut [DVec3],
+    /// Neighbour sums of the stencil methods, or the second buffer of the Jacobi steps.
+    pub scratch: &'b mut [DVec3],
+    /// The stencil methods' copy before a measured sweep (may be empty for Jacobi methods).
+    pub prev: &'b mut [DVec3],
+}
+
+/// Iterations `first ..= opts.iterations` of `opts` on `mesh`, measuring the statistics `when`
+/// says relative to `reference`. Returns their records.
+#[allow(clippy::too_many_arguments)]
+pub fn iterate(
+    mesh: &Sweep,
+    buf: Buffers,
+    opts: &Options,
+    first: usize,
+    when: Statistics,
+    reference: &Reference,
+    share: &mut dyn Share,
+    observer: &mut dyn Observer,
+) -> Result<Vec<IterationRecord>> {
+    let mut run = Run {
+        mesh,
+        opts,
+        when,
+        origin: DVec3::from_array(reference.origin),
+        reference: *reference,
+        movable: (mesh.topo.len() - mesh.topo.stats.fixed_vertices).max(1),
+        share,
+        observer,
+        records: Vec::new(),
+    };
+    if opts.method.is_jacobi() {
+        run.jacobi(buf, first)?;
+    } else {
+        run.stencils(buf, first)?;
+    }
+    Ok(run.records)
+}
+
+struct Run<'r, 'a> {
+    mesh: &'r Sweep<'a>,
+    opts: &'r Options,
+    when: Statistics,
+    origin: DVec3,
+    reference: Reference,
+    movable: usize,
+    share: &'r mut dyn Share,
+    observer: &'r mut dyn Observer,
+    records: Vec<IterationRecord>,
+}
+
+impl Run<'_, '_> {
+    /// Gauss–Seidel sweeps of a stencil method, colour after colour.
+    fn stencils(&mut self, buf: Buffers, first: usize) -> Result<()> {
+        let Buffers {
+            pos,
+            scratch: sums,
+            prev,
+        } = buf;
+        let mesh = self.mesh;
+        let owned = self.share.owned();
+        let params = stencil_params(self.opts);
+        let total = self.opts.iterations;
+        for it in first..=total {
+            let measure = self.when.wanted(it, total);
+            let start = Instant::now();
+            if measure {
+                prev[owned.clone()].copy_from_slice(&pos[owned.clone()]);
+            }
+            on_pool(&*self.share, || {
+                reduce::neighbor_sums(mesh.topo, pos, sums, owned.clone())
+            });
+            for &v in self.share.halo_sums() {
+                let v = v as usize;
+                crate::smooth::neighbor_sums_into(mesh.topo, pos, &mut sums[v..v + 1], v);
+            }
+            let mut sweep = SweepStats::default();
+            for (c, colour) in mesh.colours.iter().enumerate() {
+                if let Some(prefetch) = mesh.prefetch {
+                    // Read ahead the next colour (at the end, the first: the next iteration's).
+                    let next = &mesh.colours[(c + 1) % mesh.colours.len()];
+                    for &p in next {
+                        prefetch.hint(mesh.patches[p as usize].vertices.clone());
+                    }
+                }
+                let mine: Vec<Patch> = colour
+                    .iter()
+                    .map(|&p| p as usize)
+                    .filter(|&p| self.share.runs_patch(p))
+                    .map(|p| mesh.patches[p].clone())
+                    .collect();
+                self.share.colour_start(pos, sums);
+                // SAFETY: the views are used only by the patches of this colour, which touch
+                // disjoint positions and sums (the colouring invariant of `schedule`); `pos` and
+                // `sums` are not used otherwise while the views live.
+                let (pv, sv) = unsafe { (SharedField::new(pos), SharedField::new(sums)) };
+                let method = self.opts.method;
+                let done = on_pool(&*self.share, || {
+                    sweep_patches(mesh, pv, sv, &mine, method, params)
+                });
+                sweep.add(&done);
+                self.share.colour_end(pos, sums);
+            }
+            let seconds = start.elapsed().as_secs_f64();
+            let moved = measure.then(|| {
+                let (now, before) = (&pos[owned.clone()], &prev[owned.clone()]);
+                on_pool(&*self.share, || reduce::displacement(now, before))
+            });
+            self.record(it, pos, moved, sweep, seconds)?;
+        }
+        Ok(())
+    }
+
+    /// `laplacian` and `taubin`: rounds of Jacobi steps, ping-ponging between `pos` and
+    /// `scratch` (the result ends in `pos`).
+    ///
+    /// With a [`TilePlan`] (when the mesh may hold one, and as long as every tile can be planned)
+    /// a round runs several iterations in one pass over memory: up to the plan's depth in steps,
+    /// and never past a measured iteration (it ends the round, and its displacement is measured in
+    /// the round). The iterations of a round share its time equally in their records; the first
+    /// round also plans the tiles. Without a plan every iteration is one or two plain steps over
+    /// the owned vertices, each followed by the exchange. Both give bit-identical positions.
+    fn jacobi(&mut self, buf: Buffers, first_iteration: usize) -> Result<()> {
+        let Buffers { pos, scratch, .. } = buf;
+        let mesh = self.mesh;
+        let total = self.opts.iterations;
+        let factors: &[f64] = if self.opts.method == Method::Taubin {
+            &[self.opts.lambda, self.opts.mu]
+        } else {
+            &[self.opts.lambda]
+        };
+        let owned = self.share.owned();
+        let fixed = mesh.topo.fixed_mask()[owned.clone()]
+            .iter()
+            .filter(|&&f| f != 0)
+            .count() as u64;
+        let sweep = SweepStats {
+            applied: (owned.len() as u64 - fixed) * factors.len() as u64,
+            skipped_fixed: fixed * factors.len() as u64,
+            ..Default::default()
+        };
+        let mut start = Instant::now();
+        // Planned tile by tile by the first round (see `TilePlan::new`); dropped if a tile cannot be.
+        let mut plan = mesh.tiles.then(|| TilePlan::new(mesh.topo));
+        // Whether the current positions are in `scratch` (else in `pos`).
+        let mut in_scratch = false;
+        let mut first = first_iteration;
+        while first <= total {
+            let per_round = plan
+                .as_ref()
+                .map_or(1, |p| (p.depth() / factors.len()).max(1));
+            let mut last = first;
+            while last < total && last - first + 1 < per_round && !self.when.wanted(last, total) {
+                last += 1;
+            }
+            let measure = self.when.wanted(last, total);
+            let (src, dst): (&mut [DVec3], &mut [DVec3]) = if in_scratch {
+                (&mut *scratch, &mut *pos)
+            } else {
+                (&mut *pos, &mut *scratch)
+            };
+            let moved = match &plan {
+                Some(tiles) => {
+                    let steps: Vec<f64> = (first..=last).flat_map(|_| factors.to_vec()).collect();
+                    let measured = measure.then_some(steps.len() - factors.len());
+                    let Some(st) =
+                        on_pool(&*self.share, || round(tiles, src, dst, &steps, measured))
+                    else {
+                        // A tile could not be planned: the same iterations in plain steps, from
+                        // the untouched `src`.
+                        plan = None;
+                        continue;
+                    };
+                    in_scratch = !in_scratch;
+                    measure.then_some(st)
+                }
+                None => {
+                    let mut moved = self.step(src, dst, &owned, factors[0], Previous::Src);
+                    if let Some(&mu) = factors.get(1) {
+                        // The pair goes `src` → `dst` → `src`: the μ step measures against the
+                        // position it overwrites, the one before the pair.
+                        moved = self.step(dst, src, &owned, mu, Previous::Dst);
+                    } else {
+                        in_scratch = !in_scratch;
+                    }
+                    measure.then_some(moved)
+                }
+            };
+            let seconds = start.elapsed().as_secs_f64() / (last - first + 1) as f64;
+            let current: &[DVec3] = if in_scratch { scratch } else { pos };
+            for it in first..=last {
+                let moved = if it == last { moved } else { None };
+                self.record(it, current, moved, sweep, seconds)?;
+            }
+            first = last + 1;
+            start = Instant::now();
+        }
+        if in_scratch {
+            pos[owned.clone()].copy_from_slice(&scratch[owned]);
+        }
+        Ok(())
+    }
+
+    /// One plain Jacobi step over the owned vertices, measured against `previous`, then exchanged.
+    fn step(
+        &mut self,
+        src: &[DVec3],
+        dst: &mut [DVec3],
+        owned: &Range<usize>,
+        factor: f64,
+        previous: Previous,
+    ) -> StepStats {
+        let topo = self.mesh.topo;
+        let offset = owned.start;
+        let out = &mut dst[owned.clone()];
+        let moved = on_pool(&*self.share, || {
+            reduce::map_fold_mut(
+                out,
+                |at, out| {
+                    laplacian::jacobi_step_measured(topo, src, out, offset + at, factor, previous)
+                },
+                StepStats::default(),
+                StepStats::then,
+            )
+        });
+        self.share.step_end(dst);
+        moved
+    }
+
+    /// Record iteration `it`, which ended at `pos`; `moved` is its displacement when it is
+    /// measured (then the volume and area are measured too), `None` otherwise.
+    fn record(
+        &mut self,
+        it: usize,
+        pos: &[DVec3],
+        moved: Option<StepStats>,
+        stencils: SweepStats,
+        seconds: f64,
+    ) -> Result<()> {
+        let (volume, area) = match moved {
+            Some(_) => volume_area(self.mesh, pos, self.origin, &*self.share),
+            None => (f64::NAN, f64::NAN),
+        };
+        let (max_d, sum_d) = moved.map_or((f64::NAN, f64::NAN), |m| {
+            (m.max_displacement, m.sum_displacement)
+        });
+        let counts = [
+            stencils.applied,
+            stencils.skipped_fixed,
+            stencils.skipped_degenerate,
+            stencils.rejected,
+        ];
+        let mut local = vec![sum_d];
+        local.extend(counts.iter().map(|&c| c as f64));
+        let sums = self.share.sum(&local);
+        let maxima = self.share.max(&[max_d, seconds]);
+        let record = IterationRecord {
+            iteration: it,
+            volume,
+            volume_pct: percent(volume, self.reference.volume),
+            area_pct: percent(area, self.reference.area),
+            max_displacement: maxima[0],
+            mean_displacement: sums[0] / self.movable as f64,
+            stencils: SweepStats {
+                applied: sums[1] as u64,
+                skipped_fixed: sums[2] as u64,
+                skipped_degenerate: sums[3] as u64,
+                rejected: sums[4] as u64,
+            },
+            seconds: maxima[1],
+        };
+        if self.share.leads() {
+            self.observer.iteration(&record, self.opts.iterations);
+        }
+        self.share.iteration_end(&record, pos)?;
+        self.records.push(record);
+        Ok(())
+    }
+}
+
+/// `x` as a percentage of `reference` (100 when the reference is 0, NaN for NaN).
+pub fn percent(x: f64, reference: f64) -> f64 {
+    if x.is_nan() {
+        f64::NAN
+    } else if reference == 0.0 {
+        100.0
+    } else {
+        100.0 * x / reference
+    }
+}
+
+/// The stencil kernel's parameters for `opts`.
+pub fn stencil_params(opts: &Options) -> StencilParams {
+    StencilParams {
+        volume: matches!(opts.method, Method::Vcs | Method::VcsTriangle),
+        reject_energy_increase: opts.reject_energy_increase,
+    }
+}
+
+/// The stencils of `patches` (all of one colour, so they touch disjoint data), in parallel on the
+/// current rayon pool through the shared views, each patch's in ascending order.
+fn sweep_patches(
+    mesh: &Sweep,
+    pos: SharedField,
+    sums: SharedField,
+    patches: &[Patch],
+    method: Method,
+    params: StencilParams,
+) -> SweepStats {
+    let (topo, tris) = (mesh.topo, mesh.tris);
+    patches
+        .par_iter()
+        .map_init(Workspace::default, |ws, patch| {
+            let (mut pv, mut sv) = (pos, sums);
+            if method == Method::VcsTriangle {
+                let faces = patch.triangles.clone();
+                stencil::sweep_triangles(topo, tris, &mut pv, &mut sv, faces, params, ws)
+            } else {
+                let edges = patch.edges(topo);
+                stencil::sweep_edges(topo, tris, &mut pv, &mut sv, edges, params, ws)
+            }
+        })
+        .reduce(SweepStats::default, |mut a, b| {
+            a.add(&b);
+            a
+        })
+}
+
+/// One round of `factors.len()` Jacobi steps from `src` into `dst`, tile by tile in parallel (see
+/// [`TilePlan::run_tile`]); the statistics are summed in tile order, so they do not depend on the
+/// thread count either. `None` when a tile cannot be planned: then `src` is untouched.
+pub fn round(
+    plan: &TilePlan,
+    src: &[DVec3],
+    dst: &mut [DVec3],
+    factors: &[f64],
+    measure: Option<usize>,
+) -> Option<StepStats> {
+    let per_tile: Vec<Option<StepStats>> = dst
+        .par_chunks_mut(plan.tile_size())
+        .enumerate()
+        .map(|(t, out)| plan.run_tile(t, src, out, factors, measure))
+        .collect();
+    per_tile
+        .into_iter()
+        .try_fold(StepStats::default(), |a, b| Some(a.then(b?)))
+}

@@ -1,0 +1,204 @@
+//! The plan of a run: the mesh in the engine's vertex order, its topology, its patches and their
+//! colours. Built once, smoothed any number of times (benchmarks, multiresolution levels, the
+//! methods of `demo`), and stored by the cluster engine for its ranks.
+
+use std::time::Instant;
+
+use glam::DVec3;
+
+use crate::error::{Error, Result};
+use crate::mesh::Storage;
+use crate::partition::{self, Patch, Reordered};
+use crate::schedule::{self, Schedule};
+use crate::topology::Topology;
+
+/// How a plan orders and cuts the mesh. Part of the result's definition: the stencil methods
+/// apply their stencils colour by colour, patch by patch, so two layouts give different (equally
+/// valid) results; the same layout gives bit-identical results for any thread count and storage.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Layout {
+    /// Vertices sorted along the Morton curve and cut into patches of this many vertices (what
+    /// `smooth` and every file run use; see [`crate::partition`]).
+    Patches(usize),
+    /// The input's own order as one patch: stencils in ascending `(i, j)` (edges) or in the
+    /// input's triangle order (triangle stencils), the order of the sequential reference.
+    Whole,
+}
+
+/// Default vertices per patch: small enough that a 1M-triangle mesh has dozens of patches to
+/// share among threads, large enough that the per-patch scheduling cost is negligible.
+pub const DEFAULT_PATCH_SIZE: usize = 16_384;
+
+impl Default for Layout {
+    fn default() -> Self {
+        Layout::Patches(DEFAULT_PATCH_SIZE)
+    }
+}
+
+/// A mesh prepared for smoothing (see the module doc).
+#[derive(Debug)]
+pub struct Plan {
+    /// Positions and triangles in the plan's vertex order, with the permutation back.
+    pub reordered: Reordered,
+    pub topology: Topology,
+    pub patches: Vec<Patch>,
+    pub schedule: Schedule,
+    /// Seconds spent in each preparation phase.
+    pub timings: PrepTimings,
+}
+
+/// Seconds spent preparing.
+#[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+pub struct PrepTimings {
+    pub reorder: f64,
+    pub topology: f64,
+    pub partition: f64,
+}
+
+/// The patch decomposition of a run, for reports.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct PlanStats {
+    pub patch_size: usize,
+    pub patches: usize,
+    pub colours: usize,
+    /// Vertices outside a patch's own range that its stencils read: smallest, mean, largest.
+    pub halo_min: u32,
+    pub halo_mean: f64,
+    pub halo_max: u32,
+    /// Edge stencils whose two vertices lie in different patches (each applied once, by the
+    /// patch of its smaller vertex).
+    pub crossing_edge_stencils: u64,
+    pub threads: usize,
+}
+
+impl Plan {
+    /// Order, build the topology, cut and colour the patches as `layout` says, placing the large
+    /// arrays as `storage` says. Runs on the current rayon pool (the result does not depend on it).
+    pub fn new(
+        storage: &Storage,
+        positions: &[DVec3],
+        triangles: &[[u32; 3]],
+        layout: Layout,
+    ) -> Result<Plan> {
+        let t = Instant::now();
+        let reordered = match layout {
+            Layout::Patches(0) => {
+                return Err(Error::Parameter {
+                    name: "patch_size",
+                    problem: "must be at least 1".into(),
+                });
+            }
+            Layout::Patches(_) => partition::reorder(storage, positions, triangles)?,
+            Layout::Whole => Reordered {
+                order: {
+                    let mut order = storage.zeroed::<u32>(positions.len())?;
+                    order.iter_mut().zip(0..).for_each(|(o, v)| *o = v);
+                    order
+                },
+                positions: storage.copy_of(positions)?,
+                triangles: storage.copy_of(triangles)?,
+            },
+        };
+        let reorder = t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        let topology = Topology::build_in(storage, positions.len(), &reordered.triangles)?;
+        let topology_s = t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        let (patches, schedule) = match layout {
+            Layout::Patches(size) => {
+                let patches = partition::patches(positions.len(), &reordered.triangles, size);
+                let schedule = schedule::schedule(&topology, &patches);
+                (patches, schedule)
+            }
+            Layout::Whole => (
+                vec![Patch {
+                    vertices: 0..positions.len() as u32,
+                    triangles: 0..triangles.len() as u32,
+                }],
+                Schedule {
+                    colours: vec![vec![0]],
+                    halo: vec![0],
+                },
+            ),
+        };
+        Ok(Plan {
+            reordered,
+            topology,
+            patches,
+            schedule,
+            timings: PrepTimings {
+                reorder,
+                topology: topology_s,
+                partition: t.elapsed().as_secs_f64(),
+            },
+        })
+    }
+
+    /// Vertices of the mesh.
+    pub fn len(&self) -> usize {
+        self.reordered.positions.len()
+    }
+
+    /// Whether the mesh has no vertices.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Copy the plan's (smoothed) positions into `out` in the input's vertex order.
+    pub fn positions_in_input_order(&self, out: &mut [DVec3]) {
+        for (new, &old) in self.reordered.order.iter().enumerate() {
+            out[old as usize] = self.reordered.positions[new];
+        }
+    }
+
+    /// Set the plan's positions from `input`, given in the input's vertex order (to smooth the
+    /// same mesh again from its start).
+    pub fn set_positions_from_input(&mut self, input: &[DVec3]) {
+        let Reordered {
+            order, positions, ..
+        } = &mut self.reordered;
+        for (new, &old) in order.iter().enumerate() {
+            positions[new] = input[old as usize];
+        }
+    }
+
+    /// Statistics of the current positions; every figure is order-independent.
+    pub fn info(&self, source: &crate::io::Source) -> crate::metrics::MeshInfo {
+        crate::metrics::info_of(
+            &self.reordered.positions,
+            &self.reordered.triangles,
+            source,
+            &self.topology,
+        )
+    }
+
+    /// The decomposition's figures for reports.
+    pub fn stats(&self) -> PlanStats {
+        PlanStats::new(
+            self.patches.first().map_or(0, |p| p.vertices.len()),
+            self.schedule.colours.len(),
+            &self.schedule.halo,
+            self.patches
+                .iter()
+                .map(|p| p.crossing_edges(&self.topology))
+                .sum(),
+        )
+    }
+}
+
+impl PlanStats {
+    /// The figures of a plan of `halo.len()` patches (one halo count each), on the current pool.
+    pub fn new(patch_size: usize, colours: usize, halo: &[u32], crossing: u64) -> PlanStats {
+        PlanStats {
+            patch_size,
+            patches: halo.len(),
+            colours,
+            halo_min: halo.iter().copied().min().unwrap_or(0),
+            halo_mean: halo.iter().map(|&h| h as f64).sum::<f64>() / halo.len().max(1) as f64,
+            halo_max: halo.iter().copied().max().unwrap_or(0),
+            crossing_edge_stencils: crossing,
+            threads: rayon::current_num_threads(),
+        }
+    }
+}

@@ -1,0 +1,318 @@
+//! A run from file to file: read, plan, smooth, write, with the figures of every phase.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use super::memory::{self, PeakSampler};
+use super::observer::{IterationRecord, Observer, Statistics};
+use super::plan::{DEFAULT_PATCH_SIZE, Layout, Plan, PlanStats, PrepTimings};
+use crate::error::{Error, Result};
+use crate::io;
+use crate::mesh::{Buf, Mesh, Storage};
+use crate::metrics::MeshInfo;
+use crate::smooth::Options;
+
+/// How the engine runs: threads, patches, memory, statistics. Only `patch_size` is part of the
+/// result's definition: outputs are identical for any thread count and memory budget for the
+/// same patch size.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+pub struct EngineSettings {
+    /// Worker threads; `None`: all cores.
+    pub threads: Option<usize>,
+    /// Vertices per patch. Default [`DEFAULT_PATCH_SIZE`].
+    pub patch_size: usize,
+    /// Anonymous memory allowed; `None`: three quarters of the available memory.
+    pub memory_budget: Option<u64>,
+    /// Where scratch files go when the mesh does not fit the budget; `None`: beside the output.
+    pub scratch: Option<PathBuf>,
+    /// Measure input and output statistics (for a report).
+    pub with_stats: bool,
+    /// Which iterations measure volume, area and displacement. Default: every one.
+    pub statistics: Statistics,
+}
+
+impl Default for EngineSettings {
+    fn default() -> Self {
+        EngineSettings {
+            threads: None,
+            patch_size: DEFAULT_PATCH_SIZE,
+            memory_budget: None,
+            scratch: None,
+            with_stats: false,
+            statistics: Statistics::Every,
+        }
+    }
+}
+
+impl EngineSettings {
+    /// The memory budget: as given (checked), or the default (see [`memory::default_budget`]).
+    pub fn budget(&self) -> Result<u64> {
+        match self.memory_budget {
+            Some(b) => {
+                memory::check_budget(b)?;
+                Ok(b)
+            }
+            None => Ok(memory::default_budget()),
+        }
+    }
+
+    /// The plan layout these settings ask for.
+    pub fn layout(&self) -> Layout {
+        Layout::Patches(self.patch_size)
+    }
+}
+
+/// What a run did: the records of its iterations and the figures of its phases.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Report {
+    #[serde(skip)]
+    pub input_format: Option<io::Format>,
+    pub vertices: usize,
+    pub triangles: usize,
+    pub records: Vec<IterationRecord>,
+    pub input_stats: Option<MeshInfo>,
+    /// Measured on the f64 positions before the output format rounds them.
+    pub output_stats: Option<MeshInfo>,
+    pub plan: PlanStats,
+    pub memory: MemoryStats,
+    pub timings: PhaseTimings,
+    /// Ranks, halo traffic and checkpoints of a cluster run ([`crate::cluster`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cluster: Option<crate::cluster::ClusterStats>,
+}
+
+/// Memory and I/O of a run.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct MemoryStats {
+    pub budget: u64,
+    /// "heap" when the mesh fits the budget, else "scratch" (memory-mapped files); "cluster" for
+    /// the ranks of the cluster engine.
+    pub storage: &'static str,
+    pub scratch_bytes: u64,
+    /// Peak anonymous resident memory (RssAnon), file-backed pages excluded; 0 if unknown.
+    pub peak_anon: u64,
+    pub bytes_read: u64,
+    pub bytes_written: u64,
+}
+
+/// Seconds per phase.
+#[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+pub struct PhaseTimings {
+    pub ingest: f64,
+    pub reorder: f64,
+    pub topology: f64,
+    pub partition: f64,
+    pub smoothing: f64,
+    pub write: f64,
+    pub metrics: f64,
+    pub total: f64,
+}
+
+impl PhaseTimings {
+    /// Take the reorder, topology and partition seconds of a preparation.
+    pub fn add_preparation(&mut self, p: &PrepTimings) {
+        self.reorder += p.reorder;
+        self.topology += p.topology;
+        self.partition += p.partition;
+    }
+}
+
+/// Read `input`, smooth it patch-parallel with `opts`, write `output` (atomically, in the input's
+/// vertex order and layout).
+pub fn run_file(
+    input: &Path,
+    output: &Path,
+    opts: &Options,
+    engine: &EngineSettings,
+    observer: &mut dyn Observer,
+) -> Result<Report> {
+    run_file_with(
+        input,
+        output,
+        opts,
+        engine,
+        observer,
+        |plan, storage, obs| plan.smooth(storage, opts, engine.statistics, obs),
+    )
+}
+
+/// [`run_file`] with the smoothing step given: `smooth(plan, storage, observer)` moves the plan's
+/// positions and returns the iteration records (the multiresolution mode's levels plug in here).
+pub(crate) fn run_file_with(
+    input: &Path,
+    output: &Path,
+    opts: &Options,
+    engine: &EngineSettings,
+    observer: &mut dyn Observer,
+    smooth: impl FnOnce(&mut Plan, &Storage, &mut dyn Observer) -> Result<Vec<IterationRecord>> + Send,
+) -> Result<Report> {
+    opts.check()?;
+    let start = Instant::now();
+    let sampler = PeakSampler::start(std::time::Duration::from_millis(20));
+    let budget = engine.budget()?;
+    let pool = super::thread_pool(engine.threads)?;
+    let mut t = PhaseTimings::default();
+
+    let bytes_read = std::fs::metadata(input)
+        .map_err(|e| Error::io(input, e))?
+        .len();
+    let storage = storage_for(input, output, engine, budget)?;
+
+    let clock = Instant::now();
+    let mut mesh = io::read_mesh_in(input, &storage)?;
+    t.ingest = clock.elapsed().as_secs_f64();
+    check_in_memory_budget(input, &storage, &mesh, budget)?;
+
+    let run = pool.install(|| -> Result<_> {
+        let mut plan = Plan::new(&storage, &mesh.positions, &mesh.triangles, engine.layout())
+            .map_err(|e| e.in_file(input))?;
+        t.add_preparation(&plan.timings);
+        // The plan holds its own (reordered) copy: the input-order positions are not needed until
+        // the write, so their memory is given back while smoothing (the peak of an in-core run).
+        let n = mesh.positions.len();
+        mesh.positions = Buf::default();
+        let clock = Instant::now();
+        let input_stats = engine.with_stats.then(|| plan.info(&mesh.source));
+        t.metrics += clock.elapsed().as_secs_f64();
+
+        let clock = Instant::now();
+        let records = smooth(&mut plan, &storage, observer)?;
+        t.smoothing = clock.elapsed().as_secs_f64();
+
+        let clock = Instant::now();
+        let output_stats = engine.with_stats.then(|| plan.info(&mesh.source));
+        t.metrics += clock.elapsed().as_secs_f64();
+        mesh.positions = storage.zeroed(n)?;
+        plan.positions_in_input_order(&mut mesh.positions);
+        Ok((records, input_stats, output_stats, plan.stats()))
+    })?;
+    let (records, input_stats, output_stats, mut plan) = run;
+    plan.threads = pool.current_num_threads();
+
+    let clock = Instant::now();
+    io::write_mesh(output, &mesh)?;
+    t.write = clock.elapsed().as_secs_f64();
+    t.total = start.elapsed().as_secs_f64();
+    let memory = MemoryStats {
+        budget,
+        storage: if storage.is_mapped() {
+            "scratch"
+        } else {
+            "heap"
+        },
+        scratch_bytes: storage.mapped_bytes(),
+        peak_anon: sampler.peak(),
+        bytes_read,
+        bytes_written: std::fs::metadata(output).map(|m| m.len()).unwrap_or(0),
+    };
+    Ok(Report {
+        input_format: mesh.source.format,
+        vertices: mesh.positions.len(),
+        triangles: mesh.triangles.len(),
+        records,
+        input_stats,
+        output_stats,
+        plan,
+        memory,
+        timings: t,
+        cluster: None,
+    })
+}
+
+/// Smooth an in-memory `mesh` in place (see [`crate::smooth`], the crate's front door).
+pub(crate) fn run_mesh(
+    mesh: &mut Mesh,
+    opts: &Options,
+    engine: &EngineSettings,
+    layout: Layout,
+    observer: &mut dyn Observer,
+) -> Result<Report> {
+    opts.check()?;
+    let start = Instant::now();
+    let pool = super::thread_pool(engine.threads)?;
+    let storage = Storage::heap();
+    let mut t = PhaseTimings::default();
+    let (records, input_stats, output_stats, mut plan) = pool.install(|| -> Result<_> {
+        let mut plan = Plan::new(&storage, &mesh.positions, &mesh.triangles, layout)?;
+        t.add_preparation(&plan.timings);
+        let clock = Instant::now();
+        let input_stats = engine.with_stats.then(|| plan.info(&mesh.source));
+        t.metrics += clock.elapsed().as_secs_f64();
+        let clock = Instant::now();
+        let records = plan.smooth(&storage, opts, engine.statistics, observer)?;
+        t.smoothing = clock.elapsed().as_secs_f64();
+        let clock = Instant::now();
+        let output_stats = engine.with_stats.then(|| plan.info(&mesh.source));
+        t.metrics += clock.elapsed().as_secs_f64();
+        plan.positions_in_input_order(&mut mesh.positions);
+        Ok((records, input_stats, output_stats, plan.stats()))
+    })?;
+    plan.threads = pool.current_num_threads();
+    t.total = start.elapsed().as_secs_f64();
+    Ok(Report {
+        input_format: mesh.source.format,
+        vertices: mesh.positions.len(),
+        triangles: mesh.triangles.len(),
+        records,
+        input_stats,
+        output_stats,
+        plan,
+        memory: MemoryStats {
+            storage: "heap",
+            ..MemoryStats::default()
+        },
+        timings: t,
+        cluster: None,
+    })
+}
+
+/// Heap or scratch, decided before reading from the file size by the memory model
+/// ([`memory::in_core_bytes_of_file`]).
+pub(crate) fn storage_for(
+    input: &Path,
+    output: &Path,
+    engine: &EngineSettings,
+    budget: u64,
+) -> Result<Storage> {
+    let size = std::fs::metadata(input)
+        .map_err(|e| Error::io(input, e))?
+        .len();
+    if memory::in_core_bytes_of_file(size) <= budget {
+        return Ok(Storage::heap());
+    }
+    let dir = match &engine.scratch {
+        Some(d) => d.clone(),
+        None => scratch_beside(output),
+    };
+    Storage::scratch(&dir)
+}
+
+/// Only binary PLY decodes straight into scratch; other formats land on the heap. Refuse to go on
+/// rather than silently exceed the budget.
+pub(crate) fn check_in_memory_budget(
+    input: &Path,
+    storage: &Storage,
+    mesh: &Mesh,
+    budget: u64,
+) -> Result<()> {
+    let heap = (mesh.positions.len() * 24 + mesh.triangles.len() * 12) as u64;
+    if storage.is_mapped() && !mesh.positions.is_mapped() && heap > budget {
+        return Err(Error::Resource {
+            what: format!(
+                "{}: this format is read into memory ({}), more than the memory budget of {}; convert it to binary PLY on a larger machine, or raise the budget",
+                input.display(),
+                memory::format_size(heap),
+                memory::format_size(budget)
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// The directory of `output` (the current directory for a bare file name).
+fn scratch_beside(output: &Path) -> PathBuf {
+    match output.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    }
+}
