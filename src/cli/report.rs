@@ -105,7 +105,7 @@ pub struct SmoothReport {
     pub timings: crate::engine::PhaseTimings,
     /// Ranks, halo traffic and checkpoints, for runs of the cluster engine.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub cluster: Option<crate::cluster::ClusterStats>,
+    pub cluster: Option<crate::engine::ClusterStats>,
     pub summary: Summary,
     /// One row per iteration (with `--multires`: of the input level).
     pub iterations: Vec<IterationRecord>,

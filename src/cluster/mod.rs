@@ -42,8 +42,8 @@ use store::{Plan, PlanKey, StateDoc, WorkDir};
 use crate::engine::iterate::{Buffers, Reference, Share, Sweep, iterate};
 use crate::engine::memory as resources;
 use crate::engine::{
-    self, EngineSettings, IterationRecord, Layout, MemoryStats, Observer, PhaseTimings, PlanStats,
-    Report, Statistics,
+    self, ClusterStats, EngineSettings, IterationRecord, Layout, MemoryStats, Observer, PhaseTimings,
+    PlanStats, Report, Statistics,
 };
 use crate::error::{Error, Result};
 use crate::mesh::Buf;
@@ -62,26 +62,6 @@ pub struct ClusterSettings {
     pub keep: bool,
     /// Write positions every this many iterations (the last iteration is always written).
     pub checkpoint_every: usize,
-}
-
-/// What a cluster run adds to a [`FileRun`].
-#[derive(Debug, Clone, Default, serde::Serialize)]
-pub struct ClusterStats {
-    pub ranks: usize,
-    /// Iterations found completed in the checkpoint when this run started.
-    pub resumed_after: usize,
-    pub checkpoint_every: usize,
-    pub owned_vertices_min: u64,
-    pub owned_vertices_max: u64,
-    /// Vertices a rank holds (owned and its three rings), largest over the ranks.
-    pub region_vertices_max: u64,
-    /// Vertex values sent per iteration, all ranks together, and the largest share of one rank.
-    pub halo_values_per_iteration: u64,
-    pub halo_bytes_per_iteration_max: u64,
-    /// Largest peak anonymous memory of a rank over the whole run (rank 0's includes preparing
-    /// the plan), and while smoothing only.
-    pub peak_anon_max: u64,
-    pub smoothing_peak_anon_max: u64,
 }
 
 /// Smooth `input` into `output` with the ranks of `comm` (see the module doc). Every rank calls

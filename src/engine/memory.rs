@@ -47,56 +47,7 @@ pub fn job_bytes_of_file(size: u64) -> u64 {
     in_core_bytes_of_file(size).saturating_add(BASE_BYTES)
 }
 
-/// Parse a size such as `1G`, `512M`, `64K`, `1.5G` or `123456` (bytes); binary units.
-pub fn parse_size(s: &str) -> std::result::Result<u64, String> {
-    let t = s.trim();
-    let (num, mult) = match t.char_indices().last() {
-        Some((i, c)) if c.is_ascii_alphabetic() => {
-            let m = match c.to_ascii_uppercase() {
-                'K' => 1u64 << 10,
-                'M' => 1 << 20,
-                'G' => 1 << 30,
-                'T' => 1 << 40,
-                'B' => 1,
-                _ => {
-                    return Err(format!(
-                        "'{s}': unknown size suffix '{c}' (use K, M, G or T)"
-                    ));
-                }
-            };
-            (&t[..i], m)
-        }
-        _ => (t, 1),
-    };
-    let x: f64 = num
-        .trim()
-        .parse()
-        .map_err(|_| format!("'{s}' is not a size (e.g. 512M, 1G)"))?;
-    if !x.is_finite() || x < 0.0 {
-        return Err(format!("'{s}' is not a size (e.g. 512M, 1G)"));
-    }
-    let bytes = x * mult as f64;
-    if bytes >= u64::MAX as f64 {
-        return Err(format!("'{s}' is too large"));
-    }
-    Ok(bytes as u64)
-}
-
-/// Format a byte count with a binary unit, e.g. `1.50 GiB`.
-pub fn format_size(bytes: u64) -> String {
-    const UNITS: [&str; 5] = ["B", "KiB", "MiB", "GiB", "TiB"];
-    let mut x = bytes as f64;
-    let mut u = 0;
-    while x >= 1024.0 && u < UNITS.len() - 1 {
-        x /= 1024.0;
-        u += 1;
-    }
-    if u == 0 {
-        format!("{bytes} B")
-    } else {
-        format!("{x:.2} {}", UNITS[u])
-    }
-}
+pub use crate::mesh::storage::{format_size, parse_size};
 
 fn read_kib(file: &str, key: &str) -> Option<u64> {
     let text = std::fs::read_to_string(file).ok()?;

@@ -23,7 +23,7 @@ use glam::DVec3;
 pub use iterate::Reference;
 pub use observer::{IterationRecord, Observer, Quiet, Statistics};
 pub use plan::{DEFAULT_PATCH_SIZE, Layout, Plan, PlanStats, PrepTimings};
-pub use run::{EngineSettings, MemoryStats, PhaseTimings, Report, run_file};
+pub use run::{ClusterStats, EngineSettings, MemoryStats, PhaseTimings, Report, run_file};
 pub(crate) use run::{check_in_memory_budget, run_file_with, storage_for};
 
 use crate::error::{Error, Result};

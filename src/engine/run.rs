@@ -78,7 +78,27 @@ pub struct Report {
     pub timings: PhaseTimings,
     /// Ranks, halo traffic and checkpoints of a cluster run ([`crate::cluster`]).
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub cluster: Option<crate::cluster::ClusterStats>,
+    pub cluster: Option<ClusterStats>,
+}
+
+/// What a run of the cluster engine ([`crate::cluster`]) adds to its [`Report`].
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct ClusterStats {
+    pub ranks: usize,
+    /// Iterations found completed in the checkpoint when this run started.
+    pub resumed_after: usize,
+    pub checkpoint_every: usize,
+    pub owned_vertices_min: u64,
+    pub owned_vertices_max: u64,
+    /// Vertices a rank holds (owned and its three rings), largest over the ranks.
+    pub region_vertices_max: u64,
+    /// Vertex values sent per iteration, all ranks together, and the largest share of one rank.
+    pub halo_values_per_iteration: u64,
+    pub halo_bytes_per_iteration_max: u64,
+    /// Largest peak anonymous memory of a rank over the whole run (rank 0's includes preparing
+    /// the plan), and while smoothing only.
+    pub peak_anon_max: u64,
+    pub smoothing_peak_anon_max: u64,
 }
 
 /// Memory and I/O of a run.
