@@ -158,7 +158,7 @@ fn corpus_through_the_binary() {
     );
 }
 
-/// `VCSMOOTH_DUMP_CORPUS=DIR cargo test --test hostile dump_corpus` writes the corpus files to DIR
+/// `VCSMOOTH_DUMP_CORPUS=DIR cargo test --test tests dump_corpus` writes the corpus files to DIR
 /// (e.g. to seed the fuzzers); without the variable it does nothing.
 #[test]
 fn dump_corpus() {

@@ -1,6 +1,6 @@
 //! The hostile-input corpus, generated: every malformed or tricky file the readers must handle,
 //! with what each must produce. `tests/hostile.rs` runs every case through the `vcsmooth` binary;
-//! `VCSMOOTH_DUMP_CORPUS=DIR cargo test --test hostile dump_corpus` writes the files to DIR (the
+//! `VCSMOOTH_DUMP_CORPUS=DIR cargo test --test tests dump_corpus` writes the files to DIR (the
 //! fuzzers' seed corpora are made that way, see `fuzz/README.md`).
 //!
 //! An error case gives the message after `vcsmooth: error: <path>: `, exactly: it names the
