@@ -2,41 +2,11 @@
 //! volume preservation, fixed boundaries, orientation, rigid-motion invariance, determinism, and the
 //! paper's sphere experiment.
 
-use std::path::{Path, PathBuf};
-
 use glam::{DMat3, DVec3};
 use vcsmooth::driver::{self, IterationRecord, Quiet};
 use vcsmooth::{Mesh, Method, Options, Topology, generate, io, metrics};
 
-fn shared_meshes() -> Vec<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data");
-    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
-        .unwrap_or_else(|e| {
-            panic!(
-                "{}: {e} (the tests need ../shared beside the checkout)",
-                dir.display()
-            )
-        })
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|x| x == "ply"))
-        .collect();
-    files.sort();
-    assert_eq!(files.len(), 6, "expected the six scans of tests/data");
-    files
-}
-
-fn shared(name: &str) -> Mesh {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(name);
-    io::read_mesh(&path).unwrap()
-}
-
-fn noisy_sphere(k: u32, sigma: f64, seed: u64) -> Mesh {
-    let mut m = generate::icosphere(k);
-    generate::add_normal_noise(&mut m, sigma, seed);
-    m
-}
+use crate::util::{noisy_sphere, read_scan, scans};
 
 fn run(mesh: &mut Mesh, method: Method, iterations: usize) -> Vec<IterationRecord> {
     let opts = Options {
@@ -59,7 +29,7 @@ fn rel(a: f64, b: f64) -> f64 {
 #[test]
 fn vcs_preserves_volume_on_every_scan_in_f64_and_after_float_ply_round_trip() {
     let tmp = tempfile::tempdir().unwrap();
-    for path in shared_meshes() {
+    for path in scans() {
         for method in [Method::Vcs, Method::VcsTriangle] {
             let mut mesh = io::read_mesh(&path).unwrap();
             let origin = metrics::centroid(&mesh.positions);
@@ -173,7 +143,7 @@ fn paper_sphere_experiment_volume_curves_and_roughness() {
 #[test]
 fn open_scans_keep_boundary_vertices_bit_identical() {
     for name in ["stanford-bunny.ply", "demosthenes-17k.ply"] {
-        let input = shared(name);
+        let input = read_scan(name);
         let topo = Topology::build(input.positions.len(), &input.triangles).unwrap();
         assert!(topo.stats.boundary_edges > 0, "{name} should be open");
         for method in Method::ALL {
@@ -200,7 +170,7 @@ fn open_scans_keep_boundary_vertices_bit_identical() {
 
 #[test]
 fn inward_oriented_horse_keeps_its_negative_volume() {
-    let mut horse = shared("horse.ply");
+    let mut horse = read_scan("horse.ply");
     let v0 = metrics::volume(&horse.positions, &horse.triangles);
     assert!(v0 < 0.0);
     let rec = run(&mut horse, Method::Vcs, 5);
@@ -256,7 +226,7 @@ fn output_is_bit_identical_for_any_thread_count() {
 
 #[test]
 fn every_stencil_is_accounted_for_each_iteration() {
-    let mut mesh = shared("stanford-bunny.ply");
+    let mut mesh = read_scan("stanford-bunny.ply");
     let topo = Topology::build(mesh.positions.len(), &mesh.triangles).unwrap();
     let edges = topo.edges().count() as u64;
     for rec in run(&mut mesh, Method::Vcs, 2) {
@@ -265,7 +235,7 @@ fn every_stencil_is_accounted_for_each_iteration() {
             rec.stencils.skipped_fixed > 0 && rec.stencils.applied > rec.stencils.skipped_fixed
         );
     }
-    let mut mesh = shared("kitten-25k.ply");
+    let mut mesh = read_scan("kitten-25k.ply");
     for rec in run(&mut mesh, Method::VcsTriangle, 1) {
         assert_eq!(rec.stencils.considered(), mesh.triangles.len() as u64);
         assert_eq!(rec.stencils.skipped_fixed, 0, "kitten is closed");

@@ -6,22 +6,9 @@ use std::path::Path;
 use glam::DVec3;
 use vcsmooth::driver::{self, Prepared, Quiet};
 use vcsmooth::mesh::Storage;
-use vcsmooth::{Mesh, Method, Options, generate, io, metrics};
+use vcsmooth::{Mesh, Method, Options, metrics};
 
-fn noisy_sphere(k: u32) -> Mesh {
-    let mut m = generate::icosphere(k);
-    generate::add_normal_noise(&mut m, 0.4, 17);
-    m
-}
-
-fn shared(name: &str) -> Mesh {
-    io::read_mesh(
-        &Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("tests/data")
-            .join(name),
-    )
-    .unwrap()
-}
+use crate::util::{noisy_sphere, read_scan};
 
 fn pool(threads: usize) -> rayon::ThreadPool {
     rayon::ThreadPoolBuilder::new()
@@ -50,7 +37,7 @@ fn run(
 
 #[test]
 fn bit_identical_for_any_thread_count_and_any_storage() {
-    let mesh = noisy_sphere(5);
+    let mesh = noisy_sphere(5, 0.4, 17);
     let scratch = tempfile::tempdir().unwrap();
     let mapped = Storage::scratch(scratch.path()).unwrap();
     for method in Method::ALL {
@@ -85,7 +72,7 @@ fn bit_identical_for_any_thread_count_and_any_storage() {
 #[test]
 fn every_stencil_is_applied_once_across_many_small_patches_and_volume_is_kept() {
     for name in ["armadillo-86k.ply", "stanford-bunny.ply"] {
-        let mesh = shared(name);
+        let mesh = read_scan(name);
         let origin = metrics::centroid(&mesh.positions);
         let v0 = metrics::volume_about(&mesh.positions, &mesh.triangles, origin);
         for (method, per_iteration) in [
@@ -136,7 +123,7 @@ fn every_stencil_is_applied_once_across_many_small_patches_and_volume_is_kept() 
 
 #[test]
 fn one_patch_equals_the_whole_mesh_engine_on_the_reordered_mesh() {
-    let mesh = noisy_sphere(3);
+    let mesh = noisy_sphere(3, 0.4, 17);
     for method in Method::ALL {
         let opts = Options {
             method,
@@ -161,7 +148,7 @@ fn one_patch_equals_the_whole_mesh_engine_on_the_reordered_mesh() {
 #[test]
 fn patched_laplacian_matches_the_whole_mesh_engine() {
     // Jacobi methods do not depend on order: only the neighbour summation order may differ.
-    let mesh = noisy_sphere(4);
+    let mesh = noisy_sphere(4, 0.4, 17);
     for method in [Method::Laplacian, Method::Taubin] {
         let opts = Options {
             method,
@@ -238,7 +225,7 @@ fn multi_iteration_rounds_equal_plain_steps() {
     // Jacobi methods run tile by tile, several steps per round; in scratch storage one plain step
     // at a time. Both must give the same bits, with statistics every iteration (one iteration per
     // round) or only at the end (rounds of up to 8 steps, the last one short).
-    let mesh = shared("stanford-bunny.ply");
+    let mesh = read_scan("stanford-bunny.ply");
     let scratch = tempfile::tempdir().unwrap();
     let mapped = Storage::scratch(scratch.path()).unwrap();
     for (method, iterations) in [(Method::Laplacian, 11), (Method::Taubin, 9)] {

@@ -3,7 +3,6 @@
 //! input's triangles, open meshes keep their boundary, and the smoothing rounds keep the volume.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 use glam::DVec3;
 use vcsmooth::driver::Quiet;
@@ -11,9 +10,7 @@ use vcsmooth::refine::{self, RefineOptions};
 use vcsmooth::topology::Topology;
 use vcsmooth::{Mesh, generate, io, metrics};
 
-fn meshes_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data")
-}
+use crate::util::{generate_sphere, noisy_sphere, ok, read_scan, vcsmooth};
 
 fn bbox_diagonal(pos: &[DVec3]) -> f64 {
     let lo = pos.iter().fold(DVec3::splat(f64::MAX), |a, &p| a.min(p));
@@ -172,7 +169,7 @@ fn torus_closed_manifold_on_surface() {
 
 #[test]
 fn real_scan_closed_manifold_on_surface() {
-    let input = io::read_mesh(&meshes_dir().join("fertility-9k.ply")).unwrap();
+    let input = read_scan("fertility-9k.ply");
     let delta = bbox_diagonal(&input.positions) / 100.0;
     let (out, s) = subdivide_closed(&input, delta);
     eprintln!(
@@ -255,8 +252,7 @@ fn open_mesh_keeps_its_boundary() {
 
 #[test]
 fn refine_rounds_preserve_volume() {
-    let mut noisy = generate::icosphere(1);
-    generate::add_normal_noise(&mut noisy, 0.3, 3);
+    let noisy = noisy_sphere(1, 0.3, 3);
     for (input, delta) in [(generate::icosphere(0), 0.3), (noisy, 0.15)] {
         let mut mesh = input.clone();
         let opts = RefineOptions {
@@ -302,29 +298,9 @@ fn refine_rounds_preserve_volume() {
 
 // ---- the binary ----
 
-fn vcsmooth<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_vcsmooth"))
-        .args(args)
-        .output()
-        .expect("run vcsmooth")
-}
-
-fn ok(o: Output) -> String {
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
 fn sphere_file(dir: &Path) -> PathBuf {
     let path = dir.join("sphere.ply");
-    ok(vcsmooth(&[
-        "generate".as_ref(),
-        "sphere".as_ref(),
-        path.as_os_str(),
-        "--subdivisions".as_ref(),
-        "1".as_ref(),
-        "--noise".as_ref(),
-        "0.2".as_ref(),
-    ]));
+    generate_sphere(&path, 1, Some(0.2), None);
     path
 }
 
@@ -337,7 +313,7 @@ fn cli_subdivide_and_refine() {
     let delta = 0.2;
 
     let sub = dir.path().join("sub.ply");
-    let text = ok(vcsmooth(&[
+    let text = ok(vcsmooth([
         "subdivide".as_ref(),
         input.as_os_str(),
         sub.as_os_str(),
@@ -356,7 +332,7 @@ fn cli_subdivide_and_refine() {
     assert!(((v - v_in) / v_in).abs() <= 1e-6);
 
     let out = dir.path().join("refined.obj");
-    let text = ok(vcsmooth(&[
+    let text = ok(vcsmooth([
         "refine".as_ref(),
         input.as_os_str(),
         out.as_os_str(),
