@@ -1,4 +1,4 @@
-//! The plan's phases, each on the output of the one before, as `engine::Prepared::new` runs them:
+//! The plan's phases, each on the output of the one before, as `engine::Plan::new` runs them:
 //! Morton reorder, topology (CSR adjacency, fixed mask), partition (patches) + schedule (conflict
 //! graph colouring). On the armadillo scan, a 1.3M-triangle icosphere and a 4.2M-triangle torus;
 //! throughput in triangles, on all cores.

@@ -15,7 +15,7 @@ mod common;
 use std::time::Duration;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use vcsmooth::engine::{DEFAULT_PATCH_SIZE, Prepared, Quiet};
+use vcsmooth::engine::{DEFAULT_PATCH_SIZE, Layout, Plan, Quiet, Statistics};
 use vcsmooth::mesh::Storage;
 use vcsmooth::{Method, Options};
 
@@ -23,11 +23,11 @@ fn smooth(c: &mut Criterion) {
     let storage = Storage::heap();
     for named in common::all_meshes() {
         let mesh = &named.mesh;
-        let mut prep = Prepared::new(
+        let mut prep = Plan::new(
             &storage,
             &mesh.positions,
             &mesh.triangles,
-            DEFAULT_PATCH_SIZE,
+            Layout::Patches(DEFAULT_PATCH_SIZE),
         )
         .expect("prepare");
         let initial = prep.reordered.positions.to_vec();
@@ -48,7 +48,9 @@ fn smooth(c: &mut Criterion) {
                         iterations: iterations as usize,
                         ..Default::default()
                     };
-                    let records = prep.smooth(&storage, &opts, &mut Quiet).expect("smooth");
+                    let records = prep
+                        .smooth(&storage, &opts, Statistics::Every, &mut Quiet)
+                        .expect("smooth");
                     Duration::from_secs_f64(records.iter().map(|r| r.seconds).sum())
                 })
             });

@@ -5,7 +5,7 @@
 set -eu
 cargo build -q --bin vcsmooth
 dump=$(mktemp -d)
-VCSMOOTH_DUMP_CORPUS="$dump" cargo test -q --test hostile dump_corpus >/dev/null
+VCSMOOTH_DUMP_CORPUS="$dump" cargo test -q --test tests dump_corpus >/dev/null
 for t in ply obj off stl; do
     mkdir -p "fuzz/corpus/$t"
     cp "$dump"/*."$t" "fuzz/corpus/$t/" 2>/dev/null || true

@@ -1,13 +1,34 @@
 //! # vcsmooth
 //!
-//! Volume-constrained smoothing of very large triangle meshes, after Liu, Tang, Lu, Wang and Zheng,
-//! "A novel volume constrained smoothing method for meshes", Graphical Models 64 (2002).
+//! Smooths triangle meshes — 3D scans of millions to billions of triangles — without shrinking
+//! them: the volume-constrained stencil smoothing of Liu, Tang, Lu, Wang and Zheng, "A novel
+//! volume constrained smoothing method for meshes", Graphical Models 64 (2002), plus Laplacian,
+//! Taubin and local energy minimisation for comparison.
 //!
-//! Data flows one way: [`io`] reads a [`mesh::Mesh`] → [`topology::Topology`] builds CSR adjacency and
-//! the fixed-vertex mask → [`smooth`] kernels move positions (pure functions over slices) →
-//! [`io`] writes atomically → [`metrics`] report volume, area and per-iteration statistics.
-//! [`driver`] is the one place that wires them together; [`cluster`] spreads the same patches over
-//! MPI ranks, with checkpoints.
+//! The front door is [`smooth`]: a [`Mesh`] and [`Options`] (method, iterations, step sizes) in,
+//! the smoothed mesh and a [`Report`] out. [`engine::run_file`] does the same from file to file
+//! for meshes larger than memory.
+//!
+//! ## The pipeline, module by module
+//! Data flows one way; each module uses only those listed before it.
+//! - [`error`]: the [`Error`] kinds (invalid input, topology, parameter, I/O, resource).
+//! - [`mesh`]: [`Mesh`] (positions and triangles in flat arrays, on the heap or in memory-mapped
+//!   scratch files) and what a file carried besides them.
+//! - [`topology`]: CSR adjacency, boundary and non-manifold masks ([`Topology`]).
+//! - [`io`]: PLY (memory-mapped fast path), OBJ, OFF, STL; atomic writes. Knows nothing of smoothing.
+//! - [`metrics`]: volume, area, roughness, comparisons (sequential, pure).
+//! - [`shapes`]: generated test meshes (icosphere, torus, subdivision, noise along normals).
+//! - [`partition`]: Morton reorder and patches; [`schedule`]: patch colouring and read-ahead.
+//! - [`smooth`]: the kernels, pure functions over slices that run no threads and touch no files.
+//! - [`engine`]: the plan, the one iteration loop, deterministic parallel sums, the run from file
+//!   to file, the memory model.
+//! - [`multires`]: coarse levels smoothed with `vcs`, the fine level with Laplacian or Taubin.
+//! - [`cluster`]: the same loop over MPI ranks, with checkpoints.
+//! - [`modes`]: `batch` (job arrays), `bench` (throughput), `refine` (subdivide and smooth).
+//! - [`cli`]: the `vcsmooth` command line: flags → config → run → output.
+//!
+//! Results are part of the contract: for given inputs and options the output is bit-identical for
+//! any thread count and memory budget (the golden test in `tests/golden.rs` holds it).
 
 pub mod cli;
 pub mod cluster;
@@ -20,10 +41,13 @@ pub mod modes;
 pub mod multires;
 pub mod partition;
 pub mod schedule;
+
 pub mod smooth;
 pub mod topology;
 
+pub use engine::{EngineSettings, Report, smooth, smooth_with};
 pub use error::{Error, Result};
 pub use mesh::Mesh;
+pub use mesh::shapes;
 pub use smooth::{Method, Options};
 pub use topology::Topology;

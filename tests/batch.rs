@@ -7,35 +7,9 @@ use std::process::{Command, Output};
 
 use serde_json::Value;
 
+use crate::util::{command, generate_sphere, ok, read_json, vcsmooth};
+
 const MESHES: usize = 8;
-
-fn vcsmooth<I, S>(args: I) -> Output
-where
-    I: IntoIterator<Item = S>,
-    S: AsRef<std::ffi::OsStr>,
-{
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_vcsmooth"));
-    // Tests must not pick up the task of a Slurm job they happen to run in.
-    for v in [
-        "SLURM_ARRAY_TASK_ID",
-        "SLURM_ARRAY_TASK_COUNT",
-        "SLURM_ARRAY_TASK_MIN",
-        "SLURM_ARRAY_TASK_MAX",
-    ] {
-        cmd.env_remove(v);
-    }
-    cmd.args(args).output().expect("run vcsmooth")
-}
-
-fn ok(o: Output) -> String {
-    assert!(
-        o.status.success(),
-        "exit {:?}, stderr: {}",
-        o.status.code(),
-        String::from_utf8_lossy(&o.stderr)
-    );
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
 
 /// Generate `MESHES` noisy spheres (levels 2 and 3) in `dir/in`.
 fn meshes(dir: &Path) -> PathBuf {
@@ -43,18 +17,7 @@ fn meshes(dir: &Path) -> PathBuf {
     std::fs::create_dir(&input).unwrap();
     for k in 0..MESHES {
         let path = input.join(format!("m{k}.ply"));
-        let level = (2 + k % 2).to_string();
-        ok(vcsmooth([
-            "generate".as_ref(),
-            "sphere".as_ref(),
-            path.as_os_str(),
-            "--subdivisions".as_ref(),
-            level.as_ref(),
-            "--noise".as_ref(),
-            "0.3".as_ref(),
-            "--seed".as_ref(),
-            k.to_string().as_ref(),
-        ]));
+        generate_sphere(&path, 2 + (k % 2) as u32, Some(0.3), Some(k as u64));
     }
     input
 }
@@ -77,10 +40,6 @@ fn run_task(input: &Path, out: &Path, index: usize, count: usize) -> Output {
 
 fn marker(out: &Path, k: usize) -> PathBuf {
     out.join(".done").join(format!("m{k}.json"))
-}
-
-fn read_json(path: &Path) -> Value {
-    serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap()
 }
 
 fn mtime(path: &Path) -> std::time::SystemTime {
@@ -220,7 +179,7 @@ fn list_files_collisions_and_environment() {
     let list = dir.path().join("list.txt");
     std::fs::write(&list, "# two meshes\nin/m0.ply\n\nin/m1.ply\n").unwrap();
     let out = dir.path().join("out");
-    let o = Command::new(env!("CARGO_BIN_EXE_vcsmooth"))
+    let o = command()
         .args(["batch".as_ref(), list.as_os_str(), out.as_os_str()])
         .args(["--iterations", "1", "--format", "obj"])
         .env("SLURM_ARRAY_TASK_ID", "1")

@@ -1,8 +1,8 @@
 //! `vcsmooth bench` end to end: a tiny run's JSON has every figure, positive and finite.
 
-use std::process::Command;
-
 use serde_json::Value;
+
+use crate::util::{command, vcsmooth};
 
 fn positive(v: &Value, what: &str) -> f64 {
     let x = v
@@ -15,7 +15,7 @@ fn positive(v: &Value, what: &str) -> f64 {
 #[test]
 fn bench_json_has_positive_finite_figures() {
     let dir = tempfile::tempdir().unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_vcsmooth"))
+    let out = command()
         .args(["bench", "--sizes", "1K", "--methods", "vcs,laplacian"])
         .args([
             "--threads",
@@ -100,7 +100,7 @@ fn bench_json_has_positive_finite_figures() {
 #[test]
 fn bench_table_and_usage_errors() {
     let dir = tempfile::tempdir().unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_vcsmooth"))
+    let out = command()
         .args(["bench", "--sizes", "ico1", "--methods", "taubin"])
         .args(["--threads", "1", "--repeats", "1", "--iterations", "1"])
         .arg("--dir")
@@ -128,10 +128,7 @@ fn bench_table_and_usage_errors() {
         &["bench", "--methods", "median"],
         &["bench", "--dir", "/no/such/dir"],
     ] {
-        let out = Command::new(env!("CARGO_BIN_EXE_vcsmooth"))
-            .args(args)
-            .output()
-            .expect("run vcsmooth");
+        let out = vcsmooth(args);
         let err = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
         assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");

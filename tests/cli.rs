@@ -2,66 +2,12 @@
 //! it writes, and the one-line errors (with no output file) on bad input.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 use serde_json::Value;
 
+use crate::util::{fails, generate_sphere, json, listing, ok, read_json, scan, vcsmooth};
+
 const METHODS: [&str; 5] = ["vcs", "vcs-triangle", "lem", "laplacian", "taubin"];
-
-fn vcsmooth<I, S>(args: I) -> Output
-where
-    I: IntoIterator<Item = S>,
-    S: AsRef<std::ffi::OsStr>,
-{
-    Command::new(env!("CARGO_BIN_EXE_vcsmooth"))
-        .args(args)
-        .output()
-        .expect("run vcsmooth")
-}
-
-fn stdout(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-/// Assert success and return stdout.
-fn ok(o: Output) -> String {
-    assert!(
-        o.status.success(),
-        "exit {:?}, stderr: {}",
-        o.status.code(),
-        stderr(&o)
-    );
-    stdout(&o)
-}
-
-/// Assert a failure with exit code `code` and exactly one stderr line `vcsmooth: error: …`
-/// that contains each of `mentions`.
-fn fails(o: &Output, code: i32, mentions: &[&str]) {
-    let err = stderr(o);
-    assert_eq!(o.status.code(), Some(code), "stderr: {err}");
-    let lines: Vec<&str> = err.trim_end().lines().collect();
-    assert_eq!(lines.len(), 1, "not one line: {err:?}");
-    assert!(lines[0].starts_with("vcsmooth: error: "), "{err}");
-    for m in mentions {
-        assert!(lines[0].contains(m), "'{m}' not in: {err}");
-    }
-    assert!(
-        !err.contains("panicked") && !err.contains("RUST_BACKTRACE"),
-        "{err}"
-    );
-}
-
-fn json(text: &str) -> Value {
-    serde_json::from_str(text).unwrap_or_else(|e| panic!("not JSON ({e}): {text}"))
-}
-
-fn read_json(path: &Path) -> Value {
-    json(&std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())))
-}
 
 fn svg_texts(path: &Path) -> Vec<String> {
     let svg = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
@@ -73,38 +19,17 @@ fn svg_texts(path: &Path) -> Vec<String> {
     svg.lines().map(|l| l.trim().to_string()).collect()
 }
 
-/// Files in `dir`, sorted.
-fn listing(dir: &Path) -> Vec<String> {
-    let mut v: Vec<String> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    v.sort();
-    v
-}
-
 /// A noisy 642-vertex sphere (`--subdivisions 3`) in a fresh directory.
-fn noisy_sphere() -> (tempfile::TempDir, PathBuf) {
+fn noisy_sphere_file() -> (tempfile::TempDir, PathBuf) {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("noisy.ply");
-    ok(vcsmooth([
-        "generate".as_ref(),
-        "sphere".as_ref(),
-        path.as_os_str(),
-        "--subdivisions".as_ref(),
-        "3".as_ref(),
-        "--noise".as_ref(),
-        "0.3".as_ref(),
-        "--seed".as_ref(),
-        "7".as_ref(),
-    ]));
-    assert!(path.is_file());
+    generate_sphere(&path, 3, Some(0.3), Some(7));
     (dir, path)
 }
 
 #[test]
 fn info_json_of_generated_sphere() {
-    let (_dir, sphere) = noisy_sphere();
+    let (_dir, sphere) = noisy_sphere_file();
     let info = json(&ok(vcsmooth([
         "info".as_ref(),
         sphere.as_os_str(),
@@ -142,7 +67,7 @@ fn generate_torus_is_closed() {
 
 #[test]
 fn smooth_with_each_method_writes_mesh_report_and_plot() {
-    let (dir, sphere) = noisy_sphere();
+    let (dir, sphere) = noisy_sphere_file();
     let iterations = 4;
     for method in METHODS {
         let out = dir.path().join(format!("{method}.ply"));
@@ -254,7 +179,7 @@ fn smooth_with_each_method_writes_mesh_report_and_plot() {
 
 #[test]
 fn smooth_defaults_and_other_formats() {
-    let (dir, sphere) = noisy_sphere();
+    let (dir, sphere) = noisy_sphere_file();
     for ext in ["obj", "off", "stl"] {
         let out = dir.path().join(format!("out.{ext}"));
         let text = ok(vcsmooth([
@@ -270,7 +195,7 @@ fn smooth_defaults_and_other_formats() {
 
 #[test]
 fn compare_with_itself_is_zero() {
-    let (_dir, sphere) = noisy_sphere();
+    let (_dir, sphere) = noisy_sphere_file();
     let c = json(&ok(vcsmooth([
         "compare".as_ref(),
         sphere.as_os_str(),
@@ -298,7 +223,7 @@ fn compare_with_itself_is_zero() {
 
 #[test]
 fn curves_plot_names_every_method() {
-    let (dir, sphere) = noisy_sphere();
+    let (dir, sphere) = noisy_sphere_file();
     let plot = dir.path().join("curves.svg");
     let out = ok(vcsmooth([
         "curves".as_ref(),
@@ -424,7 +349,7 @@ fn corrupt_input_fails_cleanly_and_writes_nothing() {
 
 #[test]
 fn usage_errors_fail_cleanly_and_write_nothing() {
-    let (dir, sphere) = noisy_sphere();
+    let (dir, sphere) = noisy_sphere_file();
     let out = dir.path().join("out.ply");
     let cases: Vec<(Vec<&str>, &[&str])> = vec![
         (vec!["--method", "median"], &["median"]),
@@ -495,14 +420,8 @@ fn usage_errors_fail_cleanly_and_write_nothing() {
 fn compare_of_different_meshes_fails() {
     let dir = tempfile::tempdir().unwrap();
     let (a, b) = (dir.path().join("a.ply"), dir.path().join("b.ply"));
-    for (p, k) in [(&a, "1"), (&b, "2")] {
-        ok(vcsmooth([
-            "generate".as_ref(),
-            "sphere".as_ref(),
-            p.as_os_str(),
-            "--subdivisions".as_ref(),
-            k.as_ref(),
-        ]));
+    for (p, k) in [(&a, 1), (&b, 2)] {
+        generate_sphere(p, k, None, None);
     }
     fails(
         &vcsmooth(["compare".as_ref(), a.as_os_str(), b.as_os_str()]),
@@ -541,15 +460,7 @@ fn smooth_output_identical_across_threads_and_memory_budgets() {
     let scratch = tempfile::tempdir().unwrap();
     let input = dir.path().join("in.ply");
     // Level 8 (1.3M triangles) is the smallest sphere whose in-core estimate exceeds the 64M minimum.
-    ok(vcsmooth(
-        ["generate", "sphere"].iter().map(|s| s.to_string()).chain([
-            input.display().to_string(),
-            "--subdivisions".into(),
-            "8".into(),
-            "--noise".into(),
-            "0.3".into(),
-        ]),
-    ));
+    generate_sphere(&input, 8, Some(0.3), None);
     let run = |name: &str, extra: &[&str]| -> (Vec<u8>, Value) {
         let out = dir.path().join(format!("{name}.ply"));
         let report = dir.path().join(format!("{name}.json"));
@@ -617,7 +528,7 @@ fn smooth_output_identical_across_threads_and_memory_budgets() {
 #[test]
 fn generate_mesh_from_a_scan_streams_a_refined_copy() {
     let dir = tempfile::tempdir().unwrap();
-    let base = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fertility-9k.ply");
+    let base = scan("fertility-9k.ply");
     let out = dir.path().join("fine.ply");
     ok(vcsmooth([
         "generate",
@@ -671,15 +582,7 @@ fn generate_mesh_from_a_scan_streams_a_refined_copy() {
 fn stats_last_measures_only_the_last_iteration_and_changes_nothing_else() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("in.ply");
-    ok(vcsmooth([
-        "generate",
-        "sphere",
-        input.to_str().unwrap(),
-        "--subdivisions",
-        "3",
-        "--noise",
-        "0.3",
-    ]));
+    generate_sphere(&input, 3, Some(0.3), None);
     for method in METHODS {
         let mut outputs = Vec::new();
         let mut reports = Vec::new();

@@ -1,65 +1,23 @@
 //! The cluster engine (issue 7): one mesh over several ranks, with checkpoints. Ranks run here as
-//! threads exchanging through `cluster::Local`, the same code path MPI ranks take; tests/mpi.rs
+//! threads exchanging through `cluster::Local`, the same code path MPI ranks take; tests/engines.rs
 //! repeats the essentials with real OpenMPI processes.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::process::Stdio;
 
-use vcsmooth::cluster::{self, ClusterSettings, Comm, Local};
-use vcsmooth::driver::{self, EngineSettings, FileRun, Quiet};
-use vcsmooth::{Method, Options, generate, io};
+use vcsmooth::cluster::{Comm, Local};
+use vcsmooth::engine::{self, Quiet};
+use vcsmooth::{Method, Options, io, shapes};
 
-fn scan(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(name)
-}
+use crate::util::{
+    cluster_settings, command, engine_settings, iterations_done, noisy_sphere, ok, read_json,
+    run_ranks, scan, vcsmooth,
+};
 
-fn engine(patch_size: usize, threads: usize) -> EngineSettings {
-    EngineSettings {
-        threads: Some(threads),
-        patch_size,
-        ..EngineSettings::default()
-    }
-}
-
-/// Run the cluster engine on `ranks` thread-ranks; returns rank 0's result.
-fn run_ranks(
-    ranks: usize,
-    input: &Path,
-    output: &Path,
-    opts: &Options,
-    engine: &EngineSettings,
-    settings: &ClusterSettings,
-) -> vcsmooth::Result<FileRun> {
-    let comms = Local::group(ranks);
-    let mut results: Vec<_> = std::thread::scope(|s| {
-        let handles: Vec<_> = comms
-            .iter()
-            .map(|c| {
-                s.spawn(move || {
-                    cluster::run_file(c, input, output, opts, engine, settings, &mut Quiet)
-                })
-            })
-            .collect();
-        handles.into_iter().map(|h| h.join().unwrap()).collect()
-    });
-    results.swap_remove(0)
-}
-
-fn settings(dir: &Path, keep: bool, every: usize) -> ClusterSettings {
-    ClusterSettings {
-        work_dir: dir.to_path_buf(),
-        keep,
-        checkpoint_every: every,
-    }
-}
-
-fn noisy_sphere(dir: &Path, level: u32) -> PathBuf {
-    let mut m = generate::icosphere(level);
-    generate::add_normal_noise(&mut m, 0.4, 11);
+/// A noisy sphere of `level` written to `dir/sphere.ply`.
+fn sphere_file(dir: &Path, level: u32) -> PathBuf {
     let path = dir.join("sphere.ply");
-    io::write_mesh(&path, &m).unwrap();
+    io::write_mesh(&path, &noisy_sphere(level, 0.4, 11)).unwrap();
     path
 }
 
@@ -80,8 +38,14 @@ fn any_number_of_ranks_gives_the_single_process_output_bit_for_bit() {
             ..Options::default()
         };
         let reference = tmp.path().join(format!("{method}-plain.ply"));
-        let plain =
-            driver::run_file(&input, &reference, &opts, &engine(2048, 2), &mut Quiet).unwrap();
+        let plain = engine::run_file(
+            &input,
+            &reference,
+            &opts,
+            &engine_settings(2048, 2),
+            &mut Quiet,
+        )
+        .unwrap();
         let expected = std::fs::read(&reference).unwrap();
         for ranks in [1, 2, 3, 5] {
             let out = tmp.path().join(format!("{method}-{ranks}.ply"));
@@ -91,9 +55,10 @@ fn any_number_of_ranks_gives_the_single_process_output_bit_for_bit() {
                 &input,
                 &out,
                 &opts,
-                &engine(2048, 1),
-                &settings(&work, false, 1),
+                &engine_settings(2048, 1),
+                &cluster_settings(&work, false, 1),
             )
+            .remove(0)
             .unwrap();
             assert!(
                 std::fs::read(&out).unwrap() == expected,
@@ -127,13 +92,20 @@ fn any_number_of_ranks_gives_the_single_process_output_bit_for_bit() {
 #[test]
 fn a_run_resumes_from_its_checkpoint_with_another_rank_count() {
     let tmp = tempfile::tempdir().unwrap();
-    let input = noisy_sphere(tmp.path(), 5);
+    let input = sphere_file(tmp.path(), 5);
     let opts = |iterations| Options {
         iterations,
         ..Options::default()
     };
     let plain = tmp.path().join("plain.ply");
-    driver::run_file(&input, &plain, &opts(5), &engine(700, 2), &mut Quiet).unwrap();
+    engine::run_file(
+        &input,
+        &plain,
+        &opts(5),
+        &engine_settings(700, 2),
+        &mut Quiet,
+    )
+    .unwrap();
 
     let work = tmp.path().join("ck");
     let out = tmp.path().join("out.ply");
@@ -142,9 +114,10 @@ fn a_run_resumes_from_its_checkpoint_with_another_rank_count() {
         &input,
         &out,
         &opts(2),
-        &engine(700, 1),
-        &settings(&work, true, 1),
+        &engine_settings(700, 1),
+        &cluster_settings(&work, true, 1),
     )
+    .remove(0)
     .unwrap();
     assert_eq!(first.cluster.unwrap().resumed_after, 0);
     assert!(
@@ -156,9 +129,10 @@ fn a_run_resumes_from_its_checkpoint_with_another_rank_count() {
         &input,
         &out,
         &opts(5),
-        &engine(700, 1),
-        &settings(&work, true, 2),
+        &engine_settings(700, 1),
+        &cluster_settings(&work, true, 2),
     )
+    .remove(0)
     .unwrap();
     assert_eq!(second.cluster.as_ref().unwrap().resumed_after, 2);
     assert_eq!(
@@ -174,9 +148,10 @@ fn a_run_resumes_from_its_checkpoint_with_another_rank_count() {
         &input,
         &out,
         &opts(3),
-        &engine(700, 1),
-        &settings(&work, true, 1),
+        &engine_settings(700, 1),
+        &cluster_settings(&work, true, 1),
     )
+    .remove(0)
     .unwrap_err();
     assert!(err.to_string().contains("5 iterations done"), "{err}");
 
@@ -190,9 +165,10 @@ fn a_run_resumes_from_its_checkpoint_with_another_rank_count() {
         &input,
         &out,
         &taubin,
-        &engine(700, 1),
-        &settings(&work, true, 1),
+        &engine_settings(700, 1),
+        &cluster_settings(&work, true, 1),
     )
+    .remove(0)
     .unwrap();
     assert_eq!(run.cluster.unwrap().resumed_after, 0);
 }
@@ -200,7 +176,7 @@ fn a_run_resumes_from_its_checkpoint_with_another_rank_count() {
 #[test]
 fn a_damaged_plan_is_an_error_on_every_rank_not_a_panic() {
     let tmp = tempfile::tempdir().unwrap();
-    let input = noisy_sphere(tmp.path(), 3);
+    let input = sphere_file(tmp.path(), 3);
     let work = tmp.path().join("ck");
     let out = tmp.path().join("out.ply");
     let opts = Options {
@@ -212,9 +188,10 @@ fn a_damaged_plan_is_an_error_on_every_rank_not_a_panic() {
         &input,
         &out,
         &opts,
-        &engine(100, 1),
-        &settings(&work, true, 1),
+        &engine_settings(100, 1),
+        &cluster_settings(&work, true, 1),
     )
+    .remove(0)
     .unwrap();
     std::fs::remove_file(&out).unwrap();
     let more = Options {
@@ -222,8 +199,10 @@ fn a_damaged_plan_is_an_error_on_every_rank_not_a_panic() {
         ..opts
     };
     let resume = || {
-        let settings = settings(&work, true, 1);
-        run_ranks(2, &input, &out, &more, &engine(100, 1), &settings).unwrap_err()
+        let settings = cluster_settings(&work, true, 1);
+        run_ranks(2, &input, &out, &more, &engine_settings(100, 1), &settings)
+            .remove(0)
+            .unwrap_err()
     };
     // An out-of-range neighbour in the adjacency.
     let vv = work.join("vv.u32");
@@ -258,10 +237,10 @@ fn more_ranks_than_patches_and_a_mesh_with_boundary() {
     let tmp = tempfile::tempdir().unwrap();
     // An open mesh (boundary vertices stay fixed) cut into 3 patches, over 4 ranks: one rank owns
     // nothing and must still take part in every exchange.
-    let mut m = generate::icosphere(3);
+    let mut m = shapes::icosphere(3);
     let keep = m.triangles.len() - 40;
     m.triangles.truncate(keep);
-    generate::add_normal_noise(&mut m, 0.3, 5);
+    shapes::add_normal_noise(&mut m, 0.3, 5);
     let input = tmp.path().join("open.ply");
     io::write_mesh(&input, &m).unwrap();
     let opts = Options {
@@ -269,16 +248,17 @@ fn more_ranks_than_patches_and_a_mesh_with_boundary() {
         ..Options::default()
     };
     let plain = tmp.path().join("plain.ply");
-    driver::run_file(&input, &plain, &opts, &engine(250, 1), &mut Quiet).unwrap();
+    engine::run_file(&input, &plain, &opts, &engine_settings(250, 1), &mut Quiet).unwrap();
     let out = tmp.path().join("out.ply");
     let run = run_ranks(
         4,
         &input,
         &out,
         &opts,
-        &engine(250, 1),
-        &settings(&tmp.path().join("w"), false, 1),
+        &engine_settings(250, 1),
+        &cluster_settings(&tmp.path().join("w"), false, 1),
     )
+    .remove(0)
     .unwrap();
     assert_eq!(run.plan.patches, 3);
     assert_eq!(run.cluster.unwrap().owned_vertices_min, 0);
@@ -287,9 +267,8 @@ fn more_ranks_than_patches_and_a_mesh_with_boundary() {
 
 #[test]
 fn a_killed_run_resumes_to_the_uninterrupted_output() {
-    let bin = env!("CARGO_BIN_EXE_vcsmooth");
     let tmp = tempfile::tempdir().unwrap();
-    let input = noisy_sphere(tmp.path(), 7);
+    let input = sphere_file(tmp.path(), 7);
     let args = |out: &Path| -> Vec<String> {
         [
             "smooth",
@@ -304,56 +283,40 @@ fn a_killed_run_resumes_to_the_uninterrupted_output() {
         .to_vec()
     };
     let plain = tmp.path().join("plain.ply");
-    assert!(
-        Command::new(bin)
-            .args(args(&plain))
-            .output()
-            .unwrap()
-            .status
-            .success()
-    );
+    ok(vcsmooth(args(&plain)));
 
     let work = tmp.path().join("ck");
     let out = tmp.path().join("out.ply");
-    let mut child = Command::new(bin)
+    let mut child = command()
         .args(args(&out))
         .args(["--checkpoint", work.to_str().unwrap()])
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
         .spawn()
         .unwrap();
     // Kill it once it has recorded some iterations but not all.
-    let state = work.join("state.json");
-    let done = |s: &Path| -> usize {
-        std::fs::read_to_string(s)
-            .ok()
-            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
-            .and_then(|v| v["done"].as_u64())
-            .unwrap_or(0) as usize
-    };
+    let done = || iterations_done(&work) as usize;
     let start = std::time::Instant::now();
-    while done(&state) < 2 && start.elapsed().as_secs() < 300 {
+    while done() < 2 && start.elapsed().as_secs() < 300 {
         std::thread::sleep(std::time::Duration::from_millis(5));
     }
     child.kill().unwrap();
     child.wait().unwrap();
-    let at_kill = done(&state);
+    let at_kill = done();
     assert!(
         (2..12).contains(&at_kill),
         "killed after {at_kill} iterations"
     );
     assert!(!out.exists(), "no output from a killed run");
 
-    let o = Command::new(bin)
+    ok(command()
         .args(args(&out))
         .args(["--checkpoint", work.to_str().unwrap(), "--report"])
         .arg(tmp.path().join("r.json"))
         .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        .unwrap());
     assert_eq!(std::fs::read(&out).unwrap(), std::fs::read(&plain).unwrap());
-    let report: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(tmp.path().join("r.json")).unwrap()).unwrap();
+    let report = read_json(&tmp.path().join("r.json"));
     assert!(report["cluster"]["resumed_after"].as_u64().unwrap() >= at_kill as u64);
     assert_eq!(report["iterations"].as_array().unwrap().len(), 12);
 }

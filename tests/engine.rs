@@ -2,49 +2,29 @@
 //! volume preservation, fixed boundaries, orientation, rigid-motion invariance, determinism, and the
 //! paper's sphere experiment.
 
-use std::path::{Path, PathBuf};
-
 use glam::{DMat3, DVec3};
-use vcsmooth::driver::{self, IterationRecord, Quiet};
-use vcsmooth::{Mesh, Method, Options, Topology, generate, io, metrics};
+use vcsmooth::engine::{self, EngineSettings, IterationRecord, Quiet};
+use vcsmooth::{Mesh, Method, Options, Topology, io, metrics, shapes};
 
-fn shared_meshes() -> Vec<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data");
-    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
-        .unwrap_or_else(|e| {
-            panic!(
-                "{}: {e} (the tests need ../shared beside the checkout)",
-                dir.display()
-            )
-        })
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|x| x == "ply"))
-        .collect();
-    files.sort();
-    assert_eq!(files.len(), 6, "expected the six scans of tests/data");
-    files
+use crate::util::{noisy_sphere, read_scan, scans};
+
+fn threads(n: usize) -> EngineSettings {
+    EngineSettings {
+        threads: Some(n),
+        ..EngineSettings::default()
+    }
 }
 
-fn shared(name: &str) -> Mesh {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(name);
-    io::read_mesh(&path).unwrap()
-}
-
-fn noisy_sphere(k: u32, sigma: f64, seed: u64) -> Mesh {
-    let mut m = generate::icosphere(k);
-    generate::add_normal_noise(&mut m, sigma, seed);
-    m
-}
-
+/// Smooth in the input's own order (the sequential reference), on one thread.
 fn run(mesh: &mut Mesh, method: Method, iterations: usize) -> Vec<IterationRecord> {
     let opts = Options {
         method,
         iterations,
         ..Options::default()
     };
-    driver::smooth_mesh(mesh, &opts, Some(1), &mut Quiet).unwrap()
+    engine::smooth_in_order(mesh, &opts, &threads(1), &mut Quiet)
+        .unwrap()
+        .records
 }
 
 /// Volume about a fixed point (the input's centroid), so that open meshes are measured consistently.
@@ -59,7 +39,7 @@ fn rel(a: f64, b: f64) -> f64 {
 #[test]
 fn vcs_preserves_volume_on_every_scan_in_f64_and_after_float_ply_round_trip() {
     let tmp = tempfile::tempdir().unwrap();
-    for path in shared_meshes() {
+    for path in scans() {
         for method in [Method::Vcs, Method::VcsTriangle] {
             let mut mesh = io::read_mesh(&path).unwrap();
             let origin = metrics::centroid(&mesh.positions);
@@ -98,8 +78,8 @@ fn vcs_preserves_volume_on_every_scan_in_f64_and_after_float_ply_round_trip() {
 
 #[test]
 fn vcs_preserves_volume_on_generated_meshes_where_laplacian_shrinks() {
-    let mut torus = generate::torus(3);
-    generate::add_normal_noise(&mut torus, 0.4, 5);
+    let mut torus = shapes::torus(3);
+    shapes::add_normal_noise(&mut torus, 0.4, 5);
     for (name, mesh) in [("sphere", noisy_sphere(4, 0.4, 3)), ("torus", torus)] {
         let v0 = metrics::volume(&mesh.positions, &mesh.triangles);
         for method in [Method::Vcs, Method::VcsTriangle] {
@@ -148,7 +128,9 @@ fn paper_sphere_experiment_volume_curves_and_roughness() {
         } else {
             opts
         };
-        let rec = driver::smooth_mesh(&mut m, &opts, Some(1), &mut Quiet).unwrap();
+        let rec = engine::smooth_in_order(&mut m, &opts, &threads(1), &mut Quiet)
+            .unwrap()
+            .records;
         let rough = metrics::roughness(&m.positions, &m.triangles, &topo);
         assert!(
             rough < rough0,
@@ -173,7 +155,7 @@ fn paper_sphere_experiment_volume_curves_and_roughness() {
 #[test]
 fn open_scans_keep_boundary_vertices_bit_identical() {
     for name in ["stanford-bunny.ply", "demosthenes-17k.ply"] {
-        let input = shared(name);
+        let input = read_scan(name);
         let topo = Topology::build(input.positions.len(), &input.triangles).unwrap();
         assert!(topo.stats.boundary_edges > 0, "{name} should be open");
         for method in Method::ALL {
@@ -200,7 +182,7 @@ fn open_scans_keep_boundary_vertices_bit_identical() {
 
 #[test]
 fn inward_oriented_horse_keeps_its_negative_volume() {
-    let mut horse = shared("horse.ply");
+    let mut horse = read_scan("horse.ply");
     let v0 = metrics::volume(&horse.positions, &horse.triangles);
     assert!(v0 < 0.0);
     let rec = run(&mut horse, Method::Vcs, 5);
@@ -243,7 +225,9 @@ fn output_is_bit_identical_for_any_thread_count() {
             .iter()
             .map(|&t| {
                 let mut m = input.clone();
-                driver::smooth_mesh(&mut m, &opts, Some(t), &mut Quiet).unwrap();
+                engine::smooth_in_order(&mut m, &opts, &threads(t), &mut Quiet)
+                    .unwrap()
+                    .records;
                 m.positions.to_vec()
             })
             .collect();
@@ -256,7 +240,7 @@ fn output_is_bit_identical_for_any_thread_count() {
 
 #[test]
 fn every_stencil_is_accounted_for_each_iteration() {
-    let mut mesh = shared("stanford-bunny.ply");
+    let mut mesh = read_scan("stanford-bunny.ply");
     let topo = Topology::build(mesh.positions.len(), &mesh.triangles).unwrap();
     let edges = topo.edges().count() as u64;
     for rec in run(&mut mesh, Method::Vcs, 2) {
@@ -265,7 +249,7 @@ fn every_stencil_is_accounted_for_each_iteration() {
             rec.stencils.skipped_fixed > 0 && rec.stencils.applied > rec.stencils.skipped_fixed
         );
     }
-    let mut mesh = shared("kitten-25k.ply");
+    let mut mesh = read_scan("kitten-25k.ply");
     for rec in run(&mut mesh, Method::VcsTriangle, 1) {
         assert_eq!(rec.stencils.considered(), mesh.triangles.len() as u64);
         assert_eq!(rec.stencils.skipped_fixed, 0, "kitten is closed");
@@ -281,7 +265,9 @@ fn energy_rejection_counts_rejections_and_still_preserves_volume() {
         reject_energy_increase: true,
         ..Options::default()
     };
-    let rec = driver::smooth_mesh(&mut mesh, &opts, Some(1), &mut Quiet).unwrap();
+    let rec = engine::smooth_in_order(&mut mesh, &opts, &threads(1), &mut Quiet)
+        .unwrap()
+        .records;
     let rejected: u64 = rec.iter().map(|r| r.stencils.rejected).sum();
     assert!(
         rejected > 0,
@@ -305,8 +291,8 @@ mod props {
             torus in any::<bool>(),
             triangle in any::<bool>(),
         ) {
-            let mut m = if torus { generate::torus(1) } else { generate::icosphere(2) };
-            generate::add_normal_noise(&mut m, sigma, seed);
+            let mut m = if torus { shapes::torus(1) } else { shapes::icosphere(2) };
+            shapes::add_normal_noise(&mut m, sigma, seed);
             let o = DVec3::from_array(offset);
             m.positions.iter_mut().for_each(|p| *p += o);
             let v0 = metrics::volume(&m.positions, &m.triangles);

@@ -2,14 +2,13 @@
 //! only with `--features mpi` (Cargo.toml), which CI enables after installing OpenMPI and Slurm
 //! (`.ci/run`); these tests fail, never skip, when an engine is missing.
 
+#[allow(dead_code)]
+mod util;
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::{Command, Stdio};
 
-const BIN: &str = env!("CARGO_BIN_EXE_vcsmooth");
-
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
+use util::{BIN, command, generate_sphere, iterations_done, ok, root, scan};
 
 /// `mpirun -n ranks vcsmooth args...`, oversubscribed (3 ranks on 2 cores), allowed as root.
 fn mpirun(ranks: usize, args: &[&str]) -> Command {
@@ -21,38 +20,17 @@ fn mpirun(ranks: usize, args: &[&str]) -> Command {
     c
 }
 
-fn ok(o: Output) -> String {
-    assert!(
-        o.status.success(),
-        "failed: {}\n{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    );
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
+/// A noisy sphere of `level` in `dir/in.ply`.
 fn generate(dir: &Path, level: u32) -> PathBuf {
     let p = dir.join("in.ply");
-    let l = level.to_string();
-    ok(Command::new(BIN)
-        .args([
-            "generate",
-            "sphere",
-            p.to_str().unwrap(),
-            "--subdivisions",
-            &l,
-            "--noise",
-            "0.4",
-        ])
-        .output()
-        .unwrap());
+    generate_sphere(&p, level, Some(0.4), None);
     p
 }
 
 /// The reference: `vcsmooth smooth input dir/plain.ply args...` in one process, without MPI.
 fn single_process(dir: &Path, input: &Path, args: &[&str]) -> PathBuf {
     let plain = dir.join("plain.ply");
-    ok(Command::new(BIN)
+    ok(command()
         .args(["smooth", input.to_str().unwrap(), plain.to_str().unwrap()])
         .args(args)
         .output()
@@ -63,7 +41,7 @@ fn single_process(dir: &Path, input: &Path, args: &[&str]) -> PathBuf {
 #[test]
 fn mpi_ranks_1_2_3_are_bit_identical_to_one_process() {
     let tmp = tempfile::tempdir().unwrap();
-    let armadillo = root().join("tests/data/armadillo-86k.ply");
+    let armadillo = scan("armadillo-86k.ply");
     let sphere = generate(tmp.path(), 6);
     for (input, method) in [
         (&armadillo, "vcs"),
@@ -130,17 +108,11 @@ fn mpi_run_killed_and_resumed_equals_uninterrupted() {
     ];
     let mut child = mpirun(2, &args)
         .args(common)
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let done = || -> u64 {
-        std::fs::read_to_string(ck.join("state.json"))
-            .ok()
-            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
-            .and_then(|v| v["done"].as_u64())
-            .unwrap_or(0)
-    };
+    let done = || iterations_done(&ck);
     let start = std::time::Instant::now();
     while done() < 2 && start.elapsed().as_secs() < 300 {
         std::thread::sleep(std::time::Duration::from_millis(5));

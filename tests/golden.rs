@@ -5,20 +5,15 @@
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
-use vcsmooth::cluster::{self, ClusterSettings, Local};
-use vcsmooth::engine::{EngineSettings, Quiet};
 use vcsmooth::{Method, Options};
 
-fn data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(name)
-}
+use crate::util::{
+    cluster_settings, engine_settings, generate_sphere, ok, root, run_ranks, scan, vcsmooth,
+};
 
 fn hashes_file() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden/hashes.txt")
+    root().join("tests/golden/hashes.txt")
 }
 
 /// 64-bit FNV-1a: stable across platforms and Rust versions (std's hasher is not).
@@ -26,19 +21,6 @@ fn fnv1a(bytes: &[u8]) -> u64 {
     bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| {
         (h ^ b as u64).wrapping_mul(0x0000_0100_0000_01b3)
     })
-}
-
-fn vcsmooth<S: AsRef<std::ffi::OsStr>>(args: &[S]) {
-    let out = Command::new(env!("CARGO_BIN_EXE_vcsmooth"))
-        .args(args)
-        .output()
-        .expect("run vcsmooth");
-    assert!(
-        out.status.success(),
-        "vcsmooth {:?} failed: {}",
-        args.iter().map(|a| a.as_ref()).collect::<Vec<_>>(),
-        String::from_utf8_lossy(&out.stderr)
-    );
 }
 
 /// One golden run: `vcsmooth smooth IN OUT ARGS...` (or another command when `command` says so).
@@ -192,7 +174,7 @@ fn runs(sphere: &Path, torus: &Path, big: &Path) -> Vec<Run> {
         ("torus-convert-ply", torus, "ply", &["--iterations", "0"]),
         (
             "bunny-vcs",
-            &data("stanford-bunny.ply"),
+            &scan("stanford-bunny.ply"),
             "ply",
             &[
                 "--method",
@@ -207,7 +189,7 @@ fn runs(sphere: &Path, torus: &Path, big: &Path) -> Vec<Run> {
         ),
         (
             "horse-vcs-triangle",
-            &data("horse.ply"),
+            &scan("horse.ply"),
             "ply",
             &[
                 "--method",
@@ -222,19 +204,19 @@ fn runs(sphere: &Path, torus: &Path, big: &Path) -> Vec<Run> {
         ),
         (
             "demosthenes-taubin",
-            &data("demosthenes-17k.ply"),
+            &scan("demosthenes-17k.ply"),
             "ply",
             &["--method", "taubin", "--iterations", "9", "--stats", "last"],
         ),
         (
             "armadillo-multires",
-            &data("armadillo-86k.ply"),
+            &scan("armadillo-86k.ply"),
             "ply",
             &["--multires", "--iterations", "3", "--threads", "2"],
         ),
         (
             "kitten-multires-3-taubin",
-            &data("kitten-25k.ply"),
+            &scan("kitten-25k.ply"),
             "ply",
             &[
                 "--multires",
@@ -252,7 +234,7 @@ fn runs(sphere: &Path, torus: &Path, big: &Path) -> Vec<Run> {
         ),
         (
             "fertility-lem",
-            &data("fertility-9k.ply"),
+            &scan("fertility-9k.ply"),
             "ply",
             &[
                 "--method",
@@ -351,18 +333,8 @@ fn golden_outputs_are_unchanged() {
 
     // Generated inputs are golden too: `generate` must keep writing the same bytes.
     let (sphere, torus, big) = (p("sphere4.ply"), p("torus.obj"), p("sphere8.ply"));
-    vcsmooth(&[
-        "generate",
-        "sphere",
-        sphere.to_str().unwrap(),
-        "--subdivisions",
-        "4",
-        "--noise",
-        "0.3",
-        "--seed",
-        "7",
-    ]);
-    vcsmooth(&[
+    generate_sphere(&sphere, 4, Some(0.3), Some(7));
+    ok(vcsmooth([
         "generate",
         "torus",
         torus.to_str().unwrap(),
@@ -372,28 +344,20 @@ fn golden_outputs_are_unchanged() {
         "0.2",
         "--seed",
         "3",
-    ]);
-    vcsmooth(&[
-        "generate",
-        "sphere",
-        big.to_str().unwrap(),
-        "--subdivisions",
-        "8",
-        "--noise",
-        "0.3",
-    ]);
+    ]));
+    generate_sphere(&big, 8, Some(0.3), None);
     let sub = p("kitten-sub.ply");
-    vcsmooth(&[
+    ok(vcsmooth([
         "generate",
         "mesh",
         sub.to_str().unwrap(),
         "--from",
-        data("kitten-25k.ply").to_str().unwrap(),
+        scan("kitten-25k.ply").to_str().unwrap(),
         "--subdivide",
         "1",
         "--noise",
         "0.2",
-    ]);
+    ]));
     for (name, path) in [
         ("gen-sphere4", &sphere),
         ("gen-torus-obj", &torus),
@@ -411,15 +375,15 @@ fn golden_outputs_are_unchanged() {
             out.clone().into(),
         ];
         args.extend(run.args.iter().map(Into::into));
-        vcsmooth(&args);
+        ok(vcsmooth(&args));
         hash_file(run.name, &out);
     }
 
     // The paper's adaptive refinement: subdivide + vcs rounds.
     let refined = p("fertility-refine.ply");
-    vcsmooth(&[
+    ok(vcsmooth([
         "refine",
-        data("fertility-9k.ply").to_str().unwrap(),
+        scan("fertility-9k.ply").to_str().unwrap(),
         refined.to_str().unwrap(),
         "--max-edge",
         "4",
@@ -427,7 +391,7 @@ fn golden_outputs_are_unchanged() {
         "2",
         "--iterations",
         "2",
-    ]);
+    ]));
     hash_file("fertility-refine", &refined);
 
     // Thread ranks of the cluster engine (the same code path MPI ranks take).
@@ -440,33 +404,12 @@ fn golden_outputs_are_unchanged() {
             iterations,
             ..Options::default()
         };
-        let engine = EngineSettings {
-            threads: Some(2),
-            patch_size: 2048,
-            ..EngineSettings::default()
-        };
-        let settings = ClusterSettings {
-            work_dir: work,
-            keep: false,
-            checkpoint_every: 1,
-        };
-        let input = data("armadillo-86k.ply");
-        std::thread::scope(|s| {
-            let handles: Vec<_> = Local::group(3)
-                .into_iter()
-                .map(|c| {
-                    let (input, out, opts, engine, settings) =
-                        (&input, &out, &opts, &engine, &settings);
-                    s.spawn(move || {
-                        cluster::run_file(&c, input, out, opts, engine, settings, &mut Quiet)
-                            .map(|_| ())
-                    })
-                })
-                .collect();
-            for h in handles {
-                h.join().unwrap().unwrap();
-            }
-        });
+        let input = scan("armadillo-86k.ply");
+        let engine = engine_settings(2048, 2);
+        let settings = cluster_settings(&work, false, 1);
+        for rank in run_ranks(3, &input, &out, &opts, &engine, &settings) {
+            rank.unwrap();
+        }
         hash_file(&name, &out);
     }
 

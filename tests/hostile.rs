@@ -22,45 +22,9 @@ use cases::{Case, Expect};
 use glam::DVec3;
 use vcsmooth::Mesh;
 
-const BIN: &str = env!("CARGO_BIN_EXE_vcsmooth");
-
-fn vcsmooth(args: &[&dyn AsRef<std::ffi::OsStr>]) -> Output {
-    Command::new(BIN)
-        .args(args.iter().map(|a| a.as_ref()))
-        .stdin(Stdio::null())
-        .output()
-        .expect("run vcsmooth")
-}
-
-fn stderr(out: &Output) -> String {
-    String::from_utf8_lossy(&out.stderr).into_owned()
-}
-
-/// File names in `dir`, sorted.
-fn names(dir: &Path) -> Vec<String> {
-    let mut names: Vec<String> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    names.sort();
-    names
-}
-
-/// Checks a run that must fail with exactly `vcsmooth: error: <line>`; returns what is wrong.
-fn failed_with(out: &Output, line: &str) -> Result<(), String> {
-    let err = stderr(out);
-    let expected = format!("vcsmooth: error: {line}\n");
-    if out.status.success() || out.status.code().is_none() {
-        return Err(format!("status {:?}, stderr {err:?}", out.status));
-    }
-    if err != expected {
-        return Err(format!("stderr {err:?}\n      expected {expected:?}"));
-    }
-    if err.contains("panick") || err.contains("internal error") {
-        return Err(format!("panic: {err:?}"));
-    }
-    Ok(())
-}
+use crate::util::{
+    BIN, command, failed_with, generate_sphere, json, listing, noisy_sphere, ok, stderr, vcsmooth,
+};
 
 /// Runs one corpus case through `smooth` and `info`; returns what is wrong.
 fn run_case(dir: &Path, case: &Case) -> Result<(), String> {
@@ -74,15 +38,21 @@ fn run_case(dir: &Path, case: &Case) -> Result<(), String> {
         .filter(|e| ["ply", "obj", "off", "stl"].contains(e))
         .unwrap_or("ply");
     let output = sub.join(format!("smoothed.{ext}"));
-    let smooth = vcsmooth(&[&"smooth", &input, &output, &"--iterations", &"2"]);
-    let info = vcsmooth(&[&"info", &input, &"--json"]);
+    let smooth = vcsmooth([
+        "smooth".as_ref(),
+        input.as_os_str(),
+        output.as_os_str(),
+        "--iterations".as_ref(),
+        "2".as_ref(),
+    ]);
+    let info = vcsmooth(["info".as_ref(), input.as_os_str(), "--json".as_ref()]);
     match &case.expect {
         Expect::Error(what) => {
             let line = format!("{}: {what}", input.display());
             failed_with(&smooth, &line).map_err(|e| format!("smooth: {e}"))?;
             failed_with(&info, &line).map_err(|e| format!("info: {e}"))?;
-            if output.exists() || names(&sub).len() != 1 {
-                return Err(format!("files left: {:?}", names(&sub)));
+            if output.exists() || listing(&sub).len() != 1 {
+                return Err(format!("files left: {:?}", listing(&sub)));
             }
         }
         Expect::Valid => {
@@ -158,7 +128,7 @@ fn corpus_through_the_binary() {
     );
 }
 
-/// `VCSMOOTH_DUMP_CORPUS=DIR cargo test --test hostile dump_corpus` writes the corpus files to DIR
+/// `VCSMOOTH_DUMP_CORPUS=DIR cargo test --test tests dump_corpus` writes the corpus files to DIR
 /// (e.g. to seed the fuzzers); without the variable it does nothing.
 #[test]
 fn dump_corpus() {
@@ -197,7 +167,7 @@ fn a_trillion_vertex_header_on_a_1kb_file_fails_fast() {
                 .output()
                 .unwrap()
         } else {
-            vcsmooth(&[&"info", &input])
+            vcsmooth(["info".as_ref(), input.as_os_str()])
         };
         let took = start.elapsed();
         failed_with(&out, &format!("{}: {what}", input.display())).unwrap();
@@ -213,16 +183,17 @@ fn write_ply(path: &Path, mesh: &Mesh) {
 }
 
 fn info_json(path: &Path) -> serde_json::Value {
-    let out = vcsmooth(&[&"info", &path, &"--json"]);
-    assert!(out.status.success(), "{}", stderr(&out));
-    serde_json::from_slice(&out.stdout).unwrap()
+    json(&ok(vcsmooth([
+        "info".as_ref(),
+        path.as_os_str(),
+        "--json".as_ref(),
+    ])))
 }
 
 #[test]
 fn degenerate_and_duplicate_faces_are_processed_and_counted() {
     let dir = tempfile::tempdir().unwrap();
-    let mut mesh = vcsmooth::generate::icosphere(2);
-    vcsmooth::generate::add_normal_noise(&mut mesh, 0.3, 7);
+    let mut mesh = noisy_sphere(2, 0.3, 7);
     let t0 = mesh.triangles[0];
     mesh.triangles.push([t0[0], t0[0], t0[1]]); // a repeated index
     mesh.triangles.push([5, 5, 5]); // a point
@@ -237,8 +208,13 @@ fn degenerate_and_duplicate_faces_are_processed_and_counted() {
     assert_eq!(info["non_manifold_edges"], 3, "{info}");
 
     let output = dir.path().join("out.ply");
-    let out = vcsmooth(&[&"smooth", &input, &output, &"--method", &"vcs"]);
-    assert!(out.status.success(), "{}", stderr(&out));
+    ok(vcsmooth([
+        "smooth".as_ref(),
+        input.as_os_str(),
+        output.as_os_str(),
+        "--method".as_ref(),
+        "vcs".as_ref(),
+    ]));
     let back = vcsmooth::io::read_mesh(&output).unwrap();
     assert_eq!(back.triangles, mesh.triangles);
     assert!(back.positions.iter().all(|p| p.is_finite()));
@@ -285,8 +261,7 @@ fn glued(a: &Mesh, o: DVec3, n: DVec3, shared: &[u32]) -> Mesh {
 #[test]
 fn non_manifold_vertices_and_edges_stay_fixed_and_the_rest_is_smoothed() {
     let dir = tempfile::tempdir().unwrap();
-    let mut sphere = vcsmooth::generate::icosphere(2);
-    vcsmooth::generate::add_normal_noise(&mut sphere, 0.3, 11);
+    let sphere = noisy_sphere(2, 0.3, 11);
     let p = |v: u32| sphere.positions[v as usize];
 
     // Two spheres touching at vertex 0 (a non-manifold vertex) ...
@@ -306,14 +281,14 @@ fn non_manifold_vertices_and_edges_stay_fixed_and_the_rest_is_smoothed() {
         let info = info_json(&input);
         assert!(info[key].as_u64() >= Some(1), "{name}: {info}");
         let output = dir.path().join(format!("smoothed-{name}"));
-        let out = vcsmooth(&[
-            &"smooth",
-            &input,
-            &output,
-            &"--method",
-            &"vcs",
-            &"--iterations",
-            &"3",
+        let out = vcsmooth([
+            "smooth".as_ref(),
+            input.as_os_str(),
+            output.as_os_str(),
+            "--method".as_ref(),
+            "vcs".as_ref(),
+            "--iterations".as_ref(),
+            "3".as_ref(),
         ]);
         assert!(out.status.success(), "{name}: {}", stderr(&out));
         let back = vcsmooth::io::read_mesh(&output).unwrap();
@@ -358,15 +333,20 @@ fn killing_a_run_at_any_moment_leaves_the_previous_output_intact() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let input = d.join("big.ply");
-    let out = vcsmooth(&[&"generate", &"sphere", &input, &"--subdivisions", &"8"]);
-    assert!(out.status.success(), "{}", stderr(&out));
+    generate_sphere(&input, 8, None, None);
     let output = d.join("out.ply");
     // One complete run: how long a run takes, and what it writes.
     let complete = d.join("complete.ply");
     let clock = Instant::now();
-    let out = vcsmooth(&[&"smooth", &input, &complete, &"--iterations", &"0"]);
+    let out = vcsmooth([
+        "smooth".as_ref(),
+        input.as_os_str(),
+        complete.as_os_str(),
+        "--iterations".as_ref(),
+        "0".as_ref(),
+    ]);
     let took = clock.elapsed().as_millis() as u64;
-    assert!(out.status.success(), "{}", stderr(&out));
+    ok(out);
     let complete = std::fs::read(&complete).unwrap();
     std::fs::remove_file(d.join("complete.ply")).unwrap();
     let previous = b"the previous output, which must survive".to_vec();
@@ -390,7 +370,7 @@ fn killing_a_run_at_any_moment_leaves_the_previous_output_intact() {
     let mut killed_mid_write = 0;
     for when in &moments {
         std::fs::write(&output, &previous).unwrap();
-        let mut child = Command::new(BIN)
+        let mut child = command()
             .args([
                 "smooth".as_ref(),
                 input.as_os_str(),
@@ -430,7 +410,7 @@ fn killing_a_run_at_any_moment_leaves_the_previous_output_intact() {
         if !finished && seen.is_some() {
             killed_mid_write += 1;
         }
-        let left = names(d)
+        let left = listing(d)
             .into_iter()
             .filter(|n| n != "big.ply" && n != "out.ply");
         eprintln!(
@@ -449,7 +429,7 @@ fn killing_a_run_at_any_moment_leaves_the_previous_output_intact() {
             );
         }
         // Whatever a kill leaves is a temporary file, never something under the output's name.
-        for name in names(d) {
+        for name in listing(d) {
             if name != "big.ply" && name != "out.ply" {
                 assert!(is_temp_of(&name, "out.ply"), "left behind: {name}");
                 std::fs::remove_file(d.join(name)).unwrap();
@@ -462,17 +442,21 @@ fn killing_a_run_at_any_moment_leaves_the_previous_output_intact() {
     );
 
     // Left alone, the same run replaces the output with the complete mesh.
-    let out = vcsmooth(&[&"smooth", &input, &output, &"--iterations", &"0"]);
-    assert!(out.status.success(), "{}", stderr(&out));
+    ok(vcsmooth([
+        "smooth".as_ref(),
+        input.as_os_str(),
+        output.as_os_str(),
+        "--iterations".as_ref(),
+        "0".as_ref(),
+    ]));
     assert!(std::fs::read(&output).unwrap() == complete);
-    assert_eq!(names(d), ["big.ply", "out.ply"]);
+    assert_eq!(listing(d), ["big.ply", "out.ply"]);
 }
 
 /// A level-5 sphere: its PLY output (≈ 390 KB) does not fit 256 KiB.
 fn medium_input(dir: &Path) -> PathBuf {
     let input = dir.join("in.ply");
-    let out = vcsmooth(&[&"generate", &"sphere", &input, &"--subdivisions", &"5"]);
-    assert!(out.status.success(), "{}", stderr(&out));
+    generate_sphere(&input, 5, None, None);
     input
 }
 
@@ -482,7 +466,7 @@ fn check_write_failure(out: &Output, dir: &Path, os_error: &str) {
     let output = dir.join("out.ply");
     failed_with(out, &format!("{}: {os_error}", output.display())).unwrap();
     assert_eq!(std::fs::read(&output).unwrap(), b"previous");
-    assert_eq!(names(dir), ["out.ply"]);
+    assert_eq!(listing(dir), ["out.ply"]);
 }
 
 #[test]
@@ -531,7 +515,11 @@ fn a_full_disk_gives_one_line_and_no_partial_output() {
         Ok(m) if m.status.success() => {
             let _mount = Mount(full.clone());
             std::fs::write(full.join("out.ply"), b"previous").unwrap();
-            let out = vcsmooth(&[&"smooth", &input, &full.join("out.ply")]);
+            let out = vcsmooth([
+                "smooth".as_ref(),
+                input.as_os_str(),
+                full.join("out.ply").as_os_str(),
+            ]);
             check_write_failure(&out, &full, "No space left on device (os error 28)");
         }
         other => {

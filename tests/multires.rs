@@ -2,32 +2,15 @@
 //! sanity, bit-identical output for any thread count and between in-core and scratch storage,
 //! fixed vertices, and usage errors.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::path::Path;
 
 use glam::DVec3;
-use vcsmooth::driver::{Prepared, Quiet, thread_pool};
+use vcsmooth::engine::{Layout, Plan, Quiet, Statistics, thread_pool};
 use vcsmooth::mesh::Storage;
 use vcsmooth::multires::{self, MultiresOptions, Transfer, cluster};
-use vcsmooth::{Mesh, Method, Options, Topology, generate, io, metrics};
+use vcsmooth::{Mesh, Method, Options, Topology, io, metrics, shapes};
 
-fn shared_meshes() -> Vec<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data");
-    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
-        .unwrap_or_else(|e| panic!("{}: {e} (the tests need ../shared)", dir.display()))
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|x| x == "ply"))
-        .collect();
-    files.sort();
-    assert_eq!(files.len(), 6, "expected the six scans of tests/data");
-    files
-}
-
-fn noisy_sphere(k: u32, sigma: f64, seed: u64) -> Mesh {
-    let mut m = generate::icosphere(k);
-    generate::add_normal_noise(&mut m, sigma, seed);
-    m
-}
+use crate::util::{generate_sphere, noisy_sphere, ok, read_json, read_scan, scans, vcsmooth};
 
 /// Multires-smooth `mesh` on `threads` threads with patches of `patch`; positions in input order.
 fn run(
@@ -40,9 +23,23 @@ fn run(
     let pool = thread_pool(Some(threads)).unwrap();
     pool.install(|| {
         let storage = Storage::heap();
-        let mut prep = Prepared::new(&storage, &mesh.positions, &mesh.triangles, patch).unwrap();
-        let (_, stats) =
-            multires::smooth_prepared(&mut prep, &storage, opts, m, patch, &mut Quiet).unwrap();
+        let mut prep = Plan::new(
+            &storage,
+            &mesh.positions,
+            &mesh.triangles,
+            Layout::Patches(patch),
+        )
+        .unwrap();
+        let (_, stats) = multires::smooth_prepared(
+            &mut prep,
+            &storage,
+            opts,
+            m,
+            patch,
+            Statistics::Every,
+            &mut Quiet,
+        )
+        .unwrap();
         let mut out = vec![DVec3::ZERO; mesh.positions.len()];
         prep.positions_in_input_order(&mut out);
         (out, stats)
@@ -59,7 +56,7 @@ fn opts(iterations: usize) -> Options {
 
 #[test]
 fn real_scans_keep_their_volume_and_get_smoother_with_fixed_vertices_unmoved() {
-    for path in shared_meshes() {
+    for path in scans() {
         let mut mesh = io::read_mesh(&path).unwrap();
         let topo = Topology::build(mesh.positions.len(), &mesh.triangles).unwrap();
         let edge = metrics::mean_edge_length(&mesh.positions, &topo);
@@ -155,7 +152,7 @@ fn hierarchy_maps_every_fine_vertex_to_a_valid_coarse_one() {
 #[test]
 fn multires_smooths_a_sphere_without_shrinking_and_every_transfer_works() {
     let mesh = noisy_sphere(5, 0.3, 11);
-    let clean = generate::icosphere(5);
+    let clean = shapes::icosphere(5);
     let topo = Topology::build(mesh.positions.len(), &mesh.triangles).unwrap();
     let r_in = metrics::roughness(&mesh.positions, &mesh.triangles, &topo);
     let v_in = metrics::volume(&mesh.positions, &mesh.triangles);
@@ -205,8 +202,7 @@ fn multires_smooths_a_sphere_without_shrinking_and_every_transfer_works() {
 
 #[test]
 fn output_is_bit_identical_for_any_thread_count() {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/armadillo-86k.ply");
-    let mut mesh = io::read_mesh(&path).unwrap();
+    let mut mesh = read_scan("armadillo-86k.ply");
     let topo = Topology::build(mesh.positions.len(), &mesh.triangles).unwrap();
     let edge = metrics::mean_edge_length(&mesh.positions, &topo);
     for (v, p) in mesh.positions.iter_mut().enumerate() {
@@ -225,43 +221,16 @@ fn output_is_bit_identical_for_any_thread_count() {
     }
 }
 
-fn vcsmooth(args: &[String]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_vcsmooth"))
-        .args(args)
-        .output()
-        .expect("run vcsmooth")
-}
-
-fn ok(o: Output) -> String {
-    assert!(
-        o.status.success(),
-        "stderr: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn strings(a: &[&str]) -> Vec<String> {
-    a.iter().map(|s| s.to_string()).collect()
-}
-
 /// In-core and scratch-mapped (`--memory-budget 64M`) runs write the same bytes, with 1 and 2
 /// threads; the report has one row per level; no scratch is left behind.
 #[test]
 fn in_core_equals_out_of_core_through_the_cli() {
     let dir = tempfile::tempdir().unwrap();
     let scratch = tempfile::tempdir().unwrap();
-    let input = dir.path().join("in.ply").display().to_string();
+    let input = dir.path().join("in.ply");
     // Level 8 (1.3M triangles) is the smallest sphere whose in-core estimate exceeds 64M.
-    ok(vcsmooth(&strings(&[
-        "generate",
-        "sphere",
-        &input,
-        "--subdivisions",
-        "8",
-        "--noise",
-        "0.3",
-    ])));
+    generate_sphere(&input, 8, Some(0.3), None);
+    let input = input.display().to_string();
     let run = |name: &str, extra: &[&str]| -> (Vec<u8>, serde_json::Value) {
         let out = dir.path().join(format!("{name}.ply")).display().to_string();
         let report = dir
@@ -269,7 +238,7 @@ fn in_core_equals_out_of_core_through_the_cli() {
             .join(format!("{name}.json"))
             .display()
             .to_string();
-        let mut args = strings(&[
+        let mut args = vec![
             "smooth",
             &input,
             &out,
@@ -282,14 +251,14 @@ fn in_core_equals_out_of_core_through_the_cli() {
             "8192",
             "--report",
             &report,
-        ]);
-        args.extend(strings(extra));
+        ];
+        args.extend(extra);
         let text = ok(vcsmooth(&args));
         assert!(
             text.contains("level") && text.contains("laplacian"),
             "{text}"
         );
-        let json = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+        let json = read_json(Path::new(&report));
         (std::fs::read(&out).unwrap(), json)
     };
     let (heap, r) = run("heap", &["--threads", "1"]);
@@ -329,15 +298,10 @@ fn in_core_equals_out_of_core_through_the_cli() {
 #[test]
 fn usage_errors_are_one_line_and_write_nothing() {
     let dir = tempfile::tempdir().unwrap();
-    let input = dir.path().join("in.ply").display().to_string();
+    let input = dir.path().join("in.ply");
     let out = dir.path().join("out.ply");
-    ok(vcsmooth(&strings(&[
-        "generate",
-        "sphere",
-        &input,
-        "--subdivisions",
-        "2",
-    ])));
+    generate_sphere(&input, 2, None, None);
+    let input = input.display().to_string();
     let o = out.display().to_string();
     for (extra, needle) in [
         (
@@ -353,8 +317,8 @@ fn usage_errors_are_one_line_and_write_nothing() {
         (vec!["--multires", "--cell-factor", "0.5"], "cell factor"),
         (vec!["--multires", "--transfer", "nearest"], "--transfer"),
     ] {
-        let mut args = strings(&["smooth", &input, &o]);
-        args.extend(strings(&extra));
+        let mut args = vec!["smooth", &input, &o];
+        args.extend(&extra);
         let r = vcsmooth(&args);
         let err = String::from_utf8_lossy(&r.stderr);
         assert_eq!(r.status.code(), Some(2), "{extra:?}: {err}");
@@ -362,6 +326,6 @@ fn usage_errors_are_one_line_and_write_nothing() {
         assert!(!out.exists(), "{extra:?} wrote an output");
     }
     // The smallest meshes still work: a coarse level that does not shrink is simply not built.
-    ok(vcsmooth(&strings(&["smooth", &input, &o, "--multires"])));
+    ok(vcsmooth(["smooth", &input, &o, "--multires"]));
     assert!(out.exists());
 }

@@ -4,24 +4,11 @@
 use std::path::Path;
 
 use glam::DVec3;
-use vcsmooth::driver::{self, Prepared, Quiet};
+use vcsmooth::engine::{self, EngineSettings, Layout, Plan, Quiet, Statistics};
 use vcsmooth::mesh::Storage;
-use vcsmooth::{Mesh, Method, Options, generate, io, metrics};
+use vcsmooth::{Mesh, Method, Options, metrics};
 
-fn noisy_sphere(k: u32) -> Mesh {
-    let mut m = generate::icosphere(k);
-    generate::add_normal_noise(&mut m, 0.4, 17);
-    m
-}
-
-fn shared(name: &str) -> Mesh {
-    io::read_mesh(
-        &Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("tests/data")
-            .join(name),
-    )
-    .unwrap()
-}
+use crate::util::{noisy_sphere, read_scan};
 
 fn pool(threads: usize) -> rayon::ThreadPool {
     rayon::ThreadPoolBuilder::new()
@@ -37,11 +24,18 @@ fn run(
     patch_size: usize,
     opts: &Options,
     threads: usize,
-) -> (Vec<DVec3>, Vec<driver::IterationRecord>, Prepared) {
+) -> (Vec<DVec3>, Vec<engine::IterationRecord>, Plan) {
     pool(threads).install(|| {
-        let mut prep =
-            Prepared::new(storage, &mesh.positions, &mesh.triangles, patch_size).unwrap();
-        let records = prep.smooth(storage, opts, &mut Quiet).unwrap();
+        let mut prep = Plan::new(
+            storage,
+            &mesh.positions,
+            &mesh.triangles,
+            Layout::Patches(patch_size),
+        )
+        .unwrap();
+        let records = prep
+            .smooth(storage, opts, Statistics::Every, &mut Quiet)
+            .unwrap();
         let mut out = vec![DVec3::ZERO; mesh.positions.len()];
         prep.positions_in_input_order(&mut out);
         (out, records, prep)
@@ -50,7 +44,7 @@ fn run(
 
 #[test]
 fn bit_identical_for_any_thread_count_and_any_storage() {
-    let mesh = noisy_sphere(5);
+    let mesh = noisy_sphere(5, 0.4, 17);
     let scratch = tempfile::tempdir().unwrap();
     let mapped = Storage::scratch(scratch.path()).unwrap();
     for method in Method::ALL {
@@ -85,7 +79,7 @@ fn bit_identical_for_any_thread_count_and_any_storage() {
 #[test]
 fn every_stencil_is_applied_once_across_many_small_patches_and_volume_is_kept() {
     for name in ["armadillo-86k.ply", "stanford-bunny.ply"] {
-        let mesh = shared(name);
+        let mesh = read_scan(name);
         let origin = metrics::centroid(&mesh.positions);
         let v0 = metrics::volume_about(&mesh.positions, &mesh.triangles, origin);
         for (method, per_iteration) in [
@@ -136,7 +130,7 @@ fn every_stencil_is_applied_once_across_many_small_patches_and_volume_is_kept() 
 
 #[test]
 fn one_patch_equals_the_whole_mesh_engine_on_the_reordered_mesh() {
-    let mesh = noisy_sphere(3);
+    let mesh = noisy_sphere(3, 0.4, 17);
     for method in Method::ALL {
         let opts = Options {
             method,
@@ -148,12 +142,13 @@ fn one_patch_equals_the_whole_mesh_engine_on_the_reordered_mesh() {
         // The whole-mesh engine on the same reordered arrays.
         let re = vcsmooth::partition::reorder(&Storage::heap(), &mesh.positions, &mesh.triangles)
             .unwrap();
-        let topo = vcsmooth::Topology::build(re.positions.len(), &re.triangles).unwrap();
-        let mut pos = re.positions.to_vec();
-        driver::smooth_positions(&topo, &re.triangles, &mut pos, &opts, Some(1), &mut Quiet)
-            .unwrap();
+        let mut whole = Mesh::new(re.positions.to_vec(), re.triangles.to_vec());
+        engine::smooth_in_order(&mut whole, &opts, &one_thread(), &mut Quiet).unwrap();
         for (new, &old) in re.order.iter().enumerate() {
-            assert_eq!(out[old as usize], pos[new], "{method}: vertex {old}");
+            assert_eq!(
+                out[old as usize], whole.positions[new],
+                "{method}: vertex {old}"
+            );
         }
     }
 }
@@ -161,7 +156,7 @@ fn one_patch_equals_the_whole_mesh_engine_on_the_reordered_mesh() {
 #[test]
 fn patched_laplacian_matches_the_whole_mesh_engine() {
     // Jacobi methods do not depend on order: only the neighbour summation order may differ.
-    let mesh = noisy_sphere(4);
+    let mesh = noisy_sphere(4, 0.4, 17);
     for method in [Method::Laplacian, Method::Taubin] {
         let opts = Options {
             method,
@@ -170,7 +165,7 @@ fn patched_laplacian_matches_the_whole_mesh_engine() {
         };
         let (out, _, _) = run(&mesh, &Storage::heap(), 100, &opts, 2);
         let mut reference = mesh.clone();
-        driver::smooth_mesh(&mut reference, &opts, Some(1), &mut Quiet).unwrap();
+        engine::smooth_in_order(&mut reference, &opts, &one_thread(), &mut Quiet).unwrap();
         for (a, b) in out.iter().zip(reference.positions.iter()) {
             assert!((*a - *b).length() < 1e-12, "{method}: {a} vs {b}");
         }
@@ -223,12 +218,10 @@ fn full_scratch_disk_is_a_clear_error() {
     );
 }
 
-/// Statistics only for the last iteration (`--stats last`): the Jacobi methods then run several
-/// iterations per pass over memory.
-struct LastOnly;
-impl driver::Observer for LastOnly {
-    fn statistics(&self, iteration: usize, total: usize) -> bool {
-        iteration == total
+fn one_thread() -> EngineSettings {
+    EngineSettings {
+        threads: Some(1),
+        ..EngineSettings::default()
     }
 }
 
@@ -238,7 +231,7 @@ fn multi_iteration_rounds_equal_plain_steps() {
     // Jacobi methods run tile by tile, several steps per round; in scratch storage one plain step
     // at a time. Both must give the same bits, with statistics every iteration (one iteration per
     // round) or only at the end (rounds of up to 8 steps, the last one short).
-    let mesh = shared("stanford-bunny.ply");
+    let mesh = read_scan("stanford-bunny.ply");
     let scratch = tempfile::tempdir().unwrap();
     let mapped = Storage::scratch(scratch.path()).unwrap();
     for (method, iterations) in [(Method::Laplacian, 11), (Method::Taubin, 9)] {
@@ -248,22 +241,36 @@ fn multi_iteration_rounds_equal_plain_steps() {
             ..Options::default()
         };
         let plain = pool(2).install(|| {
-            let mut prep = Prepared::new(&mapped, &mesh.positions, &mesh.triangles, 16384).unwrap();
-            prep.smooth(&mapped, &opts, &mut Quiet).unwrap();
+            let mut prep = Plan::new(
+                &mapped,
+                &mesh.positions,
+                &mesh.triangles,
+                Layout::Patches(16384),
+            )
+            .unwrap();
+            prep.smooth(&mapped, &opts, Statistics::Every, &mut Quiet)
+                .unwrap();
             prep.reordered.positions.to_vec()
         });
         for threads in [1, 3] {
-            let tiled = |observer: &mut dyn driver::Observer| {
+            // Statistics every iteration, or only for the last (`--stats last`): the Jacobi methods
+            // then run several iterations per pass over memory.
+            let tiled = |when: Statistics| {
                 pool(threads).install(|| {
                     let heap = Storage::heap();
-                    let mut prep =
-                        Prepared::new(&heap, &mesh.positions, &mesh.triangles, 16384).unwrap();
-                    let records = prep.smooth(&heap, &opts, observer).unwrap();
+                    let mut prep = Plan::new(
+                        &heap,
+                        &mesh.positions,
+                        &mesh.triangles,
+                        Layout::Patches(16384),
+                    )
+                    .unwrap();
+                    let records = prep.smooth(&heap, &opts, when, &mut Quiet).unwrap();
                     (prep.reordered.positions.to_vec(), records)
                 })
             };
-            let (every, rec_every) = tiled(&mut Quiet);
-            let (last, rec_last) = tiled(&mut LastOnly);
+            let (every, rec_every) = tiled(Statistics::Every);
+            let (last, rec_last) = tiled(Statistics::Last);
             assert!(
                 every == plain,
                 "{method}, {threads} threads: every iteration"

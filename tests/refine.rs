@@ -3,17 +3,14 @@
 //! input's triangles, open meshes keep their boundary, and the smoothing rounds keep the volume.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 use glam::DVec3;
-use vcsmooth::driver::Quiet;
-use vcsmooth::refine::{self, RefineOptions};
+use vcsmooth::engine::Quiet;
+use vcsmooth::modes::refine::{self, RefineOptions};
 use vcsmooth::topology::Topology;
-use vcsmooth::{Mesh, generate, io, metrics};
+use vcsmooth::{Mesh, io, metrics, shapes};
 
-fn meshes_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data")
-}
+use crate::util::{generate_sphere, noisy_sphere, ok, read_scan, vcsmooth};
 
 fn bbox_diagonal(pos: &[DVec3]) -> f64 {
     let lo = pos.iter().fold(DVec3::splat(f64::MAX), |a, &p| a.min(p));
@@ -145,7 +142,7 @@ fn subdivide_closed(input: &Mesh, delta: f64) -> (Mesh, refine::SubdivideStats) 
 
 #[test]
 fn icosahedron_closed_manifold_on_surface() {
-    let ico = generate::icosphere(0);
+    let ico = shapes::icosphere(0);
     for delta in [0.9, 0.3, 0.1] {
         let (out, s) = subdivide_closed(&ico, delta);
         eprintln!(
@@ -165,14 +162,14 @@ fn icosahedron_closed_manifold_on_surface() {
 
 #[test]
 fn torus_closed_manifold_on_surface() {
-    let torus = generate::torus(0);
+    let torus = shapes::torus(0);
     let (_, s) = subdivide_closed(&torus, 0.08);
     assert!(s.triangles_after > s.triangles_before);
 }
 
 #[test]
 fn real_scan_closed_manifold_on_surface() {
-    let input = io::read_mesh(&meshes_dir().join("fertility-9k.ply")).unwrap();
+    let input = read_scan("fertility-9k.ply");
     let delta = bbox_diagonal(&input.positions) / 100.0;
     let (out, s) = subdivide_closed(&input, delta);
     eprintln!(
@@ -206,7 +203,7 @@ fn boundary(m: &Mesh) -> Vec<[u32; 2]> {
 #[test]
 fn open_mesh_keeps_its_boundary() {
     // A sphere with a hole: drop the triangles around vertex 0.
-    let sphere = generate::icosphere(1);
+    let sphere = shapes::icosphere(1);
     let tris: Vec<[u32; 3]> = sphere
         .triangles
         .iter()
@@ -255,9 +252,8 @@ fn open_mesh_keeps_its_boundary() {
 
 #[test]
 fn refine_rounds_preserve_volume() {
-    let mut noisy = generate::icosphere(1);
-    generate::add_normal_noise(&mut noisy, 0.3, 3);
-    for (input, delta) in [(generate::icosphere(0), 0.3), (noisy, 0.15)] {
+    let noisy = noisy_sphere(1, 0.3, 3);
+    for (input, delta) in [(shapes::icosphere(0), 0.3), (noisy, 0.15)] {
         let mut mesh = input.clone();
         let opts = RefineOptions {
             max_edge: delta,
@@ -302,29 +298,9 @@ fn refine_rounds_preserve_volume() {
 
 // ---- the binary ----
 
-fn vcsmooth<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_vcsmooth"))
-        .args(args)
-        .output()
-        .expect("run vcsmooth")
-}
-
-fn ok(o: Output) -> String {
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
 fn sphere_file(dir: &Path) -> PathBuf {
     let path = dir.join("sphere.ply");
-    ok(vcsmooth(&[
-        "generate".as_ref(),
-        "sphere".as_ref(),
-        path.as_os_str(),
-        "--subdivisions".as_ref(),
-        "1".as_ref(),
-        "--noise".as_ref(),
-        "0.2".as_ref(),
-    ]));
+    generate_sphere(&path, 1, Some(0.2), None);
     path
 }
 
@@ -337,7 +313,7 @@ fn cli_subdivide_and_refine() {
     let delta = 0.2;
 
     let sub = dir.path().join("sub.ply");
-    let text = ok(vcsmooth(&[
+    let text = ok(vcsmooth([
         "subdivide".as_ref(),
         input.as_os_str(),
         sub.as_os_str(),
@@ -356,7 +332,7 @@ fn cli_subdivide_and_refine() {
     assert!(((v - v_in) / v_in).abs() <= 1e-6);
 
     let out = dir.path().join("refined.obj");
-    let text = ok(vcsmooth(&[
+    let text = ok(vcsmooth([
         "refine".as_ref(),
         input.as_os_str(),
         out.as_os_str(),

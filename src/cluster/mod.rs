@@ -42,8 +42,8 @@ use store::{Plan, PlanKey, StateDoc, WorkDir};
 use crate::engine::iterate::{Buffers, Reference, Share, Sweep, iterate};
 use crate::engine::memory as resources;
 use crate::engine::{
-    self, ClusterStats, EngineSettings, IterationRecord, Layout, MemoryStats, Observer, PhaseTimings,
-    PlanStats, Report, Statistics,
+    self, ClusterStats, EngineSettings, IterationRecord, Layout, MemoryStats, Observer,
+    PhaseTimings, PlanStats, Report, Statistics,
 };
 use crate::error::{Error, Result};
 use crate::mesh::Buf;

@@ -498,3 +498,121 @@ pub fn round(
         .into_iter()
         .try_fold(StepStats::default(), |a, b| Some(a.then(b?)))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::shapes;
+
+    /// A noisy sphere in a random vertex order (so that rings reach far), with an open hole (so
+    /// that some vertices are fixed).
+    fn shuffled_open_sphere() -> (Topology, Vec<DVec3>) {
+        let mut mesh = shapes::icosphere(5);
+        shapes::add_normal_noise(&mut mesh, 0.3, 4);
+        let n = mesh.positions.len();
+        let mut perm: Vec<u32> = (0..n as u32).collect();
+        let mut x = 0x9e37_79b9_7f4a_7c15u64;
+        for i in (1..n).rev() {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            perm.swap(i, (x % (i as u64 + 1)) as usize);
+        }
+        let mut pos = vec![DVec3::ZERO; n];
+        for (old, &new) in perm.iter().enumerate() {
+            pos[new as usize] = mesh.positions[old];
+        }
+        let mut tris: Vec<[u32; 3]> = mesh
+            .triangles
+            .iter()
+            .map(|t| t.map(|v| perm[v as usize]))
+            .collect();
+        tris.truncate(tris.len() - 3);
+        let topo = Topology::build(n, &tris).unwrap();
+        assert!(topo.stats.fixed_vertices > 0);
+        (topo, pos)
+    }
+
+    #[test]
+    fn a_round_equals_plain_steps_for_any_tile_depth_and_thread_count() {
+        let (topo, pos) = shuffled_open_sphere();
+        let n = pos.len();
+        let factors = [0.5, -0.53, 0.5, -0.53, 0.5, -0.53];
+        // The plain steps, and the displacement over the last two.
+        let mut want = vec![pos.clone()];
+        for &f in &factors {
+            let mut next = vec![DVec3::ZERO; n];
+            laplacian::jacobi_step(&topo, want.last().unwrap(), &mut next, 0, f);
+            want.push(next);
+        }
+        for (tile, depth) in [(1, 6), (97, 3), (1000, 6), (n, 8)] {
+            let plan = TilePlan::lazy(&topo, tile, depth);
+            for threads in [1, 2, 3] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                for k in 1..=depth.min(factors.len()) {
+                    let mut got = vec![DVec3::ZERO; n];
+                    let st = pool
+                        .install(|| round(&plan, &pos, &mut got, &factors[..k], Some(k - 1)))
+                        .unwrap();
+                    assert_eq!(
+                        got, want[k],
+                        "tile {tile}, depth {depth}, {threads} threads, {k} steps"
+                    );
+                    let d: Vec<f64> = (0..n)
+                        .map(|v| want[k][v].distance(want[k - 1][v]))
+                        .collect();
+                    let max = d.iter().cloned().fold(0.0, f64::max);
+                    assert_eq!(st.max_displacement, max);
+                    let sum: f64 = d.iter().sum();
+                    assert!((st.sum_displacement - sum).abs() <= 1e-12 * sum);
+                    assert_eq!(st.moved as usize, n - topo.stats.fixed_vertices);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn statistics_do_not_depend_on_the_thread_count() {
+        let (topo, pos) = shuffled_open_sphere();
+        let plan = TilePlan::lazy(&topo, 300, 4);
+        let run = |threads| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let mut out = vec![DVec3::ZERO; pos.len()];
+            pool.install(|| round(&plan, &pos, &mut out, &[0.5, -0.53], Some(0)))
+                .unwrap()
+        };
+        assert_eq!(run(1), run(4));
+    }
+
+    #[test]
+    fn rings_of_an_ordered_sphere_stay_small() {
+        // Morton-ordered (as the engine orders every mesh), the rings cost a fraction of the tile.
+        let mesh = shapes::icosphere(6);
+        let storage = crate::mesh::Storage::heap();
+        let r = crate::partition::reorder(&storage, &mesh.positions, &mesh.triangles).unwrap();
+        let topo = Topology::build(r.positions.len(), &r.triangles).unwrap();
+        let plan = TilePlan::lazy(&topo, 4096, 8);
+        let mut out = vec![DVec3::ZERO; r.positions.len()];
+        round(&plan, &r.positions, &mut out, &[0.5], None).expect("every tile planned");
+        assert!(plan.overhead() < 2.0, "{}", plan.overhead());
+    }
+
+    #[test]
+    fn a_vertex_of_huge_degree_gives_no_plan() {
+        // A fan of 70,000 triangles around one vertex: its first ring alone exceeds 16-bit ids.
+        let m = 70_000u32;
+        let tris: Vec<[u32; 3]> = (0..m).map(|k| [0, 1 + k, 1 + (k + 1) % m]).collect();
+        let topo = Topology::build(m as usize + 1, &tris).unwrap();
+        // The round says so and leaves its input alone.
+        let pos: Vec<DVec3> = (0..=m).map(|k| DVec3::new(k as f64, 1.0, 0.0)).collect();
+        let mut out = vec![DVec3::ZERO; pos.len()];
+        let plan = TilePlan::lazy(&topo, 1, 2);
+        assert!(round(&plan, &pos, &mut out, &[0.5], None).is_none());
+    }
+}

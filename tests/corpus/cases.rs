@@ -1,10 +1,12 @@
 //! The hostile-input corpus, generated: every malformed or tricky file the readers must handle,
 //! with what each must produce. `tests/hostile.rs` runs every case through the `vcsmooth` binary;
-//! `VCSMOOTH_DUMP_CORPUS=DIR cargo test --test hostile dump_corpus` writes the files to DIR (the
+//! `VCSMOOTH_DUMP_CORPUS=DIR cargo test --test tests dump_corpus` writes the files to DIR (the
 //! fuzzers' seed corpora are made that way, see `fuzz/README.md`).
 //!
 //! An error case gives the message after `vcsmooth: error: <path>: `, exactly: it names the
 //! element and its byte offset (binary) or line (text). Element numbers count from 0, lines from 1.
+
+use crate::util::{OCTA_F, OCTA_V};
 
 /// One file of the corpus.
 pub struct Case {
@@ -39,26 +41,6 @@ fn valid(name: &'static str, bytes: impl Into<Vec<u8>>) -> Case {
 
 // ---------------------------------------------------------------------------------------------
 // Building blocks
-
-/// A closed octahedron: 6 vertices (±1 on each axis), 8 outward triangles.
-pub const OCTA_V: [[f32; 3]; 6] = [
-    [1., 0., 0.],
-    [-1., 0., 0.],
-    [0., 1., 0.],
-    [0., -1., 0.],
-    [0., 0., 1.],
-    [0., 0., -1.],
-];
-pub const OCTA_F: [[i32; 3]; 8] = [
-    [0, 2, 4],
-    [2, 1, 4],
-    [1, 3, 4],
-    [3, 0, 4],
-    [2, 0, 5],
-    [1, 2, 5],
-    [3, 1, 5],
-    [0, 3, 5],
-];
 
 /// A unit cube of quads, outward.
 const CUBE_OFF: &str = "OFF\n8 6 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n0 0 1\n1 0 1\n1 1 1\n0 1 1\n\

@@ -1,0 +1,17 @@
+//! The integration tests, one binary: `cargo test --test tests` runs them all, `cargo test --test
+//! tests multires::` one module. Each module tests one part of vcsmooth; `util` holds what they
+//! share (running the binary, the scans of `tests/data`, generated meshes, fixtures). The tests
+//! against real OpenMPI and Slurm are `tests/engines.rs`, built only with `--features mpi`.
+
+mod util;
+
+mod batch;
+mod bench_cli;
+mod cli;
+mod cluster;
+mod engine;
+mod golden;
+mod hostile;
+mod multires;
+mod patches;
+mod refine;

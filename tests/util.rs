@@ -1,0 +1,256 @@
+//! Helpers and fixtures shared by the integration tests (`tests/tests.rs`) and the MPI-only tests
+//! (`tests/engines.rs`): running the `vcsmooth` binary and checking what it did, reading JSON, the
+//! real scans of `tests/data`, generated spheres, the octahedron, checkpoints, and the cluster engine
+//! on thread ranks. Each exists here once; what belongs to one area alone (the hostile corpus, the
+//! golden hashes, refine's geometry checks) stays in its module.
+
+use std::ffi::OsStr;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+
+use serde_json::Value;
+use vcsmooth::cluster::{self, ClusterSettings, Local};
+use vcsmooth::engine::{EngineSettings, Quiet, Report};
+use vcsmooth::{Mesh, Options, io, shapes};
+
+// ---------------------------------------------------------------------------------------------
+// The binary
+
+/// The `vcsmooth` binary under test.
+pub const BIN: &str = env!("CARGO_BIN_EXE_vcsmooth");
+
+/// `vcsmooth` as a command to complete (arguments, environment) before running it: no stdin, and
+/// none of the Slurm array variables, so that a test never picks up the task of a Slurm job it
+/// happens to run in.
+pub fn command() -> Command {
+    let mut cmd = Command::new(BIN);
+    for v in [
+        "SLURM_ARRAY_TASK_ID",
+        "SLURM_ARRAY_TASK_COUNT",
+        "SLURM_ARRAY_TASK_MIN",
+        "SLURM_ARRAY_TASK_MAX",
+    ] {
+        cmd.env_remove(v);
+    }
+    cmd.stdin(Stdio::null());
+    cmd
+}
+
+/// Run `vcsmooth ARGS...` to completion.
+pub fn vcsmooth<I, S>(args: I) -> Output
+where
+    I: IntoIterator<Item = S>,
+    S: AsRef<OsStr>,
+{
+    command().args(args).output().expect("run vcsmooth")
+}
+
+pub fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+pub fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Assert success and return stdout.
+pub fn ok(o: Output) -> String {
+    assert!(
+        o.status.success(),
+        "exit {:?}, stderr: {}\nstdout: {}",
+        o.status.code(),
+        stderr(&o),
+        stdout(&o)
+    );
+    stdout(&o)
+}
+
+/// Assert a failure with exit code `code` and exactly one stderr line `vcsmooth: error: …`
+/// that contains each of `mentions`.
+pub fn fails(o: &Output, code: i32, mentions: &[&str]) {
+    let err = stderr(o);
+    assert_eq!(o.status.code(), Some(code), "stderr: {err}");
+    let lines: Vec<&str> = err.trim_end().lines().collect();
+    assert_eq!(lines.len(), 1, "not one line: {err:?}");
+    assert!(lines[0].starts_with("vcsmooth: error: "), "{err}");
+    for m in mentions {
+        assert!(lines[0].contains(m), "'{m}' not in: {err}");
+    }
+    assert!(
+        !err.contains("panicked") && !err.contains("RUST_BACKTRACE"),
+        "{err}"
+    );
+}
+
+/// Checks a run that must fail with exactly `vcsmooth: error: <line>`; returns what is wrong.
+pub fn failed_with(out: &Output, line: &str) -> Result<(), String> {
+    let err = stderr(out);
+    let expected = format!("vcsmooth: error: {line}\n");
+    if out.status.success() || out.status.code().is_none() {
+        return Err(format!("status {:?}, stderr {err:?}", out.status));
+    }
+    if err != expected {
+        return Err(format!("stderr {err:?}\n      expected {expected:?}"));
+    }
+    if err.contains("panick") || err.contains("internal error") {
+        return Err(format!("panic: {err:?}"));
+    }
+    Ok(())
+}
+
+/// `vcsmooth generate sphere PATH --subdivisions LEVEL [--noise NOISE] [--seed SEED]`, which must
+/// succeed.
+pub fn generate_sphere(path: &Path, level: u32, noise: Option<f64>, seed: Option<u64>) {
+    let mut args = vec![
+        "generate".to_string(),
+        "sphere".into(),
+        path.display().to_string(),
+        "--subdivisions".into(),
+        level.to_string(),
+    ];
+    if let Some(noise) = noise {
+        args.extend(["--noise".into(), noise.to_string()]);
+    }
+    if let Some(seed) = seed {
+        args.extend(["--seed".into(), seed.to_string()]);
+    }
+    ok(vcsmooth(&args));
+    assert!(path.is_file(), "{} not written", path.display());
+}
+
+// ---------------------------------------------------------------------------------------------
+// Files
+
+/// Parse `text` as JSON.
+pub fn json(text: &str) -> Value {
+    serde_json::from_str(text).unwrap_or_else(|e| panic!("not JSON ({e}): {text}"))
+}
+
+/// Read the JSON file at `path`.
+pub fn read_json(path: &Path) -> Value {
+    json(&std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())))
+}
+
+/// File names in `dir`, sorted.
+pub fn listing(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+/// The iterations a checkpointed run has recorded in `work/state.json`; 0 while there is none.
+pub fn iterations_done(work: &Path) -> u64 {
+    std::fs::read_to_string(work.join("state.json"))
+        .ok()
+        .and_then(|t| serde_json::from_str::<Value>(&t).ok())
+        .and_then(|v| v["done"].as_u64())
+        .unwrap_or(0)
+}
+
+// ---------------------------------------------------------------------------------------------
+// The real scans (tests/data, see tests/data/PROVENANCE.md)
+
+/// The repository's root.
+pub fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// The path of the scan `name` in `tests/data`.
+pub fn scan(name: &str) -> PathBuf {
+    root().join("tests/data").join(name)
+}
+
+/// The scan `name` of `tests/data`, read.
+pub fn read_scan(name: &str) -> Mesh {
+    io::read_mesh(&scan(name)).unwrap()
+}
+
+/// The paths of the six scans of `tests/data`, sorted.
+pub fn scans() -> Vec<PathBuf> {
+    let dir = root().join("tests/data");
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "ply"))
+        .collect();
+    files.sort();
+    assert_eq!(files.len(), 6, "expected the six scans of tests/data");
+    files
+}
+
+// ---------------------------------------------------------------------------------------------
+// Generated meshes
+
+/// An icosphere of `level` with Gaussian noise `sigma` (× mean edge length) along the normals.
+pub fn noisy_sphere(level: u32, sigma: f64, seed: u64) -> Mesh {
+    let mut m = shapes::icosphere(level);
+    shapes::add_normal_noise(&mut m, sigma, seed);
+    m
+}
+
+/// A closed octahedron: its 6 vertices (±1 on each axis) ...
+pub const OCTA_V: [[f32; 3]; 6] = [
+    [1., 0., 0.],
+    [-1., 0., 0.],
+    [0., 1., 0.],
+    [0., -1., 0.],
+    [0., 0., 1.],
+    [0., 0., -1.],
+];
+/// ... and its 8 outward triangles.
+pub const OCTA_F: [[i32; 3]; 8] = [
+    [0, 2, 4],
+    [2, 1, 4],
+    [1, 3, 4],
+    [3, 0, 4],
+    [2, 0, 5],
+    [1, 2, 5],
+    [3, 1, 5],
+    [0, 3, 5],
+];
+
+// ---------------------------------------------------------------------------------------------
+// The cluster engine on thread ranks (the code path MPI ranks take)
+
+pub fn engine_settings(patch_size: usize, threads: usize) -> EngineSettings {
+    EngineSettings {
+        threads: Some(threads),
+        patch_size,
+        ..EngineSettings::default()
+    }
+}
+
+pub fn cluster_settings(work_dir: &Path, keep: bool, checkpoint_every: usize) -> ClusterSettings {
+    ClusterSettings {
+        work_dir: work_dir.to_path_buf(),
+        keep,
+        checkpoint_every,
+    }
+}
+
+/// Run the cluster engine on `ranks` thread-ranks exchanging through `cluster::Local`; returns
+/// every rank's result, rank 0 first.
+pub fn run_ranks(
+    ranks: usize,
+    input: &Path,
+    output: &Path,
+    opts: &Options,
+    engine: &EngineSettings,
+    settings: &ClusterSettings,
+) -> Vec<vcsmooth::Result<Report>> {
+    let comms = Local::group(ranks);
+    std::thread::scope(|s| {
+        let handles: Vec<_> = comms
+            .iter()
+            .map(|c| {
+                s.spawn(move || {
+                    cluster::run_file(c, input, output, opts, engine, settings, &mut Quiet)
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    })
+}
