@@ -54,9 +54,6 @@ pub enum Error {
     /// flags and arguments). Raised only by [`crate::cli`].
     #[error("{what}")]
     Usage { what: String },
-    /// Temporary: the engine and cluster modules still raise this until they use the kinds above.
-    #[error("{0}")]
-    Config(String),
 }
 
 /// `"<path>: "`, or nothing without a path.
@@ -102,8 +99,6 @@ impl Error {
                 path: Some(path.to_path_buf()),
                 what,
             },
-            // Temporary, with the `Config` variant.
-            Error::Config(what) => Error::invalid(path, what),
             other => other,
         }
     }

@@ -41,6 +41,7 @@ pub mod modes;
 pub mod multires;
 pub mod partition;
 pub mod schedule;
+pub mod shapes;
 
 pub mod smooth;
 pub mod topology;
@@ -48,6 +49,6 @@ pub mod topology;
 pub use engine::{EngineSettings, Report, smooth, smooth_with};
 pub use error::{Error, Result};
 pub use mesh::Mesh;
-pub use mesh::shapes;
+
 pub use smooth::{Method, Options};
 pub use topology::Topology;

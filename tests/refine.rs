@@ -177,7 +177,7 @@ fn real_scan_closed_manifold_on_surface() {
         s.triangles_before, s.triangles_after, s.max_edge_before, s.max_edge_after
     );
     // The PLY layout no longer matches: it is dropped, and the mesh can be written as PLY.
-    assert!(out.source.ply.is_none());
+    assert!(out.source.layout.is_none());
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("f.ply");
     io::write_mesh(&path, &out).unwrap();

@@ -12,6 +12,7 @@ mod cluster;
 mod engine;
 mod golden;
 mod hostile;
+mod layout;
 mod multires;
 mod patches;
 mod refine;

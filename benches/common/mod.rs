@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use criterion::{BenchmarkGroup, SamplingMode, measurement::WallTime};
-use vcsmooth::mesh::shapes;
+use vcsmooth::shapes;
 use vcsmooth::{Mesh, io};
 
 /// Noise of the generated meshes, × the mean edge length.

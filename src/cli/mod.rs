@@ -1,42 +1,122 @@
-//! The `vcsmooth` command line, in three layers (after ripgrep):
+//! The `vcsmooth` command line. Each command has one file in [`commands`], in three steps (after
+//! ripgrep):
 //!
-//! 1. [`Args`] — raw flags parsed by clap ([`args`]); per-flag checks only.
-//! 2. [`Config`] — the resolved, validated command ([`config`]): output formats known, plot files
-//!    SVG, target directories present, so a run fails before it reads or smooths anything.
-//! 3. [`run`] — executes a [`Config`] through the library, rendering the driver's
-//!    [`crate::engine::Observer`] as an indicatif progress bar ([`progress`]) when stderr is a terminal.
+//! 1. its clap arguments (`…Args`): raw flags, per-flag checks only;
+//! 2. its config (`…Config::from_args`): the command resolved and validated — output formats known,
+//!    plot files SVG, target directories present — so that a run fails before it reads or smooths
+//!    anything;
+//! 3. its `run`: executes the config through the library, rendering the driver's
+//!    [`crate::engine::Observer`] as an indicatif progress bar ([`progress`]) when stderr is a
+//!    terminal, and prints its result.
+//!
+//! What several commands share has one file each: the flag groups ([`shared`]; [`batch_smooth`] for
+//! `batch` and `slurm-script`), `smooth`'s `--multires` flags ([`multires`]), the reports' pieces
+//! ([`report`]), output files and streams ([`output`]), plots ([`plot`]), progress ([`progress`])
+//! and flag names ([`flags`]). Command files use shared files and never each other; shared files
+//! use no command file; this file only parses, dispatches and prints errors.
 //!
 //! [`main_with`] ties them together for the binary and returns the exit code: 0 on success, 2 for
 //! usage errors (clap's, and options that resolve to nothing valid), 1 for failures at run time.
 //! Every failure is one line on stderr, `vcsmooth: error: <file>: <problem>`; no output file, report
 //! or plot is written by a run that fails before it would write them.
-//!
-//! Commands: `smooth`, `info`, `compare`, `generate`, `curves`, `demo`, `bench`, `batch`,
-//! `slurm-script` (see [`args::Command`]).
 
-pub mod args;
-pub mod batch;
+pub mod batch_smooth;
 pub mod commands;
-pub mod config;
 pub mod flags;
 pub mod multires;
 pub mod output;
 pub mod plot;
 pub mod progress;
-pub mod refine;
 pub mod report;
+pub mod shared;
+#[cfg(test)]
+mod tests;
 
 use std::ffi::OsString;
 use std::process::ExitCode;
 
-use clap::Parser;
+use clap::{Parser, Subcommand};
 
-pub use args::Args;
-pub use config::Config;
+use commands::{
+    batch, bench, compare, curves, demo, generate, info, refine, slurm_script, smooth, subdivide,
+};
+use output::{one_line, print_error};
 pub use progress::Progress;
 
 use crate::error::Result;
 
+/// vcsmooth: smooth triangle meshes without shrinking them (volume-constrained smoothing, Liu et al. 2002).
+#[derive(Debug, Clone, Parser)]
+#[command(name = "vcsmooth", version, about, long_about = None, propagate_version = true)]
+pub struct Args {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The subcommands. Their names and flags are a contract: scripts depend on them.
+#[derive(Debug, Clone, Subcommand)]
+pub enum Command {
+    /// Smooth a mesh file and write the result (format chosen by OUT's extension).
+    Smooth(smooth::SmoothArgs),
+    /// Print vertices, faces, edges, boundary, components, volume, area, bounding box of a mesh.
+    Info(info::InfoArgs),
+    /// Compare two meshes with the same connectivity (distances, normals, volume and area ratios).
+    Compare(compare::CompareArgs),
+    /// Write a closed test mesh (icosphere or torus), optionally with Gaussian noise along normals.
+    Generate(generate::GenerateArgs),
+    /// Run several methods from the same input and plot volume % per iteration (the paper's Fig. 4).
+    Curves(curves::CurvesArgs),
+    /// Smooth a generated noisy sphere with every method and print volume and roughness per method.
+    Demo(demo::DemoArgs),
+    /// Measure throughput on generated meshes: smoothing, plan, PLY I/O, memory (to size jobs).
+    #[command(long_about = bench::BENCH_ABOUT)]
+    Bench(bench::BenchArgs),
+    /// Smooth many meshes as one share of a job array (Slurm's), with per-input success markers; --summary gathers them.
+    Batch(batch::BatchArgs),
+    /// Print a ready Slurm script: an array job running `batch` over the inputs, and a dependent summary job.
+    SlurmScript(slurm_script::SlurmScriptArgs),
+    /// Split triangles until no edge is longer than --max-edge (the paper's adaptive subdivision, §4).
+    Subdivide(subdivide::SubdivideArgs),
+    /// Alternate subdivide and vcs smoothing --rounds times (the paper's Figs. 5–7).
+    Refine(refine::RefineArgs),
+}
+
+/// One resolved command.
+#[derive(Debug, Clone)]
+pub enum Config {
+    Smooth(smooth::SmoothConfig),
+    Info(info::InfoConfig),
+    Compare(compare::CompareConfig),
+    Generate(generate::GenerateConfig),
+    Curves(curves::CurvesConfig),
+    Demo(demo::DemoConfig),
+    Bench(bench::BenchConfig),
+    Batch(batch::BatchConfig),
+    SlurmScript(slurm_script::SlurmScriptConfig),
+    Subdivide(subdivide::SubdivideConfig),
+    Refine(refine::RefineConfig),
+}
+
+impl Config {
+    /// Resolve and validate parsed flags. `argv` is the command line, kept for reports.
+    pub fn from_args(args: Args, argv: Vec<String>) -> Result<Config> {
+        Ok(match args.command {
+            Command::Smooth(a) => Config::Smooth(smooth::SmoothConfig::from_args(a, argv)?),
+            Command::Info(a) => Config::Info(info::InfoConfig::from_args(a)?),
+            Command::Compare(a) => Config::Compare(compare::CompareConfig::from_args(a)?),
+            Command::Generate(a) => Config::Generate(generate::GenerateConfig::from_args(a)?),
+            Command::Curves(a) => Config::Curves(curves::CurvesConfig::from_args(a)?),
+            Command::Demo(a) => Config::Demo(demo::DemoConfig::from_args(a)?),
+            Command::Bench(a) => Config::Bench(bench::BenchConfig::from_args(a)?),
+            Command::Batch(a) => Config::Batch(batch::BatchConfig::from_args(a)?),
+            Command::SlurmScript(a) => {
+                Config::SlurmScript(slurm_script::SlurmScriptConfig::from_args(a)?)
+            }
+            Command::Subdivide(a) => Config::Subdivide(subdivide::SubdivideConfig::from_args(a)?),
+            Command::Refine(a) => Config::Refine(refine::RefineConfig::from_args(a)?),
+        })
+    }
+}
 /// Exit code of a failure at run time (unreadable input, failed write, …).
 pub const EXIT_FAILURE: u8 = 1;
 /// Exit code of a usage error (bad flags or option values), as clap uses.
@@ -89,28 +169,18 @@ pub fn run_with(
     out: &mut dyn std::io::Write,
 ) -> Result<()> {
     match config {
-        Config::Smooth(c) => commands::smooth(c, progress, out),
-        Config::Info(c) => commands::info(c, progress, out),
-        Config::Compare(c) => commands::compare(c, progress, out),
-        Config::Generate(c) => commands::generate(c, progress, out),
-        Config::Curves(c) => commands::curves(c, progress, out),
-        Config::Demo(c) => commands::demo(c, progress, out),
-        Config::Bench(c) => commands::bench(c, progress, out),
-        Config::Batch(c) => batch::batch(c, progress, out),
-        Config::SlurmScript(c) => batch::slurm_script(c, out),
-        Config::Subdivide(c) => refine::subdivide(c, progress, out),
-        Config::Refine(c) => refine::refine(c, progress, out),
+        Config::Smooth(c) => smooth::run(c, progress, out),
+        Config::Info(c) => info::run(c, progress, out),
+        Config::Compare(c) => compare::run(c, progress, out),
+        Config::Generate(c) => generate::run(c, progress, out),
+        Config::Curves(c) => curves::run(c, progress, out),
+        Config::Demo(c) => demo::run(c, progress, out),
+        Config::Bench(c) => bench::run(c, progress, out),
+        Config::Batch(c) => batch::run(c, progress, out),
+        Config::SlurmScript(c) => slurm_script::run(c, out),
+        Config::Subdivide(c) => subdivide::run(c, progress, out),
+        Config::Refine(c) => refine::run(c, progress, out),
     }
-}
-
-/// Print `vcsmooth: error: <message>` on one line.
-fn print_error(message: &str) {
-    eprintln!("vcsmooth: error: {}", one_line(message));
-}
-
-/// Collapse all whitespace runs (newlines included) into single spaces.
-fn one_line(s: &str) -> String {
-    s.split_whitespace().collect::<Vec<_>>().join(" ")
 }
 
 /// Help and version go to stdout with exit 0; a usage error becomes one line with exit 2.
@@ -161,34 +231,4 @@ fn install_panic_hook() {
             one_line(&what)
         );
     }));
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn clap_errors_become_one_line() {
-        let e = Args::try_parse_from([
-            "vcsmooth",
-            "smooth",
-            "a.ply",
-            "b.ply",
-            "--iterations",
-            "abc",
-        ])
-        .unwrap_err();
-        let m = clap_message(&e.to_string());
-        assert!(
-            !m.contains('\n') && m.contains("--iterations") && m.contains("abc"),
-            "{m}"
-        );
-        let e = Args::try_parse_from(["vcsmooth", "smooth", "a.ply"]).unwrap_err();
-        let m = clap_message(&e.to_string());
-        assert!(!m.contains('\n') && m.contains("OUT"), "{m}");
-        let e =
-            Args::try_parse_from(["vcsmooth", "smooth", "a", "b", "--method", "x"]).unwrap_err();
-        let m = clap_message(&e.to_string());
-        assert!(m.contains("vcs-triangle"), "{m}");
-    }
 }

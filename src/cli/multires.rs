@@ -1,9 +1,10 @@
-//! The flags of `vcsmooth smooth --multires` (see [`crate::multires`]), resolved here so that the
-//! shared argument and config files only gain one line each.
+//! The flags of `vcsmooth smooth --multires` (see [`crate::multires`]): a part of `smooth` kept in
+//! its own file, with their resolution and the per-level table they add to `smooth`'s output.
 
 use clap::builder::PossibleValue;
 use clap::{Args as ClapArgs, ValueEnum};
 
+use super::output::stdout_error;
 use crate::error::Result;
 use crate::multires::{DEFAULT_LEVELS, MAX_LEVELS, MultiresOptions, Transfer};
 use crate::smooth::Method;
@@ -109,8 +110,7 @@ pub fn print_multires(
         m.correction_seconds,
         m.seconds
     );
-    out.write_all(text.as_bytes())
-        .map_err(super::output::stdout_error)
+    out.write_all(text.as_bytes()).map_err(stdout_error)
 }
 
 /// Only the Jacobi methods make sense on the fine level (the point of the mode is to avoid the

@@ -7,6 +7,7 @@ use std::path::Path;
 use plotters::prelude::*;
 
 use super::output::atomic_write;
+use crate::engine::IterationRecord;
 use crate::error::{Error, Result};
 use crate::smooth::Method;
 
@@ -14,6 +15,21 @@ use crate::smooth::Method;
 pub struct Curve {
     pub method: Method,
     pub volume_pct: Vec<f64>,
+}
+
+/// Volume % at iterations 0 (the input: 100), 1, …, N.
+pub fn volume_curve(records: &[IterationRecord]) -> Vec<f64> {
+    std::iter::once(100.0)
+        .chain(records.iter().map(|r| r.volume_pct))
+        .collect()
+}
+
+/// The file name of `path`, for a plot's title.
+pub fn file_name(path: &Path) -> String {
+    path.file_name().map_or_else(
+        || path.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    )
 }
 
 /// Draw `curves` under `title` and write the SVG to `path` atomically.
@@ -170,5 +186,15 @@ mod tests {
         assert!(render("none", &[]).is_ok());
         assert_eq!(decimals(99.5, 100.5), 1);
         assert_eq!(decimals(40.0, 105.0), 0);
+    }
+
+    #[test]
+    fn curve_starts_at_100() {
+        let r = IterationRecord {
+            iteration: 1,
+            volume_pct: 90.0,
+            ..Default::default()
+        };
+        assert_eq!(volume_curve(&[r]), vec![100.0, 90.0]);
     }
 }

@@ -78,9 +78,7 @@ pub fn run_file(
 ) -> Result<Report> {
     opts.check()?;
     if cluster.checkpoint_every == 0 {
-        return Err(Error::Config(
-            "--checkpoint-every must be at least 1".into(),
-        ));
+        return Err(Error::parameter("checkpoint_every", "must be at least 1"));
     }
     let start = Instant::now();
     let sampler = resources::PeakSampler::start(std::time::Duration::from_millis(20));
@@ -102,12 +100,13 @@ pub fn run_file(
     let opened = work.open_plan().and_then(|plan| {
         let state = work.read_state()?;
         if state.done > opts.iterations {
-            return Err(Error::Config(format!(
-                "{}: the checkpoint has {} iterations done, more than --iterations {}",
-                work.dir.display(),
-                state.done,
-                opts.iterations
-            )));
+            return Err(Error::invalid(
+                &work.dir,
+                format!(
+                    "the checkpoint has {} iterations done, more than the {} asked for",
+                    state.done, opts.iterations
+                ),
+            ));
         }
         Ok((plan, state))
     });
@@ -208,7 +207,9 @@ fn agree<T>(comm: &dyn Comm, r: Result<T>, other: &str) -> Result<T> {
     let ok = comm.all(r.is_ok());
     match r {
         Err(e) => Err(e),
-        Ok(_) if !ok => Err(Error::Config(other.to_string())),
+        Ok(_) if !ok => Err(Error::Peer {
+            what: other.to_string(),
+        }),
         Ok(v) => Ok(v),
     }
 }

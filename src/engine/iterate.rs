@@ -502,7 +502,7 @@ pub fn round(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::shapes;
+    use crate::shapes;
 
     /// A noisy sphere in a random vertex order (so that rings reach far), with an open hole (so
     /// that some vertices are fixed).

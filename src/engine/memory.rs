@@ -15,24 +15,29 @@ use crate::error::{Error, Result};
 /// per-patch working buffers, with everything large in scratch files.
 pub const MIN_BUDGET: u64 = 64 << 20;
 
-/// The memory model: how many bytes of anonymous memory a run needs per triangle, by storage.
+/// The memory model: bytes of anonymous memory per triangle, the one place every estimate of the
+/// tool comes from (the heap-or-scratch choice of a run, `bench`'s size check, `slurm-script`'s
+/// `--mem`, `generate`'s check).
 ///
 /// In core ([`Storage::heap`](crate::mesh::Storage::heap)) the peak of a `smooth` run was measured
 /// at 87–95 B per triangle on a 5.2M-triangle sphere (laplacian, taubin, vcs); the model adds a
-/// fifth for the reports' statistics and the allocator. In scratch files the large arrays are
-/// file-backed pages, and what stays anonymous is per-patch working memory: a few bytes per
-/// triangle.
+/// fifth for the reports' statistics and the allocator.
 pub const HEAP_BYTES_PER_TRIANGLE: u64 = 114;
-/// Anonymous bytes per triangle when the large arrays are in scratch files (see above).
-pub const SCRATCH_BYTES_PER_TRIANGLE: u64 = 8;
+/// An in-memory [`Mesh`](crate::Mesh) itself: f64 positions (about half a vertex per triangle)
+/// and u32 triangles.
+pub const MESH_BYTES_PER_TRIANGLE: u64 = 24;
 /// Bytes per triangle of a binary PLY file (12 B per vertex at about half a vertex per triangle,
 /// 13 B per face): how the model turns a file size into triangles before reading. Text formats
 /// spend more per triangle, so they are overestimated, which only sends them to scratch sooner.
 pub const FILE_BYTES_PER_TRIANGLE: u64 = 19;
+/// `generate`: the mesh of one level and the one before it, and the write buffers (measured 32 B
+/// at level 8); with noise also the adjacency and normals it builds (measured 38 B more).
+pub const GENERATE_BYTES_PER_TRIANGLE: u64 = 48;
+pub const NOISE_BYTES_PER_TRIANGLE: u64 = 48;
 /// Memory for the process itself, its thread stacks and buffers, on top of the per-triangle part.
 pub const BASE_BYTES: u64 = 256 << 20;
 
-/// Anonymous memory an in-core run of `triangles` triangles needs (per-triangle part only).
+/// Anonymous memory an in-core smoothing run of `triangles` triangles needs.
 pub fn in_core_bytes(triangles: u64) -> u64 {
     triangles.saturating_mul(HEAP_BYTES_PER_TRIANGLE)
 }
@@ -42,9 +47,20 @@ pub fn in_core_bytes_of_file(size: u64) -> u64 {
     size.saturating_mul(HEAP_BYTES_PER_TRIANGLE) / FILE_BYTES_PER_TRIANGLE
 }
 
-/// Memory to ask a scheduler for to smooth a file of `size` bytes in core, with [`BASE_BYTES`].
+/// Memory a job needs to smooth a file of `size` bytes in core, the process included.
 pub fn job_bytes_of_file(size: u64) -> u64 {
     in_core_bytes_of_file(size).saturating_add(BASE_BYTES)
+}
+
+/// Memory to smooth a mesh of `triangles` that is also held in memory beside the plan (`bench`).
+pub fn in_core_bytes_with_mesh(triangles: u64) -> u64 {
+    in_core_bytes(triangles).saturating_add(triangles.saturating_mul(MESH_BYTES_PER_TRIANGLE))
+}
+
+/// Memory to generate a mesh of `triangles`, with or without noise.
+pub fn generate_bytes(triangles: u64, noise: bool) -> u64 {
+    let per = GENERATE_BYTES_PER_TRIANGLE + if noise { NOISE_BYTES_PER_TRIANGLE } else { 0 };
+    triangles.saturating_mul(per)
 }
 
 pub use crate::mesh::storage::{format_size, parse_size};
@@ -81,11 +97,14 @@ pub fn default_budget() -> u64 {
 /// Check a user-given budget.
 pub fn check_budget(budget: u64) -> Result<()> {
     if budget < MIN_BUDGET {
-        return Err(Error::Config(format!(
-            "--memory-budget {} is below the minimum of {}",
-            format_size(budget),
-            format_size(MIN_BUDGET)
-        )));
+        return Err(Error::parameter(
+            "memory_budget",
+            format!(
+                "{} is below the minimum of {}",
+                format_size(budget),
+                format_size(MIN_BUDGET)
+            ),
+        ));
     }
     Ok(())
 }

@@ -36,8 +36,8 @@ use crate::smooth::Options;
 /// with the default patch size: bit-identical for any thread count.
 ///
 /// ```
-/// let mut mesh = vcsmooth::mesh::shapes::icosphere(3);
-/// vcsmooth::mesh::shapes::add_normal_noise(&mut mesh, 0.3, 7);
+/// let mut mesh = vcsmooth::shapes::icosphere(3);
+/// vcsmooth::shapes::add_normal_noise(&mut mesh, 0.3, 7);
 /// let opts = vcsmooth::Options::default(); // vcs, 10 iterations
 /// let report = vcsmooth::smooth(&mut mesh, &opts)?;
 /// assert!((report.records.last().unwrap().volume_pct - 100.0).abs() < 1e-6);
@@ -73,10 +73,7 @@ impl Options {
     pub fn check(&self) -> Result<()> {
         for (name, x) in [("lambda", self.lambda), ("mu", self.mu)] {
             if !x.is_finite() {
-                return Err(Error::Parameter {
-                    name,
-                    problem: format!("must be a finite number, got {x}"),
-                });
+                return Err(Error::parameter(name, format!("must be a finite number, got {x}")));
             }
         }
         Ok(())
@@ -143,14 +140,9 @@ pub fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
     let mut builder = rayon::ThreadPoolBuilder::new();
     if let Some(n) = threads {
         if n == 0 {
-            return Err(Error::Parameter {
-                name: "threads",
-                problem: "must be at least 1".into(),
-            });
+            return Err(Error::parameter("threads", "must be at least 1"));
         }
         builder = builder.num_threads(n);
     }
-    builder.build().map_err(|e| Error::Resource {
-        what: format!("thread pool: {e}"),
-    })
+    builder.build().map_err(|e| Error::resource(format!("thread pool: {e}")))
 }

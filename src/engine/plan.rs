@@ -84,10 +84,7 @@ impl Plan {
         let t = Instant::now();
         let reordered = match layout {
             Layout::Patches(0) => {
-                return Err(Error::Parameter {
-                    name: "patch_size",
-                    problem: "must be at least 1".into(),
-                });
+                return Err(Error::parameter("patch_size", "must be at least 1"));
             }
             Layout::Patches(_) => partition::reorder(storage, positions, triangles)?,
             Layout::Whole => Reordered {
@@ -164,7 +161,7 @@ impl Plan {
     }
 
     /// Statistics of the current positions; every figure is order-independent.
-    pub fn info(&self, source: &crate::io::Source) -> crate::metrics::MeshInfo {
+    pub fn info(&self, source: &crate::mesh::Source) -> crate::metrics::MeshInfo {
         crate::metrics::info_of(
             &self.reordered.positions,
             &self.reordered.triangles,

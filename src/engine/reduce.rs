@@ -8,6 +8,7 @@ use std::ops::Range;
 use glam::DVec3;
 use rayon::prelude::*;
 
+use crate::metrics;
 use crate::smooth::laplacian::StepStats;
 use crate::topology::Topology;
 
@@ -52,63 +53,48 @@ pub fn map_fold_mut<T: Send, R: Send>(
     parts.into_iter().fold(init, fold)
 }
 
-/// Signed volume about `origin` (`(1/6) Σ det(p_a − o, p_b − o, p_c − o)`) and area of `tris`.
+/// Signed volume about `origin` and area of `tris` ([`metrics::volume_about`], [`metrics::area`]).
 pub fn volume_area(pos: &[DVec3], tris: &[[u32; 3]], origin: DVec3) -> (f64, f64) {
     let (v, a) = map_fold(
         tris,
         |_, chunk| {
-            let (mut v, mut a) = (0.0, 0.0);
-            for &[i, j, k] in chunk {
-                let p = pos[i as usize] - origin;
-                let q = pos[j as usize] - origin;
-                let r = pos[k as usize] - origin;
-                v += p.dot(q.cross(r));
-                a += (q - p).cross(r - p).length();
-            }
-            (v, a)
+            (
+                metrics::determinant_sum(pos, chunk, origin),
+                metrics::doubled_area_sum(pos, chunk),
+            )
         },
-        (0.0, 0.0),
+        (-0.0, -0.0),
         |(v, a), (pv, pa)| (v + pv, a + pa),
     );
     (v / 6.0, a / 2.0)
 }
 
-/// Signed volume about `origin` alone (the same sum as [`volume_area`]'s first half).
+/// Signed volume about `origin` ([`metrics::volume_about`]).
 pub fn volume(pos: &[DVec3], tris: &[[u32; 3]], origin: DVec3) -> f64 {
     map_fold(
         tris,
-        |_, chunk| {
-            chunk
-                .iter()
-                .map(|t| {
-                    let [a, b, c] = t.map(|v| pos[v as usize] - origin);
-                    a.dot(b.cross(c))
-                })
-                .sum::<f64>()
-        },
-        // The start of `Iterator::sum` (so a sum of zeros keeps its sign as it always did).
+        |_, chunk| metrics::determinant_sum(pos, chunk, origin),
         -0.0,
         |s, x| s + x,
     ) / 6.0
 }
 
-/// Sum of the positions (divide by the count for the centroid; kept apart so that ranks can add
-/// their sums first).
-pub fn position_sum(pos: &[DVec3]) -> DVec3 {
-    map_fold(
-        pos,
-        |_, chunk| chunk.iter().fold(DVec3::ZERO, |s, p| s + *p),
-        DVec3::ZERO,
-        |s, p| s + p,
-    )
-}
-
-/// Mean position (zero for none).
+/// Mean position (zero for none), [`metrics::centroid`] summed over chunks.
 pub fn centroid(pos: &[DVec3]) -> DVec3 {
     if pos.is_empty() {
         return DVec3::ZERO;
     }
     position_sum(pos) / pos.len() as f64
+}
+
+/// Sum of the positions (ranks add theirs before dividing by the count).
+pub fn position_sum(pos: &[DVec3]) -> DVec3 {
+    map_fold(
+        pos,
+        |_, chunk| metrics::position_sum(chunk),
+        DVec3::ZERO,
+        |s, p| s + p,
+    )
 }
 
 /// Largest and summed distance between `a` and `b`, vertex by vertex.

@@ -183,31 +183,20 @@ pub(crate) fn run_file_with(
     t.ingest = clock.elapsed().as_secs_f64();
     check_in_memory_budget(input, &storage, &mesh, budget)?;
 
-    let run = pool.install(|| -> Result<_> {
+    let smoothed = pool.install(|| -> Result<_> {
         let mut plan = Plan::new(&storage, &mesh.positions, &mesh.triangles, engine.layout())
             .map_err(|e| e.in_file(input))?;
-        t.add_preparation(&plan.timings);
         // The plan holds its own (reordered) copy: the input-order positions are not needed until
         // the write, so their memory is given back while smoothing (the peak of an in-core run).
         let n = mesh.positions.len();
         mesh.positions = Buf::default();
-        let clock = Instant::now();
-        let input_stats = engine.with_stats.then(|| plan.info(&mesh.source));
-        t.metrics += clock.elapsed().as_secs_f64();
-
-        let clock = Instant::now();
-        let records = smooth(&mut plan, &storage, observer)?;
-        t.smoothing = clock.elapsed().as_secs_f64();
-
-        let clock = Instant::now();
-        let output_stats = engine.with_stats.then(|| plan.info(&mesh.source));
-        t.metrics += clock.elapsed().as_secs_f64();
+        let smoothed = smooth_planned(&mut plan, engine, &mesh.source, &mut t, |plan| {
+            smooth(plan, &storage, observer)
+        })?;
         mesh.positions = storage.zeroed(n)?;
         plan.positions_in_input_order(&mut mesh.positions);
-        Ok((records, input_stats, output_stats, plan.stats()))
+        Ok(smoothed)
     })?;
-    let (records, input_stats, output_stats, mut plan) = run;
-    plan.threads = pool.current_num_threads();
 
     let clock = Instant::now();
     io::write_mesh(output, &mesh)?;
@@ -225,18 +214,7 @@ pub(crate) fn run_file_with(
         bytes_read,
         bytes_written: std::fs::metadata(output).map(|m| m.len()).unwrap_or(0),
     };
-    Ok(Report {
-        input_format: mesh.source.format,
-        vertices: mesh.positions.len(),
-        triangles: mesh.triangles.len(),
-        records,
-        input_stats,
-        output_stats,
-        plan,
-        memory,
-        timings: t,
-        cluster: None,
-    })
+    Ok(smoothed.report(&mesh, pool.current_num_threads(), memory, t))
 }
 
 /// Smooth an in-memory `mesh` in place (see [`crate::smooth`], the crate's front door).
@@ -252,38 +230,77 @@ pub(crate) fn run_mesh(
     let pool = super::thread_pool(engine.threads)?;
     let storage = Storage::heap();
     let mut t = PhaseTimings::default();
-    let (records, input_stats, output_stats, mut plan) = pool.install(|| -> Result<_> {
+    let smoothed = pool.install(|| -> Result<_> {
         let mut plan = Plan::new(&storage, &mesh.positions, &mesh.triangles, layout)?;
-        t.add_preparation(&plan.timings);
-        let clock = Instant::now();
-        let input_stats = engine.with_stats.then(|| plan.info(&mesh.source));
-        t.metrics += clock.elapsed().as_secs_f64();
-        let clock = Instant::now();
-        let records = plan.smooth(&storage, opts, engine.statistics, observer)?;
-        t.smoothing = clock.elapsed().as_secs_f64();
-        let clock = Instant::now();
-        let output_stats = engine.with_stats.then(|| plan.info(&mesh.source));
-        t.metrics += clock.elapsed().as_secs_f64();
+        let smoothed = smooth_planned(&mut plan, engine, &mesh.source, &mut t, |plan| {
+            plan.smooth(&storage, opts, engine.statistics, observer)
+        })?;
         plan.positions_in_input_order(&mut mesh.positions);
-        Ok((records, input_stats, output_stats, plan.stats()))
+        Ok(smoothed)
     })?;
-    plan.threads = pool.current_num_threads();
     t.total = start.elapsed().as_secs_f64();
-    Ok(Report {
-        input_format: mesh.source.format,
-        vertices: mesh.positions.len(),
-        triangles: mesh.triangles.len(),
+    let memory = MemoryStats {
+        storage: "heap",
+        ..MemoryStats::default()
+    };
+    Ok(smoothed.report(mesh, pool.current_num_threads(), memory, t))
+}
+
+/// What the smoothing phase of a run gives its report.
+struct Smoothed {
+    records: Vec<IterationRecord>,
+    input_stats: Option<MeshInfo>,
+    output_stats: Option<MeshInfo>,
+    plan: PlanStats,
+}
+
+/// The phase both runs share, on the current pool: the input's statistics (when asked), `smooth`,
+/// the output's statistics; the plan's preparation and these phases timed into `t`.
+fn smooth_planned(
+    plan: &mut Plan,
+    engine: &EngineSettings,
+    source: &crate::mesh::Source,
+    t: &mut PhaseTimings,
+    smooth: impl FnOnce(&mut Plan) -> Result<Vec<IterationRecord>>,
+) -> Result<Smoothed> {
+    t.add_preparation(&plan.timings);
+    let clock = Instant::now();
+    let input_stats = engine.with_stats.then(|| plan.info(source));
+    t.metrics += clock.elapsed().as_secs_f64();
+
+    let clock = Instant::now();
+    let records = smooth(plan)?;
+    t.smoothing = clock.elapsed().as_secs_f64();
+
+    let clock = Instant::now();
+    let output_stats = engine.with_stats.then(|| plan.info(source));
+    t.metrics += clock.elapsed().as_secs_f64();
+    Ok(Smoothed {
         records,
         input_stats,
         output_stats,
-        plan,
-        memory: MemoryStats {
-            storage: "heap",
-            ..MemoryStats::default()
-        },
-        timings: t,
-        cluster: None,
+        plan: plan.stats(),
     })
+}
+
+impl Smoothed {
+    fn report(self, mesh: &Mesh, threads: usize, memory: MemoryStats, timings: PhaseTimings) -> Report {
+        Report {
+            input_format: mesh.source.format,
+            vertices: mesh.positions.len(),
+            triangles: mesh.triangles.len(),
+            records: self.records,
+            input_stats: self.input_stats,
+            output_stats: self.output_stats,
+            plan: PlanStats {
+                threads,
+                ..self.plan
+            },
+            memory,
+            timings,
+            cluster: None,
+        }
+    }
 }
 
 /// Heap or scratch, decided before reading from the file size by the memory model
@@ -317,14 +334,12 @@ pub(crate) fn check_in_memory_budget(
 ) -> Result<()> {
     let heap = (mesh.positions.len() * 24 + mesh.triangles.len() * 12) as u64;
     if storage.is_mapped() && !mesh.positions.is_mapped() && heap > budget {
-        return Err(Error::Resource {
-            what: format!(
+        return Err(Error::resource(format!(
                 "{}: this format is read into memory ({}), more than the memory budget of {}; convert it to binary PLY on a larger machine, or raise the budget",
                 input.display(),
                 memory::format_size(heap),
                 memory::format_size(budget)
-            ),
-        });
+            )));
     }
     Ok(())
 }

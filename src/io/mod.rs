@@ -7,10 +7,10 @@
 //!   and writes atomically: a temporary file beside the target, flushed, synced and renamed into
 //!   place only when complete; on failure nothing is left under the target's name.
 //! - [`write_ply_streamed`] writes a mesh larger than memory as binary PLY, its vertices and
-//!   triangles handed over one at a time (e.g. by [`crate::mesh::shapes::Subdivision`]): the same
+//!   triangles handed over one at a time (e.g. by [`crate::shapes::Subdivision`]): the same
 //!   header and records as [`write_mesh`] writes for that mesh, written atomically too.
 //! - [`write_ply_streamed`] writes a mesh larger than memory as binary PLY, its vertices and
-//!   triangles handed over one at a time (e.g. by [`crate::mesh::shapes::Subdivision`]): the same
+//!   triangles handed over one at a time (e.g. by [`crate::shapes::Subdivision`]): the same
 //!   header and records as [`write_mesh`] writes for that mesh, written atomically too.
 //!
 //! # Formats
@@ -48,7 +48,7 @@
 //! (area-weighted face normals, normalised; a vertex with no area around it gets `0 0 0`) instead
 //! of being copied stale. Type names are written in their classic spelling (`float`, not `float32`).
 //! A source layout describes the input: a mesh whose vertex count or triangles no longer match it
-//! is refused by the writer (clear `mesh.source.ply` to write a plain PLY).
+//! is refused by the writer (clear `mesh.source.layout` to write a plain PLY).
 //!
 //! # Bad input
 //!
@@ -98,83 +98,12 @@ use std::io::{Read, Write};
 use std::path::Path;
 use std::sync::Arc;
 
+pub use crate::mesh::{Format, Precision, Source};
 pub use ply::{PlyEncoding, PlyLayout};
 pub use stream::{PlyStream, write_ply_streamed};
 
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
-
-/// Mesh file formats vcsmooth reads and writes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum Format {
-    #[default]
-    Ply,
-    Obj,
-    Off,
-    Stl,
-}
-
-impl Format {
-    /// The format a file name's extension stands for (`.ply .obj .off .stl`, any case).
-    pub fn from_extension(path: &Path) -> Option<Format> {
-        let ext = path.extension()?.to_str()?.to_ascii_lowercase();
-        match ext.as_str() {
-            "ply" => Some(Format::Ply),
-            "obj" => Some(Format::Obj),
-            "off" => Some(Format::Off),
-            "stl" => Some(Format::Stl),
-            _ => None,
-        }
-    }
-}
-
-/// Precision of coordinates in outputs that do not follow a PLY layout: the `x y z` type of a plain
-/// PLY and the number of digits in OBJ/OFF text. (STL is always single precision; a PLY output
-/// from a PLY input keeps the input's property types whatever this says.)
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum Precision {
-    /// `f32`: PLY `float`, and text that reads back to the same `f32`.
-    #[default]
-    Float,
-    /// `f64`: PLY `double`, and text that reads back to the same `f64`.
-    Double,
-}
-
-/// What a reader learned about the input beyond positions and triangles, kept so that a writer can
-/// reproduce the input's layout (PLY extra properties, precision, vertex order) and so that `info`
-/// can report how the input was interpreted.
-#[derive(Clone, Default)]
-pub struct Source {
-    /// The format the mesh was read from; `None` for generated meshes.
-    pub format: Option<Format>,
-    /// Number of faces in the input file (before fan triangulation).
-    pub input_faces: usize,
-    /// Number of input faces with more than 3 corners, fan-triangulated on read.
-    pub polygons_triangulated: usize,
-    /// Coordinate precision of the input: `Double` for PLY `double` coordinates and for text whose
-    /// numbers an `f32` cannot reproduce, else `Float`. Set it to ask a writer for double precision.
-    pub precision: Precision,
-    /// Corner count of every input face, in order; kept only when some face had more than 3
-    /// corners. The mesh's triangles are then the fans of these polygons, which lets writers put the
-    /// polygons back.
-    pub face_sizes: Option<Arc<Vec<u32>>>,
-    /// The PLY input's header and extra records, for a faithful PLY output; `None` otherwise.
-    pub ply: Option<Arc<PlyLayout>>,
-}
-
-// By hand: `face_sizes` and `ply` hold millions of entries that a `{:?}` must not dump.
-impl fmt::Debug for Source {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.debug_struct("Source")
-            .field("format", &self.format)
-            .field("input_faces", &self.input_faces)
-            .field("polygons_triangulated", &self.polygons_triangulated)
-            .field("precision", &self.precision)
-            .field("face_sizes", &self.face_sizes.as_ref().map(|s| s.len()))
-            .field("ply", &self.ply)
-            .finish()
-    }
-}
 
 /// Read a mesh file onto the heap.
 pub fn read_mesh(path: &Path) -> Result<Mesh> {

@@ -237,6 +237,12 @@ pub struct PlyLayout {
     elements: Vec<Element>,
 }
 
+impl crate::mesh::FileLayout for PlyLayout {
+    fn as_any(&self) -> &dyn std::any::Any {
+        self
+    }
+}
+
 impl PlyLayout {
     /// The input's encoding (outputs use it, except that big-endian becomes little-endian).
     pub fn encoding(&self) -> PlyEncoding {
@@ -794,7 +800,7 @@ pub(crate) fn read_in(bytes: &[u8], storage: &Storage) -> Result<Mesh, ReadError
     let source = Source {
         format: Some(Format::Ply),
         precision,
-        ply: Some(Arc::new(layout)),
+        layout: Some(Arc::new(layout)),
         ..Source::default()
     };
     let faces = mesh.faces.unwrap_or_else(|| FaceBuilder::with_capacity(0));
@@ -1199,7 +1205,8 @@ fn faces_any(
 
 /// The layout a PLY output follows: the source's, or the plain one.
 fn layout_of(mesh: &Mesh) -> Cow<'_, PlyLayout> {
-    match &mesh.source.ply {
+    let own = mesh.source.layout.as_deref();
+    match own.and_then(|l| l.as_any().downcast_ref::<PlyLayout>()) {
         Some(layout) => Cow::Borrowed(layout),
         None => Cow::Owned(PlyLayout::plain(mesh)),
     }
@@ -1212,7 +1219,7 @@ pub(crate) fn check_writable(mesh: &Mesh) -> Fallible<()> {
     let vertex = &layout.elements[roles.vertex];
     if vertex.count != mesh.positions.len() {
         return Err(format!(
-            "the mesh has {} vertices but its PLY source has {}; clear mesh.source.ply after \
+            "the mesh has {} vertices but its PLY source has {}; clear mesh.source.layout after \
              adding or removing vertices",
             mesh.positions.len(),
             vertex.count
@@ -1249,7 +1256,7 @@ pub(crate) fn check_writable(mesh: &Mesh) -> Fallible<()> {
         if !same {
             return Err(
                 "the triangles no longer match the PLY source's faces; clear \
-                        mesh.source.ply after changing connectivity"
+                        mesh.source.layout after changing connectivity"
                     .into(),
             );
         }

@@ -27,7 +27,7 @@ const FLUSH: usize = 1 << 20;
 /// triangle.
 ///
 /// # Errors
-/// - [`Error::Config`] for a path that does not end in `.ply` or a comment that spans lines,
+/// - [`Error::InvalidInput`] for a path that does not end in `.ply` or a comment that spans lines,
 ///   before any file is created.
 /// - [`Error::InvalidInput`] (`cannot write: …`) for a record the layout cannot hold (a coordinate
 ///   that is not finite in single precision, a vertex index out of range), records out of order,
@@ -41,19 +41,19 @@ pub fn write_ply_streamed(
     produce: impl FnOnce(&mut PlyStream<'_>) -> io::Result<()>,
 ) -> Result<()> {
     if Format::from_extension(path) != Some(Format::Ply) {
-        return Err(Error::Config(format!(
-            "{}: a streamed mesh is written as binary PLY only; use a .ply output",
-            path.display()
-        )));
+        return Err(Error::invalid(
+            path,
+            "a streamed mesh is written as binary PLY only; use a .ply output",
+        ));
     }
     if let Some(c) = comments.iter().find(|c| c.contains(['\n', '\r'])) {
-        return Err(Error::Config(format!(
-            "{}: a PLY comment is one line, got {c:?}",
-            path.display()
-        )));
+        return Err(Error::invalid(
+            path,
+            format!("a PLY comment is one line, got {c:?}"),
+        ));
     }
     let too_many = |what| {
-        Error::Config(format!(
+        Error::resource(format!(
             "{}: too many {what} for this platform",
             path.display()
         ))
@@ -179,7 +179,7 @@ impl PlyStream<'_> {
 mod tests {
     use super::*;
     use crate::mesh::Mesh;
-    use crate::mesh::shapes::{self, Subdivision};
+    use crate::shapes::{self, Subdivision};
 
     fn stream_mesh(path: &Path, m: &Mesh, comments: &[&str]) -> Result<()> {
         let (v, t) = (m.positions.len() as u64, m.triangles.len() as u64);

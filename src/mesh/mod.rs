@@ -11,7 +11,7 @@ use glam::DVec3;
 /// - `positions`: one per input vertex, in the input's order (unreferenced vertices included).
 /// - `triangles`: vertex indices into `positions`; polygons of the input are fan-triangulated
 ///   (`(v0, v1, v2), (v0, v2, v3), …`), keeping the input's orientation.
-/// - `source`: format details for a faithful round trip (see [`crate::io::Source`]).
+/// - `source`: what the file carried besides them, for a faithful round trip ([`Source`]).
 ///
 /// The arrays are [`Buf`]s: on the heap, or in memory-mapped scratch files for meshes larger than
 /// the memory budget (see [`crate::io::read_mesh_in`]); either way they deref to slices.
@@ -19,7 +19,7 @@ use glam::DVec3;
 pub struct Mesh {
     pub positions: Buf<DVec3>,
     pub triangles: Buf<[u32; 3]>,
-    pub source: crate::io::Source,
+    pub source: Source,
 }
 
 impl Mesh {
@@ -33,6 +33,7 @@ impl Mesh {
     }
 }
 
-pub mod shapes;
+pub mod source;
 pub mod storage;
+pub use source::{FileLayout, Format, Precision, Source};
 pub use storage::{Buf, Storage};

@@ -131,7 +131,7 @@ fn ratio(num: f64, den: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::shapes::{add_normal_noise, icosphere, torus};
+    use crate::shapes::{add_normal_noise, icosphere, torus};
 
     #[test]
     fn a_mesh_against_itself() {

@@ -48,7 +48,7 @@ pub fn info(mesh: &Mesh, topo: &Topology) -> MeshInfo {
 pub fn info_of(
     pos: &[DVec3],
     triangles: &[[u32; 3]],
-    source: &crate::io::Source,
+    source: &crate::mesh::Source,
     topo: &Topology,
 ) -> MeshInfo {
     debug_assert_eq!(
@@ -194,7 +194,7 @@ fn two_common(a: &[u32], b: &[u32]) -> Option<[u32; 2]> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::shapes::{add_normal_noise, icosphere};
+    use crate::shapes::{add_normal_noise, icosphere};
 
     fn topo(m: &Mesh) -> Topology {
         Topology::build(m.positions.len(), &m.triangles).unwrap()

@@ -16,27 +16,12 @@ pub fn volume(pos: &[DVec3], triangles: &[[u32; 3]]) -> f64 {
 
 /// Signed volume of the cone from `origin` over the triangles (for a closed mesh, its volume).
 pub fn volume_about(pos: &[DVec3], triangles: &[[u32; 3]], origin: DVec3) -> f64 {
-    let c = origin;
-    triangles
-        .iter()
-        .map(|t| {
-            let [a, b, d] = t.map(|v| pos[v as usize] - c);
-            a.dot(b.cross(d))
-        })
-        .sum::<f64>()
-        / 6.0
+    determinant_sum(pos, triangles, origin) / 6.0
 }
 
 /// Total surface area.
 pub fn area(pos: &[DVec3], triangles: &[[u32; 3]]) -> f64 {
-    triangles
-        .iter()
-        .map(|t| {
-            let [a, b, d] = t.map(|v| pos[v as usize]);
-            (b - a).cross(d - a).length()
-        })
-        .sum::<f64>()
-        / 2.0
+    doubled_area_sum(pos, triangles) / 2.0
 }
 
 /// Mean of the positions (zero for none).
@@ -44,7 +29,36 @@ pub fn centroid(pos: &[DVec3]) -> DVec3 {
     if pos.is_empty() {
         return DVec3::ZERO;
     }
-    pos.iter().fold(DVec3::ZERO, |s, p| s + *p) / pos.len() as f64
+    position_sum(pos) / pos.len() as f64
+}
+
+/// `Σ det(p_a − o, p_b − o, p_c − o)` over the triangles, in order: six times their signed volume
+/// about `o`. The one definition of the volume sum ([`crate::engine::reduce`] adds it up over
+/// chunks in parallel).
+pub fn determinant_sum(pos: &[DVec3], triangles: &[[u32; 3]], origin: DVec3) -> f64 {
+    triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|v| pos[v as usize] - origin);
+            a.dot(b.cross(c))
+        })
+        .sum::<f64>()
+}
+
+/// `Σ |(p_b − p_a) × (p_c − p_a)|` over the triangles, in order: twice their area.
+pub fn doubled_area_sum(pos: &[DVec3], triangles: &[[u32; 3]]) -> f64 {
+    triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|v| pos[v as usize]);
+            (b - a).cross(c - a).length()
+        })
+        .sum::<f64>()
+}
+
+/// Sum of the positions, in order.
+pub fn position_sum(pos: &[DVec3]) -> DVec3 {
+    pos.iter().fold(DVec3::ZERO, |s, p| s + *p)
 }
 
 mod compare;

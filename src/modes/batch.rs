@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::engine::{EngineSettings, Report};
+use crate::engine::{EngineSettings, Report, memory};
 use crate::error::{Error, Result};
 use crate::io::Format;
 use crate::smooth::Options;
@@ -345,13 +345,11 @@ pub fn summarize(outdir: &Path, inputs: Option<&[PathBuf]>) -> Result<BatchSumma
     })
 }
 
-/// `--mem` of a Slurm task whose largest input is `largest` bytes: 8 × the file size (the engine
-/// needs about 6 × a binary PLY's size in memory, text formats less) plus 256 MiB for the program,
-/// thread stacks and buffers, at least 1 GiB; in MiB, rounded up.
+/// Memory of a Slurm task whose largest input is `largest` bytes: what the memory model says a job
+/// smoothing it in core needs ([`memory::job_bytes_of_file`]), at least 1 GiB; in MiB, rounded up.
 pub fn slurm_mem_mib(largest: u64) -> u64 {
     const MIB: u64 = 1 << 20;
-    let bytes = largest.saturating_mul(8).saturating_add(256 * MIB);
-    bytes.div_ceil(MIB).max(1024)
+    memory::job_bytes_of_file(largest).div_ceil(MIB).max(1024)
 }
 
 /// The number of array tasks for `inputs` inputs under `max_array_size` (indices must be below it).
@@ -413,7 +411,7 @@ mod tests {
     #[test]
     fn mem_rule() {
         assert_eq!(slurm_mem_mib(0), 1024);
-        assert_eq!(slurm_mem_mib(1 << 30), 8 * 1024 + 256);
+        assert_eq!(slurm_mem_mib(1 << 30), 6 * 1024 + 256);
         assert_eq!(array_tasks(5000, 1001), 1001);
         assert_eq!(array_tasks(8, 1001), 8);
     }

@@ -33,16 +33,12 @@ use crate::engine::memory as resources;
 use crate::engine::{self, Layout, Plan, Quiet, Statistics};
 use crate::error::{Error, Result};
 use crate::io;
-use crate::mesh::shapes;
+use crate::shapes;
 use crate::mesh::{Mesh, Storage};
 use crate::smooth::{Method, Options};
 
 /// Noise of the generated meshes, × the mean edge length.
 pub const NOISE: f64 = 0.3;
-
-/// Anonymous memory per triangle that a benchmark size needs at its peak, with a margin (the
-/// generated mesh, its PLY copy while it is read back, the plan and the smoothing buffers).
-pub const BYTES_PER_TRIANGLE_ESTIMATE: u64 = 200;
 
 /// One requested mesh size: an icosphere level.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize)]
@@ -328,7 +324,7 @@ pub fn check(settings: &BenchSettings) -> Result<()> {
         .map(|s| s.triangles)
         .max()
         .unwrap_or(0);
-    let need = largest.saturating_mul(BYTES_PER_TRIANGLE_ESTIMATE);
+    let need = resources::in_core_bytes_with_mesh(largest);
     if let Some(available) = resources::mem_available() {
         if need > available {
             return Err(Error::resource(format!(

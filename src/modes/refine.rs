@@ -397,7 +397,7 @@ pub fn refine(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::shapes;
+    use crate::shapes;
     use crate::topology::Topology;
 
     fn edges_ok(mesh: &Mesh, delta: f64) {

@@ -16,6 +16,7 @@
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 
+use crate::engine::reduce;
 use crate::error::{Error, Result};
 use crate::mesh::{Buf, Storage};
 use crate::partition::morton3;
@@ -87,17 +88,13 @@ pub fn cluster(
     starts[clusters] = n as u32;
 
     let mut positions: Buf<DVec3> = storage.zeroed(clusters)?;
-    const CHUNK: usize = 1 << 12;
-    positions
-        .par_chunks_mut(CHUNK)
-        .enumerate()
-        .for_each(|(ch, out)| {
-            for (k, p) in out.iter_mut().enumerate() {
-                let c = ch * CHUNK + k;
-                let members = &keys[starts[c] as usize..starts[c + 1] as usize];
-                *p = place(members, pos, triangles, topo, &map, c as u32);
-            }
-        });
+    reduce::for_chunks_mut(&mut positions, |first, out| {
+        for (k, p) in out.iter_mut().enumerate() {
+            let c = first + k;
+            let members = &keys[starts[c] as usize..starts[c + 1] as usize];
+            *p = place(members, pos, triangles, topo, &map, c as u32);
+        }
+    });
     drop(keys);
     drop(starts);
 

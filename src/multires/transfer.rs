@@ -250,7 +250,7 @@ fn volume_gradient(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::shapes;
+    use crate::shapes;
 
     #[test]
     fn restore_volume_reaches_the_target_and_leaves_fixed_vertices() {

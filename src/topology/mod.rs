@@ -73,7 +73,8 @@ impl TopologyStats {
     }
 }
 
-/// Vertices per parallel work item of the build.
+/// Vertices per parallel work item of the build (a work size only: every chunk's result is
+/// placed by vertex id, so the topology does not depend on it).
 const CHUNK: usize = 1 << 13;
 
 /// Reusable per-thread buffers of the per-vertex analysis.

@@ -1,0 +1,103 @@
+//! What `batch` and `slurm-script` share: the smoothing applied to every mesh of a batch (its
+//! flags, their resolution) and the check of a batch's inputs.
+
+use std::path::{Path, PathBuf};
+
+use clap::{Args as ClapArgs, ValueEnum};
+
+use super::shared::{EngineConfig, SmoothingArgs};
+use crate::error::{Error, Result};
+use crate::io::Format;
+use crate::modes::batch as core;
+use crate::smooth::Options;
+
+/// Output formats of `batch --format`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum OutputFormat {
+    Ply,
+    Obj,
+    Off,
+    Stl,
+}
+
+impl From<OutputFormat> for Format {
+    fn from(f: OutputFormat) -> Format {
+        match f {
+            OutputFormat::Ply => Format::Ply,
+            OutputFormat::Obj => Format::Obj,
+            OutputFormat::Off => Format::Off,
+            OutputFormat::Stl => Format::Stl,
+        }
+    }
+}
+
+/// The smoothing flags of `smooth`, for every mesh of a batch, plus the output format.
+#[derive(Debug, Clone, ClapArgs)]
+pub struct BatchSmoothArgs {
+    #[command(flatten)]
+    pub smoothing: SmoothingArgs,
+    /// Format of the outputs, OUTDIR/<input's stem>.<format>.
+    #[arg(long, value_enum, default_value_t = OutputFormat::Ply)]
+    pub format: OutputFormat,
+}
+
+/// The smoothing a batch applies to each of its meshes.
+#[derive(Debug, Clone)]
+pub struct BatchSmooth {
+    pub options: Options,
+    pub engine: EngineConfig,
+    pub format: Format,
+    /// The flags as given, to repeat them in a job script.
+    pub args: BatchSmoothArgs,
+}
+
+impl BatchSmooth {
+    pub fn from_args(a: BatchSmoothArgs) -> Result<BatchSmooth> {
+        let mut engine = a.smoothing.engine.resolve()?;
+        engine.with_stats = true;
+        Ok(BatchSmooth {
+            options: a.smoothing.options(),
+            engine,
+            format: a.format.into(),
+            args: a,
+        })
+    }
+}
+
+/// The inputs of a batch, checked: at least one, no two with the same stem, none that its output
+/// would overwrite.
+pub fn batch_inputs(list_or_dir: &Path, outdir: &Path, format: Format) -> Result<Vec<PathBuf>> {
+    let inputs = core::list_inputs(list_or_dir)?;
+    if inputs.is_empty() {
+        return Err(Error::invalid(
+            list_or_dir,
+            "names no mesh files (.ply, .obj, .off or .stl)",
+        ));
+    }
+    core::check_stems(&inputs)?;
+    if let Ok(out) = outdir.canonicalize() {
+        for input in &inputs {
+            let same_dir = input
+                .parent()
+                .map(|p| {
+                    if p.as_os_str().is_empty() {
+                        Path::new(".")
+                    } else {
+                        p
+                    }
+                })
+                .and_then(|p| p.canonicalize().ok())
+                .is_some_and(|p| p == out);
+            if same_dir && Format::from_extension(input) == Some(format) {
+                let name = core::output_path(outdir, input, format)?;
+                if name.file_name() == input.file_name() {
+                    return Err(Error::invalid(
+                        input,
+                        "its output would overwrite it: choose another OUTDIR or --format",
+                    ));
+                }
+            }
+        }
+    }
+    Ok(inputs)
+}

@@ -1,0 +1,191 @@
+//! `vcsmooth curves IN --plot FILE.svg ...`: several methods from the same input, their volume %
+//! per iteration plotted (the paper's Fig. 4) and printed as a table or JSON.
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use clap::Args as ClapArgs;
+use serde::Serialize;
+
+use crate::cli::flags;
+use crate::cli::output::{print_json, stdout_error, svg_output};
+use crate::cli::plot::{Curve, file_name, volume_curve, write_volume_plot};
+use crate::cli::progress::Progress;
+use crate::cli::report::Tool;
+use crate::cli::shared::{EngineArgs, EngineConfig, MethodParams, distinct};
+use crate::engine::{self, IterationRecord};
+use crate::error::Result;
+use crate::smooth::{Method, Options};
+
+/// `vcsmooth curves IN --plot FILE.svg ...`
+#[derive(Debug, Clone, ClapArgs)]
+pub struct CurvesArgs {
+    /// Input mesh (PLY, OBJ, OFF or STL).
+    #[arg(value_name = "IN")]
+    pub input: PathBuf,
+    /// Comma-separated methods to run, each from the same input.
+    #[arg(long, value_enum, value_delimiter = ',', value_name = "M,M,...",
+          default_values_t = [Method::Vcs, Method::Lem, Method::Laplacian])]
+    pub methods: Vec<Method>,
+    /// Iterations per method (at least 1).
+    #[arg(long, value_name = "N", default_value_t = 10, allow_negative_numbers = true,
+          value_parser = clap::value_parser!(u32).range(1..))]
+    pub iterations: u32,
+    #[command(flatten)]
+    pub params: MethodParams,
+    #[command(flatten)]
+    pub engine: EngineArgs,
+    /// SVG file for the volume curves, one line per method with a legend.
+    #[arg(long, value_name = "FILE.svg", required = true)]
+    pub plot: PathBuf,
+    /// Print JSON instead of a table [default: table].
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// `vcsmooth curves`, resolved.
+#[derive(Debug, Clone)]
+pub struct CurvesConfig {
+    pub input: PathBuf,
+    /// Distinct methods, in the order given.
+    pub methods: Vec<Method>,
+    /// Options shared by every method (`method` is replaced per run).
+    pub options: Options,
+    pub engine: EngineConfig,
+    pub plot: PathBuf,
+    pub json: bool,
+}
+
+impl CurvesConfig {
+    pub fn from_args(a: CurvesArgs) -> Result<CurvesConfig> {
+        svg_output(&a.plot)?;
+        let methods = distinct(a.methods);
+        if methods.is_empty() {
+            return Err(flags::parameter("methods", "names no method"));
+        }
+        Ok(CurvesConfig {
+            options: a.params.options(methods[0], a.iterations as usize),
+            engine: a.engine.resolve()?,
+            input: a.input,
+            methods,
+            plot: a.plot,
+            json: a.json,
+        })
+    }
+}
+
+/// One method's run in `vcsmooth curves`.
+#[derive(Debug, Clone, Serialize)]
+pub struct CurveDoc {
+    pub method: Method,
+    /// Volume % at iterations 0 (100), 1, …, N.
+    pub volume_pct: Vec<f64>,
+    pub seconds: f64,
+    pub iterations: Vec<IterationRecord>,
+}
+
+/// The JSON of `vcsmooth curves --json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct CurvesDoc {
+    pub tool: Tool,
+    pub input: String,
+    pub iterations: usize,
+    pub lambda: f64,
+    pub mu: f64,
+    pub reject_energy_increase: bool,
+    pub plot: String,
+    pub curves: Vec<CurveDoc>,
+}
+
+/// `vcsmooth curves`: every method from the same input positions; the plot, then the table.
+pub fn run(cfg: &CurvesConfig, progress: &mut Progress, out: &mut dyn Write) -> Result<()> {
+    progress.phase(format!("reading {}", cfg.input.display()));
+    let mesh = crate::io::read_mesh(&cfg.input)?;
+    progress.phase("building topology");
+    let pool = engine::thread_pool(cfg.engine.threads)?;
+    let storage = crate::mesh::Storage::heap();
+    // Every method from the input in its own order (the sequential reference order).
+    let mut plan = pool
+        .install(|| {
+            engine::Plan::new(
+                &storage,
+                &mesh.positions,
+                &mesh.triangles,
+                engine::Layout::Whole,
+            )
+        })
+        .map_err(|e| e.in_file(&cfg.input))?;
+
+    let mut docs = Vec::with_capacity(cfg.methods.len());
+    for &method in &cfg.methods {
+        let options = Options {
+            method,
+            ..cfg.options
+        };
+        plan.set_positions_from_input(&mesh.positions);
+        progress.iterations(method.name(), options.iterations);
+        let clock = Instant::now();
+        let records = pool
+            .install(|| plan.smooth(&storage, &options, engine::Statistics::Every, progress))
+            .map_err(|e| e.in_file(&cfg.input))?;
+        docs.push(CurveDoc {
+            method,
+            volume_pct: volume_curve(&records),
+            seconds: clock.elapsed().as_secs_f64(),
+            iterations: records,
+        });
+    }
+
+    let curves: Vec<Curve> = docs
+        .iter()
+        .map(|d| Curve {
+            method: d.method,
+            volume_pct: d.volume_pct.clone(),
+        })
+        .collect();
+    let title = format!("volume per iteration: {}", file_name(&cfg.input));
+    write_volume_plot(&cfg.plot, &title, &curves)?;
+    progress.finish();
+
+    let doc = CurvesDoc {
+        tool: Tool::this(),
+        input: cfg.input.display().to_string(),
+        iterations: cfg.options.iterations,
+        lambda: cfg.options.lambda,
+        mu: cfg.options.mu,
+        reject_energy_increase: cfg.options.reject_energy_increase,
+        plot: cfg.plot.display().to_string(),
+        curves: docs,
+    };
+    if cfg.json {
+        print_json(out, &doc)
+    } else {
+        print_curves(out, &doc)
+    }
+}
+
+/// Print the iteration × method table of volume percentages.
+fn print_curves(out: &mut dyn Write, doc: &CurvesDoc) -> Result<()> {
+    let mut text = format!("{:>5}", "iter");
+    for c in &doc.curves {
+        text += &format!(" {:>14}", format!("{} %", c.method.name()));
+    }
+    text.push('\n');
+    for it in 0..=doc.iterations {
+        text += &format!("{it:>5}");
+        for c in &doc.curves {
+            match c.volume_pct.get(it) {
+                Some(v) => text += &format!(" {v:>14.6}"),
+                None => text += &format!(" {:>14}", "-"),
+            }
+        }
+        text.push('\n');
+    }
+    text += &format!("{:>5}", "secs");
+    for c in &doc.curves {
+        text += &format!(" {:>14.3}", c.seconds);
+    }
+    text.push('\n');
+    out.write_all(text.as_bytes()).map_err(stdout_error)
+}

@@ -1,0 +1,117 @@
+//! `vcsmooth info IN [--json]`: a mesh's vertices, faces, edges, boundary, components, volume,
+//! area and bounding box, as a table or JSON.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use clap::Args as ClapArgs;
+use serde::Serialize;
+
+use crate::cli::output::print_json;
+use crate::cli::progress::Progress;
+use crate::cli::report::{count, format_name, num, print_rows};
+use crate::error::Result;
+use crate::metrics::{self, MeshInfo};
+use crate::topology::Topology;
+
+/// `vcsmooth info IN [--json]`
+#[derive(Debug, Clone, ClapArgs)]
+pub struct InfoArgs {
+    /// Mesh to describe.
+    #[arg(value_name = "IN")]
+    pub input: PathBuf,
+    /// Print JSON instead of a table [default: table].
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// `vcsmooth info`, resolved.
+#[derive(Debug, Clone)]
+pub struct InfoConfig {
+    pub input: PathBuf,
+    pub json: bool,
+}
+
+impl InfoConfig {
+    pub fn from_args(a: InfoArgs) -> Result<InfoConfig> {
+        Ok(InfoConfig {
+            input: a.input,
+            json: a.json,
+        })
+    }
+}
+
+/// The JSON of `vcsmooth info --json`: the path, the format and every [`MeshInfo`] field.
+#[derive(Debug, Clone, Serialize)]
+pub struct InfoDoc {
+    pub path: String,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub format: Option<String>,
+    #[serde(flatten)]
+    pub info: MeshInfo,
+}
+
+/// `vcsmooth info`.
+pub fn run(cfg: &InfoConfig, progress: &mut Progress, out: &mut dyn Write) -> Result<()> {
+    progress.phase(format!("reading {}", cfg.input.display()));
+    let mesh = crate::io::read_mesh(&cfg.input)?;
+    progress.phase("building topology");
+    let topo = Topology::build(mesh.positions.len(), &mesh.triangles)
+        .map_err(|e| e.in_file(&cfg.input))?;
+    progress.phase("measuring");
+    let doc = InfoDoc {
+        path: cfg.input.display().to_string(),
+        format: mesh.source.format.map(format_name),
+        info: metrics::info(&mesh, &topo),
+    };
+    progress.finish();
+    if cfg.json {
+        print_json(out, &doc)
+    } else {
+        print_info(out, &doc)
+    }
+}
+
+/// Print `info` as aligned `key  value` lines.
+fn print_info(out: &mut dyn Write, doc: &InfoDoc) -> Result<()> {
+    let i = &doc.info;
+    let mut rows: Vec<(&str, String)> = vec![("file", doc.path.clone())];
+    if let Some(f) = &doc.format {
+        rows.push(("format", f.clone()));
+    }
+    rows.push(("vertices", i.vertices.to_string()));
+    let faces = if i.polygons_triangulated > 0 {
+        format!(
+            "{} triangles from {} ({} fan-triangulated)",
+            i.triangles,
+            count(i.input_faces, "input face"),
+            count(i.polygons_triangulated, "polygon")
+        )
+    } else {
+        format!("{} triangles", i.triangles)
+    };
+    rows.push(("faces", faces));
+    rows.push(("edges", i.edges.to_string()));
+    rows.push(("boundary edges", i.boundary_edges.to_string()));
+    rows.push(("non-manifold edges", i.non_manifold_edges.to_string()));
+    rows.push(("non-manifold vertices", i.non_manifold_vertices.to_string()));
+    rows.push(("degenerate triangles", i.degenerate_triangles.to_string()));
+    rows.push(("components", i.components.to_string()));
+    rows.push(("unreferenced vertices", i.unreferenced_vertices.to_string()));
+    rows.push(("closed", if i.closed { "yes" } else { "no" }.to_string()));
+    rows.push(("signed volume", num(i.volume)));
+    rows.push(("area", num(i.area)));
+    rows.push(("bbox min", vec3(i.bbox_min)));
+    rows.push(("bbox max", vec3(i.bbox_max)));
+    rows.push(("bbox diagonal", num(i.bbox_diagonal)));
+    rows.push(("mean edge length", num(i.mean_edge_length)));
+    rows.push((
+        "roughness",
+        format!("{:.4} deg (mean dihedral angle)", i.roughness_deg),
+    ));
+    print_rows(out, &rows)
+}
+
+fn vec3(v: [f64; 3]) -> String {
+    format!("{} {} {}", num(v[0]), num(v[1]), num(v[2]))
+}

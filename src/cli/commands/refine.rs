@@ -1,0 +1,129 @@
+//! `vcsmooth refine IN OUT --max-edge DELTA --rounds R ...`: the paper's refine-and-smooth workflow
+//! (Figs. 5–7), through [`crate::modes::refine`]. It reads the whole mesh, works in memory and
+//! writes the result atomically only when everything succeeded.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use clap::Args as ClapArgs;
+
+use crate::cli::output::{refined_mesh_output, stdout_error};
+use crate::cli::progress::Progress;
+use crate::cli::shared::{InOut, length};
+use crate::error::Result;
+use crate::io;
+use crate::modes::refine::{self, RefineOptions};
+use crate::smooth::Method;
+
+/// `vcsmooth refine IN OUT --max-edge DELTA --rounds R [--iterations N] [--method M] [--threads T]`
+#[derive(Debug, Clone, ClapArgs)]
+pub struct RefineArgs {
+    #[command(flatten)]
+    pub files: InOut,
+    /// δ of every subdivision (see `subdivide`).
+    #[arg(long, value_name = "DELTA", allow_negative_numbers = true, value_parser = length)]
+    pub max_edge: f64,
+    /// Rounds of subdivide-then-smooth (the paper's Figs. 5–7 show two after a first smoothing).
+    #[arg(long, value_name = "R", value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub rounds: u32,
+    /// Smoothing iterations after each subdivision.
+    #[arg(long, value_name = "N", default_value_t = 5, value_parser = clap::value_parser!(u32).range(0..=100_000))]
+    pub iterations: u32,
+    /// Smoothing method (the paper uses vcs, Fig. 5, and vcs-triangle, Fig. 6).
+    #[arg(long, value_enum, default_value_t = Method::Vcs)]
+    pub method: Method,
+    /// Worker threads of the smoothing [default: all cores].
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
+    pub threads: Option<u32>,
+}
+
+/// `vcsmooth refine`, resolved.
+#[derive(Debug, Clone)]
+pub struct RefineConfig {
+    pub input: PathBuf,
+    pub output: PathBuf,
+    pub options: RefineOptions,
+    pub threads: Option<usize>,
+}
+
+impl RefineConfig {
+    pub fn from_args(a: RefineArgs) -> Result<RefineConfig> {
+        refine::check_max_edge(a.max_edge)?;
+        refined_mesh_output(&a.files.output)?;
+        let mut options = RefineOptions {
+            max_edge: a.max_edge,
+            rounds: a.rounds as usize,
+            ..Default::default()
+        };
+        options.smoothing.method = a.method;
+        options.smoothing.iterations = a.iterations as usize;
+        Ok(RefineConfig {
+            input: a.files.input,
+            output: a.files.output,
+            options,
+            threads: a.threads.map(|t| t as usize),
+        })
+    }
+}
+
+/// `vcsmooth refine`.
+pub fn run(cfg: &RefineConfig, progress: &mut Progress, out: &mut dyn Write) -> Result<()> {
+    progress.phase(format!("reading {}", cfg.input.display()));
+    let mut mesh = io::read_mesh(&cfg.input)?;
+    let (v0, t0) = (mesh.positions.len(), mesh.triangles.len());
+    let volume0 = crate::metrics::volume(&mesh.positions, &mesh.triangles);
+    progress.phase(format!(
+        "refining and smoothing, {} rounds",
+        cfg.options.rounds
+    ));
+    let records = refine::refine(&mut mesh, &cfg.options, cfg.threads, progress)
+        .map_err(|e| e.in_file(&cfg.input))?;
+    progress.phase(format!("writing {}", cfg.output.display()));
+    io::write_mesh(&cfg.output, &mesh)?;
+    progress.finish();
+    let volume1 = crate::metrics::volume(&mesh.positions, &mesh.triangles);
+    let max_edge = records.last().map_or_else(
+        || refine::max_edge_of(&mesh.positions, &mesh.triangles),
+        |r| r.max_edge_smoothed,
+    );
+    writeln!(
+        out,
+        "{} -> {}: {} rounds of subdivide (max edge {}) + {} × {}: {} vertices, {} triangles -> {} vertices, {} triangles; longest edge {:.6}; volume {:.9} %",
+        cfg.input.display(),
+        cfg.output.display(),
+        cfg.options.rounds,
+        cfg.options.max_edge,
+        cfg.options.smoothing.iterations,
+        cfg.options.smoothing.method,
+        v0,
+        t0,
+        mesh.positions.len(),
+        mesh.triangles.len(),
+        max_edge,
+        pct(volume1, volume0)
+    )
+    .map_err(stdout_error)?;
+    for r in &records {
+        writeln!(
+            out,
+            "round {}: {} -> {} triangles, volume after subdivision {:.9} %, after smoothing {:.9} %, longest edge {:.6}",
+            r.round,
+            r.subdivision.triangles_before,
+            r.subdivision.triangles_after,
+            pct(r.volume_subdivided, r.volume_before),
+            pct(r.volume_smoothed, r.volume_before),
+            r.max_edge_smoothed
+        )
+        .map_err(stdout_error)?;
+    }
+    Ok(())
+}
+
+/// `x` as a percentage of `reference` (100 when the reference is 0).
+fn pct(x: f64, reference: f64) -> f64 {
+    if reference == 0.0 {
+        100.0
+    } else {
+        100.0 * x / reference
+    }
+}

@@ -1,0 +1,389 @@
+//! `vcsmooth smooth IN OUT ...`: read → reorder → topology → partition → smooth → write the mesh →
+//! write the report and the plot → print the table. Its `--multires` flags are
+//! [`crate::cli::multires`].
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use clap::{Args as ClapArgs, ValueEnum};
+use serde::Serialize;
+
+use crate::cli::flags;
+use crate::cli::multires::{MultiresArgs, print_multires};
+use crate::cli::output::{
+    mesh_output, output_format, parent_exists, stdout_error, svg_output, write_json,
+};
+use crate::cli::plot::{Curve, file_name, volume_curve, write_volume_plot};
+use crate::cli::progress::Progress;
+use crate::cli::report::{FileStats, Summary, Tool, count};
+use crate::cli::shared::{EngineConfig, InOut, SmoothingArgs};
+use crate::engine::{self, IterationRecord};
+use crate::error::{Error, Result};
+use crate::smooth::Options;
+
+/// `vcsmooth smooth IN OUT ...`
+#[derive(Debug, Clone, ClapArgs)]
+pub struct SmoothArgs {
+    #[command(flatten)]
+    pub files: InOut,
+    #[command(flatten)]
+    pub smoothing: SmoothingArgs,
+    #[command(flatten)]
+    pub multires: MultiresArgs,
+    /// Write a JSON report (options, input/output statistics, timings, per-iteration table).
+    #[arg(long, value_name = "FILE.json")]
+    pub report: Option<PathBuf>,
+    /// Write an SVG plot of volume % per iteration.
+    #[arg(long, value_name = "FILE.svg")]
+    pub plot: Option<PathBuf>,
+    /// Which iterations measure volume, area and displacement (each costs passes over the whole mesh, about one taubin iteration for volume and area); the others show '-' in the table and null in the report.
+    #[arg(long, value_enum, value_name = "WHEN", default_value_t = Stats::Every)]
+    pub stats: Stats,
+    #[command(flatten)]
+    pub cluster: ClusterArgs,
+}
+
+/// When `smooth` measures the per-iteration statistics.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Stats {
+    /// After every iteration.
+    Every,
+    /// After the last iteration only.
+    Last,
+}
+
+/// Checkpoints and MPI ranks (see the README's "One mesh over MPI ranks").
+#[derive(Debug, Clone, ClapArgs)]
+pub struct ClusterArgs {
+    /// Keep the prepared plan and the positions after every --checkpoint-every iterations in DIR
+    /// (on a file system all ranks see); a run started again with the same input, options and patch
+    /// size resumes after the last completed iteration. Under mpirun/srun without it, a work
+    /// directory OUT.vcsmooth-work is used and removed after success.
+    #[arg(long, value_name = "DIR")]
+    pub checkpoint: Option<PathBuf>,
+    /// Iterations between checkpoints (the last iteration is always written).
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..), allow_negative_numbers = true)]
+    pub checkpoint_every: u64,
+}
+
+/// `vcsmooth smooth`, resolved.
+#[derive(Debug, Clone)]
+pub struct SmoothConfig {
+    pub input: PathBuf,
+    pub output: PathBuf,
+    pub options: Options,
+    pub engine: EngineConfig,
+    pub report: Option<PathBuf>,
+    pub plot: Option<PathBuf>,
+    /// `--multires` and its options.
+    pub multires: Option<crate::multires::MultiresOptions>,
+    /// `--checkpoint DIR` (kept) and `--checkpoint-every`.
+    pub checkpoint: Option<PathBuf>,
+    pub checkpoint_every: usize,
+    /// Which iterations measure their statistics.
+    pub stats: Stats,
+    /// The command line as given, recorded in the report.
+    pub argv: Vec<String>,
+}
+
+impl SmoothConfig {
+    /// Resolve and check the flags; `argv` is the command line, kept for the report.
+    pub fn from_args(a: SmoothArgs, argv: Vec<String>) -> Result<SmoothConfig> {
+        mesh_output(&a.files.output)?;
+        if let Some(r) = &a.report {
+            parent_exists(r)?;
+        }
+        if let Some(p) = &a.plot {
+            svg_output(p)?;
+            if a.stats != Stats::Every {
+                return Err(flags::parameter(
+                    "plot",
+                    "draws the volume of every iteration: it needs --stats every",
+                ));
+            }
+        }
+        let mut engine = a.smoothing.engine.resolve()?;
+        engine.with_stats = a.report.is_some();
+        engine.statistics = match a.stats {
+            Stats::Every => crate::engine::Statistics::Every,
+            Stats::Last => crate::engine::Statistics::Last,
+        };
+        let options = a.smoothing.options();
+        let multires = a.multires.resolve(&options)?;
+        if multires.is_some() && a.cluster.checkpoint.is_some() {
+            return Err(flags::parameter(
+                "multires",
+                "cannot be combined with --checkpoint (it runs in one process)",
+            ));
+        }
+        Ok(SmoothConfig {
+            multires,
+            options,
+            engine,
+            input: a.files.input,
+            output: a.files.output,
+            report: a.report,
+            plot: a.plot,
+            checkpoint: a.cluster.checkpoint,
+            checkpoint_every: a.cluster.checkpoint_every as usize,
+            stats: a.stats,
+            argv,
+        })
+    }
+
+    /// How a run over `ranks` ranks uses its work directory; `None` for the plain engine (one
+    /// rank, no checkpoint).
+    pub fn cluster(&self, ranks: usize) -> Option<crate::cluster::ClusterSettings> {
+        let (work_dir, keep) = match &self.checkpoint {
+            Some(dir) => (dir.clone(), true),
+            None if ranks > 1 => {
+                let mut name = self.output.as_os_str().to_owned();
+                name.push(".vcsmooth-work");
+                (PathBuf::from(name), false)
+            }
+            None => return None,
+        };
+        Some(crate::cluster::ClusterSettings {
+            work_dir,
+            keep,
+            checkpoint_every: self.checkpoint_every,
+        })
+    }
+}
+
+/// The JSON report of `vcsmooth smooth --report FILE.json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct SmoothReport {
+    pub tool: Tool,
+    pub command: &'static str,
+    /// The command line as given.
+    pub argv: Vec<String>,
+    pub options: Options,
+    pub engine: EngineConfig,
+    pub input: FileStats,
+    /// Statistics of the smoothed f64 positions (before the output format's rounding).
+    pub output: FileStats,
+    pub plan: crate::engine::PlanStats,
+    pub memory: crate::engine::MemoryStats,
+    pub timings: crate::engine::PhaseTimings,
+    /// Ranks, halo traffic and checkpoints, for runs of the cluster engine.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cluster: Option<crate::engine::ClusterStats>,
+    pub summary: Summary,
+    /// One row per iteration (with `--multires`: of the input level).
+    pub iterations: Vec<IterationRecord>,
+    /// Per level of `--multires`: vertices, method, iterations, seconds.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub multires: Option<crate::multires::MultiresStats>,
+}
+
+/// `vcsmooth smooth`.
+///
+/// Under `mpirun`/`srun` (built with `--features mpi`) or with `--checkpoint`, the cluster engine
+/// runs it; rank 0 alone reports.
+pub fn run(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) -> Result<()> {
+    crate::cluster::with_world(|comm| {
+        let Some(cluster) = cfg.cluster(comm.size()) else {
+            progress.phase(format!("smoothing {}", cfg.input.display()));
+            progress.iterations(cfg.options.method.name(), cfg.options.iterations);
+            let (run, multires) = match &cfg.multires {
+                None => (
+                    engine::run_file(&cfg.input, &cfg.output, &cfg.options, &cfg.engine, progress)?,
+                    None,
+                ),
+                Some(m) => {
+                    let (run, stats) = crate::multires::run_file(
+                        &cfg.input,
+                        &cfg.output,
+                        &cfg.options,
+                        m,
+                        &cfg.engine,
+                        progress,
+                    )?;
+                    (run, Some(stats))
+                }
+            };
+            return report(cfg, &run, multires, progress, out);
+        };
+        if cfg.multires.is_some() {
+            return Err(flags::parameter(
+                "multires",
+                "runs in one process; it cannot be combined with --checkpoint or MPI ranks",
+            ));
+        }
+        let lead = comm.rank() == 0;
+        if lead {
+            progress.phase(format!(
+                "smoothing {} on {} (work directory {})",
+                cfg.input.display(),
+                count(comm.size(), "rank"),
+                cluster.work_dir.display()
+            ));
+            progress.iterations(cfg.options.method.name(), cfg.options.iterations);
+        }
+        let observer: &mut dyn engine::Observer = if lead { progress } else { &mut engine::Quiet };
+        let run = crate::cluster::run_file(
+            comm,
+            &cfg.input,
+            &cfg.output,
+            &cfg.options,
+            &cfg.engine,
+            &cluster,
+            observer,
+        )
+        .map_err(|e| {
+            if comm.size() > 1 {
+                Error::Rank {
+                    rank: comm.rank(),
+                    source: Box::new(e),
+                }
+            } else {
+                e
+            }
+        })?;
+        if !lead {
+            return Ok(());
+        }
+        report(cfg, &run, None, progress, out)
+    })
+}
+
+/// The report, plot and table of a finished `smooth`.
+fn report(
+    cfg: &SmoothConfig,
+    run: &engine::Report,
+    multires: Option<crate::multires::MultiresStats>,
+    progress: &mut Progress,
+    out: &mut dyn Write,
+) -> Result<()> {
+    let records = &run.records;
+
+    if let (Some(path), Some(input_stats), Some(output_stats)) =
+        (&cfg.report, &run.input_stats, &run.output_stats)
+    {
+        let report = SmoothReport {
+            tool: Tool::this(),
+            command: "smooth",
+            argv: cfg.argv.clone(),
+            options: cfg.options,
+            engine: cfg.engine.clone(),
+            input: FileStats::new(&cfg.input, run.input_format, input_stats.clone()),
+            output: FileStats::new(
+                &cfg.output,
+                output_format(&cfg.output),
+                output_stats.clone(),
+            ),
+            plan: run.plan.clone(),
+            memory: run.memory.clone(),
+            timings: run.timings,
+            cluster: run.cluster.clone(),
+            summary: Summary::of(records),
+            iterations: records.clone(),
+            multires: multires.clone(),
+        };
+        write_json(path, &report)?;
+    }
+    if let Some(path) = &cfg.plot {
+        let curve = Curve {
+            method: cfg.options.method,
+            volume_pct: volume_curve(records),
+        };
+        let title = format!("{} on {}", cfg.options.method, file_name(&cfg.input));
+        write_volume_plot(path, &title, &[curve])?;
+    }
+    progress.finish();
+
+    let s = Summary::of(records);
+    let text = format!(
+        "{} -> {}: {}, {}, {} vertices, {} triangles; volume {:.6} %, area {:.4} %\n",
+        cfg.input.display(),
+        cfg.output.display(),
+        cfg.options.method,
+        count(cfg.options.iterations, "iteration"),
+        run.vertices,
+        run.triangles,
+        s.volume_pct,
+        s.area_pct
+    );
+    out.write_all(text.as_bytes()).map_err(stdout_error)?;
+    if !records.is_empty() {
+        print_iterations(out, records)?;
+    }
+    if let Some(m) = &multires {
+        print_multires(out, m)?;
+    }
+    let (t, p, m) = (&run.timings, &run.plan, &run.memory);
+    writeln!(
+        out,
+        "patches: {} of {} vertices in {} colours on {} threads, {} crossing edge stencils; memory: {} ({}), peak anonymous {}",
+        p.patches,
+        p.patch_size,
+        p.colours,
+        p.threads,
+        p.crossing_edge_stencils,
+        m.storage,
+        crate::engine::memory::format_size(m.budget),
+        crate::engine::memory::format_size(m.peak_anon)
+    )
+    .map_err(stdout_error)?;
+    if let Some(c) = &run.cluster {
+        writeln!(
+            out,
+            "cluster: {}, {}-{} owned vertices and up to {} held per rank, {} halo values per iteration (largest rank {}/iteration), largest rank peak {} ({} while smoothing); resumed after {}, checkpoint every {}",
+            count(c.ranks, "rank"),
+            c.owned_vertices_min,
+            c.owned_vertices_max,
+            c.region_vertices_max,
+            c.halo_values_per_iteration,
+            crate::engine::memory::format_size(c.halo_bytes_per_iteration_max),
+            crate::engine::memory::format_size(c.peak_anon_max),
+            crate::engine::memory::format_size(c.smoothing_peak_anon_max),
+            count(c.resumed_after, "iteration"),
+            count(c.checkpoint_every, "iteration"),
+        )
+        .map_err(stdout_error)?;
+    }
+    writeln!(
+        out,
+        "seconds: ingest {:.3}, reorder {:.3}, topology {:.3}, partition {:.3}, smoothing {:.3}, write {:.3}, total {:.3}",
+        t.ingest, t.reorder, t.topology, t.partition, t.smoothing, t.write, t.total
+    )
+    .map_err(stdout_error)
+}
+
+/// Print the per-iteration table of a run.
+fn print_iterations(out: &mut dyn Write, records: &[IterationRecord]) -> Result<()> {
+    let mut text = format!(
+        "{:>5} {:>12} {:>10} {:>11} {:>11} {:>10} {:>9} {:>10} {:>9} {:>9}\n",
+        "iter",
+        "volume %",
+        "area %",
+        "max disp",
+        "mean disp",
+        "applied",
+        "fixed",
+        "degenerate",
+        "rejected",
+        "seconds"
+    );
+    // Statistics not measured (`smooth --stats last`) are NaN: shown as '-'.
+    let measured = |x: f64, text: String| if x.is_nan() { "-".into() } else { text };
+    for r in records {
+        let s = &r.stencils;
+        text += &format!(
+            "{:>5} {:>12} {:>10} {:>11} {:>11} {:>10} {:>9} {:>10} {:>9} {:>9.3}\n",
+            r.iteration,
+            measured(r.volume_pct, format!("{:.6}", r.volume_pct)),
+            measured(r.area_pct, format!("{:.4}", r.area_pct)),
+            measured(r.max_displacement, format!("{:.4e}", r.max_displacement)),
+            measured(r.mean_displacement, format!("{:.4e}", r.mean_displacement)),
+            s.applied,
+            s.skipped_fixed,
+            s.skipped_degenerate,
+            s.rejected,
+            r.seconds
+        );
+    }
+    out.write_all(text.as_bytes()).map_err(stdout_error)
+}

@@ -1,0 +1,205 @@
+//! The flag groups several commands share, each with its resolution into the library's settings:
+//! a command's `IN OUT`, the smoothing flags (method, iterations, step sizes) and the engine flags
+//! (threads, patches, memory); and the value parsers more than one command uses.
+
+use std::path::PathBuf;
+
+use clap::builder::PossibleValue;
+use clap::{Args as ClapArgs, ValueEnum};
+
+use crate::error::{Error, Result};
+use crate::smooth::{Method, Options};
+
+/// How the engine runs (threads, patch size, memory budget, scratch directory).
+pub type EngineConfig = crate::engine::EngineSettings;
+
+/// `IN OUT` of the commands that turn one mesh file into another (`smooth`, `subdivide`, `refine`).
+#[derive(Debug, Clone, ClapArgs)]
+pub struct InOut {
+    /// Input mesh (PLY, OBJ, OFF or STL).
+    #[arg(value_name = "IN")]
+    pub input: PathBuf,
+    /// Output mesh; .ply, .obj, .off or .stl. Written atomically, never on failure.
+    #[arg(value_name = "OUT")]
+    pub output: PathBuf,
+}
+
+/// The smoothing flags shared by `smooth`, `batch` and `slurm-script`: method, iterations, step
+/// sizes, engine.
+#[derive(Debug, Clone, ClapArgs)]
+pub struct SmoothingArgs {
+    /// Smoothing method.
+    #[arg(long, value_enum, default_value_t = Method::Vcs)]
+    pub method: Method,
+    /// Number of iterations; 0 only converts the file's format.
+    #[arg(
+        long,
+        value_name = "N",
+        default_value_t = 10,
+        allow_negative_numbers = true
+    )]
+    pub iterations: usize,
+    #[command(flatten)]
+    pub params: MethodParams,
+    #[command(flatten)]
+    pub engine: EngineArgs,
+}
+
+impl SmoothingArgs {
+    /// The smoothing these flags ask for.
+    pub fn options(&self) -> Options {
+        self.params.options(self.method, self.iterations)
+    }
+}
+
+/// Step sizes and stencil options shared by `smooth` and `curves`.
+#[derive(Debug, Clone, ClapArgs)]
+pub struct MethodParams {
+    /// Laplacian step size λ (laplacian, and the first step of taubin).
+    #[arg(long, value_name = "X", default_value_t = 0.5, value_parser = finite_f64, allow_negative_numbers = true)]
+    pub lambda: f64,
+    /// Taubin's second step size μ (negative).
+    #[arg(long, value_name = "Y", default_value_t = -0.53, value_parser = finite_f64, allow_negative_numbers = true)]
+    pub mu: f64,
+    /// Skip a stencil whose result has a higher stencil energy than before (lem, vcs, vcs-triangle) [default: off].
+    #[arg(long)]
+    pub reject_energy_increase: bool,
+}
+
+impl MethodParams {
+    /// `iterations` of `method` with these parameters.
+    pub fn options(&self, method: Method, iterations: usize) -> Options {
+        Options {
+            method,
+            iterations,
+            lambda: self.lambda,
+            mu: self.mu,
+            reject_energy_increase: self.reject_energy_increase,
+        }
+    }
+}
+
+/// How the engine runs: threads, patches, memory.
+#[derive(Debug, Clone, ClapArgs)]
+pub struct EngineArgs {
+    /// Worker threads [default: all cores].
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..), allow_negative_numbers = true)]
+    pub threads: Option<u32>,
+    /// Vertices per patch; the result is identical for any thread count and memory budget for a given patch size [default: 16384].
+    #[arg(long, value_name = "VERTICES", value_parser = clap::value_parser!(u64).range(1..u32::MAX as u64), allow_negative_numbers = true)]
+    pub patch_size: Option<u64>,
+    /// Anonymous memory allowed, with K/M/G/T suffixes (binary units); larger meshes go to memory-mapped scratch files [default: 3/4 of available memory].
+    #[arg(long, value_name = "SIZE", value_parser = crate::engine::memory::parse_size)]
+    pub memory_budget: Option<u64>,
+    /// Directory for scratch files (removed on exit, even on error) [default: the output's directory].
+    #[arg(long, value_name = "DIR")]
+    pub scratch: Option<PathBuf>,
+}
+
+impl EngineArgs {
+    /// The engine settings: the budget checked, the scratch directory present.
+    pub fn resolve(&self) -> Result<EngineConfig> {
+        if let Some(b) = self.memory_budget {
+            crate::engine::memory::check_budget(b)?;
+        }
+        if let Some(dir) = &self.scratch {
+            if !dir.is_dir() {
+                return Err(Error::invalid(
+                    dir,
+                    "--scratch must be an existing directory",
+                ));
+            }
+        }
+        Ok(EngineConfig {
+            threads: self.threads.map(|t| t as usize),
+            patch_size: self
+                .patch_size
+                .map_or(crate::engine::DEFAULT_PATCH_SIZE, |p| p as usize),
+            memory_budget: self.memory_budget,
+            scratch: self.scratch.clone(),
+            with_stats: false,
+            statistics: crate::engine::Statistics::Every,
+        })
+    }
+}
+
+/// The values of a list flag without repeats, in the order first given.
+pub fn distinct<T: PartialEq>(values: impl IntoIterator<Item = T>) -> Vec<T> {
+    let mut out: Vec<T> = Vec::new();
+    for v in values {
+        if !out.contains(&v) {
+            out.push(v);
+        }
+    }
+    out
+}
+
+/// A number (clap value parsers).
+fn number(s: &str) -> std::result::Result<f64, String> {
+    s.trim()
+        .parse()
+        .map_err(|_| format!("'{s}' is not a number"))
+}
+
+/// A float that must be finite (clap value parser).
+pub fn finite_f64(s: &str) -> std::result::Result<f64, String> {
+    let x = number(s)?;
+    if x.is_finite() {
+        Ok(x)
+    } else {
+        Err(format!("'{s}' is not a finite number"))
+    }
+}
+
+/// A length such as `--max-edge`: a finite number > 0 (clap value parser).
+pub fn length(s: &str) -> std::result::Result<f64, String> {
+    let x = number(s)?;
+    if x.is_finite() && x > 0.0 {
+        Ok(x)
+    } else {
+        Err(format!("'{s}' is not a finite length > 0"))
+    }
+}
+
+impl ValueEnum for Method {
+    fn value_variants<'a>() -> &'a [Self] {
+        &Method::ALL
+    }
+
+    fn to_possible_value(&self) -> Option<PossibleValue> {
+        let help = match self {
+            Method::Laplacian => "umbrella Laplacian, p += λ L(p) (shrinks)",
+            Method::Taubin => "λ|μ: a λ step then a μ step (Taubin 1995)",
+            Method::Lem => "local energy minimisation on edge stencils, no volume constraint",
+            Method::Vcs => "volume-constrained smoothing on edge stencils (Liu et al. 2002)",
+            Method::VcsTriangle => "volume-constrained smoothing on triangle stencils",
+        };
+        Some(PossibleValue::new(self.name()).help(help))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn value_parsers() {
+        assert_eq!(finite_f64(" -0.6"), Ok(-0.6));
+        assert_eq!(finite_f64("x"), Err("'x' is not a number".into()));
+        assert_eq!(
+            finite_f64("inf"),
+            Err("'inf' is not a finite number".into())
+        );
+        assert_eq!(length("0.5"), Ok(0.5));
+        assert_eq!(length("0"), Err("'0' is not a finite length > 0".into()));
+        assert_eq!(
+            length("nan"),
+            Err("'nan' is not a finite length > 0".into())
+        );
+    }
+
+    #[test]
+    fn distinct_keeps_the_first_order() {
+        assert_eq!(distinct([3, 1, 3, 2, 1]), vec![3, 1, 2]);
+    }
+}

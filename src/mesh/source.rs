@@ -1,0 +1,88 @@
+//! What a mesh carried in its file besides positions and triangles: the format, the coordinate
+//! precision, the polygons before triangulation, and the file's own layout, so that a writer can
+//! reproduce the input and `info` can say how it was read.
+
+use std::any::Any;
+use std::fmt;
+use std::path::Path;
+use std::sync::Arc;
+
+/// Mesh file formats vcsmooth reads and writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Format {
+    #[default]
+    Ply,
+    Obj,
+    Off,
+    Stl,
+}
+
+impl Format {
+    /// The format a file name's extension stands for (`.ply .obj .off .stl`, any case).
+    pub fn from_extension(path: &Path) -> Option<Format> {
+        let ext = path.extension()?.to_str()?.to_ascii_lowercase();
+        match ext.as_str() {
+            "ply" => Some(Format::Ply),
+            "obj" => Some(Format::Obj),
+            "off" => Some(Format::Off),
+            "stl" => Some(Format::Stl),
+            _ => None,
+        }
+    }
+}
+
+/// Precision of coordinates in outputs that do not follow a PLY layout: the `x y z` type of a plain
+/// PLY and the number of digits in OBJ/OFF text. (STL is always single precision; a PLY output
+/// from a PLY input keeps the input's property types whatever this says.)
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Precision {
+    /// `f32`: PLY `float`, and text that reads back to the same `f32`.
+    #[default]
+    Float,
+    /// `f64`: PLY `double`, and text that reads back to the same `f64`.
+    Double,
+}
+
+/// What a reader learned about the input beyond positions and triangles, kept so that a writer can
+/// reproduce the input's layout (PLY extra properties, precision, vertex order) and so that `info`
+/// can report how the input was interpreted.
+#[derive(Clone, Default)]
+pub struct Source {
+    /// The format the mesh was read from; `None` for generated meshes.
+    pub format: Option<Format>,
+    /// Number of faces in the input file (before fan triangulation).
+    pub input_faces: usize,
+    /// Number of input faces with more than 3 corners, fan-triangulated on read.
+    pub polygons_triangulated: usize,
+    /// Coordinate precision of the input: `Double` for PLY `double` coordinates and for text whose
+    /// numbers an `f32` cannot reproduce, else `Float`. Set it to ask a writer for double precision.
+    pub precision: Precision,
+    /// Corner count of every input face, in order; kept only when some face had more than 3
+    /// corners. The mesh's triangles are then the fans of these polygons, which lets writers put the
+    /// polygons back.
+    pub face_sizes: Option<Arc<Vec<u32>>>,
+    /// The layout of the file beyond the above, kept by its reader for a faithful output (a PLY
+    /// input's header and extra records); `None` for other inputs and generated meshes. Clear it
+    /// after changing the connectivity, to write a plain file.
+    pub layout: Option<Arc<dyn FileLayout>>,
+}
+
+/// A file's layout as its reader in [`crate::io`] kept it: opaque to everything but that reader's
+/// writer, which finds its own type again through [`FileLayout::as_any`].
+pub trait FileLayout: fmt::Debug + Send + Sync {
+    fn as_any(&self) -> &dyn Any;
+}
+
+// By hand: `face_sizes` and `layout` hold millions of entries that a `{:?}` must not dump.
+impl fmt::Debug for Source {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Source")
+            .field("format", &self.format)
+            .field("input_faces", &self.input_faces)
+            .field("polygons_triangulated", &self.polygons_triangulated)
+            .field("precision", &self.precision)
+            .field("face_sizes", &self.face_sizes.as_ref().map(|s| s.len()))
+            .field("layout", &self.layout)
+            .finish()
+    }
+}

@@ -1,0 +1,209 @@
+//! The source tree keeps the shape DESIGN.md gives it: modules in folders, data flowing one way
+//! (no two top-level modules import each other, directly or through others), and a library that
+//! speaks its own vocabulary (no string literal outside the command line names a flag).
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+fn src() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("src")
+}
+
+fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.is_dir() {
+            rust_files(&path, out);
+        } else if path.extension().is_some_and(|e| e == "rs") {
+            out.push(path);
+        }
+    }
+}
+
+/// `text` without comments, and cut where its unit tests start.
+fn code_of(text: &str) -> String {
+    let text = text.split("#[cfg(test)]").next().unwrap_or("");
+    text.lines()
+        .map(|l| match l.find("//") {
+            // Good enough for this tree: no string literal holds `//` before a flag.
+            Some(i) if !l[..i].contains('"') => &l[..i],
+            _ => l,
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// The string literals of `text` (plain, byte and raw), with their line numbers.
+fn string_literals(text: &str) -> Vec<(usize, String)> {
+    let b = text.as_bytes();
+    let (mut i, mut line, mut out) = (0, 1, Vec::new());
+    while i < b.len() {
+        match b[i] {
+            b'\n' => line += 1,
+            b'/' if b.get(i + 1) == Some(&b'/') => {
+                while i < b.len() && b[i] != b'\n' {
+                    i += 1;
+                }
+                continue;
+            }
+            // A char literal: '"' or '\"' (a lifetime has no closing quote after one char).
+            b'\'' if b.get(i + 2) == Some(&b'\'') => i += 2,
+            b'\'' if b.get(i + 1) == Some(&b'\\') && b.get(i + 3) == Some(&b'\'') => i += 3,
+            b'r' if (b.get(i + 1) == Some(&b'"') || b.get(i + 1) == Some(&b'#'))
+                && (i == 0 || !(b[i - 1].is_ascii_alphanumeric() || b[i - 1] == b'_')) =>
+            {
+                let mut j = i + 1;
+                let mut hashes = 0;
+                while b.get(j) == Some(&b'#') {
+                    hashes += 1;
+                    j += 1;
+                }
+                if b.get(j) == Some(&b'"') {
+                    let close: Vec<u8> = std::iter::once(b'"')
+                        .chain(std::iter::repeat_n(b'#', hashes))
+                        .collect();
+                    let start = j + 1;
+                    let end = start
+                        + text[start..]
+                            .find(std::str::from_utf8(&close).unwrap())
+                            .expect("raw string closed");
+                    out.push((line, text[start..end].to_string()));
+                    line += text[start..end].matches('\n').count();
+                    i = end + close.len();
+                    continue;
+                }
+            }
+            b'"' => {
+                let start = i + 1;
+                let mut j = start;
+                while b[j] != b'"' {
+                    j += if b[j] == b'\\' { 2 } else { 1 };
+                }
+                out.push((line, text[start..j].to_string()));
+                line += text[start..j].matches('\n').count();
+                i = j + 1;
+                continue;
+            }
+            _ => {}
+        }
+        i += 1;
+    }
+    out
+}
+
+/// Whether `s` holds something shaped like a long flag: `--` then a lower-case letter.
+fn names_a_flag(s: &str) -> bool {
+    s.as_bytes()
+        .windows(3)
+        .enumerate()
+        .any(|(k, w)| {
+            w[0] == b'-' && w[1] == b'-' && w[2].is_ascii_lowercase() && (k == 0 || s.as_bytes()[k - 1] != b'-')
+        })
+}
+
+#[test]
+fn the_library_names_no_flag() {
+    let mut files = Vec::new();
+    rust_files(&src(), &mut files);
+    let mut found = Vec::new();
+    for f in files {
+        let rel = f.strip_prefix(src()).unwrap().to_path_buf();
+        if rel.starts_with("cli") || rel == Path::new("main.rs") {
+            continue;
+        }
+        let text = std::fs::read_to_string(&f).unwrap();
+        for (line, lit) in string_literals(&text) {
+            if names_a_flag(&lit) {
+                found.push(format!("src/{}:{line}: {lit:?}", rel.display()));
+            }
+        }
+    }
+    assert!(found.is_empty(), "flags outside src/cli:\n{}", found.join("\n"));
+}
+
+#[test]
+fn the_scanner_finds_flags_in_every_kind_of_literal() {
+    let text = "let a = \"x --threads\"; let c = '\"'; let b = r#\"say \"--lambda\"\"#; // \"--no\"\n";
+    let lits = string_literals(text);
+    let flagged: Vec<_> = lits.iter().filter(|(_, l)| names_a_flag(l)).collect();
+    assert_eq!(flagged.len(), 2, "{lits:?}");
+    assert!(!names_a_flag("a---b"));
+}
+
+/// Top-level module of a file under `src/` (`None` for the crate roots).
+fn top_module(rel: &Path) -> Option<String> {
+    let first = rel.components().next()?.as_os_str().to_str()?;
+    let name = first.trim_end_matches(".rs");
+    (!matches!(name, "lib" | "main")).then(|| name.to_string())
+}
+
+/// The top-level modules that `code` names through `crate::`.
+fn uses(code: &str, modules: &BTreeSet<String>) -> BTreeSet<String> {
+    let mut out = BTreeSet::new();
+    for (k, _) in code.match_indices("crate::") {
+        let rest = &code[k + "crate::".len()..];
+        let names: Vec<&str> = if let Some(group) = rest.strip_prefix('{') {
+            let group = &group[..group.find('}').unwrap_or(group.len())];
+            group
+                .split(',')
+                .map(|p| p.trim().split("::").next().unwrap_or("").trim())
+                .collect()
+        } else {
+            vec![rest.split(|c: char| !(c.is_alphanumeric() || c == '_')).next().unwrap_or("")]
+        };
+        out.extend(names.into_iter().filter(|n| modules.contains(*n)).map(String::from));
+    }
+    out
+}
+
+#[test]
+fn modules_import_each_other_in_one_direction() {
+    let mut files = Vec::new();
+    rust_files(&src(), &mut files);
+    let modules: BTreeSet<String> = files
+        .iter()
+        .filter_map(|f| top_module(f.strip_prefix(src()).unwrap()))
+        .collect();
+    let mut graph: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    for f in &files {
+        let rel = f.strip_prefix(src()).unwrap();
+        let Some(top) = top_module(rel) else { continue };
+        if rel.file_name().is_some_and(|n| n == "tests.rs") {
+            continue;
+        }
+        let code = code_of(&std::fs::read_to_string(f).unwrap());
+        let mut used = uses(&code, &modules);
+        used.remove(&top);
+        graph.entry(top).or_default().extend(used);
+    }
+    // A cycle shows as a module that reaches itself.
+    let mut cycles = Vec::new();
+    for start in graph.keys() {
+        let mut stack: Vec<(String, Vec<String>)> = vec![(start.clone(), vec![start.clone()])];
+        let mut seen = BTreeSet::new();
+        while let Some((m, path)) = stack.pop() {
+            for next in graph.get(&m).into_iter().flatten() {
+                if next == start {
+                    cycles.push(format!("{} -> {start}", path.join(" -> ")));
+                } else if seen.insert(next.clone()) {
+                    let mut p = path.clone();
+                    p.push(next.clone());
+                    stack.push((next.clone(), p));
+                }
+            }
+        }
+    }
+    assert!(cycles.is_empty(), "import circles:\n{}", cycles.join("\n"));
+}
+
+#[test]
+fn no_loose_module_files() {
+    let loose: Vec<String> = std::fs::read_dir(src())
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.is_file())
+        .filter_map(|p| p.file_name()?.to_str().map(String::from))
+        .filter(|n| !matches!(n.as_str(), "lib.rs" | "main.rs" | "error.rs"))
+        .collect();
+    assert!(loose.is_empty(), "loose files in src/: {loose:?}");
+}
