@@ -93,12 +93,12 @@ fn string_literals(text: &str) -> Vec<(usize, String)> {
 
 /// Whether `s` holds something shaped like a long flag: `--` then a lower-case letter.
 fn names_a_flag(s: &str) -> bool {
-    s.as_bytes()
-        .windows(3)
-        .enumerate()
-        .any(|(k, w)| {
-            w[0] == b'-' && w[1] == b'-' && w[2].is_ascii_lowercase() && (k == 0 || s.as_bytes()[k - 1] != b'-')
-        })
+    s.as_bytes().windows(3).enumerate().any(|(k, w)| {
+        w[0] == b'-'
+            && w[1] == b'-'
+            && w[2].is_ascii_lowercase()
+            && (k == 0 || s.as_bytes()[k - 1] != b'-')
+    })
 }
 
 #[test]
@@ -118,12 +118,17 @@ fn the_library_names_no_flag() {
             }
         }
     }
-    assert!(found.is_empty(), "flags outside src/cli:\n{}", found.join("\n"));
+    assert!(
+        found.is_empty(),
+        "flags outside src/cli:\n{}",
+        found.join("\n")
+    );
 }
 
 #[test]
 fn the_scanner_finds_flags_in_every_kind_of_literal() {
-    let text = "let a = \"x --threads\"; let c = '\"'; let b = r#\"say \"--lambda\"\"#; // \"--no\"\n";
+    let text =
+        "let a = \"x --threads\"; let c = '\"'; let b = r#\"say \"--lambda\"\"#; // \"--no\"\n";
     let lits = string_literals(text);
     let flagged: Vec<_> = lits.iter().filter(|(_, l)| names_a_flag(l)).collect();
     assert_eq!(flagged.len(), 2, "{lits:?}");
@@ -149,9 +154,18 @@ fn uses(code: &str, modules: &BTreeSet<String>) -> BTreeSet<String> {
                 .map(|p| p.trim().split("::").next().unwrap_or("").trim())
                 .collect()
         } else {
-            vec![rest.split(|c: char| !(c.is_alphanumeric() || c == '_')).next().unwrap_or("")]
+            vec![
+                rest.split(|c: char| !(c.is_alphanumeric() || c == '_'))
+                    .next()
+                    .unwrap_or(""),
+            ]
         };
-        out.extend(names.into_iter().filter(|n| modules.contains(*n)).map(String::from));
+        out.extend(
+            names
+                .into_iter()
+                .filter(|n| modules.contains(*n))
+                .map(String::from),
+        );
     }
     out
 }

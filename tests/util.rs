@@ -191,26 +191,17 @@ pub fn noisy_sphere(level: u32, sigma: f64, seed: u64) -> Mesh {
     m
 }
 
-/// A closed octahedron: its 6 vertices (±1 on each axis) ...
-pub const OCTA_V: [[f32; 3]; 6] = [
-    [1., 0., 0.],
-    [-1., 0., 0.],
-    [0., 1., 0.],
-    [0., -1., 0.],
-    [0., 0., 1.],
-    [0., 0., -1.],
-];
-/// ... and its 8 outward triangles.
-pub const OCTA_F: [[i32; 3]; 8] = [
-    [0, 2, 4],
-    [2, 1, 4],
-    [1, 3, 4],
-    [3, 0, 4],
-    [2, 0, 5],
-    [1, 2, 5],
-    [3, 1, 5],
-    [0, 3, 5],
-];
+/// The octahedron of [`vcsmooth::shapes::octahedron`] as a file holds it: `f32` corners ...
+pub fn octa_v() -> Vec<[f32; 3]> {
+    let m = vcsmooth::shapes::octahedron();
+    m.positions.iter().map(|p| p.as_vec3().to_array()).collect()
+}
+
+/// ... and its 8 outward triangles as `i32` indices.
+pub fn octa_f() -> Vec<[i32; 3]> {
+    let m = vcsmooth::shapes::octahedron();
+    m.triangles.iter().map(|t| t.map(|v| v as i32)).collect()
+}
 
 // ---------------------------------------------------------------------------------------------
 // The cluster engine on thread ranks (the code path MPI ranks take)

@@ -22,7 +22,7 @@ use crate::error::Result;
 use crate::partition::Patch;
 use crate::schedule::{Prefetch, SharedField};
 use crate::smooth::laplacian::{self, Previous, StepStats};
-use crate::smooth::stencil::{self, StencilParams, Workspace};
+use crate::smooth::stencil::{self, StencilParams};
 use crate::smooth::tiled::TilePlan;
 use crate::smooth::{Method, Options, SweepStats};
 use crate::topology::Topology;
@@ -463,14 +463,14 @@ fn sweep_patches(
     let (topo, tris) = (mesh.topo, mesh.tris);
     patches
         .par_iter()
-        .map_init(Workspace::default, |ws, patch| {
+        .map(|patch| {
             let (mut pv, mut sv) = (pos, sums);
             if method == Method::VcsTriangle {
                 let faces = patch.triangles.clone();
-                stencil::sweep_triangles(topo, tris, &mut pv, &mut sv, faces, params, ws)
+                stencil::sweep_triangles(topo, tris, &mut pv, &mut sv, faces, params)
             } else {
                 let edges = patch.edges(topo);
-                stencil::sweep_edges(topo, tris, &mut pv, &mut sv, edges, params, ws)
+                stencil::sweep_edges(topo, tris, &mut pv, &mut sv, edges, params)
             }
         })
         .reduce(SweepStats::default, |mut a, b| {

@@ -73,7 +73,10 @@ impl Options {
     pub fn check(&self) -> Result<()> {
         for (name, x) in [("lambda", self.lambda), ("mu", self.mu)] {
             if !x.is_finite() {
-                return Err(Error::parameter(name, format!("must be a finite number, got {x}")));
+                return Err(Error::parameter(
+                    name,
+                    format!("must be a finite number, got {x}"),
+                ));
             }
         }
         Ok(())
@@ -144,5 +147,7 @@ pub fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
         }
         builder = builder.num_threads(n);
     }
-    builder.build().map_err(|e| Error::resource(format!("thread pool: {e}")))
+    builder
+        .build()
+        .map_err(|e| Error::resource(format!("thread pool: {e}")))
 }

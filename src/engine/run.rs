@@ -284,7 +284,13 @@ fn smooth_planned(
 }
 
 impl Smoothed {
-    fn report(self, mesh: &Mesh, threads: usize, memory: MemoryStats, timings: PhaseTimings) -> Report {
+    fn report(
+        self,
+        mesh: &Mesh,
+        threads: usize,
+        memory: MemoryStats,
+        timings: PhaseTimings,
+    ) -> Report {
         Report {
             input_format: mesh.source.format,
             vertices: mesh.positions.len(),
@@ -335,11 +341,11 @@ pub(crate) fn check_in_memory_budget(
     let heap = (mesh.positions.len() * 24 + mesh.triangles.len() * 12) as u64;
     if storage.is_mapped() && !mesh.positions.is_mapped() && heap > budget {
         return Err(Error::resource(format!(
-                "{}: this format is read into memory ({}), more than the memory budget of {}; convert it to binary PLY on a larger machine, or raise the budget",
-                input.display(),
-                memory::format_size(heap),
-                memory::format_size(budget)
-            )));
+            "{}: this format is read into memory ({}), more than the memory budget of {}; convert it to binary PLY on a larger machine, or raise the budget",
+            input.display(),
+            memory::format_size(heap),
+            memory::format_size(budget)
+        )));
     }
     Ok(())
 }

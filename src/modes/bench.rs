@@ -33,8 +33,8 @@ use crate::engine::memory as resources;
 use crate::engine::{self, Layout, Plan, Quiet, Statistics};
 use crate::error::{Error, Result};
 use crate::io;
-use crate::shapes;
 use crate::mesh::{Mesh, Storage};
+use crate::shapes;
 use crate::smooth::{Method, Options};
 
 /// Noise of the generated meshes, × the mean edge length.

@@ -2,6 +2,7 @@
 //! files here: writing them is [`crate::io`]'s (see [`crate::io::write_mesh`] and, for the
 //! streamed [`Subdivision`], [`crate::io::write_ply_streamed`]).
 //!
+//! - [`octahedron`]: the unit octahedron, 8 triangles.
 //! - [`icosphere`]: the unit sphere (radius 1, centred at the origin), `20·4^k` triangles.
 //! - [`torus`]: around the z axis, major radius 1, minor radius 0.4, `256·4^k` triangles.
 //! - [`add_normal_noise`]: seeded Gaussian noise along the vertex normals, σ × the mean edge length.
@@ -25,6 +26,35 @@ use glam::DVec3;
 use crate::mesh::Mesh;
 use crate::metrics::mean_edge_length;
 use crate::topology::Topology;
+
+/// The unit octahedron: vertices `±x, ±y, ±z` (in that order: `+x, −x, +y, −y, +z, −z`), 8
+/// outward triangles, every vertex of degree 4. The smallest closed mesh on which every stencil
+/// has a full 1-ring: the tests' fixture.
+pub fn octahedron() -> Mesh {
+    let positions = [
+        [1.0, 0.0, 0.0],
+        [-1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [0.0, -1.0, 0.0],
+        [0.0, 0.0, 1.0],
+        [0.0, 0.0, -1.0],
+    ]
+    .map(DVec3::from_array)
+    .to_vec();
+    let triangles = vec![
+        [0, 2, 4],
+        [2, 1, 4],
+        [1, 3, 4],
+        [3, 0, 4],
+        [2, 0, 5],
+        [1, 2, 5],
+        [3, 1, 5],
+        [0, 3, 5],
+    ];
+    let mut mesh = Mesh::new(positions, triangles);
+    mesh.source.input_faces = mesh.triangles.len();
+    mesh
+}
 
 /// Largest subdivision level [`icosphere`] accepts: `20·4^12` ≈ 335 M triangles, the last level
 /// whose vertex and triangle counts fit the crate's 32-bit indices with room to spare.

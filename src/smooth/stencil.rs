@@ -39,15 +39,6 @@ pub enum Outcome {
     Rejected,
 }
 
-/// Per-thread scratch of the stencil kernels. The kernels now accumulate everything they need in
-/// registers during one pass over the rows, so it holds nothing; it stays in the signatures so
-/// that callers keep one per thread should a kernel need scratch again.
-#[derive(Debug, Default)]
-pub struct Workspace {
-    // Not a unit struct, so that callers' `Workspace::default()` stays idiomatic.
-    _reserved: (),
-}
-
 /// Relative size below which a pivot of `KᵀK`, or `|n|` against the stencil's area, counts as degenerate.
 const DEGENERATE: f64 = 1e-10;
 
@@ -74,7 +65,6 @@ pub fn apply<const N: usize, P: Field + ?Sized, S: Field + ?Sized>(
     sums: &mut S,
     free: [u32; N],
     params: StencilParams,
-    _ws: &mut Workspace,
 ) -> Outcome {
     const { assert!(N >= 1 && N <= 8, "masks are u8") };
     if free.iter().any(|&f| topo.is_fixed(f)) {
@@ -381,11 +371,10 @@ pub fn sweep_edges<P: Field + ?Sized, S: Field + ?Sized>(
     sums: &mut S,
     edges: impl IntoIterator<Item = [u32; 2]>,
     params: StencilParams,
-    ws: &mut Workspace,
 ) -> SweepStats {
     let mut stats = SweepStats::default();
     for e in edges {
-        count(&mut stats, apply(topo, triangles, pos, sums, e, params, ws));
+        count(&mut stats, apply(topo, triangles, pos, sums, e, params));
     }
     stats
 }
@@ -399,15 +388,11 @@ pub fn sweep_triangles<P: Field + ?Sized, S: Field + ?Sized>(
     sums: &mut S,
     faces: impl IntoIterator<Item = u32>,
     params: StencilParams,
-    ws: &mut Workspace,
 ) -> SweepStats {
     let mut stats = SweepStats::default();
     for t in faces {
         let free = triangles[t as usize];
-        count(
-            &mut stats,
-            apply(topo, triangles, pos, sums, free, params, ws),
-        );
+        count(&mut stats, apply(topo, triangles, pos, sums, free, params));
     }
     stats
 }
@@ -427,16 +412,7 @@ mod tests {
             DVec3::new(0.0, 0.2, 1.4),
             DVec3::new(-0.1, 0.0, -0.7),
         ];
-        let tris = vec![
-            [0, 2, 4],
-            [2, 1, 4],
-            [1, 3, 4],
-            [3, 0, 4],
-            [2, 0, 5],
-            [1, 2, 5],
-            [3, 1, 5],
-            [0, 3, 5],
-        ];
+        let tris = crate::shapes::octahedron().triangles.to_vec();
         (pos.into_iter().map(|p| p + offset).collect(), tris)
     }
 
@@ -463,15 +439,7 @@ mod tests {
                 volume: true,
                 reject_energy_increase: false,
             };
-            let out = apply(
-                &topo,
-                &tris,
-                &mut pos[..],
-                &mut sums[..],
-                [0, 2],
-                p,
-                &mut Workspace::default(),
-            );
+            let out = apply(&topo, &tris, &mut pos[..], &mut sums[..], [0, 2], p);
             assert_eq!(out, Outcome::Applied);
             let rel = ((volume(&pos, &tris) - before) / before).abs();
             assert!(rel < 1e-9, "offset {offset}: relative volume change {rel}");
@@ -493,15 +461,7 @@ mod tests {
             volume: false,
             reject_energy_increase: false,
         };
-        apply(
-            &topo,
-            &tris,
-            &mut pos[..],
-            &mut sums[..],
-            [0, 2],
-            p,
-            &mut Workspace::default(),
-        );
+        apply(&topo, &tris, &mut pos[..], &mut sums[..], [0, 2], p);
         let e1 = energy(&topo, &pos, &rows);
         assert!(e1 < energy(&topo, &pos0, &rows));
         // Any small perturbation of a free vertex raises the energy: the solve found the minimum.
@@ -524,15 +484,7 @@ mod tests {
             volume: true,
             reject_energy_increase: false,
         };
-        let stats = sweep_triangles(
-            &topo,
-            &tris,
-            &mut pos[..],
-            &mut sums[..],
-            0..8,
-            p,
-            &mut Workspace::default(),
-        );
+        let stats = sweep_triangles(&topo, &tris, &mut pos[..], &mut sums[..], 0..8, p);
         assert_eq!(stats.applied, 8);
         assert!(((volume(&pos, &tris) - before) / before).abs() < 1e-9);
     }
@@ -549,15 +501,7 @@ mod tests {
             reject_energy_increase: false,
         };
         let before = pos.clone();
-        let out = apply(
-            &topo,
-            &tris,
-            &mut pos[..],
-            &mut sums[..],
-            [0, 1],
-            p,
-            &mut Workspace::default(),
-        );
+        let out = apply(&topo, &tris, &mut pos[..], &mut sums[..], [0, 1], p);
         assert_eq!(out, Outcome::SkippedFixed);
         assert_eq!(pos, before);
 
@@ -566,15 +510,7 @@ mod tests {
         let topo = Topology::build(6, &tris).unwrap();
         let mut pos = vec![DVec3::splat(3.0); 6];
         let mut sums = neighbor_sums(&topo, &pos);
-        let out = apply(
-            &topo,
-            &tris,
-            &mut pos[..],
-            &mut sums[..],
-            [0, 2],
-            p,
-            &mut Workspace::default(),
-        );
+        let out = apply(&topo, &tris, &mut pos[..], &mut sums[..], [0, 2], p);
         assert_eq!(out, Outcome::SkippedDegenerate);
         assert!(pos.iter().all(|p| *p == DVec3::splat(3.0)));
     }
@@ -588,16 +524,13 @@ mod tests {
             volume: true,
             reject_energy_increase: true,
         };
-        let mut ws = Workspace::default();
         let all: Vec<u32> = (0..6).collect();
         for _ in 0..20 {
             for e in topo.edges().collect::<Vec<_>>() {
                 let before = pos.clone();
                 let rows: Vec<u32> = all.clone();
                 let e0 = energy(&topo, &before, &rows);
-                if apply(&topo, &tris, &mut pos[..], &mut sums[..], e, p, &mut ws)
-                    == Outcome::Applied
-                {
+                if apply(&topo, &tris, &mut pos[..], &mut sums[..], e, p) == Outcome::Applied {
                     assert!(energy(&topo, &pos, &rows) <= e0 * (1.0 + 1e-12));
                 }
             }

@@ -521,16 +521,7 @@ mod tests {
 
     /// Octahedron: closed, 6 vertices of degree 4.
     fn octahedron() -> Vec<[u32; 3]> {
-        vec![
-            [0, 2, 4],
-            [2, 1, 4],
-            [1, 3, 4],
-            [3, 0, 4],
-            [2, 0, 5],
-            [1, 2, 5],
-            [3, 1, 5],
-            [0, 3, 5],
-        ]
+        crate::shapes::octahedron().triangles.to_vec()
     }
 
     #[test]

@@ -6,7 +6,7 @@
 //! An error case gives the message after `vcsmooth: error: <path>: `, exactly: it names the
 //! element and its byte offset (binary) or line (text). Element numbers count from 0, lines from 1.
 
-use crate::util::{OCTA_F, OCTA_V};
+use crate::util::{octa_f, octa_v};
 
 /// One file of the corpus.
 pub struct Case {
@@ -93,8 +93,8 @@ fn triangle_body(indices: &[i32]) -> Vec<u8> {
 
 /// The octahedron as binary little-endian PLY records, with `extra` faces after its own.
 fn octa_body(extra: &[&[i32]]) -> Vec<u8> {
-    let mut body: Vec<u8> = OCTA_V.iter().flat_map(|p| f32s(p)).collect();
-    for f in OCTA_F.iter().map(|f| &f[..]).chain(extra.iter().copied()) {
+    let mut body: Vec<u8> = octa_v().iter().flat_map(|p| f32s(p)).collect();
+    for f in octa_f().iter().map(|f| &f[..]).chain(extra.iter().copied()) {
         body.extend(face(f));
     }
     body
@@ -111,10 +111,10 @@ fn octa_ascii_ply(eol: &str) -> Vec<u8> {
          element vertex 6{eol}property float x{eol}property float y{eol}property float z{eol}\
          element face 8{eol}property list uchar int vertex_indices{eol}end_header{eol}"
     );
-    for p in OCTA_V {
+    for p in octa_v() {
         text += &format!("{} {} {}{eol}", p[0], p[1], p[2]);
     }
-    for f in OCTA_F {
+    for f in octa_f() {
         text += &format!("3 {} {} {}{eol}", f[0], f[1], f[2]);
     }
     text.into_bytes()
@@ -122,10 +122,10 @@ fn octa_ascii_ply(eol: &str) -> Vec<u8> {
 
 fn octa_obj(eol: &str) -> Vec<u8> {
     let mut text = format!("# exported{eol}o octahedron{eol}");
-    for p in OCTA_V {
+    for p in octa_v() {
         text += &format!("v {} {} {}{eol}", p[0], p[1], p[2]);
     }
-    for f in OCTA_F {
+    for f in octa_f() {
         text += &format!("f {} {} {}{eol}", f[0] + 1, f[1] + 1, f[2] + 1);
     }
     text.into_bytes()
@@ -133,10 +133,10 @@ fn octa_obj(eol: &str) -> Vec<u8> {
 
 fn octa_off(eol: &str) -> Vec<u8> {
     let mut text = format!("OFF{eol}# comment{eol}6 8 12{eol}");
-    for p in OCTA_V {
+    for p in octa_v() {
         text += &format!("{} {} {}{eol}", p[0], p[1], p[2]);
     }
-    for f in OCTA_F {
+    for f in octa_f() {
         text += &format!("3 {} {} {}{eol}", f[0], f[1], f[2]);
     }
     text.into_bytes()
@@ -144,10 +144,11 @@ fn octa_off(eol: &str) -> Vec<u8> {
 
 fn octa_stl_ascii(eol: &str) -> Vec<u8> {
     let mut text = format!("solid octa{eol}");
-    for f in OCTA_F {
+    let corners = octa_v();
+    for f in octa_f() {
         text += &format!("facet normal 0 0 0{eol}outer loop{eol}");
         for v in f {
-            let p = OCTA_V[v as usize];
+            let p = corners[v as usize];
             text += &format!("vertex {} {} {}{eol}", p[0], p[1], p[2]);
         }
         text += &format!("endloop{eol}endfacet{eol}");
@@ -172,9 +173,10 @@ fn stl_binary(count: u32, facets: &[[[f32; 3]; 3]]) -> Vec<u8> {
 }
 
 fn octa_facets() -> Vec<[[f32; 3]; 3]> {
-    OCTA_F
+    let corners = octa_v();
+    octa_f()
         .iter()
-        .map(|f| f.map(|v| OCTA_V[v as usize]))
+        .map(|f| f.map(|v| corners[v as usize]))
         .collect()
 }
 
@@ -220,7 +222,7 @@ fn typed_octa(ty: &str, shift: f64, count_ty: &str, index_ty: &str, format: &str
         }
         bytes.extend(le);
     };
-    for p in OCTA_V {
+    for p in octa_v() {
         for c in p {
             encode(&mut bytes, ty, f64::from(c) + shift);
         }
@@ -231,7 +233,7 @@ fn typed_octa(ty: &str, shift: f64, count_ty: &str, index_ty: &str, format: &str
             bytes.push(b'\n');
         }
     }
-    for f in OCTA_F {
+    for f in octa_f() {
         encode(&mut bytes, count_ty, 3.);
         for v in f {
             encode(&mut bytes, index_ty, f64::from(v));
@@ -402,10 +404,10 @@ pub fn cases() -> Vec<Case> {
             let mut text = "ply\nformat ascii 1.0\nelement face 8\nproperty list uchar int vertex_indices\nelement vertex 6\n".to_string();
             text += XYZ;
             text += "end_header\n";
-            for f in OCTA_F {
+            for f in octa_f() {
                 text += &format!("3 {} {} {}\n", f[0], f[1], f[2]);
             }
-            for p in OCTA_V {
+            for p in octa_v() {
                 text += &format!("{} {} {}\n", p[0], p[1], p[2]);
             }
             text
