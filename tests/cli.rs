@@ -639,3 +639,21 @@ fn stats_last_measures_only_the_last_iteration_and_changes_nothing_else() {
     ]);
     fails(&o, 2, &["--plot", "--stats every"]);
 }
+
+/// `generate mesh` streams binary PLY whatever the output's extension says, so any other output is
+/// refused before any work (it once wrote PLY bytes into an `.obj` file).
+#[test]
+fn generate_mesh_refuses_a_non_ply_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("x.obj");
+    let kitten = scan("kitten-25k.ply");
+    let o = vcsmooth([
+        "generate",
+        "mesh",
+        out.to_str().unwrap(),
+        "--from",
+        kitten.to_str().unwrap(),
+    ]);
+    fails(&o, 2, &["x.obj", ".ply output"]);
+    assert!(listing(dir.path()).is_empty(), "{:?}", listing(dir.path()));
+}

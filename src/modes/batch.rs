@@ -1,7 +1,7 @@
 //! Many meshes as one batch, spread over the tasks of a job array (Slurm's, or any scheduler's
 //! that numbers its tasks): which inputs a task owns, where their outputs and success markers go,
 //! and the summary gathered from the markers. The CLI's `batch` and `slurm-script` commands
-//! (`crate::cli::batch`) are thin layers over this module.
+//! (`crate::cli::commands::{batch, slurm_script}`) are thin layers over this module.
 //!
 //! * Inputs: the mesh files of a directory (known extensions `.ply .obj .off .stl`, any case; hidden
 //!   files skipped), sorted by file name; or the lines of a list file (blank lines and lines

@@ -102,10 +102,11 @@ impl GenerateConfig {
             }
             (_, Some(k), None) => k,
         };
-        if a.subdivide.is_some() && output_format(&a.output) != Some(Format::Ply) {
+        let streamed = a.subdivide.is_some() || a.shape == Shape::Mesh;
+        if streamed && output_format(&a.output) != Some(Format::Ply) {
             return Err(Error::invalid(
                 &a.output,
-                "--subdivide streams binary PLY only; use a .ply output",
+                "generate mesh and --subdivide stream binary PLY only; use a .ply output",
             ));
         }
         Ok(GenerateConfig {
