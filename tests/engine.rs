@@ -225,9 +225,7 @@ fn output_is_bit_identical_for_any_thread_count() {
             .iter()
             .map(|&t| {
                 let mut m = input.clone();
-                engine::smooth_in_order(&mut m, &opts, &threads(t), &mut Quiet)
-                    .unwrap()
-                    .records;
+                engine::smooth_in_order(&mut m, &opts, &threads(t), &mut Quiet).unwrap();
                 m.positions.to_vec()
             })
             .collect();

@@ -1,6 +1,6 @@
 //! One mesh over several processes (MPI ranks), with checkpoints.
 //!
-//! The unit of distribution is the patch of the out-of-core engine ([`crate::engine::Prepared`]):
+//! The unit of distribution is the patch of the out-of-core engine ([`crate::engine::Plan`]):
 //! rank 0 prepares the plan once (Morton reorder, adjacency, patches, colours) into a work
 //! directory on a shared file system ([`store`]); every rank maps it and owns a contiguous block of
 //! patches, i.e. a contiguous range `A` of reordered vertices. A rank keeps positions and
@@ -9,7 +9,8 @@
 //! indexed by global vertex id but only the region's pages are ever touched
 //! ([`Buf::sparse`]), so a rank's memory follows its region, not the mesh.
 //!
-//! Per iteration, colour after colour: each rank applies the stencils of its patches of that
+//! Every rank runs the engine's one iteration loop ([`crate::engine::iterate`]), plugged in as its
+//! [`Share`]: per iteration, colour after colour, each rank applies the stencils of its patches of that
 //! colour (in parallel on its threads), then sends every value it changed that another rank's
 //! region holds to that rank ([`Comm::exchange`]). Patches of one colour touch disjoint data and
 //! every region copy is brought up to date before the next colour, so each stencil sees exactly

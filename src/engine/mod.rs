@@ -1,6 +1,6 @@
 //! The engine: the one place that combines the plan, the kernels and the threads.
 //!
-//! - [`plan`]: a [`Plan`] orders the mesh (Morton curve), builds its [`Topology`], cuts it into
+//! - [`plan`]: a [`Plan`] orders the mesh (Morton curve), builds its [`Topology`](crate::Topology), cuts it into
 //!   patches and colours them; built once, smoothed any number of times.
 //! - [`iterate`]: the one iteration loop: Jacobi rounds for `laplacian` and `taubin`, colour by
 //!   colour Gauss–Seidel sweeps for the stencil methods, statistics when asked. The cluster

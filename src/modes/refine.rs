@@ -5,7 +5,7 @@
 //!   edge midpoints, so they lie on the input's triangles and the volume of a closed mesh does not
 //!   change (up to rounding); a closed manifold stays closed and manifold, orientation is kept,
 //!   and an open mesh keeps its boundary (its boundary edges are split, never moved).
-//! - [`refine`] alternates [`subdivide`] and whole-mesh smoothing ([`crate::engine::smooth_mesh`])
+//! - [`refine`] alternates [`subdivide`] and whole-mesh smoothing ([`crate::engine::smooth_in_order`])
 //!   for a number of rounds, recording volume, counts and edge lengths per round.
 //!
 //! # Scheme: conforming longest-edge bisection (Rivara)

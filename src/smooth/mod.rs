@@ -89,7 +89,20 @@ impl FromStr for Method {
     }
 }
 
-/// Smoothing options. Defaults: `vcs`, 10 iterations, λ = 0.5, μ = −0.53, no energy rejection.
+/// What to smooth with: the method and its parameters. These define the result (with the plan's
+/// layout, see [`crate::engine::Layout`]); how the work is run (threads, memory, statistics) is
+/// [`crate::engine::EngineSettings`].
+///
+/// | field | default | used by |
+/// |---|---|---|
+/// | `method` | [`Method::Vcs`] | — |
+/// | `iterations` | 10 | every method |
+/// | `lambda` | 0.5 | `laplacian` (its step), `taubin` (its first step) |
+/// | `mu` | −0.53 | `taubin` (its second step; negative, `|μ| > λ`) |
+/// | `reject_energy_increase` | false | `lem`, `vcs`, `vcs-triangle` |
+///
+/// The stencil methods (`lem`, `vcs`, `vcs-triangle`) have no step size: each stencil is moved to
+/// its local energy minimum (and, for `vcs`, translated back to its volume).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct Options {
     pub method: Method,
