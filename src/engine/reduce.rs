@@ -57,12 +57,7 @@ pub fn map_fold_mut<T: Send, R: Send>(
 pub fn volume_area(pos: &[DVec3], tris: &[[u32; 3]], origin: DVec3) -> (f64, f64) {
     let (v, a) = map_fold(
         tris,
-        |_, chunk| {
-            (
-                metrics::determinant_sum(pos, chunk, origin),
-                metrics::doubled_area_sum(pos, chunk),
-            )
-        },
+        |_, chunk| metrics::determinant_and_area_sums(pos, chunk, origin),
         (-0.0, -0.0),
         |(v, a), (pv, pa)| (v + pv, a + pa),
     );

@@ -32,15 +32,26 @@ pub fn centroid(pos: &[DVec3]) -> DVec3 {
     position_sum(pos) / pos.len() as f64
 }
 
+/// Six times the signed volume of the tetrahedron `(o, a, b, c)`, given `a − o, b − o, c − o`.
+#[inline(always)]
+pub fn determinant(a: DVec3, b: DVec3, c: DVec3) -> f64 {
+    a.dot(b.cross(c))
+}
+
+/// Twice the area of the triangle `(a, b, c)`.
+#[inline(always)]
+pub fn doubled_area(a: DVec3, b: DVec3, c: DVec3) -> f64 {
+    (b - a).cross(c - a).length()
+}
+
 /// `Σ det(p_a − o, p_b − o, p_c − o)` over the triangles, in order: six times their signed volume
-/// about `o`. The one definition of the volume sum ([`crate::engine::reduce`] adds it up over
-/// chunks in parallel).
+/// about `o` ([`crate::engine::reduce`] adds these sums up over chunks in parallel).
 pub fn determinant_sum(pos: &[DVec3], triangles: &[[u32; 3]], origin: DVec3) -> f64 {
     triangles
         .iter()
         .map(|t| {
             let [a, b, c] = t.map(|v| pos[v as usize] - origin);
-            a.dot(b.cross(c))
+            determinant(a, b, c)
         })
         .sum::<f64>()
 }
@@ -51,9 +62,20 @@ pub fn doubled_area_sum(pos: &[DVec3], triangles: &[[u32; 3]]) -> f64 {
         .iter()
         .map(|t| {
             let [a, b, c] = t.map(|v| pos[v as usize]);
-            (b - a).cross(c - a).length()
+            doubled_area(a, b, c)
         })
         .sum::<f64>()
+}
+
+/// [`determinant_sum`] and [`doubled_area_sum`] in one pass over the triangles.
+pub fn determinant_and_area_sums(pos: &[DVec3], triangles: &[[u32; 3]], origin: DVec3) -> (f64, f64) {
+    triangles.iter().fold((-0.0, -0.0), |(v, s), t| {
+        let [a, b, c] = t.map(|v| pos[v as usize]);
+        (
+            v + determinant(a - origin, b - origin, c - origin),
+            s + doubled_area(a, b, c),
+        )
+    })
 }
 
 /// Sum of the positions, in order.
