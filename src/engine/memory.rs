@@ -57,6 +57,14 @@ pub fn in_core_bytes_with_mesh(triangles: u64) -> u64 {
     in_core_bytes(triangles).saturating_add(triangles.saturating_mul(MESH_BYTES_PER_TRIANGLE))
 }
 
+/// The heap an in-memory [`Mesh`](crate::Mesh) of these counts holds: f64 positions, u32
+/// triangles (what a text format costs when its mesh is read before it can go to scratch).
+pub fn mesh_bytes(vertices: u64, triangles: u64) -> u64 {
+    vertices
+        .saturating_mul(24)
+        .saturating_add(triangles.saturating_mul(12))
+}
+
 /// Memory to generate a mesh of `triangles`, with or without noise.
 pub fn generate_bytes(triangles: u64, noise: bool) -> u64 {
     let per = GENERATE_BYTES_PER_TRIANGLE + if noise { NOISE_BYTES_PER_TRIANGLE } else { 0 };

@@ -338,7 +338,7 @@ pub(crate) fn check_in_memory_budget(
     mesh: &Mesh,
     budget: u64,
 ) -> Result<()> {
-    let heap = (mesh.positions.len() * 24 + mesh.triangles.len() * 12) as u64;
+    let heap = memory::mesh_bytes(mesh.positions.len() as u64, mesh.triangles.len() as u64);
     if storage.is_mapped() && !mesh.positions.is_mapped() && heap > budget {
         return Err(Error::resource(format!(
             "{}: this format is read into memory ({}), more than the memory budget of {}; convert it to binary PLY on a larger machine, or raise the budget",

@@ -68,7 +68,11 @@ pub fn doubled_area_sum(pos: &[DVec3], triangles: &[[u32; 3]]) -> f64 {
 }
 
 /// [`determinant_sum`] and [`doubled_area_sum`] in one pass over the triangles.
-pub fn determinant_and_area_sums(pos: &[DVec3], triangles: &[[u32; 3]], origin: DVec3) -> (f64, f64) {
+pub fn determinant_and_area_sums(
+    pos: &[DVec3],
+    triangles: &[[u32; 3]],
+    origin: DVec3,
+) -> (f64, f64) {
     triangles.iter().fold((-0.0, -0.0), |(v, s), t| {
         let [a, b, c] = t.map(|v| pos[v as usize]);
         (
