@@ -19,6 +19,7 @@ use rayon::prelude::*;
 use super::observer::{IterationRecord, Observer, Statistics};
 use super::reduce;
 use crate::error::Result;
+use crate::metrics;
 use crate::partition::Patch;
 use crate::schedule::{Prefetch, SharedField};
 use crate::smooth::laplacian::{self, Previous, StepStats};
@@ -410,8 +411,8 @@ impl Run<'_, '_> {
         let record = IterationRecord {
             iteration: it,
             volume,
-            volume_pct: percent(volume, self.reference.volume),
-            area_pct: percent(area, self.reference.area),
+            volume_pct: metrics::percent(volume, self.reference.volume),
+            area_pct: metrics::percent(area, self.reference.area),
             max_displacement: maxima[0],
             mean_displacement: sums[0] / self.movable as f64,
             stencils: SweepStats {
@@ -428,17 +429,6 @@ impl Run<'_, '_> {
         self.share.iteration_end(&record, pos)?;
         self.records.push(record);
         Ok(())
-    }
-}
-
-/// `x` as a percentage of `reference` (100 when the reference is 0, NaN for NaN).
-pub fn percent(x: f64, reference: f64) -> f64 {
-    if x.is_nan() {
-        f64::NAN
-    } else if reference == 0.0 {
-        100.0
-    } else {
-        100.0 * x / reference
     }
 }
 

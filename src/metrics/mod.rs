@@ -24,6 +24,17 @@ pub fn area(pos: &[DVec3], triangles: &[[u32; 3]]) -> f64 {
     doubled_area_sum(pos, triangles) / 2.0
 }
 
+/// `x` as a percentage of `reference` (100 when the reference is 0, NaN for NaN).
+pub fn percent(x: f64, reference: f64) -> f64 {
+    if x.is_nan() {
+        f64::NAN
+    } else if reference == 0.0 {
+        100.0
+    } else {
+        100.0 * x / reference
+    }
+}
+
 /// Mean of the positions (zero for none).
 pub fn centroid(pos: &[DVec3]) -> DVec3 {
     if pos.is_empty() {

@@ -187,7 +187,7 @@ pub fn smooth_prepared(
     let start = Instant::now();
     let origin = reduce::centroid(&prep.reordered.positions);
     let v0 = reduce::volume(&prep.reordered.positions, &prep.reordered.triangles, origin);
-    let pct = |v: f64| if v0 == 0.0 { 100.0 } else { 100.0 * v / v0 };
+    let pct = |v: f64| metrics::percent(v, v0);
     let coarse_iterations = m.coarse_iterations.unwrap_or(opts.iterations);
 
     // 1. The hierarchy, finest to coarsest.

@@ -100,7 +100,7 @@ pub fn run(cfg: &RefineConfig, progress: &mut Progress, out: &mut dyn Write) -> 
         mesh.positions.len(),
         mesh.triangles.len(),
         max_edge,
-        pct(volume1, volume0)
+        crate::metrics::percent(volume1, volume0)
     )
     .map_err(stdout_error)?;
     for r in &records {
@@ -110,20 +110,11 @@ pub fn run(cfg: &RefineConfig, progress: &mut Progress, out: &mut dyn Write) -> 
             r.round,
             r.subdivision.triangles_before,
             r.subdivision.triangles_after,
-            pct(r.volume_subdivided, r.volume_before),
-            pct(r.volume_smoothed, r.volume_before),
+            crate::metrics::percent(r.volume_subdivided, r.volume_before),
+            crate::metrics::percent(r.volume_smoothed, r.volume_before),
             r.max_edge_smoothed
         )
         .map_err(stdout_error)?;
     }
     Ok(())
-}
-
-/// `x` as a percentage of `reference` (100 when the reference is 0).
-fn pct(x: f64, reference: f64) -> f64 {
-    if reference == 0.0 {
-        100.0
-    } else {
-        100.0 * x / reference
-    }
 }
