@@ -190,15 +190,83 @@ fn modules_import_each_other_in_one_direction() {
         used.remove(&top);
         graph.entry(top).or_default().extend(used);
     }
-    // A cycle shows as a module that reaches itself.
-    let mut cycles = Vec::new();
+    let cycles = cycles(&graph);
+    assert!(cycles.is_empty(), "import circles:\n{}", cycles.join("\n"));
+}
+
+/// The path of the module a file under `src/<top>/` defines, below `top`: `a.rs` → `[a]`,
+/// `sub/mod.rs` → `[sub]`, `sub/b.rs` → `[sub, b]`, `mod.rs` → `[]`.
+fn module_path(rel: &Path) -> Vec<String> {
+    let mut parts: Vec<String> = rel
+        .iter()
+        .skip(1)
+        .map(|c| c.to_str().unwrap().trim_end_matches(".rs").to_string())
+        .collect();
+    if parts.last().is_some_and(|p| p == "mod") {
+        parts.pop();
+    }
+    parts
+}
+
+/// Sibling modules (children of `top`) that `code`, the file of module `path` inside `top`,
+/// names through `super::…` or `crate::top::…`.
+fn sibling_uses(code: &str, top: &str, path: &[String]) -> BTreeSet<String> {
+    let mut out = BTreeSet::new();
+    let mut add = |rest: &str, up: usize| {
+        // `up` levels above `path`: the names that follow are children of that module.
+        if up > path.len() {
+            return;
+        }
+        let base = &path[..path.len() - up];
+        let names: Vec<String> = if let Some(group) = rest.strip_prefix('{') {
+            let group = &group[..group.find('}').unwrap_or(group.len())];
+            group
+                .split(',')
+                .map(|p| p.trim().split("::").next().unwrap_or("").trim().to_string())
+                .collect()
+        } else {
+            vec![
+                rest.split(|c: char| !(c.is_alphanumeric() || c == '_'))
+                    .next()
+                    .unwrap_or("")
+                    .to_string(),
+            ]
+        };
+        for n in names.into_iter().filter(|n| !n.is_empty() && n != "self") {
+            // The first component below `top` of the module named.
+            let first = base.first().cloned().unwrap_or(n);
+            out.insert(first);
+        }
+    };
+    let prefix = format!("crate::{top}::");
+    for (k, _) in code.match_indices(&prefix) {
+        add(&code[k + prefix.len()..], path.len());
+    }
+    for (k, _) in code.match_indices("super::") {
+        if k >= 7 && &code[k - 7..k] == "super::" {
+            continue; // counted from the first `super::` of the chain
+        }
+        let mut rest = &code[k..];
+        let mut up = 0;
+        while let Some(r) = rest.strip_prefix("super::") {
+            rest = r;
+            up += 1;
+        }
+        add(rest, up);
+    }
+    out
+}
+
+/// Cycles in `graph`, each as `a -> b -> a`.
+fn cycles(graph: &BTreeMap<String, BTreeSet<String>>) -> Vec<String> {
+    let mut found = Vec::new();
     for start in graph.keys() {
         let mut stack: Vec<(String, Vec<String>)> = vec![(start.clone(), vec![start.clone()])];
         let mut seen = BTreeSet::new();
         while let Some((m, path)) = stack.pop() {
             for next in graph.get(&m).into_iter().flatten() {
                 if next == start {
-                    cycles.push(format!("{} -> {start}", path.join(" -> ")));
+                    found.push(format!("{} -> {start}", path.join(" -> ")));
                 } else if seen.insert(next.clone()) {
                     let mut p = path.clone();
                     p.push(next.clone());
@@ -207,7 +275,43 @@ fn modules_import_each_other_in_one_direction() {
             }
         }
     }
-    assert!(cycles.is_empty(), "import circles:\n{}", cycles.join("\n"));
+    found
+}
+
+#[test]
+fn files_of_a_module_import_each_other_in_one_direction() {
+    let mut files = Vec::new();
+    rust_files(&src(), &mut files);
+    let mut graphs: BTreeMap<String, BTreeMap<String, BTreeSet<String>>> = BTreeMap::new();
+    for f in &files {
+        let rel = f.strip_prefix(src()).unwrap();
+        let Some(top) = top_module(rel) else { continue };
+        let path = module_path(rel);
+        let Some(own) = path.first().cloned() else {
+            continue; // the module's root, which declares and dispatches to its children
+        };
+        if path.last().is_some_and(|n| n == "tests") {
+            continue;
+        }
+        let code = code_of(&std::fs::read_to_string(f).unwrap());
+        let mut used = sibling_uses(&code, &top, &path);
+        used.remove(&own);
+        graphs
+            .entry(top)
+            .or_default()
+            .entry(own)
+            .or_default()
+            .extend(used);
+    }
+    let found: Vec<String> = graphs
+        .iter()
+        .flat_map(|(top, g)| cycles(g).into_iter().map(move |c| format!("{top}: {c}")))
+        .collect();
+    assert!(
+        found.is_empty(),
+        "import circles inside modules:\n{}",
+        found.join("\n")
+    );
 }
 
 #[test]

@@ -17,7 +17,7 @@
 //!
 //! | format | read | write |
 //! |---|---|---|
-//! | PLY | binary little/big-endian (memory-mapped, own header parser, stride decode); ASCII (own strict parser, see `ply_ascii`) | the input's layout when it came from PLY, else binary little-endian `x y z float` (or `double`, see [`Precision`]) + `list uchar int vertex_indices` |
+//! | PLY | binary little/big-endian (memory-mapped, own header parser, stride decode); ASCII (own strict parser, see `ply::ascii`) | the input's layout when it came from PLY, else binary little-endian `x y z float` (or `double`, see [`Precision`]) + `list uchar int vertex_indices` |
 //! | OBJ | `v` (first three numbers), `f` with `i`, `i/t`, `i//n`, `i/t/n` and negative (relative) indices; every other statement ignored | `v` + `f` |
 //! | OFF | `OFF` and its `C`/`N`/`ST` variants (extra vertex columns and face colours ignored), `#` comments | `OFF` |
 //! | STL | binary and ASCII | binary |
@@ -86,7 +86,6 @@ mod atomic;
 mod obj;
 mod off;
 mod ply;
-mod ply_ascii;
 mod stl;
 mod stream;
 

@@ -1,7 +1,7 @@
 //! PLY: the header model and its parser, the binary decoder (mapped bytes in, stride decode out)
 //! and the writer for both encodings.
 //!
-//! Records are held little-endian whatever the input's encoding: `ply_ascii` encodes ASCII bodies,
+//! Records are held little-endian whatever the input's encoding: `ascii` encodes ASCII bodies,
 //! big-endian bodies are byte-swapped once. Everything after that — positions, faces, validation,
 //! output — is one code path over little-endian bytes, decoded with `from_le_bytes` on byte slices
 //! (records are unaligned; they are never cast to `&[f32]`).
@@ -21,7 +21,9 @@ use std::sync::Arc;
 use glam::DVec3;
 use rayon::prelude::*;
 
-use super::{FaceBuilder, Faces, Format, Precision, Source, bad_index, ply_ascii, vertex_normals};
+mod ascii;
+
+use super::{FaceBuilder, Faces, Format, Precision, Source, bad_index, vertex_normals};
 use crate::mesh::Mesh;
 
 type Fallible<T> = Result<T, String>;
@@ -739,7 +741,7 @@ pub(crate) fn read_in(bytes: &[u8], storage: &Storage) -> Result<Mesh, ReadError
     };
     match header.encoding {
         PlyEncoding::Ascii => {
-            let records = ply_ascii::parse_body(body, header.lines + 1, &elements)?;
+            let records = ascii::parse_body(body, header.lines + 1, &elements)?;
             let mut line = header.lines + 1;
             for (e, data) in records.into_iter().enumerate() {
                 let origin = Origin::Line(line);
@@ -1342,7 +1344,7 @@ pub(crate) fn write_header(
 /// Writes little-endian records as they are, or as ASCII lines.
 fn emit(out: &mut impl Write, props: &[Property], records: &[u8], ascii: bool) -> io::Result<()> {
     if ascii {
-        ply_ascii::write_records(out, props, records)
+        ascii::write_records(out, props, records)
     } else {
         out.write_all(records)
     }

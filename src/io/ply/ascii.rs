@@ -9,8 +9,8 @@
 
 use std::io::{self, Write};
 
-use super::ply::{Element, Kind, Property, Scalar, walk_record};
-use super::{F32, F64, show, tokens};
+use super::{Element, Kind, Property, Scalar, walk_record};
+use crate::io::{F32, F64, show, tokens};
 
 /// Parses the body that starts on line `first_line` into each element's little-endian records.
 pub(crate) fn parse_body(
@@ -19,8 +19,9 @@ pub(crate) fn parse_body(
     elements: &[Element],
 ) -> Result<Vec<Vec<u8>>, String> {
     // The empty piece after a final newline is not a line.
-    let real = super::lines(body).count() - usize::from(body.is_empty() || body.ends_with(b"\n"));
-    let mut lines = super::lines(body)
+    let real =
+        crate::io::lines(body).count() - usize::from(body.is_empty() || body.ends_with(b"\n"));
+    let mut lines = crate::io::lines(body)
         .take(real)
         .map(|(n, line)| (n + first_line - 1, line));
     let mut out = Vec::with_capacity(elements.len());
@@ -96,8 +97,8 @@ fn push(records: &mut Vec<u8>, t: Scalar, token: &[u8], p: &Property) -> Result<
         (Scalar::F32, _) => text.parse::<f32>().map(f64::from).ok(),
         (_, None) => text.parse::<f64>().ok(),
         (_, Some((lo, hi))) => {
-            let v =
-                super::integer(token).map_err(|e| format!("{e} ('{}' is {})", p.name, t.name()))?;
+            let v = crate::io::integer(token)
+                .map_err(|e| format!("{e} ('{}' is {})", p.name, t.name()))?;
             if !(lo..=hi).contains(&v) {
                 return Err(format!(
                     "value {v} does not fit '{}' ({})",
