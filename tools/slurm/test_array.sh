@@ -13,7 +13,7 @@
 #
 #   tools/slurm/test_array.sh [VCSMOOTH_BINARY]   (default: target/debug/vcsmooth, built if missing)
 #
-# Exits 0 on success. Takes about 30 s on 2 cores. Leaves its files in $WORK (default: a new
+# Exits 0 on success. Takes about 45 s on 2 cores. Leaves its files in $WORK (default: a new
 # directory under /tmp, removed on success). Jobs run as the calling user; the directory must be
 # visible to the node (here: the same machine).
 set -euo pipefail
@@ -52,7 +52,9 @@ for k in $(seq 0 $((n - 1))); do
 done
 say "generated $n meshes in $in"
 
-"$bin" slurm-script "$in" "$out" --iterations 300 --cpus 1 --max-array-size 5 \
+# 1000 iterations: a task runs for seconds, so that the kill below lands while task 4 runs even on
+# a loaded machine (at 300 it could finish both of its inputs first).
+"$bin" slurm-script "$in" "$out" --iterations 1000 --cpus 1 --max-array-size 5 \
     --job-name vcs-test > "$WORK/submit.sh"
 grep -q -- '--array=0-4' "$WORK/submit.sh" || fail "expected --array=0-4 in $WORK/submit.sh"
 submitted=$(bash "$WORK/submit.sh")
@@ -109,7 +111,7 @@ n = int(sys.argv[2])
 assert len(s["meshes"]) == n, len(s["meshes"])
 assert s["inputs"] == n and s["missing"] == [] and s["unreadable"] == [], s
 for m in s["meshes"]:
-    assert m["iterations"] == 300 and m["triangles"] == 5120, m
+    assert m["iterations"] == 1000 and m["triangles"] == 5120, m
     assert abs(m["volume_pct"] - 100) < 1e-6, m
     assert m["slurm"] and m["slurm"]["array_job_id"], m
 EOF
