@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::process::Stdio;
 
 use vcsmooth::cluster::{Comm, Local};
-use vcsmooth::engine::{self, Quiet};
+use vcsmooth::engine::{self, EngineSettings, Quiet, Statistics};
 use vcsmooth::{Method, Options, io, shapes};
 
 use crate::util::{
@@ -332,4 +332,60 @@ fn comm_sum_is_identical_on_every_rank() {
         hs.into_iter().map(|h| h.join().unwrap()).collect()
     });
     assert!(sums.windows(2).all(|w| w[0] == w[1]));
+}
+
+/// With statistics of the last iteration only (`--stats last`), the checkpoint holds records whose
+/// figures are NaN (`null` in its JSON): a resumed run reads them back, and every rank reports the
+/// unmeasured iterations as NaN, as one process does.
+#[test]
+fn a_run_measuring_only_its_last_iteration_resumes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = sphere_file(tmp.path(), 4);
+    let engine = EngineSettings {
+        statistics: Statistics::Last,
+        ..engine_settings(300, 1)
+    };
+    let opts = |iterations| Options {
+        method: Method::Taubin,
+        iterations,
+        ..Options::default()
+    };
+    let plain = tmp.path().join("plain.ply");
+    let single = engine::run_file(&input, &plain, &opts(4), &engine, &mut Quiet).unwrap();
+    let (work, out) = (tmp.path().join("ck"), tmp.path().join("out.ply"));
+    for (iterations, resumed) in [(2, 0), (4, 2)] {
+        let run = run_ranks(
+            2,
+            &input,
+            &out,
+            &opts(iterations),
+            &engine,
+            &cluster_settings(&work, true, 1),
+        )
+        .remove(0)
+        .unwrap();
+        assert_eq!(run.cluster.unwrap().resumed_after, resumed);
+        assert_eq!(run.records.len(), iterations);
+        // Measured: the last iteration of each run (the first run's stays in the checkpoint).
+        let measured: Vec<bool> = run
+            .records
+            .iter()
+            .map(|r| r.volume_pct.is_finite())
+            .collect();
+        let want: &[bool] = if resumed == 0 {
+            &[false, true]
+        } else {
+            &[false, true, false, true]
+        };
+        assert_eq!(measured, want);
+        for r in run.records.iter().filter(|r| !r.volume_pct.is_finite()) {
+            assert!(r.volume.is_nan() && r.max_displacement.is_nan(), "{r:?}");
+        }
+    }
+    assert_eq!(std::fs::read(&out).unwrap(), std::fs::read(&plain).unwrap());
+    assert!(
+        single.records[..3]
+            .iter()
+            .all(|r| r.max_displacement.is_nan())
+    );
 }

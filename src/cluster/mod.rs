@@ -84,7 +84,11 @@ pub fn run_file(
     let start = Instant::now();
     let sampler = resources::PeakSampler::start(std::time::Duration::from_millis(20));
     let budget = engine.budget()?;
-    let pool = engine::thread_pool(engine.threads)?;
+    let pool = agree(
+        comm,
+        engine::thread_pool(engine.threads),
+        "another rank could not start its threads",
+    )?;
     let work = WorkDir::new(&cluster.work_dir);
     let mut t = PhaseTimings::default();
 
@@ -148,9 +152,6 @@ pub fn run_file(
     };
     let output_stats = agree(comm, written, "rank 0 could not write the output")?;
     t.write = clock.elapsed().as_secs_f64();
-    if comm.rank() == 0 && !cluster.keep {
-        work.remove();
-    }
     t.total = start.elapsed().as_secs_f64();
 
     // 5. Figures of all ranks.
@@ -163,7 +164,7 @@ pub fn run_file(
     let maxima = comm.max(&[owned, -owned, region, bytes, peak, smoothing_peak]);
     let sums = comm.sum(&[values]);
     let doc = &plan.doc;
-    Ok(Report {
+    let report = Report {
         input_format: io::Format::from_extension(input),
         vertices: doc.vertices,
         triangles: doc.triangles,
@@ -199,7 +200,15 @@ pub fn run_file(
             peak_anon_max: maxima[4] as u64,
             smoothing_peak_anon_max: maxima[5] as u64,
         }),
-    })
+    };
+    // Every rank unmaps the plan before rank 0 removes it (on NFS a file still mapped somewhere
+    // is kept as a hidden `.nfs*` file, and its directory cannot go).
+    drop(plan);
+    comm.all(true);
+    if comm.rank() == 0 && !cluster.keep {
+        work.remove();
+    }
+    Ok(report)
 }
 
 /// Turn a per-rank result into a collective one: every rank goes on only if all succeeded. A rank

@@ -295,7 +295,9 @@ impl Run<'_, '_> {
         };
         let mut start = Instant::now();
         // Planned tile by tile by the first round (see `TilePlan::new`); dropped if a tile cannot be.
-        let mut plan = mesh.tiles.then(|| TilePlan::new(mesh.topo));
+        // Only a process that owns every vertex: a round writes all of `dst` and exchanges nothing.
+        let mut plan =
+            (mesh.tiles && owned.len() == mesh.topo.len()).then(|| TilePlan::new(mesh.topo));
         // Whether the current positions are in `scratch` (else in `pos`).
         let mut in_scratch = false;
         let mut first = first_iteration;
@@ -413,7 +415,8 @@ impl Run<'_, '_> {
             volume,
             volume_pct: metrics::percent(volume, self.reference.volume),
             area_pct: metrics::percent(area, self.reference.area),
-            max_displacement: maxima[0],
+            // The maximum of NaNs is not NaN: an unmeasured iteration stays NaN on every rank.
+            max_displacement: if moved.is_some() { maxima[0] } else { f64::NAN },
             mean_displacement: sums[0] / self.movable as f64,
             stencils: SweepStats {
                 applied: sums[1] as u64,
@@ -469,9 +472,13 @@ fn sweep_patches(
         })
 }
 
+// A tile holds whole chunks, so that a round sums the displacement chunk by chunk as plain steps do.
+const _: () = assert!(crate::smooth::tiled::TILE % reduce::CHUNK == 0);
+
 /// One round of `factors.len()` Jacobi steps from `src` into `dst`, tile by tile in parallel (see
-/// [`TilePlan::run_tile`]); the statistics are summed in tile order, so they do not depend on the
-/// thread count either. `None` when a tile cannot be planned: then `src` is untouched.
+/// [`TilePlan::run_tile`]). The displacement is summed per [`reduce::CHUNK`] block in block order,
+/// exactly as plain steps sum it, so the statistics do not depend on the thread count, the tile
+/// size or the storage either. `None` when a tile cannot be planned: then `src` is untouched.
 pub fn round(
     plan: &TilePlan,
     src: &[DVec3],
@@ -479,14 +486,16 @@ pub fn round(
     factors: &[f64],
     measure: Option<usize>,
 ) -> Option<StepStats> {
-    let per_tile: Vec<Option<StepStats>> = dst
+    let per_tile: Vec<Option<Vec<StepStats>>> = dst
         .par_chunks_mut(plan.tile_size())
         .enumerate()
-        .map(|(t, out)| plan.run_tile(t, src, out, factors, measure))
+        .map(|(t, out)| plan.run_tile(t, src, out, factors, measure, reduce::CHUNK))
         .collect();
-    per_tile
-        .into_iter()
-        .try_fold(StepStats::default(), |a, b| Some(a.then(b?)))
+    let mut total = StepStats::default();
+    for blocks in per_tile {
+        total = blocks?.into_iter().fold(total, StepStats::then);
+    }
+    Some(total)
 }
 
 #[cfg(test)]
@@ -559,6 +568,22 @@ mod tests {
                     let sum: f64 = d.iter().sum();
                     assert!((st.sum_displacement - sum).abs() <= 1e-12 * sum);
                     assert_eq!(st.moved as usize, n - topo.stats.fixed_vertices);
+                    // The same bits as the plain step measured over the engine's chunks, when the
+                    // tiles hold whole chunks (as the engine's tiles do) or one tile holds all.
+                    if tile % reduce::CHUNK != 0 && tile < n {
+                        continue;
+                    }
+                    let mut out = vec![DVec3::ZERO; n];
+                    let plain = reduce::map_fold_mut(
+                        &mut out,
+                        |at, o| {
+                            let (from, f) = (&want[k - 1], factors[k - 1]);
+                            laplacian::jacobi_step_measured(&topo, from, o, at, f, Previous::Src)
+                        },
+                        StepStats::default(),
+                        StepStats::then,
+                    );
+                    assert_eq!(st.sum_displacement, plain.sum_displacement);
                 }
             }
         }

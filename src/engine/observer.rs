@@ -3,18 +3,28 @@
 
 use crate::smooth::SweepStats;
 
-/// Statistics of one iteration, relative to the input where a percentage is given.
+/// Statistics of one iteration, relative to the input where a percentage is given. The figures of
+/// an iteration that was not measured (see [`Statistics`]) are NaN, `null` in JSON.
+///
+/// The positions of a run are bit-identical for any thread count, storage and rank count; these
+/// figures are sums over the mesh, and where the cluster engine's ranks add their shares their
+/// last bits depend on the rank count.
 #[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize)]
 pub struct IterationRecord {
     /// 1-based iteration number.
     pub iteration: usize,
+    #[serde(deserialize_with = "nan_if_null")]
     pub volume: f64,
     /// Volume as a percentage of the input volume (100 when the input volume is 0).
+    #[serde(deserialize_with = "nan_if_null")]
     pub volume_pct: f64,
+    #[serde(deserialize_with = "nan_if_null")]
     pub area_pct: f64,
     /// Largest distance any vertex moved in this iteration.
+    #[serde(deserialize_with = "nan_if_null")]
     pub max_displacement: f64,
     /// Mean distance moved over the movable (non-fixed) vertices.
+    #[serde(deserialize_with = "nan_if_null")]
     pub mean_displacement: f64,
     pub stencils: SweepStats,
     /// Seconds of the sweep: for `laplacian` and `taubin` with the displacement, which they
@@ -22,6 +32,13 @@ pub struct IterationRecord {
     /// round of Jacobi steps (see [`Statistics`]) share its time equally, the round that builds
     /// the tile plan counting its construction.
     pub seconds: f64,
+}
+
+/// JSON has no NaN: serde_json writes it as `null`, and this reads `null` back as NaN (a resumed
+/// cluster run reads the records of unmeasured iterations from its checkpoint).
+fn nan_if_null<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    use serde::Deserialize;
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
 }
 
 /// Which iterations measure their volume, area and displacement, a setting of the run.
@@ -61,3 +78,32 @@ pub trait Observer: Send {
 /// An observer that ignores everything.
 pub struct Quiet;
 impl Observer for Quiet {}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn unmeasured_records_survive_json() {
+        let r = IterationRecord {
+            iteration: 3,
+            volume: f64::NAN,
+            volume_pct: f64::NAN,
+            area_pct: f64::NAN,
+            max_displacement: f64::NAN,
+            mean_displacement: f64::NAN,
+            seconds: 0.5,
+            ..Default::default()
+        };
+        let text = serde_json::to_string(&r).unwrap();
+        assert!(text.contains("\"volume\":null"), "{text}");
+        let back: IterationRecord = serde_json::from_str(&text).unwrap();
+        assert_eq!(back.iteration, 3);
+        assert!(back.volume.is_nan() && back.max_displacement.is_nan());
+        let measured: IterationRecord = serde_json::from_str(
+            &serde_json::to_string(&IterationRecord { volume: 2.5, ..r }).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(measured.volume, 2.5);
+    }
+}

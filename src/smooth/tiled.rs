@@ -354,9 +354,12 @@ impl TilePlan<'_> {
     /// at most [`TilePlan::depth`]) from `src` into `out`, the tile's own vertices of the result
     /// (`out.len()` = the tile's length). Plans the tile first if no round has yet. With
     /// `measure = Some(s)` also measures how far each vertex moved from its position before step
-    /// `s` to the end; its `moved` counts the tile's vertices that are not fixed. Bit-identical to
-    /// the steps run one by one with [`crate::smooth::laplacian::jacobi_step`]. `None` when the
-    /// tile cannot be planned (see [`TilePlan::new`]): then `out` is untouched.
+    /// `s` to the end, one [`StepStats`] per block of `block` vertices (blocks start at multiples
+    /// of `block`, so that folding them in order gives the same sums as plain steps measured over
+    /// chunks of that size); `moved` counts the vertices that are not fixed. Without `measure` the
+    /// list is empty. The positions are bit-identical to the steps run one by one with
+    /// [`crate::smooth::laplacian::jacobi_step`]. `None` when the tile cannot be planned (see
+    /// [`TilePlan::new`]): then `out` is untouched.
     ///
     /// # Panics
     /// If `src` does not have one entry per vertex, or there are more factors than the depth.
@@ -367,16 +370,15 @@ impl TilePlan<'_> {
         out: &mut [DVec3],
         factors: &[f64],
         measure: Option<usize>,
-    ) -> Option<StepStats> {
+        block: usize,
+    ) -> Option<Vec<StepStats>> {
         assert!(src.len() == self.topo.len());
         assert!(!factors.is_empty() && factors.len() <= self.depth);
-        assert!(measure.is_none_or(|s| s < factors.len()));
+        assert!(measure.is_none_or(|s| s < factors.len()) && block > 0);
         let tile = self.tile(t)?;
-        Some(
-            LOCAL.with_borrow_mut(|local| {
-                run_tile(self.topo, tile, src, out, factors, measure, local)
-            }),
-        )
+        Some(LOCAL.with_borrow_mut(|local| {
+            run_tile(self.topo, tile, src, out, factors, measure, block, local)
+        }))
     }
 }
 
@@ -387,8 +389,9 @@ fn run_tile(
     out: &mut [DVec3],
     factors: &[f64],
     measure: Option<usize>,
+    block: usize,
     local: &mut Local,
-) -> StepStats {
+) -> Vec<StepStats> {
     let k = factors.len();
     let own = tile.ring_end[0] as usize;
     let len = tile.ring_end[k] as usize;
@@ -432,17 +435,26 @@ fn run_tile(
         );
         std::mem::swap(a, b);
     }
-    let mut st = StepStats::default();
-    for (i, (o, l)) in out.iter_mut().zip(&a[..own]).enumerate() {
+    for (o, l) in out.iter_mut().zip(&a[..own]) {
         *o = l.vec();
-        if measure.is_some() {
-            let d = o.distance(before[i].vec());
-            st.moved += (tile.kinds[i] != 0) as u64;
-            st.max_displacement = st.max_displacement.max(d);
-            st.sum_displacement += d;
+    }
+    let mut blocks = Vec::new();
+    if measure.is_some() {
+        let mut i = 0;
+        while i < own {
+            let end = (own).min(i + block - (tile.start + i) % block);
+            let mut st = StepStats::default();
+            for j in i..end {
+                let d = out[j].distance(before[j].vec());
+                st.moved += (tile.kinds[j] != 0) as u64;
+                st.max_displacement = st.max_displacement.max(d);
+                st.sum_displacement += d;
+            }
+            blocks.push(st);
+            i = end;
         }
     }
-    st
+    blocks
 }
 
 /// Where the interior rows of a tile find their neighbours: the topology's adjacency of the own
