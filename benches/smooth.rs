@@ -23,14 +23,14 @@ fn smooth(c: &mut Criterion) {
     let storage = Storage::heap();
     for named in common::all_meshes() {
         let mesh = &named.mesh;
-        let mut prep = Plan::new(
+        let mut plan = Plan::new(
             &storage,
             &mesh.positions,
             &mesh.triangles,
             Layout::Patches(DEFAULT_PATCH_SIZE),
         )
         .expect("prepare");
-        let initial = prep.reordered.positions.to_vec();
+        let initial = plan.reordered.positions.to_vec();
         let mut group = c.benchmark_group(format!("smooth/{}", named.name));
         let seconds = if mesh.triangles.len() > 2_000_000 {
             6.0
@@ -42,13 +42,13 @@ fn smooth(c: &mut Criterion) {
         for method in Method::ALL {
             group.bench_function(method.name(), |b| {
                 b.iter_custom(|iterations| {
-                    prep.reordered.positions.copy_from_slice(&initial);
+                    plan.reordered.positions.copy_from_slice(&initial);
                     let opts = Options {
                         method,
                         iterations: iterations as usize,
                         ..Default::default()
                     };
-                    let records = prep
+                    let records = plan
                         .smooth(&storage, &opts, Statistics::Every, &mut Quiet)
                         .expect("smooth");
                     Duration::from_secs_f64(records.iter().map(|r| r.seconds).sum())

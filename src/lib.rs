@@ -5,7 +5,7 @@
 //! volume constrained smoothing method for meshes", Graphical Models 64 (2002), plus Laplacian,
 //! Taubin and local energy minimisation for comparison.
 //!
-//! The front door is [`smooth`]: a [`Mesh`] and [`Options`] (method, iterations, step sizes) in,
+//! The front door is [`smooth()`]: a [`Mesh`] and [`Options`] (method, iterations, step sizes) in,
 //! the smoothed mesh and a [`Report`] out. [`engine::run_file`] does the same from file to file
 //! for meshes larger than memory.
 //!
@@ -18,8 +18,8 @@
 //! - [`io`]: PLY (memory-mapped fast path), OBJ, OFF, STL; atomic writes. Knows nothing of smoothing.
 //! - [`metrics`]: volume, area, roughness, comparisons (sequential, pure).
 //! - [`shapes`]: generated test meshes (icosphere, torus, subdivision, noise along normals).
+//! - [`mod@smooth`]: the kernels, pure functions over slices that run no threads and touch no files.
 //! - [`partition`]: Morton reorder and patches; [`schedule`]: patch colouring and read-ahead.
-//! - [`smooth`]: the kernels, pure functions over slices that run no threads and touch no files.
 //! - [`engine`]: the plan, the one iteration loop, deterministic parallel sums, the run from file
 //!   to file, the memory model.
 //! - [`multires`]: coarse levels smoothed with `vcs`, the fine level with Laplacian or Taubin.

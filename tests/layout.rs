@@ -1,4 +1,4 @@
-//! The source tree keeps the shape DESIGN.md gives it: modules in folders, data flowing one way
+//! The source tree keeps the shape of the design: modules in folders, data flowing one way
 //! (no two top-level modules import each other, directly or through others), and a library that
 //! speaks its own vocabulary (no string literal outside the command line names a flag).
 

@@ -23,15 +23,15 @@ fn run(
     let pool = thread_pool(Some(threads)).unwrap();
     pool.install(|| {
         let storage = Storage::heap();
-        let mut prep = Plan::new(
+        let mut plan = Plan::new(
             &storage,
             &mesh.positions,
             &mesh.triangles,
             Layout::Patches(patch),
         )
         .unwrap();
-        let (_, stats) = multires::smooth_prepared(
-            &mut prep,
+        let (_, stats) = multires::smooth_plan(
+            &mut plan,
             &storage,
             opts,
             m,
@@ -41,7 +41,7 @@ fn run(
         )
         .unwrap();
         let mut out = vec![DVec3::ZERO; mesh.positions.len()];
-        prep.positions_in_input_order(&mut out);
+        plan.positions_in_input_order(&mut out);
         (out, stats)
     })
 }

@@ -26,19 +26,19 @@ fn run(
     threads: usize,
 ) -> (Vec<DVec3>, Vec<engine::IterationRecord>, Plan) {
     pool(threads).install(|| {
-        let mut prep = Plan::new(
+        let mut plan = Plan::new(
             storage,
             &mesh.positions,
             &mesh.triangles,
             Layout::Patches(patch_size),
         )
         .unwrap();
-        let records = prep
+        let records = plan
             .smooth(storage, opts, Statistics::Every, &mut Quiet)
             .unwrap();
         let mut out = vec![DVec3::ZERO; mesh.positions.len()];
-        prep.positions_in_input_order(&mut out);
-        (out, records, prep)
+        plan.positions_in_input_order(&mut out);
+        (out, records, plan)
     })
 }
 
@@ -53,8 +53,8 @@ fn bit_identical_for_any_thread_count_and_any_storage() {
             iterations: 2,
             ..Options::default()
         };
-        let (reference, _, prep) = run(&mesh, &Storage::heap(), 500, &opts, 1);
-        assert!(prep.schedule.colours.len() > 1 && prep.patches.len() > 10);
+        let (reference, _, plan) = run(&mesh, &Storage::heap(), 500, &opts, 1);
+        assert!(plan.schedule.colours.len() > 1 && plan.patches.len() > 10);
         for threads in [2, 8] {
             let (out, _, _) = run(&mesh, &Storage::heap(), 500, &opts, threads);
             assert!(
@@ -91,12 +91,12 @@ fn every_stencil_is_applied_once_across_many_small_patches_and_volume_is_kept() 
                 iterations: 3,
                 ..Options::default()
             };
-            let (out, records, prep) = run(&mesh, &Storage::heap(), 64, &opts, 2);
-            let edges = prep.topology.stats.edges;
-            let crossing = prep
+            let (out, records, plan) = run(&mesh, &Storage::heap(), 64, &opts, 2);
+            let edges = plan.topology.stats.edges;
+            let crossing = plan
                 .patches
                 .iter()
-                .map(|p| p.crossing_edges(&prep.topology))
+                .map(|p| p.crossing_edges(&plan.topology))
                 .sum::<u64>();
             assert!(
                 crossing > 1000,
@@ -137,8 +137,8 @@ fn one_patch_equals_the_whole_mesh_engine_on_the_reordered_mesh() {
             iterations: 3,
             ..Options::default()
         };
-        let (out, _, prep) = run(&mesh, &Storage::heap(), usize::MAX / 2, &opts, 2);
-        assert_eq!(prep.patches.len(), 1);
+        let (out, _, plan) = run(&mesh, &Storage::heap(), usize::MAX / 2, &opts, 2);
+        assert_eq!(plan.patches.len(), 1);
         // The whole-mesh engine on the same reordered arrays.
         let re = vcsmooth::partition::reorder(&Storage::heap(), &mesh.positions, &mesh.triangles)
             .unwrap();
@@ -241,16 +241,16 @@ fn multi_iteration_rounds_equal_plain_steps() {
             ..Options::default()
         };
         let plain = pool(2).install(|| {
-            let mut prep = Plan::new(
+            let mut plan = Plan::new(
                 &mapped,
                 &mesh.positions,
                 &mesh.triangles,
                 Layout::Patches(16384),
             )
             .unwrap();
-            prep.smooth(&mapped, &opts, Statistics::Every, &mut Quiet)
+            plan.smooth(&mapped, &opts, Statistics::Every, &mut Quiet)
                 .unwrap();
-            prep.reordered.positions.to_vec()
+            plan.reordered.positions.to_vec()
         });
         for threads in [1, 3] {
             // Statistics every iteration, or only for the last (`--stats last`): the Jacobi methods
@@ -258,15 +258,15 @@ fn multi_iteration_rounds_equal_plain_steps() {
             let tiled = |when: Statistics| {
                 pool(threads).install(|| {
                     let heap = Storage::heap();
-                    let mut prep = Plan::new(
+                    let mut plan = Plan::new(
                         &heap,
                         &mesh.positions,
                         &mesh.triangles,
                         Layout::Patches(16384),
                     )
                     .unwrap();
-                    let records = prep.smooth(&heap, &opts, when, &mut Quiet).unwrap();
-                    (prep.reordered.positions.to_vec(), records)
+                    let records = plan.smooth(&heap, &opts, when, &mut Quiet).unwrap();
+                    (plan.reordered.positions.to_vec(), records)
                 })
             };
             let (every, rec_every) = tiled(Statistics::Every);

@@ -5,7 +5,8 @@ use std::path::{Path, PathBuf};
 
 use clap::{Args as ClapArgs, ValueEnum};
 
-use super::shared::{EngineConfig, SmoothingArgs};
+use super::shared::SmoothingArgs;
+use crate::engine::EngineSettings;
 use crate::error::{Error, Result};
 use crate::io::Format;
 use crate::modes::batch as core;
@@ -45,7 +46,7 @@ pub struct BatchSmoothArgs {
 #[derive(Debug, Clone)]
 pub struct BatchSmooth {
     pub options: Options,
-    pub engine: EngineConfig,
+    pub engine: EngineSettings,
     pub format: Format,
     /// The flags as given, to repeat them in a job script.
     pub args: BatchSmoothArgs,

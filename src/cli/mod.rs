@@ -5,7 +5,7 @@
 //! 2. its config (`…Config::from_args`): the command resolved and validated — output formats known,
 //!    plot files SVG, target directories present — so that a run fails before it reads or smooths
 //!    anything;
-//! 3. its `run`: executes the config through the library, rendering the driver's
+//! 3. its `run`: executes the config through the library, rendering the engine's
 //!    [`crate::engine::Observer`] as an indicatif progress bar ([`progress`]) when stderr is a
 //!    terminal, and prints its result.
 //!

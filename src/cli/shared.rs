@@ -7,11 +7,9 @@ use std::path::PathBuf;
 use clap::builder::PossibleValue;
 use clap::{Args as ClapArgs, ValueEnum};
 
+use crate::engine::{EngineSettings, Statistics};
 use crate::error::{Error, Result};
 use crate::smooth::{Method, Options};
-
-/// How the engine runs (threads, patch size, memory budget, scratch directory).
-pub type EngineConfig = crate::engine::EngineSettings;
 
 /// `IN OUT` of the commands that turn one mesh file into another (`smooth`, `subdivide`, `refine`).
 #[derive(Debug, Clone, ClapArgs)]
@@ -98,7 +96,7 @@ pub struct EngineArgs {
 
 impl EngineArgs {
     /// The engine settings: the budget checked, the scratch directory present.
-    pub fn resolve(&self) -> Result<EngineConfig> {
+    pub fn resolve(&self) -> Result<EngineSettings> {
         if let Some(b) = self.memory_budget {
             crate::engine::memory::check_budget(b)?;
         }
@@ -110,7 +108,7 @@ impl EngineArgs {
                 ));
             }
         }
-        Ok(EngineConfig {
+        Ok(EngineSettings {
             threads: self.threads.map(|t| t as usize),
             patch_size: self
                 .patch_size
@@ -158,6 +156,19 @@ pub fn length(s: &str) -> std::result::Result<f64, String> {
         Ok(x)
     } else {
         Err(format!("'{s}' is not a finite length > 0"))
+    }
+}
+
+impl ValueEnum for Statistics {
+    fn value_variants<'a>() -> &'a [Self] {
+        &[Statistics::Every, Statistics::Last]
+    }
+
+    fn to_possible_value(&self) -> Option<PossibleValue> {
+        Some(match self {
+            Statistics::Every => PossibleValue::new("every").help("After every iteration"),
+            Statistics::Last => PossibleValue::new("last").help("After the last iteration only"),
+        })
     }
 }
 

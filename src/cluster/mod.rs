@@ -38,13 +38,12 @@ use std::time::Instant;
 
 pub use comm::{Comm, Local, Single};
 use glam::DVec3;
-use store::{Plan, PlanKey, StateDoc, WorkDir};
+use store::{PlanKey, StateDoc, StoredPlan, WorkDir};
 
 use crate::engine::iterate::{Buffers, Reference, Share, Sweep, iterate};
-use crate::engine::memory as resources;
 use crate::engine::{
     self, ClusterStats, EngineSettings, IterationRecord, Layout, MemoryStats, Observer,
-    PhaseTimings, PlanStats, Report, Statistics,
+    PhaseTimings, PlanStats, Report, Statistics, memory,
 };
 use crate::error::{Error, Result};
 use crate::mesh::Buf;
@@ -82,7 +81,7 @@ pub fn run_file(
         return Err(Error::parameter("checkpoint_every", "must be at least 1"));
     }
     let start = Instant::now();
-    let sampler = resources::PeakSampler::start(std::time::Duration::from_millis(20));
+    let sampler = memory::PeakSampler::start(std::time::Duration::from_millis(20));
     let budget = engine.budget()?;
     let pool = agree(
         comm,
@@ -101,7 +100,7 @@ pub fn run_file(
     agree(comm, made, "rank 0 could not prepare the plan")?;
 
     // 2. Every rank maps the plan and finds its part.
-    let smoothing_sampler = resources::PeakSampler::start(std::time::Duration::from_millis(20));
+    let smoothing_sampler = memory::PeakSampler::start(std::time::Duration::from_millis(20));
     let opened = work.open_plan().and_then(|plan| {
         let state = work.read_state()?;
         if state.done > opts.iterations {
@@ -246,24 +245,24 @@ fn ensure_plan(
     let mesh = io::read_mesh_in(input, &storage)?;
     engine::check_in_memory_budget(input, &storage, &mesh, budget)?;
     t.ingest = clock.elapsed().as_secs_f64();
-    let prep = engine::Plan::new(
+    let new_plan = engine::Plan::new(
         &storage,
         &mesh.positions,
         &mesh.triangles,
         Layout::Patches(engine.patch_size),
     )
     .map_err(|e| e.in_file(input))?;
-    t.add_preparation(&prep.timings);
+    t.add_preparation(&new_plan.timings);
     // Measured always: a resumed run may ask for a report that the first run did not.
-    let input_stats = Some(prep.info(&mesh.source));
+    let input_stats = Some(new_plan.info(&mesh.source));
     drop(mesh);
-    work.write_plan(&prep, key, input_stats)
+    work.write_plan(&new_plan, key, input_stats)
 }
 
 /// Rank 0: the input with the final positions, written atomically; output statistics if asked.
 fn write_output(
     work: &WorkDir,
-    plan: &Plan,
+    plan: &StoredPlan,
     state: &StateDoc,
     input: &Path,
     output: &Path,
@@ -305,7 +304,7 @@ struct Part {
 }
 
 impl Part {
-    fn new(comm: &dyn Comm, plan: &Plan) -> Result<Part> {
+    fn new(comm: &dyn Comm, plan: &StoredPlan) -> Result<Part> {
         let doc = &plan.doc;
         let (r, size) = (comm.rank(), comm.size());
         let count = doc.patches.len();
@@ -374,7 +373,7 @@ impl Part {
 /// the outside. Checks the adjacency and triangles of every vertex whose entries the rank will
 /// use, so a damaged plan is an error, not an out-of-range access.
 fn rings_around(
-    plan: &Plan,
+    plan: &StoredPlan,
     owned: Range<u32>,
 ) -> std::result::Result<(Vec<Vec<u32>>, Vec<u32>), String> {
     let topo = &plan.topology;
@@ -473,7 +472,7 @@ struct RankRun<'a> {
     comm: &'a dyn Comm,
     /// The rank's threads (the communicator stays on the calling thread).
     pool: &'a rayon::ThreadPool,
-    plan: &'a Plan,
+    plan: &'a StoredPlan,
     part: &'a Part,
     work: &'a WorkDir,
     state: StateDoc,

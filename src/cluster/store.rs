@@ -115,7 +115,7 @@ pub struct StateDoc {
 }
 
 /// A plan mapped from the work directory.
-pub struct Plan {
+pub struct StoredPlan {
     /// The work directory it was mapped from (for messages).
     pub dir: PathBuf,
     pub doc: PlanDoc,
@@ -160,10 +160,10 @@ impl WorkDir {
         write_json(&self.path(STATE), state)
     }
 
-    /// Store `prep` (fresh from [`engine::Plan::new`]) as the plan, replacing whatever plan was there.
+    /// Store `made` (fresh from [`engine::Plan::new`]) as the plan, replacing whatever plan was there.
     pub fn write_plan(
         &self,
-        prep: &engine::Plan,
+        made: &engine::Plan,
         key: PlanKey,
         input_stats: Option<MeshInfo>,
     ) -> Result<()> {
@@ -177,9 +177,9 @@ impl WorkDir {
                 _ => {}
             }
         }
-        let parts = prep.topology.parts();
-        self.write_array("order.u32", &prep.reordered.order)?;
-        self.write_array("triangles.u32", &prep.reordered.triangles)?;
+        let parts = made.topology.parts();
+        self.write_array("order.u32", &made.reordered.order)?;
+        self.write_array("triangles.u32", &made.reordered.triangles)?;
         self.write_array("vv_offsets.u64", parts.vv_offsets)?;
         self.write_array("vv.u32", parts.vv)?;
         self.write_array("vf_offsets.u64", parts.vf_offsets)?;
@@ -187,15 +187,15 @@ impl WorkDir {
         self.write_array("fixed.u8", parts.fixed)?;
         for slot in [0, 1] {
             let name = format!("positions-{slot}.f64");
-            self.write_array(&name, &prep.reordered.positions)?;
+            self.write_array(&name, &made.reordered.positions)?;
         }
         self.write_state(&StateDoc::default())?;
-        let stats = prep.stats();
+        let stats = made.stats();
         let doc = PlanDoc {
             key,
-            vertices: prep.reordered.positions.len(),
-            triangles: prep.reordered.triangles.len(),
-            patches: prep
+            vertices: made.reordered.positions.len(),
+            triangles: made.reordered.triangles.len(),
+            patches: made
                 .patches
                 .iter()
                 .map(|p| {
@@ -207,10 +207,10 @@ impl WorkDir {
                     ]
                 })
                 .collect(),
-            colours: prep.schedule.colours.clone(),
-            halo: prep.schedule.halo.clone(),
+            colours: made.schedule.colours.clone(),
+            halo: made.schedule.halo.clone(),
             crossing_edge_stencils: stats.crossing_edge_stencils,
-            topology: prep.topology.stats,
+            topology: made.topology.stats,
             input_stats,
         };
         write_json(&self.path(PLAN), &doc)
@@ -227,7 +227,7 @@ impl WorkDir {
     }
 
     /// Map the plan (each rank; only the pages a rank uses are ever read).
-    pub fn open_plan(&self) -> Result<Plan> {
+    pub fn open_plan(&self) -> Result<StoredPlan> {
         let plan_path = self.path(PLAN);
         let doc = self
             .read_plan_doc()?
@@ -255,7 +255,7 @@ impl WorkDir {
         if !patches_ok {
             return Err(Error::invalid(&plan_path, "patches out of range"));
         }
-        Ok(Plan {
+        Ok(StoredPlan {
             triangles: Buf::map_file(&m("triangles.u32"), t)?,
             order: Buf::map_file(&m("order.u32"), n)?,
             topology,

@@ -24,7 +24,7 @@ use crate::partition::Patch;
 use crate::schedule::{Prefetch, SharedField};
 use crate::smooth::laplacian::{self, Previous, StepStats};
 use crate::smooth::stencil::{self, StencilParams};
-use crate::smooth::tiled::TilePlan;
+use crate::smooth::tiled::{Measure, TilePlan};
 use crate::smooth::{Method, Options, SweepStats};
 use crate::topology::Topology;
 
@@ -489,7 +489,13 @@ pub fn round(
     let per_tile: Vec<Option<Vec<StepStats>>> = dst
         .par_chunks_mut(plan.tile_size())
         .enumerate()
-        .map(|(t, out)| plan.run_tile(t, src, out, factors, measure, reduce::CHUNK))
+        .map(|(t, out)| {
+            let measure = measure.map(|from_step| Measure {
+                from_step,
+                block: reduce::CHUNK,
+            });
+            plan.run_tile(t, src, out, factors, measure)
+        })
         .collect();
     let mut total = StepStats::default();
     for blocks in per_tile {

@@ -68,25 +68,11 @@ pub fn smooth_in_order(
     run::run_mesh(mesh, opts, engine, Layout::Whole, observer)
 }
 
-impl Options {
-    /// Check the options: the step sizes must be finite numbers.
-    pub fn check(&self) -> Result<()> {
-        for (name, x) in [("lambda", self.lambda), ("mu", self.mu)] {
-            if !x.is_finite() {
-                return Err(Error::parameter(
-                    name,
-                    format!("must be a finite number, got {x}"),
-                ));
-            }
-        }
-        Ok(())
-    }
-}
-
 impl Plan {
     /// Smooth the plan's positions in place with `opts` on the current rayon pool, measuring the
-    /// statistics `when` says (see [`iterate`] for the order of work). The result is
-    /// bit-identical for any number of threads and any storage placement.
+    /// statistics `when` says (see [`iterate`] for the order of work). `storage` places the
+    /// working buffers (the one the plan was built on). The result is bit-identical for any
+    /// number of threads and any storage placement.
     pub fn smooth(
         &mut self,
         storage: &Storage,
@@ -100,6 +86,7 @@ impl Plan {
             topology: topo,
             patches,
             schedule,
+            in_memory,
             ..
         } = self;
         let n = reordered.positions.len();
@@ -122,8 +109,8 @@ impl Plan {
                 tris,
                 patches,
                 colours: &schedule.colours,
-                prefetch: storage.is_mapped().then_some(prefetch),
-                tiles: !storage.is_mapped(),
+                prefetch: (!*in_memory).then_some(prefetch),
+                tiles: *in_memory,
             };
             let reference = Reference::measure(&mesh, pos, &alone);
             let buffers = iterate::Buffers {

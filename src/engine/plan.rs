@@ -44,6 +44,11 @@ pub struct Plan {
     pub topology: Topology,
     pub patches: Vec<Patch>,
     pub schedule: Schedule,
+    /// How the plan orders and cuts the mesh.
+    pub layout: Layout,
+    /// Whether its arrays are on the heap (else in memory-mapped scratch files): the smoothing
+    /// then holds its tile plans and buffers in memory too.
+    pub in_memory: bool,
     /// Seconds spent in each preparation phase.
     pub timings: PrepTimings,
 }
@@ -124,6 +129,8 @@ impl Plan {
             topology,
             patches,
             schedule,
+            layout,
+            in_memory: !storage.is_mapped(),
             timings: PrepTimings {
                 reorder,
                 topology: topology_s,
@@ -172,8 +179,12 @@ impl Plan {
 
     /// The decomposition's figures for reports.
     pub fn stats(&self) -> PlanStats {
+        let patch_size = match self.layout {
+            Layout::Patches(size) => size,
+            Layout::Whole => self.len(),
+        };
         PlanStats::new(
-            self.patches.first().map_or(0, |p| p.vertices.len()),
+            patch_size,
             self.schedule.colours.len(),
             &self.schedule.halo,
             self.patches

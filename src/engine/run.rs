@@ -21,9 +21,12 @@ pub struct EngineSettings {
     pub threads: Option<usize>,
     /// Vertices per patch. Default [`DEFAULT_PATCH_SIZE`].
     pub patch_size: usize,
-    /// Anonymous memory allowed; `None`: three quarters of the available memory.
+    /// Anonymous memory a file run may use (see [`memory`]); `None`: three quarters of the
+    /// available memory. An in-memory mesh ([`crate::smooth()`]) is smoothed on the heap whatever
+    /// this says.
     pub memory_budget: Option<u64>,
-    /// Where scratch files go when the mesh does not fit the budget; `None`: beside the output.
+    /// Where a file run's scratch files go when its mesh does not fit the budget; `None`: beside
+    /// the output.
     pub scratch: Option<PathBuf>,
     /// Measure input and output statistics (for a report).
     pub with_stats: bool,
@@ -217,7 +220,7 @@ pub(crate) fn run_file_with(
     Ok(smoothed.report(&mesh, pool.current_num_threads(), memory, t))
 }
 
-/// Smooth an in-memory `mesh` in place (see [`crate::smooth`], the crate's front door).
+/// Smooth an in-memory `mesh` in place (see [`crate::smooth()`], the crate's front door).
 pub(crate) fn run_mesh(
     mesh: &mut Mesh,
     opts: &Options,

@@ -29,8 +29,7 @@ use std::time::{Duration, Instant};
 
 use serde::Serialize;
 
-use crate::engine::memory as resources;
-use crate::engine::{self, Layout, Plan, Quiet, Statistics};
+use crate::engine::{self, Layout, Plan, Quiet, Statistics, memory};
 use crate::error::{Error, Result};
 use crate::io;
 use crate::mesh::{Mesh, Storage};
@@ -184,7 +183,7 @@ impl Machine {
     fn now() -> Machine {
         Machine {
             cores: cores(),
-            mem_available: resources::mem_available(),
+            mem_available: memory::mem_available(),
             load_average: load_average(),
         }
     }
@@ -324,13 +323,13 @@ pub fn check(settings: &BenchSettings) -> Result<()> {
         .map(|s| s.triangles)
         .max()
         .unwrap_or(0);
-    let need = resources::in_core_bytes_with_mesh(largest);
-    if let Some(available) = resources::mem_available() {
+    let need = memory::in_core_bytes_with_mesh(largest);
+    if let Some(available) = memory::mem_available() {
         if need > available {
             return Err(Error::resource(format!(
                 "the largest size, {largest} triangles, needs about {} of memory, but only {} is available",
-                resources::format_size(need),
-                resources::format_size(available)
+                memory::format_size(need),
+                memory::format_size(available)
             )));
         }
     }
@@ -342,7 +341,7 @@ pub fn run(settings: &BenchSettings, phase: &mut dyn FnMut(String)) -> Result<Be
     check(settings)?;
     let start = Instant::now();
     let machine = Machine::now();
-    let baseline = resources::rss_anon().unwrap_or(0);
+    let baseline = memory::rss_anon().unwrap_or(0);
     let mut sizes = Vec::with_capacity(settings.sizes.len());
     for size in &settings.sizes {
         sizes.push(run_size(settings, size, baseline, phase)?);
@@ -379,7 +378,7 @@ fn run_size(
     shapes::add_normal_noise(&mut mesh, NOISE, 1);
     let generate_seconds = clock.elapsed().as_secs_f64();
 
-    let sampler = resources::PeakSampler::start(Duration::from_millis(10));
+    let sampler = memory::PeakSampler::start(Duration::from_millis(10));
     phase(format!("{}: PLY write and read", size.label));
     let ply = ply_round_trip(settings, size, &mesh)?;
 
@@ -455,8 +454,8 @@ fn run_threads(
     let pool = engine::thread_pool(Some(threads))?;
     let storage = Storage::heap();
     phase(format!("{}: preparing on {threads} threads", size.label));
-    let (mut prep, prepare) = pool.install(|| prepare(settings, &storage, mesh))?;
-    let plan = prep.stats();
+    let (mut plan, prepare) = pool.install(|| prepare(settings, &storage, mesh))?;
+    let stats = plan.stats();
     let triangles = mesh.triangles.len() as f64;
     let mut methods = Vec::with_capacity(settings.methods.len());
     for &method in &settings.methods {
@@ -473,9 +472,9 @@ fn run_threads(
         let mut stencils = 0;
         let mut volume_pct = 100.0;
         for _ in 0..settings.repeats {
-            prep.set_positions_from_input(&mesh.positions);
+            plan.set_positions_from_input(&mesh.positions);
             let records =
-                pool.install(|| prep.smooth(&storage, &opts, Statistics::Every, &mut Quiet))?;
+                pool.install(|| plan.smooth(&storage, &opts, Statistics::Every, &mut Quiet))?;
             seconds.extend(records.iter().map(|r| r.seconds));
             if let Some(last) = records.last() {
                 stencils = last.stencils.considered();
@@ -495,8 +494,8 @@ fn run_threads(
     }
     Ok(ThreadRun {
         threads,
-        patches: plan.patches,
-        colours: plan.colours,
+        patches: stats.patches,
+        colours: stats.colours,
         prepare,
         methods,
     })
@@ -510,9 +509,9 @@ fn prepare(
     mesh: &Mesh,
 ) -> Result<(Plan, PrepareResult)> {
     let mut timings = Vec::with_capacity(settings.repeats);
-    let mut prep = None;
+    let mut plan = None;
     for _ in 0..settings.repeats {
-        drop(prep.take());
+        drop(plan.take());
         let clock = Instant::now();
         let p = Plan::new(
             storage,
@@ -527,11 +526,11 @@ fn prepare(
             partition_seconds: p.timings.partition,
             total_seconds: total,
         });
-        prep = Some(p);
+        plan = Some(p);
     }
-    let prep = prep.ok_or_else(|| Error::parameter("repeats", "must be at least 1"))?;
+    let plan = plan.ok_or_else(|| Error::parameter("repeats", "must be at least 1"))?;
     timings.sort_by(|a, b| a.total_seconds.total_cmp(&b.total_seconds));
-    Ok((prep, timings[timings.len() / 2]))
+    Ok((plan, timings[timings.len() / 2]))
 }
 
 #[cfg(test)]

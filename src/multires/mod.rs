@@ -5,7 +5,7 @@
 //! 1. **Hierarchy** ([`cluster`]): level 0 is the input on the patch engine ([`Plan`]); level
 //!    k + 1 clusters level k's vertices into grid cubes of `cell_factor` × level k's mean edge
 //!    length, with quadric placement, and is then given level 0's volume back
-//!    ([`transfer::restore_volume`]). Every level is a [`Plan`] plan on the same [`Storage`]
+//!    ([`transfer::restore_volume`]). Every level is a [`Plan`] on the same [`Storage`]
 //!    (heap or memory-mapped scratch), so the whole mode runs out of core like `smooth`.
 //! 2. **Coarse levels**, coarsest first: the coarser level's total displacement is transferred
 //!    ([`transfer::apply`]), then `coarse_iterations` of `vcs` (or `vcs-triangle`) run on the
@@ -150,7 +150,7 @@ pub fn validate(opts: &Options, m: &MultiresOptions) -> Result<()> {
 
 /// A coarse level: its plan, how the level below maps onto it, and its positions as built.
 struct Level {
-    prep: Plan,
+    plan: Plan,
     /// `map[v]`: the vertex of this level (reordered id) representing vertex `v` of the level below.
     map: Buf<u32>,
     rest: Buf<DVec3>,
@@ -163,7 +163,7 @@ impl Level {
     /// This level as the transfer reads it, with displacement `disp`.
     fn coarse<'a>(&'a self, disp: &'a [DVec3]) -> transfer::Coarse<'a> {
         transfer::Coarse {
-            topo: &self.prep.topology,
+            topo: &self.plan.topology,
             rest: &self.rest,
             disp,
             cell: self.cell,
@@ -171,11 +171,11 @@ impl Level {
     }
 }
 
-/// Smooth the plan `prep` (level 0) in multiresolution (see the module doc), creating the coarse
+/// Smooth the plan `plan` (level 0) in multiresolution (see the module doc), creating the coarse
 /// levels on `storage` with `patch_size`. Returns level 0's iteration records (the last includes
 /// the final volume correction) and the per-level statistics.
-pub fn smooth_prepared(
-    prep: &mut Plan,
+pub fn smooth_plan(
+    plan: &mut Plan,
     storage: &Storage,
     opts: &Options,
     m: &MultiresOptions,
@@ -185,8 +185,8 @@ pub fn smooth_prepared(
 ) -> Result<(Vec<IterationRecord>, MultiresStats)> {
     validate(opts, m)?;
     let start = Instant::now();
-    let origin = reduce::centroid(&prep.reordered.positions);
-    let v0 = reduce::volume(&prep.reordered.positions, &prep.reordered.triangles, origin);
+    let origin = reduce::centroid(&plan.reordered.positions);
+    let v0 = reduce::volume(&plan.reordered.positions, &plan.reordered.triangles, origin);
     let pct = |v: f64| metrics::percent(v, v0);
     let coarse_iterations = m.coarse_iterations.unwrap_or(opts.iterations);
 
@@ -194,7 +194,7 @@ pub fn smooth_prepared(
     let mut levels: Vec<Level> = Vec::new();
     for k in 1..m.levels {
         let t = Instant::now();
-        let finer = levels.last().map_or(&*prep, |l| &l.prep);
+        let finer = levels.last().map_or(&*plan, |l| &l.plan);
         let (pos, tris, topo) = (
             &finer.reordered.positions,
             &finer.reordered.triangles,
@@ -246,7 +246,7 @@ pub fn smooth_prepared(
             smooth_seconds: 0.0,
         };
         levels.push(Level {
-            prep: coarse,
+            plan: coarse,
             map,
             rest,
             cell,
@@ -267,7 +267,7 @@ pub fn smooth_prepared(
         let level = &mut finer[i];
         let t = Instant::now();
         if let (Some(d), Some(c)) = (&disp, coarser.first()) {
-            let p = &mut level.prep;
+            let p = &mut level.plan;
             transfer::apply(
                 storage,
                 &p.topology,
@@ -281,12 +281,12 @@ pub fn smooth_prepared(
         level.stats.transfer_seconds = t.elapsed().as_secs_f64();
         let t = Instant::now();
         level
-            .prep
-            .smooth(storage, &coarse_opts, Statistics::Every, &mut Quiet)?;
+            .plan
+            .smooth(storage, &coarse_opts, Statistics::Last, &mut Quiet)?;
         level.stats.smooth_seconds = t.elapsed().as_secs_f64();
         let mut d: Buf<DVec3> = storage.zeroed(level.rest.len())?;
-        let r = &level.prep.reordered;
-        let topo = &level.prep.topology;
+        let r = &level.plan.reordered;
+        let topo = &level.plan.topology;
         transfer::normal_displacement(topo, &r.triangles, &r.positions, &level.rest, &mut d);
         disp = Some(d);
     }
@@ -294,9 +294,9 @@ pub fn smooth_prepared(
     // 3. Level 0.
     let mut fine = LevelStats {
         level: 0,
-        vertices: prep.reordered.positions.len(),
-        triangles: prep.reordered.triangles.len(),
-        fixed_vertices: prep.topology.stats.fixed_vertices,
+        vertices: plan.reordered.positions.len(),
+        triangles: plan.reordered.triangles.len(),
+        fixed_vertices: plan.topology.stats.fixed_vertices,
         method: m.fine_method,
         iterations: opts.iterations,
         volume_pct: 100.0,
@@ -308,10 +308,10 @@ pub fn smooth_prepared(
     if let (Some(d), Some(c)) = (&disp, levels.first()) {
         transfer::apply(
             storage,
-            &prep.topology,
+            &plan.topology,
             &c.map,
             &c.coarse(d),
-            &mut prep.reordered.positions,
+            &mut plan.reordered.positions,
             m.transfer,
             passes,
         )?;
@@ -323,16 +323,16 @@ pub fn smooth_prepared(
         method: m.fine_method,
         ..*opts
     };
-    let mut records = prep.smooth(storage, &fine_opts, when, observer)?;
+    let mut records = plan.smooth(storage, &fine_opts, when, observer)?;
     fine.smooth_seconds = t.elapsed().as_secs_f64();
 
     // 4. The final volume correction.
     let t = Instant::now();
-    let r = &mut prep.reordered;
+    let r = &mut plan.reordered;
     let before = pct(reduce::volume(&r.positions, &r.triangles, origin));
     let err = transfer::restore_volume(
         storage,
-        &prep.topology,
+        &plan.topology,
         &r.triangles,
         &mut r.positions,
         v0,
@@ -377,9 +377,9 @@ pub fn run_file(
         opts,
         engine,
         observer,
-        |prep, storage, obs| {
-            let (records, s) = smooth_prepared(
-                prep,
+        |plan, storage, obs| {
+            let (records, s) = smooth_plan(
+                plan,
                 storage,
                 opts,
                 m,

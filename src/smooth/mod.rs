@@ -116,6 +116,21 @@ pub struct Options {
     pub reject_energy_increase: bool,
 }
 
+impl Options {
+    /// Check the options: the step sizes must be finite numbers.
+    pub fn check(&self) -> crate::Result<()> {
+        for (name, x) in [("lambda", self.lambda), ("mu", self.mu)] {
+            if !x.is_finite() {
+                return Err(crate::Error::parameter(
+                    name,
+                    format!("must be a finite number, got {x}"),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
 impl Default for Options {
     fn default() -> Self {
         Options {

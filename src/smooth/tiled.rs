@@ -352,12 +352,12 @@ impl TilePlan<'_> {
 
     /// One round on tile `t`: `factors.len()` Jacobi steps `p ← p + f L(p)` (one factor per step,
     /// at most [`TilePlan::depth`]) from `src` into `out`, the tile's own vertices of the result
-    /// (`out.len()` = the tile's length). Plans the tile first if no round has yet. With
-    /// `measure = Some(s)` also measures how far each vertex moved from its position before step
-    /// `s` to the end, one [`StepStats`] per block of `block` vertices (blocks start at multiples
-    /// of `block`, so that folding them in order gives the same sums as plain steps measured over
-    /// chunks of that size); `moved` counts the vertices that are not fixed. Without `measure` the
-    /// list is empty. The positions are bit-identical to the steps run one by one with
+    /// (`out.len()` = the tile's length). Plans the tile first if no round has yet. With a
+    /// [`Measure`] also measures how far each vertex moved from its position before step
+    /// `from_step` to the end, one [`StepStats`] per block of `block` vertices (blocks start at
+    /// multiples of `block`, so that folding them in order gives the same sums as plain steps
+    /// measured over chunks of that size); `moved` counts the vertices that are not fixed. Without
+    /// it the list is empty. The positions are bit-identical to the steps run one by one with
     /// [`crate::smooth::laplacian::jacobi_step`]. `None` when the tile cannot be planned (see
     /// [`TilePlan::new`]): then `out` is untouched.
     ///
@@ -369,17 +369,26 @@ impl TilePlan<'_> {
         src: &[DVec3],
         out: &mut [DVec3],
         factors: &[f64],
-        measure: Option<usize>,
-        block: usize,
+        measure: Option<Measure>,
     ) -> Option<Vec<StepStats>> {
         assert!(src.len() == self.topo.len());
         assert!(!factors.is_empty() && factors.len() <= self.depth);
-        assert!(measure.is_none_or(|s| s < factors.len()) && block > 0);
+        assert!(measure.is_none_or(|m| m.from_step < factors.len() && m.block > 0));
         let tile = self.tile(t)?;
-        Some(LOCAL.with_borrow_mut(|local| {
-            run_tile(self.topo, tile, src, out, factors, measure, block, local)
-        }))
+        Some(
+            LOCAL.with_borrow_mut(|local| {
+                run_tile(self.topo, tile, src, out, factors, measure, local)
+            }),
+        )
     }
+}
+
+/// What a round measures: the displacement from before step `from_step` to the end of the round,
+/// summed per block of `block` vertices.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Measure {
+    pub from_step: usize,
+    pub block: usize,
 }
 
 fn run_tile(
@@ -388,8 +397,7 @@ fn run_tile(
     src: &[DVec3],
     out: &mut [DVec3],
     factors: &[f64],
-    measure: Option<usize>,
-    block: usize,
+    measure: Option<Measure>,
     local: &mut Local,
 ) -> Vec<StepStats> {
     let k = factors.len();
@@ -417,7 +425,7 @@ fn run_tile(
         start: tile.start,
     };
     for (s, &f) in factors.iter().enumerate() {
-        if measure == Some(s) {
+        if measure.is_some_and(|m| m.from_step == s) {
             before.clear();
             before.extend_from_slice(&a[..own]);
         }
@@ -439,7 +447,7 @@ fn run_tile(
         *o = l.vec();
     }
     let mut blocks = Vec::new();
-    if measure.is_some() {
+    if let Some(Measure { block, .. }) = measure {
         let mut i = 0;
         while i < own {
             let end = (own).min(i + block - (tile.start + i) % block);

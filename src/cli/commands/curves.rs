@@ -13,7 +13,8 @@ use crate::cli::output::{print_json, stdout_error, svg_output};
 use crate::cli::plot::{Curve, file_name, volume_curve, write_volume_plot};
 use crate::cli::progress::Progress;
 use crate::cli::report::Tool;
-use crate::cli::shared::{EngineArgs, EngineConfig, MethodParams, distinct};
+use crate::cli::shared::{EngineArgs, MethodParams, distinct};
+use crate::engine::EngineSettings;
 use crate::engine::{self, IterationRecord};
 use crate::error::Result;
 use crate::smooth::{Method, Options};
@@ -52,7 +53,7 @@ pub struct CurvesConfig {
     pub methods: Vec<Method>,
     /// Options shared by every method (`method` is replaced per run).
     pub options: Options,
-    pub engine: EngineConfig,
+    pub engine: EngineSettings,
     pub plot: PathBuf,
     pub json: bool,
 }

@@ -10,8 +10,9 @@ use clap::Args as ClapArgs;
 use crate::cli::flags;
 use crate::cli::output::stdout_error;
 use crate::cli::progress::Progress;
-use crate::cli::shared::{EngineArgs, EngineConfig};
+use crate::cli::shared::EngineArgs;
 use crate::engine;
+use crate::engine::EngineSettings;
 use crate::error::Result;
 use crate::metrics;
 use crate::shapes;
@@ -40,7 +41,7 @@ pub struct DemoConfig {
     pub subdivisions: u32,
     pub iterations: usize,
     pub noise: f64,
-    pub engine: EngineConfig,
+    pub engine: EngineSettings,
 }
 
 impl DemoConfig {
@@ -94,6 +95,15 @@ pub fn run(cfg: &DemoConfig, progress: &mut Progress, out: &mut dyn Write) -> Re
         "method", "volume %", "area %", "roughness °", "RMS to clean", "seconds"
     )
     .map_err(stdout_error)?;
+    // One plan for every method, each from the noisy positions.
+    let mut plan = pool.install(|| {
+        engine::Plan::new(
+            &storage,
+            &noisy.positions,
+            &noisy.triangles,
+            engine::Layout::Patches(cfg.engine.patch_size),
+        )
+    })?;
     for method in Method::ALL {
         let opts = Options {
             method,
@@ -101,18 +111,11 @@ pub fn run(cfg: &DemoConfig, progress: &mut Progress, out: &mut dyn Write) -> Re
             ..Default::default()
         };
         progress.iterations(method.name(), cfg.iterations);
-        let (records, positions) = pool.install(|| -> Result<_> {
-            let mut prep = engine::Plan::new(
-                &storage,
-                &noisy.positions,
-                &noisy.triangles,
-                engine::Layout::Patches(cfg.engine.patch_size),
-            )?;
-            let records = prep.smooth(&storage, &opts, engine::Statistics::Every, progress)?;
-            let mut positions = noisy.positions.clone();
-            prep.positions_in_input_order(&mut positions);
-            Ok((records, positions))
-        })?;
+        plan.set_positions_from_input(&noisy.positions);
+        let records =
+            pool.install(|| plan.smooth(&storage, &opts, engine::Statistics::Every, progress))?;
+        let mut positions = noisy.positions.clone();
+        plan.positions_in_input_order(&mut positions);
         let last = records.last().copied().unwrap_or_default();
         let rough = metrics::roughness(&positions, &noisy.triangles, &clean_topo);
         let rms = (positions

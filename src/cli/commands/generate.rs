@@ -142,15 +142,13 @@ pub fn run(cfg: &GenerateConfig, progress: &mut Progress, out: &mut dyn Write) -
     let need = memory::generate_bytes(triangles, cfg.noise > 0.0);
     let available = memory::mem_available().unwrap_or(u64::MAX);
     if need > available {
-        return Err(Error::invalid(
-            &cfg.output,
-            format!(
-                "--subdivisions {k} makes {triangles} triangles and needs about {} of memory, \
-                 but only {} is available",
-                gib(need),
-                gib(available)
-            ),
-        ));
+        return Err(Error::resource(format!(
+            "{}: --subdivisions {k} makes {triangles} triangles and needs about {} of memory, \
+             but only {} is available",
+            cfg.output.display(),
+            gib(need),
+            gib(available)
+        )));
     }
 
     progress.phase(format!("generating {} level {k}", shape_name(cfg.shape)));

@@ -5,7 +5,7 @@
 use std::io::Write;
 use std::path::PathBuf;
 
-use clap::{Args as ClapArgs, ValueEnum};
+use clap::Args as ClapArgs;
 use serde::Serialize;
 
 use crate::cli::flags;
@@ -16,8 +16,8 @@ use crate::cli::output::{
 use crate::cli::plot::{Curve, file_name, volume_curve, write_volume_plot};
 use crate::cli::progress::Progress;
 use crate::cli::report::{FileStats, Summary, Tool, count};
-use crate::cli::shared::{EngineConfig, InOut, SmoothingArgs};
-use crate::engine::{self, IterationRecord};
+use crate::cli::shared::{InOut, SmoothingArgs};
+use crate::engine::{self, EngineSettings, IterationRecord, Statistics};
 use crate::error::{Error, Result};
 use crate::smooth::Options;
 
@@ -37,20 +37,10 @@ pub struct SmoothArgs {
     #[arg(long, value_name = "FILE.svg")]
     pub plot: Option<PathBuf>,
     /// Which iterations measure volume, area and displacement (each costs passes over the whole mesh, about one taubin iteration for volume and area); the others show '-' in the table and null in the report.
-    #[arg(long, value_enum, value_name = "WHEN", default_value_t = Stats::Every)]
-    pub stats: Stats,
+    #[arg(long, value_enum, value_name = "WHEN", default_value_t = Statistics::Every)]
+    pub stats: Statistics,
     #[command(flatten)]
     pub cluster: ClusterArgs,
-}
-
-/// When `smooth` measures the per-iteration statistics.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, serde::Serialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Stats {
-    /// After every iteration.
-    Every,
-    /// After the last iteration only.
-    Last,
 }
 
 /// Checkpoints and MPI ranks (see the README's "One mesh over MPI ranks").
@@ -73,7 +63,7 @@ pub struct SmoothConfig {
     pub input: PathBuf,
     pub output: PathBuf,
     pub options: Options,
-    pub engine: EngineConfig,
+    pub engine: EngineSettings,
     pub report: Option<PathBuf>,
     pub plot: Option<PathBuf>,
     /// `--multires` and its options.
@@ -81,8 +71,6 @@ pub struct SmoothConfig {
     /// `--checkpoint DIR` (kept) and `--checkpoint-every`.
     pub checkpoint: Option<PathBuf>,
     pub checkpoint_every: usize,
-    /// Which iterations measure their statistics.
-    pub stats: Stats,
     /// The command line as given, recorded in the report.
     pub argv: Vec<String>,
 }
@@ -96,7 +84,7 @@ impl SmoothConfig {
         }
         if let Some(p) = &a.plot {
             svg_output(p)?;
-            if a.stats != Stats::Every {
+            if a.stats != Statistics::Every {
                 return Err(flags::parameter(
                     "plot",
                     "draws the volume of every iteration: it needs --stats every",
@@ -105,10 +93,7 @@ impl SmoothConfig {
         }
         let mut engine = a.smoothing.engine.resolve()?;
         engine.with_stats = a.report.is_some();
-        engine.statistics = match a.stats {
-            Stats::Every => crate::engine::Statistics::Every,
-            Stats::Last => crate::engine::Statistics::Last,
-        };
+        engine.statistics = a.stats;
         let options = a.smoothing.options();
         let multires = a.multires.resolve(&options)?;
         if multires.is_some() && a.cluster.checkpoint.is_some() {
@@ -127,7 +112,6 @@ impl SmoothConfig {
             plot: a.plot,
             checkpoint: a.cluster.checkpoint,
             checkpoint_every: a.cluster.checkpoint_every as usize,
-            stats: a.stats,
             argv,
         })
     }
@@ -160,7 +144,7 @@ pub struct SmoothReport {
     /// The command line as given.
     pub argv: Vec<String>,
     pub options: Options,
-    pub engine: EngineConfig,
+    pub engine: EngineSettings,
     pub input: FileStats,
     /// Statistics of the smoothed f64 positions (before the output format's rounding).
     pub output: FileStats,
