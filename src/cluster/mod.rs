@@ -544,10 +544,6 @@ impl<'a> RankRun<'a> {
         Ok((self.state, self.traffic))
     }
 
-    fn owned(&self) -> Range<usize> {
-        self.part.owned.start as usize..self.part.owned.end as usize
-    }
-
     /// Write the owned positions of iteration `it` into the free slot; once all ranks have,
     /// rank 0 switches the state to it.
     fn checkpoint(&mut self, it: usize, pos: &[DVec3]) -> Result<()> {
@@ -576,7 +572,7 @@ impl<'a> RankRun<'a> {
 
 impl Share for RankRun<'_> {
     fn owned(&self) -> Range<usize> {
-        RankRun::owned(self)
+        self.part.owned.start as usize..self.part.owned.end as usize
     }
 
     fn triangles(&self) -> Range<usize> {

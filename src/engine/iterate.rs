@@ -436,7 +436,7 @@ impl Run<'_, '_> {
 }
 
 /// The stencil kernel's parameters for `opts`.
-pub fn stencil_params(opts: &Options) -> StencilParams {
+fn stencil_params(opts: &Options) -> StencilParams {
     StencilParams {
         volume: matches!(opts.method, Method::Vcs | Method::VcsTriangle),
         reject_energy_increase: opts.reject_energy_increase,
