@@ -829,6 +829,19 @@ def main():
     for x in a.vcs_methods:
         if x not in VCS_METHODS_ALL:
             p.error(f"unknown vcsmooth method {x!r}; known: {', '.join(VCS_METHODS_ALL)}")
+    if a.workdir:
+        # A missing work directory is created (with its parents); a path that cannot be one is
+        # reported in one line rather than as a traceback.
+        try:
+            os.makedirs(a.workdir, exist_ok=True)
+        except OSError as e:
+            sys.exit(f"compare_peers: --workdir {a.workdir}: cannot create the directory ({e.strerror or e})")
+        if not os.access(a.workdir, os.W_OK | os.X_OK):
+            sys.exit(f"compare_peers: --workdir {a.workdir}: the directory is not writable")
+    if a.json and not os.path.isdir(os.path.dirname(os.path.abspath(a.json))):
+        sys.exit(f"compare_peers: --json {a.json}: its directory does not exist")
+    if a.mesh and not os.path.isfile(a.mesh):
+        sys.exit(f"compare_peers: --mesh {a.mesh}: no such file")
     if a.install:
         subprocess.run([sys.executable, "-m", "pip", "install", "-r", REQUIREMENTS], check=True)
     binary = find_vcsmooth(a.vcsmooth)
@@ -841,8 +854,11 @@ def main():
         print_table(res)
         results.append(res)
     if a.json:
-        with open(a.json, "w") as f:
-            json.dump({"tool": "tools/compare_peers.py", "argv": sys.argv, "results": results}, f, indent=1)
+        try:
+            with open(a.json, "w") as f:
+                json.dump({"tool": "tools/compare_peers.py", "argv": sys.argv, "results": results}, f, indent=1)
+        except OSError as e:
+            sys.exit(f"compare_peers: --json {a.json}: cannot write ({e.strerror or e})")
 
 
 if __name__ == "__main__":

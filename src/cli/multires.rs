@@ -5,6 +5,7 @@ use clap::builder::PossibleValue;
 use clap::{Args as ClapArgs, ValueEnum};
 
 use super::output::stdout_error;
+use super::report::fixed;
 use crate::error::Result;
 use crate::multires::{DEFAULT_LEVELS, MAX_LEVELS, MultiresOptions, Transfer};
 use crate::smooth::Method;
@@ -16,11 +17,12 @@ pub struct MultiresArgs {
     #[arg(long)]
     pub multires: bool,
     /// Levels of the hierarchy, the input included (2..=8); each coarse level has about 18× fewer vertices (--cell-factor 4) [default: 2].
-    #[arg(long, value_name = "K", requires = "multires",
+    #[arg(long, value_name = "K", requires = "multires", allow_negative_numbers = true,
           value_parser = clap::value_parser!(u32).range(2..=MAX_LEVELS as i64))]
     pub levels: Option<u32>,
     /// Iterations of --method on each coarse level [default: --iterations].
-    #[arg(long, value_name = "N", requires = "multires")]
+    #[arg(long, value_name = "N", requires = "multires", allow_negative_numbers = true,
+          value_parser = super::shared::whole)]
     pub coarse_iterations: Option<usize>,
     /// Method on the input level: laplacian or taubin [default: laplacian].
     #[arg(long, value_name = "M", requires = "multires", value_parser = fine_method)]
@@ -29,7 +31,8 @@ pub struct MultiresArgs {
     #[arg(long, value_enum, value_name = "HOW", requires = "multires")]
     pub transfer: Option<Transfer>,
     /// Cell edge of each coarse level, in mean edge lengths of the level below (> 1) [default: 4].
-    #[arg(long, value_name = "X", requires = "multires")]
+    #[arg(long, value_name = "X", requires = "multires", allow_hyphen_values = true,
+          value_parser = super::shared::finite_f64)]
     pub cell_factor: Option<f64>,
 }
 
@@ -89,23 +92,23 @@ pub fn print_multires(
     );
     for l in &m.levels {
         text += &format!(
-            "{:>5} {:>10} {:>10} {:>7} {:>13} {:>5} {:>11.6} {:>8.3} {:>9.3} {:>8.3}\n",
+            "{:>5} {:>10} {:>10} {:>7} {:>13} {:>5} {:>11} {:>8.3} {:>9.3} {:>8.3}\n",
             l.level,
             l.vertices,
             l.triangles,
             l.fixed_vertices,
             l.method.name(),
             l.iterations,
-            l.volume_pct,
+            fixed(l.volume_pct, 6),
             l.build_seconds,
             l.transfer_seconds,
             l.smooth_seconds
         );
     }
     text += &format!(
-        "multires: {} transfer, volume {:.6} % before the final correction, relative error {:.1e} after ({:.3} s); {:.3} s in all\n",
+        "multires: {} transfer, volume {} % before the final correction, relative error {:.1e} after ({:.3} s); {:.3} s in all\n",
         m.options.transfer.name(),
-        m.volume_pct_before_correction,
+        fixed(m.volume_pct_before_correction, 6),
         m.volume_error,
         m.correction_seconds,
         m.seconds

@@ -54,20 +54,164 @@ pub fn svg_output(path: &Path) -> Result<()> {
     parent_exists(path)
 }
 
-/// Check that the directory `path` would be created in exists.
+/// Check that the directory `path` would be created in exists (and is a directory).
 pub fn parent_exists(path: &Path) -> Result<()> {
     if path.as_os_str().is_empty() {
         return Err(Error::Usage {
             what: "an output file name is empty".into(),
         });
     }
-    match path.parent() {
-        Some(dir) if !dir.as_os_str().is_empty() && !dir.is_dir() => Err(Error::invalid(
-            path,
-            format!("directory '{}' does not exist", dir.display()),
-        )),
-        _ => Ok(()),
+    match path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        Some(dir) => match std::fs::metadata(dir) {
+            Ok(m) if m.is_dir() => Ok(()),
+            Ok(_) => Err(Error::invalid(
+                path,
+                format!("'{}' is not a directory", dir.display()),
+            )),
+            Err(_) => Err(Error::invalid(
+                path,
+                format!("directory '{}' does not exist", dir.display()),
+            )),
+        },
+        None => Ok(()),
     }
+}
+
+/// A file a command reads or writes, with the flag or argument that names it (`IN`, `OUT`,
+/// `--report`, …), for [`check_files`].
+pub type Named<'a> = (&'a str, &'a Path);
+
+/// Check, before anything is read or smoothed, every file a command will write (`writes`: the
+/// output first, then its side files such as reports and plots): each can be written (see
+/// [`writable`]), none is one of the files the command reads (`reads`), and no two are the same
+/// file. "The same" is decided by identity: device and inode when the file exists (which also
+/// catches hard links, symbolic links and spellings such as `./a/../x.ply`), else the absolute
+/// path with `.`, `..` and the symbolic links of its existing part resolved. The error names the
+/// flag of the file that would be overwritten.
+pub fn check_files(reads: &[Named], writes: &[Named]) -> Result<()> {
+    let read_ids: Vec<Identity> = reads.iter().map(|(_, p)| Identity::of(p)).collect();
+    let mut written: Vec<(&str, Identity)> = Vec::with_capacity(writes.len());
+    for &(name, path) in writes {
+        let id = Identity::of(path);
+        let clash = reads
+            .iter()
+            .zip(&read_ids)
+            .find(|(_, r)| **r == id)
+            .map(|((other, _), _)| *other)
+            .or_else(|| {
+                written
+                    .iter()
+                    .find(|(_, w)| *w == id)
+                    .map(|(other, _)| *other)
+            });
+        if let Some(other) = clash {
+            return Err(Error::invalid(
+                path,
+                format!("{name} names the same file as {other}: it would be overwritten"),
+            ));
+        }
+        written.push((name, id));
+    }
+    for &(_, path) in writes {
+        writable(path)?;
+    }
+    Ok(())
+}
+
+/// What makes two paths the same file (see [`check_files`]).
+#[derive(Debug, PartialEq, Eq)]
+enum Identity {
+    /// Device and inode of an existing file.
+    Inode(u64, u64),
+    /// The resolved absolute path of a file that does not exist (yet).
+    Path(std::path::PathBuf),
+}
+
+impl Identity {
+    fn of(path: &Path) -> Identity {
+        #[cfg(unix)]
+        if let Ok(m) = std::fs::metadata(path) {
+            use std::os::unix::fs::MetadataExt;
+            return Identity::Inode(m.dev(), m.ino());
+        }
+        Identity::Path(resolved(path))
+    }
+}
+
+/// `path` made absolute, component by component: `.` dropped, `..` removing the component before
+/// it, and each prefix that exists replaced by its canonical form (its symbolic links resolved,
+/// so that a later `..` leaves the real directory).
+fn resolved(path: &Path) -> std::path::PathBuf {
+    use std::path::Component;
+    let absolute = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    let mut out = std::path::PathBuf::new();
+    for c in absolute.components() {
+        match c {
+            Component::CurDir => {}
+            Component::ParentDir => {
+                out.pop();
+            }
+            other => {
+                out.push(other);
+                if let Ok(real) = out.canonicalize() {
+                    out = real;
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Check that a file can be written at `path`, before any work: its directory exists, is a
+/// directory and lets us create files (tried with an empty file named as the atomic writer's
+/// temporary files, `.<name>.tmp-<pid>-<n>`, removed at once), and `path` itself is not a
+/// directory or another non-regular file (a device, a pipe) that the final rename would replace.
+pub fn writable(path: &Path) -> Result<()> {
+    parent_exists(path)?;
+    let dir = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let Some(name) = path.file_name() else {
+        return Err(Error::invalid(path, "the output path names no file"));
+    };
+    if let Ok(m) = std::fs::metadata(path) {
+        if m.is_dir() {
+            return Err(Error::invalid(path, "is a directory, not a file"));
+        }
+        if !m.is_file() {
+            return Err(Error::invalid(
+                path,
+                "exists and is not a regular file (vcsmooth replaces its output by renaming)",
+            ));
+        }
+    }
+    // Numbers counted down from the top, so that they never meet the atomic writer's (counted up
+    // from 0) in the same process.
+    for n in (0..100).map(|k| u64::MAX - k) {
+        let mut probe = std::ffi::OsString::from(".");
+        probe.push(name);
+        probe.push(format!(".tmp-{}-{n}", std::process::id()));
+        let probe = dir.join(probe);
+        match std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&probe)
+        {
+            Ok(_) => {
+                let _ = std::fs::remove_file(&probe);
+                return Ok(());
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
+            Err(e) => {
+                return Err(Error::invalid(
+                    path,
+                    format!("cannot create files in '{}': {e}", dir.display()),
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Write `bytes` to `path` through a temporary file beside it, renamed into place when complete:

@@ -34,7 +34,8 @@ pub struct SmoothingArgs {
         long,
         value_name = "N",
         default_value_t = 10,
-        allow_negative_numbers = true
+        allow_negative_numbers = true,
+        value_parser = whole
     )]
     pub iterations: usize,
     #[command(flatten)]
@@ -53,11 +54,11 @@ impl SmoothingArgs {
 /// Step sizes and stencil options shared by `smooth` and `curves`.
 #[derive(Debug, Clone, ClapArgs)]
 pub struct MethodParams {
-    /// Laplacian step size λ (laplacian, and the first step of taubin).
-    #[arg(long, value_name = "X", default_value_t = 0.5, value_parser = finite_f64, allow_negative_numbers = true)]
+    /// Laplacian step size λ, in (0, 1] (laplacian, and the first step of taubin).
+    #[arg(long, value_name = "X", default_value_t = 0.5, value_parser = step_lambda, allow_hyphen_values = true)]
     pub lambda: f64,
-    /// Taubin's second step size μ (negative).
-    #[arg(long, value_name = "Y", default_value_t = -0.53, value_parser = finite_f64, allow_negative_numbers = true)]
+    /// Taubin's second step size μ, in [-1, 0).
+    #[arg(long, value_name = "Y", default_value_t = -0.53, value_parser = step_mu, allow_hyphen_values = true)]
     pub mu: f64,
     /// Skip a stencil whose result has a higher stencil energy than before (lem, vcs, vcs-triangle) [default: off].
     #[arg(long)]
@@ -80,14 +81,14 @@ impl MethodParams {
 /// How the engine runs: threads, patches, memory.
 #[derive(Debug, Clone, ClapArgs)]
 pub struct EngineArgs {
-    /// Worker threads [default: all cores].
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..), allow_negative_numbers = true)]
+    /// Worker threads, 1 to 4096 [default: all cores].
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=MAX_THREADS as i64), allow_negative_numbers = true)]
     pub threads: Option<u32>,
     /// Vertices per patch; the result is identical for any thread count and memory budget for a given patch size [default: 16384].
-    #[arg(long, value_name = "VERTICES", value_parser = clap::value_parser!(u64).range(1..u32::MAX as u64), allow_negative_numbers = true)]
+    #[arg(long, value_name = "VERTICES", value_parser = whole_in(1, u32::MAX as u64 - 1), allow_negative_numbers = true)]
     pub patch_size: Option<u64>,
     /// Anonymous memory allowed, with K/M/G/T suffixes (binary units); larger meshes go to memory-mapped scratch files [default: 3/4 of available memory].
-    #[arg(long, value_name = "SIZE", value_parser = crate::engine::memory::parse_size)]
+    #[arg(long, value_name = "SIZE", value_parser = crate::engine::memory::parse_size, allow_hyphen_values = true)]
     pub memory_budget: Option<u64>,
     /// Directory for scratch files (removed on exit, even on error) [default: the output's directory].
     #[arg(long, value_name = "DIR")]
@@ -121,6 +122,11 @@ impl EngineArgs {
     }
 }
 
+/// The most worker threads a command accepts (`--threads`, `--cpus`): far above the cores of any
+/// node, and low enough that a pool is built, or refused by the system, at once: a thread count
+/// in the millions would spend seconds spawning threads before it failed.
+pub const MAX_THREADS: u32 = 4096;
+
 /// The values of a list flag without repeats, in the order first given.
 pub fn distinct<T: PartialEq>(values: impl IntoIterator<Item = T>) -> Vec<T> {
     let mut out: Vec<T> = Vec::new();
@@ -139,6 +145,23 @@ fn number(s: &str) -> std::result::Result<f64, String> {
         .map_err(|_| format!("'{s}' is not a number"))
 }
 
+/// A count with no bound but its type's (clap value parser): `-1` is refused with the range,
+/// where Rust's parser would only say "invalid digit".
+pub fn whole(s: &str) -> std::result::Result<usize, String> {
+    whole_in(0, usize::MAX as u64)(s).map(|n| n as usize)
+}
+
+/// A whole number in `lo..=hi` (clap value parser).
+pub fn whole_in(
+    lo: u64,
+    hi: u64,
+) -> impl Fn(&str) -> std::result::Result<u64, String> + Clone + Send + Sync + 'static {
+    move |s| match s.trim().parse::<u64>() {
+        Ok(n) if (lo..=hi).contains(&n) => Ok(n),
+        _ => Err(format!("'{s}' is not a whole number in {lo}..={hi}")),
+    }
+}
+
 /// A float that must be finite (clap value parser).
 pub fn finite_f64(s: &str) -> std::result::Result<f64, String> {
     let x = number(s)?;
@@ -147,6 +170,27 @@ pub fn finite_f64(s: &str) -> std::result::Result<f64, String> {
     } else {
         Err(format!("'{s}' is not a finite number"))
     }
+}
+
+/// A step size of the library parameter `name` (`lambda` or `mu`) in its range
+/// ([`crate::smooth::check_step`]).
+fn step(name: &'static str, s: &str) -> std::result::Result<f64, String> {
+    let x = finite_f64(s)?;
+    crate::smooth::check_step(name, x).map_err(|e| match e {
+        Error::Parameter { problem, .. } => problem,
+        other => other.to_string(),
+    })?;
+    Ok(x)
+}
+
+/// `--lambda` (clap value parser).
+fn step_lambda(s: &str) -> std::result::Result<f64, String> {
+    step("lambda", s)
+}
+
+/// `--mu` (clap value parser).
+fn step_mu(s: &str) -> std::result::Result<f64, String> {
+    step("mu", s)
 }
 
 /// A length such as `--max-edge`: a finite number > 0 (clap value parser).
@@ -201,6 +245,21 @@ mod tests {
             finite_f64("inf"),
             Err("'inf' is not a finite number".into())
         );
+        assert_eq!(whole("7"), Ok(7));
+        assert_eq!(
+            whole_in(1, 9)("-1"),
+            Err("'-1' is not a whole number in 1..=9".into())
+        );
+        assert!(whole_in(1, 9)("0").is_err() && whole_in(1, 9)("10").is_err());
+        assert_eq!(step_lambda("1"), Ok(1.0));
+        assert_eq!(step_mu("-1"), Ok(-1.0));
+        for bad in ["0", "1.5", "-0.5", "-inf"] {
+            let e = step_lambda(bad).unwrap_err();
+            assert!(e.contains("(0, 1]") || e.contains("finite"), "{bad}: {e}");
+        }
+        for bad in ["0", "0.5", "-1.01", "nan"] {
+            assert!(step_mu(bad).is_err(), "{bad}");
+        }
         assert_eq!(length("0.5"), Ok(0.5));
         assert_eq!(length("0"), Err("'0' is not a finite length > 0".into()));
         assert_eq!(

@@ -8,22 +8,25 @@ use crate::mesh::Mesh;
 
 /// Differences between two meshes with the same connectivity (`vcsmooth compare`).
 ///
-/// Every field is finite (the struct goes to JSON as is).
+/// Every number is finite and none is −0 (the struct goes to JSON as is). A quantity that is not
+/// defined for the meshes given (a ratio whose denominator is 0, a mean over nothing) is `None`,
+/// `null` in JSON: never a made-up 0 or 1.
 #[derive(Debug, Clone, Default, serde::Serialize)]
 pub struct Comparison {
-    /// Root mean square and largest distance between corresponding vertices (0 for no vertices).
+    /// Root mean square and largest distance between corresponding vertices (0 for no vertices:
+    /// nothing moved).
     pub rms_distance: f64,
     pub max_distance: f64,
-    /// The same, relative to the bounding-box diagonal of `a` (0 when that diagonal is 0).
-    pub rms_relative: f64,
-    pub max_relative: f64,
+    /// The same, relative to the bounding-box diagonal of `a`; `None` when that diagonal is 0.
+    pub rms_relative: Option<f64>,
+    pub max_relative: Option<f64>,
     /// Mean angle between corresponding face normals, degrees, over the triangles that have a
-    /// normal (non-zero area) in both meshes; 0 when none has.
-    pub mean_normal_angle_deg: f64,
-    /// volume(b) / volume(a), area(b) / area(a). When the denominator is 0 (or the quotient is not
-    /// finite) the ratio is 1 if the numerator is 0 too, else 0.
-    pub volume_ratio: f64,
-    pub area_ratio: f64,
+    /// normal (non-zero area) in both meshes; `None` when none has.
+    pub mean_normal_angle_deg: Option<f64>,
+    /// volume(b) / volume(a), area(b) / area(a); `None` when the denominator is 0 (or the quotient
+    /// is not finite).
+    pub volume_ratio: Option<f64>,
+    pub area_ratio: Option<f64>,
     /// The bounding-box diagonal of `a` that the relative distances divide by.
     pub bbox_diagonal: f64,
     /// Signed volumes and areas of `a` and `b` ([`crate::metrics::volume`], [`crate::metrics::area`]).
@@ -76,7 +79,7 @@ pub fn compare(a: &Mesh, b: &Mesh) -> Result<Comparison> {
     };
     let (lo, hi) = bounding_box(&a.positions);
     let diagonal = (hi - lo).length();
-    let relative = |d: f64| if diagonal > 0.0 { d / diagonal } else { 0.0 };
+    let relative = |d: f64| ratio(d, diagonal);
 
     let normal = |pos: &[DVec3], t: &[u32; 3]| {
         let [p, q, r] = t.map(|v| pos[v as usize]);
@@ -101,31 +104,22 @@ pub fn compare(a: &Mesh, b: &Mesh) -> Result<Comparison> {
         max_distance: max,
         rms_relative: relative(rms),
         max_relative: relative(max),
-        mean_normal_angle_deg: if faces == 0 {
-            0.0
-        } else {
-            angle_sum / faces as f64
-        },
+        mean_normal_angle_deg: ratio(angle_sum, faces as f64),
         volume_ratio: ratio(volume_b, volume_a),
         area_ratio: ratio(area_b, area_a),
         bbox_diagonal: diagonal,
-        volume_a,
-        volume_b,
-        area_a,
-        area_b,
+        // `+ 0.0` turns the −0 of an empty sum into 0.
+        volume_a: volume_a + 0.0,
+        volume_b: volume_b + 0.0,
+        area_a: area_a + 0.0,
+        area_b: area_b + 0.0,
     })
 }
 
-/// `num / den`, always finite: 1 for 0/0, 0 for any other quotient that is not finite.
-fn ratio(num: f64, den: f64) -> f64 {
+/// `num / den` when it is a finite number (`None` for a zero denominator), never −0.
+fn ratio(num: f64, den: f64) -> Option<f64> {
     let r = num / den;
-    if r.is_finite() {
-        r
-    } else if num == 0.0 && den == 0.0 {
-        1.0
-    } else {
-        0.0
-    }
+    (den != 0.0 && r.is_finite()).then_some(r + 0.0)
 }
 
 #[cfg(test)]
@@ -137,17 +131,10 @@ mod tests {
     fn a_mesh_against_itself() {
         let a = torus(1);
         let c = compare(&a, &a).unwrap();
-        assert_eq!(
-            (
-                c.rms_distance,
-                c.max_distance,
-                c.rms_relative,
-                c.max_relative
-            ),
-            (0.0, 0.0, 0.0, 0.0)
-        );
-        assert_eq!(c.mean_normal_angle_deg, 0.0);
-        assert_eq!((c.volume_ratio, c.area_ratio), (1.0, 1.0));
+        assert_eq!((c.rms_distance, c.max_distance), (0.0, 0.0));
+        assert_eq!((c.rms_relative, c.max_relative), (Some(0.0), Some(0.0)));
+        assert_eq!(c.mean_normal_angle_deg, Some(0.0));
+        assert_eq!((c.volume_ratio, c.area_ratio), (Some(1.0), Some(1.0)));
     }
 
     #[test]
@@ -159,14 +146,11 @@ mod tests {
         let c = compare(&a, &b).unwrap();
         assert!((c.rms_distance - 1.3).abs() < 1e-12, "{}", c.rms_distance);
         assert!((c.max_distance - 1.3).abs() < 1e-12);
-        assert!((c.rms_relative - 1.3 / 12f64.sqrt()).abs() < 1e-12);
-        assert!(
-            c.mean_normal_angle_deg < 1e-5,
-            "{}",
-            c.mean_normal_angle_deg
-        );
-        assert!((c.volume_ratio - 1.0).abs() < 1e-12);
-        assert!((c.area_ratio - 1.0).abs() < 1e-12);
+        assert!((c.rms_relative.unwrap() - 1.3 / 12f64.sqrt()).abs() < 1e-12);
+        let angle = c.mean_normal_angle_deg.unwrap();
+        assert!(angle < 1e-5, "{angle}");
+        assert!((c.volume_ratio.unwrap() - 1.0).abs() < 1e-12);
+        assert!((c.area_ratio.unwrap() - 1.0).abs() < 1e-12);
     }
 
     #[test]
@@ -175,15 +159,15 @@ mod tests {
         let mut b = a.clone();
         b.positions.iter_mut().for_each(|p| *p *= 2.0);
         let c = compare(&a, &b).unwrap();
-        assert!((c.volume_ratio - 8.0).abs() < 1e-12);
-        assert!((c.area_ratio - 4.0).abs() < 1e-12);
+        assert!((c.volume_ratio.unwrap() - 8.0).abs() < 1e-12);
+        assert!((c.area_ratio.unwrap() - 4.0).abs() < 1e-12);
         assert!((c.max_distance - 1.0).abs() < 1e-12);
 
         let mut n = a.clone();
         add_normal_noise(&mut n, 0.3, 5);
         let c = compare(&a, &n).unwrap();
         assert!(c.rms_distance > 0.0 && c.max_distance >= c.rms_distance);
-        assert!(c.mean_normal_angle_deg > 1.0);
+        assert!(c.mean_normal_angle_deg > Some(1.0));
     }
 
     #[test]
@@ -210,19 +194,29 @@ mod tests {
     }
 
     #[test]
-    fn ratios_stay_finite() {
-        assert_eq!(ratio(0.0, 0.0), 1.0);
-        assert_eq!(ratio(1.0, 0.0), 0.0);
-        assert_eq!(ratio(3.0, 2.0), 1.5);
-        // A flat mesh (zero volume) against itself and against a bent copy.
+    fn undefined_quantities_are_none() {
+        assert_eq!(ratio(0.0, 0.0), None);
+        assert_eq!(ratio(1.0, 0.0), None);
+        assert_eq!(ratio(1.0, -0.0), None);
+        assert_eq!(ratio(3.0, 2.0), Some(1.5));
+        assert!(ratio(-0.0, 2.0).unwrap().is_sign_positive());
+        // A flat mesh (zero volume) against itself: the volume ratio is undefined, the area's not.
         let flat = Mesh::new(vec![DVec3::ZERO, DVec3::X, DVec3::Y], vec![[0, 1, 2]]);
         let c = compare(&flat, &flat).unwrap();
-        assert_eq!(c.volume_ratio, 1.0);
+        assert_eq!((c.volume_ratio, c.area_ratio), (None, Some(1.0)));
+        assert!(c.volume_a.is_sign_positive() && c.volume_b.is_sign_positive());
+        // All vertices at one point: no diagonal, no normal.
+        let point = Mesh::new(vec![DVec3::ONE; 3], vec![[0, 1, 2]]);
+        let c = compare(&point, &point).unwrap();
+        assert_eq!((c.rms_relative, c.mean_normal_angle_deg), (None, None));
         let empty = Mesh::default();
         let c = compare(&empty, &empty).unwrap();
         assert_eq!(
             (c.rms_distance, c.volume_ratio, c.area_ratio),
-            (0.0, 1.0, 1.0)
+            (0.0, None, None)
         );
+        let json = serde_json::to_string(&c).unwrap();
+        assert!(json.contains("\"volume_ratio\":null"), "{json}");
+        assert!(!json.contains("-0"), "{json}");
     }
 }

@@ -372,7 +372,8 @@ pub fn refine(
     observer: &mut dyn Observer,
 ) -> Result<Vec<RoundRecord>> {
     check_max_edge(opts.max_edge)?;
-    let mut records = Vec::with_capacity(opts.rounds);
+    // Grown round by round: `rounds` comes from the caller and may be anything.
+    let mut records = Vec::new();
     for round in 1..=opts.rounds {
         let volume_before = metrics::volume(&mesh.positions, &mesh.triangles);
         let subdivision = subdivide(mesh, opts.max_edge)?;

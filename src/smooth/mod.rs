@@ -117,18 +117,43 @@ pub struct Options {
 }
 
 impl Options {
-    /// Check the options: the step sizes must be finite numbers.
+    /// Check the options: the step sizes in their ranges (see [`check_step`]).
     pub fn check(&self) -> crate::Result<()> {
-        for (name, x) in [("lambda", self.lambda), ("mu", self.mu)] {
-            if !x.is_finite() {
-                return Err(crate::Error::parameter(
-                    name,
-                    format!("must be a finite number, got {x}"),
-                ));
-            }
-        }
-        Ok(())
+        check_step("lambda", self.lambda)?;
+        check_step("mu", self.mu)
     }
+}
+
+/// Check one step size by its name: `lambda` in (0, 1], `mu` in [−1, 0), both finite.
+///
+/// Why these ranges: the umbrella Laplacian's eigenvalues lie in [−2, 0], so the step
+/// `p += λ L(p)` damps every frequency only for 0 < λ ≤ 1 (a larger λ overshoots and a run
+/// diverges; λ ≤ 0 does nothing or sharpens). Taubin's second step is the inflating one: μ < 0,
+/// and, as λ, at most 1 in size.
+pub fn check_step(name: &'static str, x: f64) -> crate::Result<()> {
+    let (ok, range) = match name {
+        "mu" => (
+            (-1.0..0.0).contains(&x),
+            "[-1, 0) (Taubin's inflating step is negative)",
+        ),
+        _ => (
+            x > 0.0 && x <= 1.0,
+            "(0, 1] (a larger Laplacian step overshoots)",
+        ),
+    };
+    if !x.is_finite() {
+        return Err(crate::Error::parameter(
+            name,
+            format!("must be a finite number, got {x}"),
+        ));
+    }
+    if !ok {
+        return Err(crate::Error::parameter(
+            name,
+            format!("must be in {range}, got {x}"),
+        ));
+    }
+    Ok(())
 }
 
 impl Default for Options {
@@ -229,5 +254,34 @@ pub fn neighbor_sums_into(topo: &Topology, pos: &[DVec3], out: &mut [DVec3], fir
             .neighbors(v)
             .iter()
             .fold(DVec3::ZERO, |s, &u| s + pos[u as usize]);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn step_sizes_are_checked_in_their_ranges() {
+        assert!(Options::default().check().is_ok());
+        let with = |lambda, mu| Options {
+            lambda,
+            mu,
+            ..Options::default()
+        };
+        assert!(with(1.0, -1.0).check().is_ok());
+        for (lambda, mu, name) in [
+            (0.0, -0.5, "lambda"),
+            (1.5, -0.5, "lambda"),
+            (f64::NEG_INFINITY, -0.5, "lambda"),
+            (0.5, 0.0, "mu"),
+            (0.5, -1.5, "mu"),
+            (0.5, f64::NAN, "mu"),
+        ] {
+            match with(lambda, mu).check() {
+                Err(crate::Error::Parameter { name: n, .. }) => assert_eq!(n, name),
+                other => panic!("{lambda} {mu}: {other:?}"),
+            }
+        }
     }
 }

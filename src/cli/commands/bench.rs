@@ -9,8 +9,8 @@ use serde::Serialize;
 
 use crate::cli::output::{print_json, stdout_error};
 use crate::cli::progress::Progress;
-use crate::cli::report::{Tool, count};
-use crate::cli::shared::distinct;
+use crate::cli::report::{Tool, count, fixed};
+use crate::cli::shared::{MAX_THREADS, distinct};
 use crate::engine::memory::format_size;
 use crate::error::Result;
 use crate::modes::bench::{self as core, BenchReport, BenchSettings};
@@ -43,18 +43,18 @@ pub struct BenchArgs {
     #[arg(long, value_enum, value_delimiter = ',', value_name = "M,M,...",
           default_values_t = [Method::Laplacian, Method::Taubin, Method::Vcs])]
     pub methods: Vec<Method>,
-    /// Comma-separated thread counts [default: 1 and all cores].
-    #[arg(long, value_name = "N,...", value_delimiter = ',',
-          value_parser = clap::value_parser!(u32).range(1..))]
+    /// Comma-separated thread counts, each 1 to 4096 [default: 1 and all cores].
+    #[arg(long, value_name = "N,...", value_delimiter = ',', allow_negative_numbers = true,
+          value_parser = clap::value_parser!(u32).range(1..=MAX_THREADS as i64))]
     pub threads: Vec<u32>,
     /// Iterations per smoothing run.
-    #[arg(long, value_name = "N", default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=1000))]
+    #[arg(long, value_name = "N", default_value_t = 3, allow_negative_numbers = true, value_parser = clap::value_parser!(u32).range(1..=1000))]
     pub iterations: u32,
     /// Repeats of every timing; the median is reported.
-    #[arg(long, value_name = "R", default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=100))]
+    #[arg(long, value_name = "R", default_value_t = 3, allow_negative_numbers = true, value_parser = clap::value_parser!(u32).range(1..=100))]
     pub repeats: u32,
     /// Vertices per patch [default: 16384].
-    #[arg(long, value_name = "VERTICES", value_parser = clap::value_parser!(u64).range(1..u32::MAX as u64))]
+    #[arg(long, value_name = "VERTICES", allow_negative_numbers = true, value_parser = crate::cli::shared::whole_in(1, u32::MAX as u64 - 1))]
     pub patch_size: Option<u64>,
     /// Directory for the temporary PLY file (a tmpfs such as /dev/shm leaves out the disk's fsync) [default: the system's temporary directory].
     #[arg(long, value_name = "DIR")]
@@ -190,14 +190,14 @@ fn print_bench(out: &mut dyn Write, r: &BenchReport) -> Result<()> {
                     .stencils_per_second
                     .map_or(String::from("-"), |x| sig(x / 1e6));
                 t += &format!(
-                    "{:<8} {:>7} {:<13} {:>12} {:>13} {:>12} {:>12.6}\n",
+                    "{:<8} {:>7} {:<13} {:>12} {:>13} {:>12} {:>12}\n",
                     z.label,
                     run.threads,
                     m.method.name(),
                     sig(m.seconds_per_iteration),
                     sig(m.triangles_per_second / 1e6),
                     stencils,
-                    m.volume_pct
+                    fixed(m.volume_pct, 6)
                 );
             }
         }
@@ -208,8 +208,11 @@ fn print_bench(out: &mut dyn Write, r: &BenchReport) -> Result<()> {
 
 /// A measurement with 4 significant digits in fixed point (at most 9 decimals).
 fn sig(x: f64) -> String {
-    if x == 0.0 || !x.is_finite() {
-        return format!("{x}");
+    if !x.is_finite() {
+        return crate::cli::report::UNDEFINED.to_string();
+    }
+    if x == 0.0 {
+        return "0".to_string();
     }
     let decimals = (3 - x.abs().log10().floor() as i32).clamp(0, 9) as usize;
     format!("{x:.decimals$}")

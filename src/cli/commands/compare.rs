@@ -9,7 +9,7 @@ use serde::Serialize;
 
 use crate::cli::output::print_json;
 use crate::cli::progress::Progress;
-use crate::cli::report::{num, print_rows};
+use crate::cli::report::{defined, fixed, num, print_rows};
 use crate::error::{Error, Result};
 use crate::metrics::{self, Comparison};
 
@@ -84,31 +84,21 @@ pub fn run(cfg: &CompareConfig, progress: &mut Progress, out: &mut dyn Write) ->
 /// Print a comparison as aligned `key  value` lines.
 fn print_comparison(out: &mut dyn Write, doc: &CompareDoc) -> Result<()> {
     let c = &doc.comparison;
+    let distance = |d: f64, relative: Option<f64>| match relative {
+        Some(r) => format!("{} ({} of the bbox diagonal of a)", num(d), num(r)),
+        None => format!("{} (the bbox diagonal of a is 0)", num(d)),
+    };
     let rows: Vec<(&str, String)> = vec![
         ("a", doc.a.clone()),
         ("b", doc.b.clone()),
-        (
-            "rms distance",
-            format!(
-                "{} ({} of the bbox diagonal of a)",
-                num(c.rms_distance),
-                num(c.rms_relative)
-            ),
-        ),
-        (
-            "max distance",
-            format!(
-                "{} ({} of the bbox diagonal of a)",
-                num(c.max_distance),
-                num(c.max_relative)
-            ),
-        ),
+        ("rms distance", distance(c.rms_distance, c.rms_relative)),
+        ("max distance", distance(c.max_distance, c.max_relative)),
         (
             "mean normal angle",
-            format!("{:.6} deg", c.mean_normal_angle_deg),
+            defined(c.mean_normal_angle_deg, |x| format!("{} deg", fixed(x, 6))),
         ),
-        ("volume ratio b/a", format!("{:.9}", c.volume_ratio)),
-        ("area ratio b/a", format!("{:.9}", c.area_ratio)),
+        ("volume ratio b/a", defined(c.volume_ratio, |x| fixed(x, 9))),
+        ("area ratio b/a", defined(c.area_ratio, |x| fixed(x, 9))),
     ];
     print_rows(out, &rows)
 }

@@ -9,10 +9,10 @@ use clap::Args as ClapArgs;
 use serde::Serialize;
 
 use crate::cli::flags;
-use crate::cli::output::{print_json, stdout_error, svg_output};
+use crate::cli::output::{check_files, print_json, stdout_error, svg_output};
 use crate::cli::plot::{Curve, file_name, volume_curve, write_volume_plot};
 use crate::cli::progress::Progress;
-use crate::cli::report::Tool;
+use crate::cli::report::{Tool, fixed};
 use crate::cli::shared::{EngineArgs, MethodParams, distinct};
 use crate::engine::EngineSettings;
 use crate::engine::{self, IterationRecord};
@@ -61,6 +61,7 @@ pub struct CurvesConfig {
 impl CurvesConfig {
     pub fn from_args(a: CurvesArgs) -> Result<CurvesConfig> {
         svg_output(&a.plot)?;
+        check_files(&[("IN", &a.input)], &[("--plot", &a.plot)])?;
         let methods = distinct(a.methods);
         if methods.is_empty() {
             return Err(flags::parameter("methods", "names no method"));
@@ -177,7 +178,7 @@ fn print_curves(out: &mut dyn Write, doc: &CurvesDoc) -> Result<()> {
         text += &format!("{it:>5}");
         for c in &doc.curves {
             match c.volume_pct.get(it) {
-                Some(v) => text += &format!(" {v:>14.6}"),
+                Some(v) => text += &format!(" {:>14}", fixed(*v, 6)),
                 None => text += &format!(" {:>14}", "-"),
             }
         }

@@ -10,7 +10,8 @@ use clap::Args as ClapArgs;
 use crate::cli::flags;
 use crate::cli::output::stdout_error;
 use crate::cli::progress::Progress;
-use crate::cli::shared::EngineArgs;
+use crate::cli::report::fixed;
+use crate::cli::shared::{EngineArgs, finite_f64};
 use crate::engine;
 use crate::engine::EngineSettings;
 use crate::error::Result;
@@ -23,13 +24,13 @@ use crate::topology::Topology;
 #[derive(Debug, Clone, ClapArgs)]
 pub struct DemoArgs {
     /// Icosphere level of the embedded test mesh (20·4^K triangles).
-    #[arg(long, value_name = "K", default_value_t = 4, value_parser = clap::value_parser!(u32).range(0..=10))]
+    #[arg(long, value_name = "K", default_value_t = 4, allow_negative_numbers = true, value_parser = clap::value_parser!(u32).range(0..=10))]
     pub subdivisions: u32,
     /// Iterations per method.
-    #[arg(long, value_name = "N", default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..10_000))]
+    #[arg(long, value_name = "N", default_value_t = 10, allow_negative_numbers = true, value_parser = clap::value_parser!(u64).range(1..10_000))]
     pub iterations: u64,
     /// Noise along normals, × the mean edge length.
-    #[arg(long, value_name = "SIGMA", default_value_t = 0.3)]
+    #[arg(long, value_name = "SIGMA", default_value_t = 0.3, value_parser = finite_f64, allow_hyphen_values = true)]
     pub noise: f64,
     #[command(flatten)]
     pub engine: EngineArgs,
@@ -128,10 +129,10 @@ pub fn run(cfg: &DemoConfig, progress: &mut Progress, out: &mut dyn Write) -> Re
         let seconds: f64 = records.iter().map(|r| r.seconds).sum();
         writeln!(
             out,
-            "{:<13} {:>12.6} {:>10.4} {:>14.3} {:>16.3e} {:>10.3}",
+            "{:<13} {:>12} {:>10} {:>14.3} {:>16.3e} {:>10.3}",
             method.name(),
-            last.volume_pct,
-            last.area_pct,
+            fixed(last.volume_pct, 6),
+            fixed(last.area_pct, 4),
             rough,
             rms,
             seconds

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use clap::{Args as ClapArgs, ValueEnum};
 
 use crate::cli::flags;
-use crate::cli::output::{mesh_output, output_format, stdout_error};
+use crate::cli::output::{check_files, mesh_output, output_format, stdout_error};
 use crate::cli::progress::Progress;
 use crate::cli::shared::finite_f64;
 use crate::engine::memory;
@@ -38,19 +38,19 @@ pub struct GenerateArgs {
     #[arg(value_name = "OUT")]
     pub output: PathBuf,
     /// Subdivision level K of sphere or torus (sphere: 20·4^K triangles; K = 2 is the paper's 162-vertex sphere).
-    #[arg(long, value_name = "K")]
+    #[arg(long, value_name = "K", allow_negative_numbers = true)]
     pub subdivisions: Option<u32>,
     /// Base mesh for the `mesh` shape (any readable mesh, e.g. a scan).
     #[arg(long, value_name = "MESH")]
     pub from: Option<PathBuf>,
     /// Split every triangle of the base into 4^L, streamed straight to a binary PLY without holding the output in memory (for meshes of hundreds of millions of triangles).
-    #[arg(long, value_name = "L", value_parser = clap::value_parser!(u32).range(0..=15))]
+    #[arg(long, value_name = "L", allow_negative_numbers = true, value_parser = clap::value_parser!(u32).range(0..=15))]
     pub subdivide: Option<u32>,
     /// Gaussian noise along vertex normals, standard deviation relative to the mean edge length.
-    #[arg(long, value_name = "SIGMA", default_value_t = 0.0, value_parser = finite_f64)]
+    #[arg(long, value_name = "SIGMA", default_value_t = 0.0, value_parser = finite_f64, allow_hyphen_values = true)]
     pub noise: f64,
     /// Random seed of the noise (same seed, same mesh).
-    #[arg(long, value_name = "S", default_value_t = 1)]
+    #[arg(long, value_name = "S", default_value_t = 1, allow_negative_numbers = true, value_parser = crate::cli::shared::whole_in(0, u64::MAX))]
     pub seed: u64,
 }
 
@@ -73,6 +73,13 @@ pub struct GenerateConfig {
 impl GenerateConfig {
     pub fn from_args(a: GenerateArgs) -> Result<GenerateConfig> {
         mesh_output(&a.output)?;
+        let reads: Vec<_> = a
+            .from
+            .as_deref()
+            .map(|f| ("--from", f))
+            .into_iter()
+            .collect();
+        check_files(&reads, &[("OUT", &a.output)])?;
         if a.noise < 0.0 {
             return Err(flags::parameter(
                 "noise",

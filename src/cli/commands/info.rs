@@ -9,7 +9,7 @@ use serde::Serialize;
 
 use crate::cli::output::print_json;
 use crate::cli::progress::Progress;
-use crate::cli::report::{count, format_name, num, print_rows};
+use crate::cli::report::{UNDEFINED, count, fixed, format_name, num, print_rows, undefined_as_nan};
 use crate::error::Result;
 use crate::metrics::{self, MeshInfo};
 use crate::topology::Topology;
@@ -41,7 +41,8 @@ impl InfoConfig {
     }
 }
 
-/// The JSON of `vcsmooth info --json`: the path, the format and every [`MeshInfo`] field.
+/// The JSON of `vcsmooth info --json`: the path, the format and every [`MeshInfo`] field, `null`
+/// for a figure the mesh does not define (see [`undefined_as_nan`]).
 #[derive(Debug, Clone, Serialize)]
 pub struct InfoDoc {
     pub path: String,
@@ -62,7 +63,7 @@ pub fn run(cfg: &InfoConfig, progress: &mut Progress, out: &mut dyn Write) -> Re
     let doc = InfoDoc {
         path: cfg.input.display().to_string(),
         format: mesh.source.format.map(format_name),
-        info: metrics::info(&mesh, &topo),
+        info: undefined_as_nan(&metrics::info(&mesh, &topo)),
     };
     progress.finish();
     if cfg.json {
@@ -107,11 +108,20 @@ fn print_info(out: &mut dyn Write, doc: &InfoDoc) -> Result<()> {
     rows.push(("mean edge length", num(i.mean_edge_length)));
     rows.push((
         "roughness",
-        format!("{:.4} deg (mean dihedral angle)", i.roughness_deg),
+        if i.roughness_deg.is_finite() {
+            format!("{} deg (mean dihedral angle)", fixed(i.roughness_deg, 4))
+        } else {
+            format!("{UNDEFINED} (no interior edge between two triangles)")
+        },
     ));
     print_rows(out, &rows)
 }
 
+/// Three coordinates, or one [`UNDEFINED`] for all of them.
 fn vec3(v: [f64; 3]) -> String {
-    format!("{} {} {}", num(v[0]), num(v[1]), num(v[2]))
+    if v.iter().all(|x| x.is_finite()) {
+        format!("{} {} {}", num(v[0]), num(v[1]), num(v[2]))
+    } else {
+        UNDEFINED.to_string()
+    }
 }

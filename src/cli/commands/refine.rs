@@ -7,9 +7,10 @@ use std::path::PathBuf;
 
 use clap::Args as ClapArgs;
 
-use crate::cli::output::{refined_mesh_output, stdout_error};
+use crate::cli::output::{check_files, refined_mesh_output, stdout_error};
 use crate::cli::progress::Progress;
-use crate::cli::shared::{InOut, length};
+use crate::cli::report::{UNDEFINED, fixed, percent_of};
+use crate::cli::shared::{InOut, MAX_THREADS, length};
 use crate::error::Result;
 use crate::io;
 use crate::modes::refine::{self, RefineOptions};
@@ -21,19 +22,19 @@ pub struct RefineArgs {
     #[command(flatten)]
     pub files: InOut,
     /// δ of every subdivision (see `subdivide`).
-    #[arg(long, value_name = "DELTA", allow_negative_numbers = true, value_parser = length)]
+    #[arg(long, value_name = "DELTA", allow_hyphen_values = true, value_parser = length)]
     pub max_edge: f64,
     /// Rounds of subdivide-then-smooth (the paper's Figs. 5–7 show two after a first smoothing).
-    #[arg(long, value_name = "R", value_parser = clap::value_parser!(u32).range(1..=64))]
+    #[arg(long, value_name = "R", allow_negative_numbers = true, value_parser = clap::value_parser!(u32).range(1..=64))]
     pub rounds: u32,
     /// Smoothing iterations after each subdivision.
-    #[arg(long, value_name = "N", default_value_t = 5, value_parser = clap::value_parser!(u32).range(0..=100_000))]
+    #[arg(long, value_name = "N", default_value_t = 5, allow_negative_numbers = true, value_parser = clap::value_parser!(u32).range(0..=100_000))]
     pub iterations: u32,
     /// Smoothing method (the paper uses vcs, Fig. 5, and vcs-triangle, Fig. 6).
     #[arg(long, value_enum, default_value_t = Method::Vcs)]
     pub method: Method,
-    /// Worker threads of the smoothing [default: all cores].
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
+    /// Worker threads of the smoothing, 1 to 4096 [default: all cores].
+    #[arg(long, value_name = "N", allow_negative_numbers = true, value_parser = clap::value_parser!(u32).range(1..=MAX_THREADS as i64))]
     pub threads: Option<u32>,
 }
 
@@ -50,6 +51,7 @@ impl RefineConfig {
     pub fn from_args(a: RefineArgs) -> Result<RefineConfig> {
         refine::check_max_edge(a.max_edge)?;
         refined_mesh_output(&a.files.output)?;
+        check_files(&[("IN", &a.files.input)], &[("OUT", &a.files.output)])?;
         let mut options = RefineOptions {
             max_edge: a.max_edge,
             rounds: a.rounds as usize,
@@ -88,7 +90,7 @@ pub fn run(cfg: &RefineConfig, progress: &mut Progress, out: &mut dyn Write) -> 
     );
     writeln!(
         out,
-        "{} -> {}: {} rounds of subdivide (max edge {}) + {} × {}: {} vertices, {} triangles -> {} vertices, {} triangles; longest edge {:.6}; volume {:.9} %",
+        "{} -> {}: {} rounds of subdivide (max edge {}) + {} × {}: {} vertices, {} triangles -> {} vertices, {} triangles; longest edge {:.6}; volume {}",
         cfg.input.display(),
         cfg.output.display(),
         cfg.options.rounds,
@@ -100,21 +102,30 @@ pub fn run(cfg: &RefineConfig, progress: &mut Progress, out: &mut dyn Write) -> 
         mesh.positions.len(),
         mesh.triangles.len(),
         max_edge,
-        crate::metrics::percent(volume1, volume0)
+        volume_pct(volume1, volume0)
     )
     .map_err(stdout_error)?;
     for r in &records {
         writeln!(
             out,
-            "round {}: {} -> {} triangles, volume after subdivision {:.9} %, after smoothing {:.9} %, longest edge {:.6}",
+            "round {}: {} -> {} triangles, volume after subdivision {}, after smoothing {}, longest edge {:.6}",
             r.round,
             r.subdivision.triangles_before,
             r.subdivision.triangles_after,
-            crate::metrics::percent(r.volume_subdivided, r.volume_before),
-            crate::metrics::percent(r.volume_smoothed, r.volume_before),
+            volume_pct(r.volume_subdivided, r.volume_before),
+            volume_pct(r.volume_smoothed, r.volume_before),
             r.max_edge_smoothed
         )
         .map_err(stdout_error)?;
     }
     Ok(())
+}
+
+/// `volume` as `12.345678901 %` of `reference`, or [`UNDEFINED`] when the reference is 0 (an open
+/// or flat mesh).
+fn volume_pct(volume: f64, reference: f64) -> String {
+    match percent_of(volume, reference) {
+        p if p.is_finite() => format!("{} %", fixed(p, 9)),
+        _ => UNDEFINED.to_string(),
+    }
 }

@@ -34,11 +34,11 @@ pub struct SlurmScriptArgs {
     /// Time limit of each array task, in sbatch's syntax (e.g. 2:00:00) [default: the partition's].
     #[arg(long, value_name = "T")]
     pub time: Option<String>,
-    /// CPUs per array task, also passed as --threads [default: --threads, else 1].
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
+    /// CPUs per array task, also passed as --threads, 1 to 4096 [default: --threads, else 1].
+    #[arg(long, value_name = "N", allow_negative_numbers = true, value_parser = clap::value_parser!(u32).range(1..=crate::cli::shared::MAX_THREADS as i64))]
     pub cpus: Option<u32>,
     /// Largest array size allowed (indices stay below it); more inputs than that share tasks [default: MaxArraySize of `scontrol show config`, else 1001].
-    #[arg(long, value_name = "M", value_parser = clap::value_parser!(u32).range(1..))]
+    #[arg(long, value_name = "M", allow_negative_numbers = true, value_parser = clap::value_parser!(u32).range(1..))]
     pub max_array_size: Option<u32>,
     /// Name of the array job (the summary job is NAME-summary).
     #[arg(long, value_name = "NAME", default_value = "vcsmooth")]

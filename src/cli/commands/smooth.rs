@@ -11,11 +11,11 @@ use serde::Serialize;
 use crate::cli::flags;
 use crate::cli::multires::{MultiresArgs, print_multires};
 use crate::cli::output::{
-    mesh_output, output_format, parent_exists, stdout_error, svg_output, write_json,
+    check_files, mesh_output, output_format, stdout_error, svg_output, write_json,
 };
 use crate::cli::plot::{Curve, file_name, volume_curve, write_volume_plot};
 use crate::cli::progress::Progress;
-use crate::cli::report::{FileStats, Summary, Tool, count};
+use crate::cli::report::{FileStats, Summary, Tool, count, fixed};
 use crate::cli::shared::{InOut, SmoothingArgs};
 use crate::engine::{self, EngineSettings, IterationRecord, Statistics};
 use crate::error::{Error, Result};
@@ -53,7 +53,7 @@ pub struct ClusterArgs {
     #[arg(long, value_name = "DIR")]
     pub checkpoint: Option<PathBuf>,
     /// Iterations between checkpoints (the last iteration is always written).
-    #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..), allow_negative_numbers = true)]
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = crate::cli::shared::whole_in(1, u64::MAX), allow_negative_numbers = true)]
     pub checkpoint_every: u64,
 }
 
@@ -79,9 +79,6 @@ impl SmoothConfig {
     /// Resolve and check the flags; `argv` is the command line, kept for the report.
     pub fn from_args(a: SmoothArgs, argv: Vec<String>) -> Result<SmoothConfig> {
         mesh_output(&a.files.output)?;
-        if let Some(r) = &a.report {
-            parent_exists(r)?;
-        }
         if let Some(p) = &a.plot {
             svg_output(p)?;
             if a.stats != Statistics::Every {
@@ -91,6 +88,10 @@ impl SmoothConfig {
                 ));
             }
         }
+        let mut writes = vec![("OUT", a.files.output.as_path())];
+        writes.extend(a.report.as_deref().map(|r| ("--report", r)));
+        writes.extend(a.plot.as_deref().map(|p| ("--plot", p)));
+        check_files(&[("IN", &a.files.input)], &writes)?;
         let mut engine = a.smoothing.engine.resolve()?;
         engine.with_stats = a.report.is_some();
         engine.statistics = a.stats;
@@ -280,15 +281,15 @@ fn report(
 
     let s = Summary::of(records);
     let text = format!(
-        "{} -> {}: {}, {}, {} vertices, {} triangles; volume {:.6} %, area {:.4} %\n",
+        "{} -> {}: {}, {}, {} vertices, {} triangles; volume {} %, area {} %\n",
         cfg.input.display(),
         cfg.output.display(),
         cfg.options.method,
         count(cfg.options.iterations, "iteration"),
         run.vertices,
         run.triangles,
-        s.volume_pct,
-        s.area_pct
+        fixed(s.volume_pct, 6),
+        fixed(s.area_pct, 4)
     );
     out.write_all(text.as_bytes()).map_err(stdout_error)?;
     if !records.is_empty() {
@@ -358,8 +359,8 @@ fn print_iterations(out: &mut dyn Write, records: &[IterationRecord]) -> Result<
         text += &format!(
             "{:>5} {:>12} {:>10} {:>11} {:>11} {:>10} {:>9} {:>10} {:>9} {:>9.3}\n",
             r.iteration,
-            measured(r.volume_pct, format!("{:.6}", r.volume_pct)),
-            measured(r.area_pct, format!("{:.4}", r.area_pct)),
+            measured(r.volume_pct, fixed(r.volume_pct, 6)),
+            measured(r.area_pct, fixed(r.area_pct, 4)),
             measured(r.max_displacement, format!("{:.4e}", r.max_displacement)),
             measured(r.mean_displacement, format!("{:.4e}", r.mean_displacement)),
             s.applied,

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use clap::Args as ClapArgs;
 
-use crate::cli::output::{refined_mesh_output, stdout_error};
+use crate::cli::output::{check_files, refined_mesh_output, stdout_error};
 use crate::cli::progress::Progress;
 use crate::cli::shared::{InOut, length};
 use crate::error::Result;
@@ -20,7 +20,7 @@ pub struct SubdivideArgs {
     #[command(flatten)]
     pub files: InOut,
     /// δ: split triangles (conforming longest-edge bisection) until no edge is longer than this; new vertices lie on the input's triangles.
-    #[arg(long, value_name = "DELTA", allow_negative_numbers = true, value_parser = length)]
+    #[arg(long, value_name = "DELTA", allow_hyphen_values = true, value_parser = length)]
     pub max_edge: f64,
 }
 
@@ -36,6 +36,7 @@ impl SubdivideConfig {
     pub fn from_args(a: SubdivideArgs) -> Result<SubdivideConfig> {
         refine::check_max_edge(a.max_edge)?;
         refined_mesh_output(&a.files.output)?;
+        check_files(&[("IN", &a.files.input)], &[("OUT", &a.files.output)])?;
         Ok(SubdivideConfig {
             input: a.files.input,
             output: a.files.output,
