@@ -82,7 +82,10 @@ pub fn run_file(
     }
     let start = Instant::now();
     let sampler = memory::PeakSampler::start(std::time::Duration::from_millis(20));
-    let budget = engine.budget()?;
+    let memory::Budget {
+        bytes: budget,
+        source: budget_source,
+    } = engine.budget_and_source()?;
     let pool = agree(
         comm,
         engine::thread_pool(engine.threads),
@@ -180,6 +183,7 @@ pub fn run_file(
         }),
         memory: MemoryStats {
             budget,
+            budget_source,
             storage: "cluster",
             scratch_bytes: 0,
             peak_anon: maxima[4] as u64,

@@ -160,7 +160,9 @@ pub struct Buffers<'b> {
 }
 
 /// Iterations `first ..= opts.iterations` of `opts` on `mesh`, measuring the statistics `when`
-/// says relative to `reference`. Returns their records.
+/// says relative to `reference`. Returns their records, one per iteration, which grow as the
+/// iterations run (a record the memory cannot hold is an [`Error::Resource`](crate::Error), not
+/// an abort; file runs bound them up front, see [`memory::check_records`](super::memory)).
 #[allow(clippy::too_many_arguments)]
 pub fn iterate(
     mesh: &Sweep,
@@ -172,23 +174,58 @@ pub fn iterate(
     share: &mut dyn Share,
     observer: &mut dyn Observer,
 ) -> Result<Vec<IterationRecord>> {
-    let mut run = Run {
-        mesh,
-        opts,
-        when,
-        origin: DVec3::from_array(reference.origin),
-        reference: *reference,
-        movable: (mesh.topo.len() - mesh.topo.stats.fixed_vertices).max(1),
-        share,
-        observer,
-        records: Vec::new(),
-    };
-    if opts.method.is_jacobi() {
-        run.jacobi(buf, first)?;
-    } else {
-        run.stencils(buf, first)?;
+    let run = Run::new(mesh, opts, when, reference, share, observer, true);
+    run.all(buf, first)
+}
+
+/// [`iterate`] keeping no record (the observer still sees each): for runs whose records nobody
+/// reads, so that their memory does not grow with the iteration count.
+pub(crate) fn iterate_unrecorded(
+    mesh: &Sweep,
+    buf: Buffers,
+    opts: &Options,
+    when: Statistics,
+    reference: &Reference,
+    share: &mut dyn Share,
+    observer: &mut dyn Observer,
+) -> Result<()> {
+    let run = Run::new(mesh, opts, when, reference, share, observer, false);
+    run.all(buf, 1).map(drop)
+}
+
+impl<'r, 'a> Run<'r, 'a> {
+    fn new(
+        mesh: &'r Sweep<'a>,
+        opts: &'r Options,
+        when: Statistics,
+        reference: &Reference,
+        share: &'r mut dyn Share,
+        observer: &'r mut dyn Observer,
+        keep: bool,
+    ) -> Self {
+        Run {
+            mesh,
+            opts,
+            when,
+            origin: DVec3::from_array(reference.origin),
+            reference: *reference,
+            movable: (mesh.topo.len() - mesh.topo.stats.fixed_vertices).max(1),
+            share,
+            observer,
+            keep,
+            records: Vec::new(),
+        }
     }
-    Ok(run.records)
+
+    /// Every iteration from `first`; the records kept.
+    fn all(mut self, buf: Buffers, first: usize) -> Result<Vec<IterationRecord>> {
+        if self.opts.method.is_jacobi() {
+            self.jacobi(buf, first)?;
+        } else {
+            self.stencils(buf, first)?;
+        }
+        Ok(self.records)
+    }
 }
 
 struct Run<'r, 'a> {
@@ -200,6 +237,8 @@ struct Run<'r, 'a> {
     movable: usize,
     share: &'r mut dyn Share,
     observer: &'r mut dyn Observer,
+    /// Whether `records` keeps the records.
+    keep: bool,
     records: Vec<IterationRecord>,
 }
 
@@ -430,7 +469,14 @@ impl Run<'_, '_> {
             self.observer.iteration(&record, self.opts.iterations);
         }
         self.share.iteration_end(&record, pos)?;
-        self.records.push(record);
+        if self.keep {
+            self.records.try_reserve(1).map_err(|_| {
+                let bytes = (self.records.len() as u64 + 1)
+                    .saturating_mul(std::mem::size_of::<IterationRecord>() as u64);
+                super::memory::not_enough("the iteration records", bytes, None)
+            })?;
+            self.records.push(record);
+        }
         Ok(())
     }
 }

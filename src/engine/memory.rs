@@ -34,8 +34,45 @@ pub const FILE_BYTES_PER_TRIANGLE: u64 = 19;
 /// at level 8); with noise also the adjacency and normals it builds (measured 38 B more).
 pub const GENERATE_BYTES_PER_TRIANGLE: u64 = 48;
 pub const NOISE_BYTES_PER_TRIANGLE: u64 = 48;
+/// `subdivide`, per output triangle: the mesh (f64 positions at about half a vertex per triangle,
+/// u32 triangles: 24 B) and the last bisection pass's arrays over the triangles before it, which
+/// are at least half as many (half-edges, edge ids, lengths, marks, midpoints: about 110 B each).
+pub const SUBDIVIDE_BYTES_PER_TRIANGLE: u64 = 96;
 /// Memory for the process itself, its thread stacks and buffers, on top of the per-triangle part.
 pub const BASE_BYTES: u64 = 256 << 20;
+
+/// Bytes of memory per iteration of a run, which keeps one [`IterationRecord`] per iteration for
+/// its report (`--stats last` too: an unmeasured iteration still has its stencil counts and
+/// time): the 88 B record, twice while its vector grows, a copy in the command line's report and
+/// that copy's pretty-printed JSON (about 450 B, twice while it grows).
+///
+/// [`IterationRecord`]: super::IterationRecord
+pub const RECORD_BYTES: u64 = 1024;
+
+/// Memory the records of `iterations` iterations take ([`RECORD_BYTES`] each).
+pub fn records_bytes(iterations: usize) -> u64 {
+    (iterations as u64).saturating_mul(RECORD_BYTES)
+}
+
+/// The records of a run count against its budget: a run whose records alone would take more than
+/// half of it is refused before any work (the other half is for the mesh, in memory or as the
+/// working set of its scratch files). Records grow one per iteration as the run goes, so without
+/// this check a huge iteration count would exhaust the memory hours into the run.
+pub fn check_records(iterations: usize, budget: u64) -> Result<()> {
+    let need = records_bytes(iterations);
+    if need > budget / 2 {
+        return Err(Error::parameter(
+            "iterations",
+            format!(
+                "{iterations}: not enough memory for one record per iteration ({} needed, more than half the memory budget of {}); run at most {} iterations, or raise the budget",
+                format_size(need),
+                format_size(budget),
+                budget / 2 / RECORD_BYTES
+            ),
+        ));
+    }
+    Ok(())
+}
 
 /// Anonymous memory an in-core smoothing run of `triangles` triangles needs.
 pub fn in_core_bytes(triangles: u64) -> u64 {
@@ -71,10 +108,50 @@ pub fn generate_bytes(triangles: u64, noise: bool) -> u64 {
     triangles.saturating_mul(per)
 }
 
-pub use crate::mesh::storage::{format_size, parse_size};
+/// Memory to subdivide a mesh into `triangles` triangles in memory.
+pub fn subdivide_bytes(triangles: u64) -> u64 {
+    triangles.saturating_mul(SUBDIVIDE_BYTES_PER_TRIANGLE)
+}
 
-fn read_kib(file: &str, key: &str) -> Option<u64> {
-    let text = std::fs::read_to_string(file).ok()?;
+/// Refuse work estimated to need `need` bytes for `what` when `budget` cannot hold it, before
+/// anything is allocated: `not enough memory for WHAT (NEED needed, budget B from SOURCE)`.
+pub fn check_fits(what: &str, need: u64, budget: Budget) -> Result<()> {
+    if need <= budget.bytes {
+        return Ok(());
+    }
+    let from = match budget.source {
+        BudgetSource::Flag => "as given",
+        BudgetSource::Available => "3/4 of the available memory",
+        BudgetSource::Cgroup => "3/4 of the cgroup's memory limit left",
+        BudgetSource::Rlimit => "3/4 of the address-space or data rlimit left",
+        BudgetSource::Fallback => "a default",
+    };
+    Err(Error::resource(format!(
+        "not enough memory for {what} ({} needed, budget {}, {from})",
+        format_size(need),
+        format_size(budget.bytes)
+    )))
+}
+
+/// The budget `given` (checked), else the default.
+pub fn budget_or_default(given: Option<u64>) -> Result<Budget> {
+    match given {
+        Some(bytes) => {
+            check_budget(bytes)?;
+            Ok(Budget {
+                bytes,
+                source: BudgetSource::Flag,
+            })
+        }
+        None => Ok(default_budget()),
+    }
+}
+
+pub use crate::mesh::storage::{format_size, not_enough, parse_size};
+
+/// The value of `key` (e.g. `"MemAvailable:"`) in a `/proc` text whose lines read `Key: N kB`,
+/// in bytes.
+fn parse_kib(text: &str, key: &str) -> Option<u64> {
     let line = text.lines().find(|l| l.starts_with(key))?;
     let kib: u64 = line[key.len()..]
         .trim()
@@ -82,7 +159,11 @@ fn read_kib(file: &str, key: &str) -> Option<u64> {
         .trim()
         .parse()
         .ok()?;
-    Some(kib * 1024)
+    kib.checked_mul(1024)
+}
+
+fn read_kib(file: &str, key: &str) -> Option<u64> {
+    parse_kib(&std::fs::read_to_string(file).ok()?, key)
 }
 
 /// The process's anonymous resident memory in bytes (`RssAnon`), if the OS tells.
@@ -95,11 +176,177 @@ pub fn mem_available() -> Option<u64> {
     read_kib("/proc/meminfo", "MemAvailable:")
 }
 
-/// The default budget: three quarters of the available memory (1 GiB if unknown).
-pub fn default_budget() -> u64 {
-    mem_available()
-        .map_or(1 << 30, |m| m / 4 * 3)
-        .max(MIN_BUDGET)
+/// Where a run's memory budget came from (the report's `memory.budget_source`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum BudgetSource {
+    /// Given by the caller (`memory_budget`).
+    Flag,
+    /// The system's available memory (`MemAvailable`).
+    Available,
+    /// The memory limit of the process's control group (v2 `memory.max`, v1
+    /// `memory.limit_in_bytes`) minus what the group already uses: a batch job's `--mem`.
+    Cgroup,
+    /// A resource limit of the process (`RLIMIT_AS`, `RLIMIT_DATA`: `ulimit -v`, `ulimit -d`)
+    /// minus what it already uses.
+    Rlimit,
+    /// Nothing known: 1 GiB.
+    #[default]
+    Fallback,
+}
+
+/// A memory budget and where it came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Budget {
+    pub bytes: u64,
+    pub source: BudgetSource,
+}
+
+/// The default budget: three quarters of the tightest of the memory the system has available,
+/// the headroom of the process's control groups and the headroom under its address-space and
+/// data rlimits (1 GiB if none is known). A budget that ignored a job's cgroup limit would be
+/// killed by the kernel without a word; one that ignored `ulimit -v` would abort on a failed
+/// allocation. It is not raised to [`MIN_BUDGET`]: a smaller limit gives a smaller budget, and the
+/// checks against it fail with a clear error instead of the kernel's kill.
+pub fn default_budget() -> Budget {
+    let limits = [
+        (BudgetSource::Available, mem_available()),
+        (
+            BudgetSource::Cgroup,
+            cgroup_headroom(&|p| std::fs::read_to_string(p).ok()),
+        ),
+        (BudgetSource::Rlimit, rlimit_headroom()),
+    ];
+    budget_of(&limits)
+}
+
+/// Three quarters of the smallest of `limits` (the first on a tie), or 1 GiB if none is known.
+fn budget_of(limits: &[(BudgetSource, Option<u64>)]) -> Budget {
+    limits
+        .iter()
+        .filter_map(|&(source, bytes)| Some((source, bytes?)))
+        .min_by_key(|&(_, bytes)| bytes)
+        .map_or(
+            Budget {
+                bytes: 1 << 30,
+                source: BudgetSource::Fallback,
+            },
+            |(source, bytes)| Budget {
+                bytes: bytes / 4 * 3,
+                source,
+            },
+        )
+}
+
+/// A cgroup limit file's value: `None` for `max` (no limit) or anything unreadable.
+fn parse_cgroup_value(text: &str) -> Option<u64> {
+    text.trim().parse().ok()
+}
+
+/// The process's cgroup paths in `/proc/self/cgroup`: the v2 path (line `0::PATH`) and the path
+/// in the v1 hierarchy that has the `memory` controller (line `N:...memory...:PATH`).
+fn parse_cgroup_paths(text: &str) -> (Option<&str>, Option<&str>) {
+    let (mut v2, mut v1) = (None, None);
+    for line in text.lines() {
+        let mut parts = line.splitn(3, ':');
+        let (Some(id), Some(controllers), Some(path)) = (parts.next(), parts.next(), parts.next())
+        else {
+            continue;
+        };
+        if id == "0" && controllers.is_empty() {
+            v2 = Some(path);
+        } else if controllers.split(',').any(|c| c == "memory") {
+            v1 = Some(path);
+        }
+    }
+    (v2, v1)
+}
+
+/// The smallest `limit − usage` over the cgroup at `path` under `root` and its ancestors (a
+/// group is bounded by every group above it); `None` when no group sets a limit. `read` returns a
+/// file's text (the one place that touches the file system, so tests can give sample trees).
+fn group_headroom(
+    read: &dyn Fn(&str) -> Option<String>,
+    root: &str,
+    path: &str,
+    limit_file: &str,
+    usage_file: &str,
+) -> Option<u64> {
+    let mut dir = path.trim_end_matches('/').to_string();
+    let mut tightest: Option<u64> = None;
+    loop {
+        let limit = read(&format!("{root}{dir}/{limit_file}"))
+            .as_deref()
+            .and_then(parse_cgroup_value);
+        if let Some(limit) = limit {
+            let usage = read(&format!("{root}{dir}/{usage_file}"))
+                .as_deref()
+                .and_then(parse_cgroup_value)
+                .unwrap_or(0);
+            let room = limit.saturating_sub(usage);
+            tightest = Some(tightest.map_or(room, |t| t.min(room)));
+        }
+        match dir.rfind('/') {
+            Some(at) => dir.truncate(at),
+            None => return tightest,
+        }
+    }
+}
+
+/// The headroom of the process's memory cgroups, v2 and v1 (the tighter if both limit).
+fn cgroup_headroom(read: &dyn Fn(&str) -> Option<String>) -> Option<u64> {
+    let text = read("/proc/self/cgroup")?;
+    let (v2, v1) = parse_cgroup_paths(&text);
+    let v2 =
+        v2.and_then(|p| group_headroom(read, "/sys/fs/cgroup", p, "memory.max", "memory.current"));
+    let v1 = v1.and_then(|p| {
+        group_headroom(
+            read,
+            "/sys/fs/cgroup/memory",
+            p,
+            "memory.limit_in_bytes",
+            "memory.usage_in_bytes",
+        )
+    });
+    [v2, v1].into_iter().flatten().min()
+}
+
+/// The soft limit of the row `name` (e.g. `"Max address space"`) of `/proc/self/limits`, in its
+/// units; `None` when unlimited or absent.
+fn parse_limit(text: &str, name: &str) -> Option<u64> {
+    let line = text.lines().find(|l| l.starts_with(name))?;
+    line[name.len()..].split_whitespace().next()?.parse().ok()
+}
+
+/// Address space the C allocator reserves for each thread that allocates (glibc: a 64 MiB arena
+/// per thread, up to eight per core). It is not memory, but `RLIMIT_AS` counts it.
+const ARENA_BYTES: u64 = 64 << 20;
+
+/// The room left under `RLIMIT_AS` (minus `VmSize`: every mapping counts, files included, and
+/// the arenas of the threads to come, one per core and one for the sampler) and `RLIMIT_DATA`
+/// (minus `VmData`), the tighter of the two; `None` when neither is set.
+fn rlimit_headroom() -> Option<u64> {
+    let limits = std::fs::read_to_string("/proc/self/limits").ok()?;
+    let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get()) as u64 + 1;
+    rlimit_room(&limits, &status, threads * ARENA_BYTES)
+}
+
+/// [`rlimit_headroom`] from the texts of `/proc/self/limits` and `/proc/self/status`, keeping
+/// `arenas` bytes of address space aside.
+fn rlimit_room(limits: &str, status: &str, arenas: u64) -> Option<u64> {
+    let room = |limit: &str, used: &str, aside: u64| {
+        let limit = parse_limit(limits, limit)?;
+        let used = parse_kib(status, used).unwrap_or(0).saturating_add(aside);
+        Some(limit.saturating_sub(used))
+    };
+    [
+        room("Max address space", "VmSize:", arenas),
+        room("Max data size", "VmData:", 0),
+    ]
+    .into_iter()
+    .flatten()
+    .min()
 }
 
 /// Check a user-given budget.
@@ -179,6 +426,135 @@ mod tests {
         assert!(check_budget(1 << 20).is_err());
         assert!(check_budget(1 << 30).is_ok());
         assert_eq!(format_size(3 << 29), "1.50 GiB");
+    }
+
+    /// A file system of sample texts.
+    fn tree(files: &[(&str, &str)]) -> impl Fn(&str) -> Option<String> + use<> {
+        let files: Vec<(String, String)> = files
+            .iter()
+            .map(|(p, t)| (p.to_string(), t.to_string()))
+            .collect();
+        move |path: &str| {
+            files
+                .iter()
+                .find(|(p, _)| p == path)
+                .map(|(_, t)| t.clone())
+        }
+    }
+
+    #[test]
+    fn cgroup_v2_limits_are_read_up_the_tree_and_the_tightest_wins() {
+        // A Slurm job: the job's group limits 100 MB, its step's group none, the user's 1 GB.
+        let read = tree(&[
+            ("/proc/self/cgroup", "0::/user/job_7/step_0\n"),
+            ("/sys/fs/cgroup/user/job_7/step_0/memory.max", "max\n"),
+            (
+                "/sys/fs/cgroup/user/job_7/step_0/memory.current",
+                "5000000\n",
+            ),
+            ("/sys/fs/cgroup/user/job_7/memory.max", "100000000\n"),
+            ("/sys/fs/cgroup/user/job_7/memory.current", "30000000\n"),
+            ("/sys/fs/cgroup/user/memory.max", "1000000000\n"),
+            ("/sys/fs/cgroup/user/memory.current", "950000000\n"),
+        ]);
+        // The user's group has only 50 MB left, less than the job's 70 MB.
+        assert_eq!(cgroup_headroom(&read), Some(50_000_000));
+        // Without limits: nothing known.
+        let free = tree(&[
+            ("/proc/self/cgroup", "0::/a\n"),
+            ("/sys/fs/cgroup/a/memory.max", "max\n"),
+        ]);
+        assert_eq!(cgroup_headroom(&free), None);
+        // Over the limit already: no room, not an underflow.
+        let full = tree(&[
+            ("/proc/self/cgroup", "0::/a\n"),
+            ("/sys/fs/cgroup/a/memory.max", "100\n"),
+            ("/sys/fs/cgroup/a/memory.current", "120\n"),
+        ]);
+        assert_eq!(cgroup_headroom(&full), Some(0));
+    }
+
+    #[test]
+    fn cgroup_v1_memory_hierarchy_is_found_among_the_controllers() {
+        let text = "12:pids:/x\n4:memory:/process_api/abc\n3:cpu,cpuacct:/\n0::/\n";
+        assert_eq!(
+            parse_cgroup_paths(text),
+            (Some("/"), Some("/process_api/abc"))
+        );
+        let read = tree(&[
+            ("/proc/self/cgroup", text),
+            (
+                "/sys/fs/cgroup/memory/memory.limit_in_bytes",
+                "9223372036854771712\n",
+            ),
+            (
+                "/sys/fs/cgroup/memory/memory.usage_in_bytes",
+                "8717778944\n",
+            ),
+            (
+                "/sys/fs/cgroup/memory/process_api/abc/memory.limit_in_bytes",
+                "104857600\n",
+            ),
+            (
+                "/sys/fs/cgroup/memory/process_api/abc/memory.usage_in_bytes",
+                "4857600\n",
+            ),
+        ]);
+        assert_eq!(cgroup_headroom(&read), Some(100_000_000));
+        // No cgroup file at all (not Linux, or /proc not mounted).
+        assert_eq!(cgroup_headroom(&tree(&[])), None);
+    }
+
+    #[test]
+    fn rlimits_leave_the_room_above_what_is_mapped() {
+        let limits = "Limit                     Soft Limit           Hard Limit           Units     \n\
+            Max data size             unlimited            unlimited            bytes     \n\
+            Max stack size            8388608              unlimited            bytes     \n\
+            Max address space         307200000            unlimited            bytes     \n";
+        let status =
+            "Name:\tvcsmooth\nVmPeak:\t  120000 kB\nVmSize:\t  100000 kB\nVmData:\t 20000 kB\n";
+        assert_eq!(parse_limit(limits, "Max address space"), Some(307_200_000));
+        assert_eq!(parse_limit(limits, "Max data size"), None);
+        assert_eq!(
+            rlimit_room(limits, status, 0),
+            Some(307_200_000 - 102_400_000)
+        );
+        // The arenas of threads to come are kept aside from the address space.
+        assert_eq!(
+            rlimit_room(limits, status, 100_000_000),
+            Some(307_200_000 - 202_400_000)
+        );
+        // `ulimit -d`: the data limit minus the data segment; the tighter of the two counts.
+        let both = limits.replace(
+            "Max data size             unlimited",
+            "Max data size             50000000 ",
+        );
+        assert_eq!(rlimit_room(&both, status, 0), Some(50_000_000 - 20_480_000));
+        let none = limits.replace("307200000", "unlimited");
+        assert_eq!(rlimit_room(&none, status, 0), None);
+    }
+
+    #[test]
+    fn the_budget_is_three_quarters_of_the_tightest_limit() {
+        let b = budget_of(&[
+            (BudgetSource::Available, Some(8 << 30)),
+            (BudgetSource::Cgroup, Some(100 << 20)),
+            (BudgetSource::Rlimit, None),
+        ]);
+        assert_eq!((b.bytes, b.source), (75 << 20, BudgetSource::Cgroup));
+        let b = budget_of(&[
+            (BudgetSource::Available, Some(8 << 30)),
+            (BudgetSource::Cgroup, None),
+            (BudgetSource::Rlimit, Some(200 << 20)),
+        ]);
+        assert_eq!((b.bytes, b.source), (150 << 20, BudgetSource::Rlimit));
+        let b = budget_of(&[(BudgetSource::Available, None)]);
+        assert_eq!((b.bytes, b.source), (1 << 30, BudgetSource::Fallback));
+        // This machine: whatever it says, never more than three quarters of what is available.
+        let here = default_budget();
+        if let Some(a) = mem_available() {
+            assert!(here.bytes <= a / 4 * 3);
+        }
     }
 
     #[test]

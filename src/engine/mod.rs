@@ -80,6 +80,27 @@ impl Plan {
         when: Statistics,
         observer: &mut dyn Observer,
     ) -> Result<Vec<IterationRecord>> {
+        let mut records = Vec::new();
+        self.smooth_into(storage, opts, when, observer, Some(&mut records))?;
+        Ok(records)
+    }
+
+    /// [`Plan::smooth`] measuring only the last iteration and keeping no record: a step whose
+    /// records nobody reads (a coarse level of the multiresolution mode), so that its memory does
+    /// not grow with the iteration count.
+    pub fn smooth_unrecorded(&mut self, storage: &Storage, opts: &Options) -> Result<()> {
+        self.smooth_into(storage, opts, Statistics::Last, &mut Quiet, None)
+    }
+
+    /// [`Plan::smooth`], the records into `records` when given.
+    fn smooth_into(
+        &mut self,
+        storage: &Storage,
+        opts: &Options,
+        when: Statistics,
+        observer: &mut dyn Observer,
+        records: Option<&mut Vec<IterationRecord>>,
+    ) -> Result<()> {
         opts.check()?;
         let Plan {
             reordered,
@@ -118,9 +139,17 @@ impl Plan {
                 scratch: &mut scratch,
                 prev: &mut prev,
             };
-            iterate::iterate(
-                &mesh, buffers, opts, 1, when, &reference, &mut alone, observer,
-            )
+            match records {
+                Some(records) => {
+                    *records = iterate::iterate(
+                        &mesh, buffers, opts, 1, when, &reference, &mut alone, observer,
+                    )?;
+                    Ok(())
+                }
+                None => iterate::iterate_unrecorded(
+                    &mesh, buffers, opts, when, &reference, &mut alone, observer,
+                ),
+            }
         })
     }
 }

@@ -3,7 +3,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use super::memory::{self, PeakSampler};
+use super::memory::{self, Budget, BudgetSource, PeakSampler};
 use super::observer::{IterationRecord, Observer, Statistics};
 use super::plan::{DEFAULT_PATCH_SIZE, Layout, Plan, PlanStats, PrepTimings};
 use crate::error::{Error, Result};
@@ -22,8 +22,9 @@ pub struct EngineSettings {
     /// Vertices per patch. Default [`DEFAULT_PATCH_SIZE`].
     pub patch_size: usize,
     /// Anonymous memory a file run may use (see [`memory`]); `None`: three quarters of the
-    /// available memory. An in-memory mesh ([`crate::smooth()`]) is smoothed on the heap whatever
-    /// this says.
+    /// available memory, or less under a cgroup limit or an rlimit (see
+    /// [`memory::default_budget`]). An in-memory mesh ([`crate::smooth()`]) is smoothed on the
+    /// heap whatever this says.
     pub memory_budget: Option<u64>,
     /// Where a file run's scratch files go when its mesh does not fit the budget; `None`: beside
     /// the output.
@@ -50,13 +51,12 @@ impl Default for EngineSettings {
 impl EngineSettings {
     /// The memory budget: as given (checked), or the default (see [`memory::default_budget`]).
     pub fn budget(&self) -> Result<u64> {
-        match self.memory_budget {
-            Some(b) => {
-                memory::check_budget(b)?;
-                Ok(b)
-            }
-            None => Ok(memory::default_budget()),
-        }
+        Ok(self.budget_and_source()?.bytes)
+    }
+
+    /// [`EngineSettings::budget`] and where it came from.
+    pub fn budget_and_source(&self) -> Result<Budget> {
+        memory::budget_or_default(self.memory_budget)
     }
 
     /// The plan layout these settings ask for.
@@ -74,7 +74,8 @@ pub struct Report {
     pub triangles: usize,
     pub records: Vec<IterationRecord>,
     pub input_stats: Option<MeshInfo>,
-    /// Measured on the f64 positions before the output format rounds them.
+    /// A file run's: measured on the output file's positions as stored (rounded to its coordinate
+    /// type); an in-memory run's ([`crate::smooth()`]): on the f64 positions.
     pub output_stats: Option<MeshInfo>,
     pub plan: PlanStats,
     pub memory: MemoryStats,
@@ -108,6 +109,8 @@ pub struct ClusterStats {
 #[derive(Debug, Clone, Default, serde::Serialize)]
 pub struct MemoryStats {
     pub budget: u64,
+    /// Where `budget` came from: "flag", "available", "cgroup", "rlimit" or "fallback".
+    pub budget_source: BudgetSource,
     /// "heap" when the mesh fits the budget, else "scratch" (memory-mapped files); "cluster" for
     /// the ranks of the cluster engine.
     pub storage: &'static str,
@@ -172,21 +175,26 @@ pub(crate) fn run_file_with(
     opts.check()?;
     let start = Instant::now();
     let sampler = PeakSampler::start(std::time::Duration::from_millis(20));
-    let budget = engine.budget()?;
+    let budget = engine.budget_and_source()?;
+    memory::check_records(opts.iterations, budget.bytes)?;
     let pool = super::thread_pool(engine.threads)?;
     let mut t = PhaseTimings::default();
 
     let bytes_read = std::fs::metadata(input)
         .map_err(|e| Error::io(input, e))?
         .len();
-    let storage = storage_for(input, output, engine, budget)?;
+    // The records take their share of the budget; the mesh decides heap or scratch in the rest.
+    let mesh_budget = budget
+        .bytes
+        .saturating_sub(memory::records_bytes(opts.iterations));
+    let storage = storage_for(input, output, engine, mesh_budget)?;
 
     let clock = Instant::now();
     let mut mesh = io::read_mesh_in(input, &storage)?;
     t.ingest = clock.elapsed().as_secs_f64();
-    check_in_memory_budget(input, &storage, &mesh, budget)?;
+    check_in_memory_budget(input, &storage, &mesh, mesh_budget)?;
 
-    let smoothed = pool.install(|| -> Result<_> {
+    let (plan, mut smoothed) = pool.install(|| -> Result<_> {
         let mut plan = Plan::new(&storage, &mesh.positions, &mesh.triangles, engine.layout())
             .map_err(|e| e.in_file(input))?;
         // The plan holds its own (reordered) copy: the input-order positions are not needed until
@@ -198,15 +206,27 @@ pub(crate) fn run_file_with(
         })?;
         mesh.positions = storage.zeroed(n)?;
         plan.positions_in_input_order(&mut mesh.positions);
-        Ok(smoothed)
+        Ok((plan, smoothed))
     })?;
+
+    // The plan is kept past the write only to measure the output as written.
+    let plan = engine.with_stats.then_some(plan);
 
     let clock = Instant::now();
     io::write_mesh(output, &mesh)?;
     t.write = clock.elapsed().as_secs_f64();
+    if let Some(mut plan) = plan {
+        let clock = Instant::now();
+        let written = io::read_mesh_in(output, &storage)?;
+        as_written(&mut plan, &written);
+        drop(written);
+        smoothed.output_stats = Some(pool.install(|| plan.info(&mesh.source)));
+        t.metrics += clock.elapsed().as_secs_f64();
+    }
     t.total = start.elapsed().as_secs_f64();
     let memory = MemoryStats {
-        budget,
+        budget: budget.bytes,
+        budget_source: budget.source,
         storage: if storage.is_mapped() {
             "scratch"
         } else {
@@ -218,6 +238,21 @@ pub(crate) fn run_file_with(
         bytes_written: std::fs::metadata(output).map(|m| m.len()).unwrap_or(0),
     };
     Ok(smoothed.report(&mesh, pool.current_num_threads(), memory, t))
+}
+
+/// Put the positions of the `written` output file into `plan`, so that the output's statistics
+/// describe the file as stored (rounded to its coordinate type: `float`, or `uchar`, `short`, …
+/// of a PLY layout), not the f64 positions before the write. PLY, OBJ and OFF give the plan's
+/// vertices back in the input's order; STL rebuilds its vertices from the triangles' corners
+/// instead, and stores single precision by definition, so its positions are rounded to `f32` here.
+fn as_written(plan: &mut Plan, written: &Mesh) {
+    if written.source.format != Some(io::Format::Stl) && written.positions.len() == plan.len() {
+        plan.set_positions_from_input(&written.positions);
+    } else {
+        for p in plan.reordered.positions.iter_mut() {
+            *p = p.as_vec3().as_dvec3();
+        }
+    }
 }
 
 /// Smooth an in-memory `mesh` in place (see [`crate::smooth()`], the crate's front door).
@@ -235,9 +270,12 @@ pub(crate) fn run_mesh(
     let mut t = PhaseTimings::default();
     let smoothed = pool.install(|| -> Result<_> {
         let mut plan = Plan::new(&storage, &mesh.positions, &mesh.triangles, layout)?;
-        let smoothed = smooth_planned(&mut plan, engine, &mesh.source, &mut t, |plan| {
+        let mut smoothed = smooth_planned(&mut plan, engine, &mesh.source, &mut t, |plan| {
             plan.smooth(&storage, opts, engine.statistics, observer)
         })?;
+        let clock = Instant::now();
+        smoothed.output_stats = engine.with_stats.then(|| plan.info(&mesh.source));
+        t.metrics += clock.elapsed().as_secs_f64();
         plan.positions_in_input_order(&mut mesh.positions);
         Ok(smoothed)
     })?;
@@ -257,8 +295,9 @@ struct Smoothed {
     plan: PlanStats,
 }
 
-/// The phase both runs share, on the current pool: the input's statistics (when asked), `smooth`,
-/// the output's statistics; the plan's preparation and these phases timed into `t`.
+/// The phase both runs share, on the current pool: the input's statistics (when asked) and
+/// `smooth` (the output's statistics are each run's own); the plan's preparation and these phases
+/// timed into `t`.
 fn smooth_planned(
     plan: &mut Plan,
     engine: &EngineSettings,
@@ -275,13 +314,10 @@ fn smooth_planned(
     let records = smooth(plan)?;
     t.smoothing = clock.elapsed().as_secs_f64();
 
-    let clock = Instant::now();
-    let output_stats = engine.with_stats.then(|| plan.info(source));
-    t.metrics += clock.elapsed().as_secs_f64();
     Ok(Smoothed {
         records,
         input_stats,
-        output_stats,
+        output_stats: None,
         plan: plan.stats(),
     })
 }
@@ -324,13 +360,13 @@ pub(crate) fn storage_for(
         .map_err(|e| Error::io(input, e))?
         .len();
     if memory::in_core_bytes_of_file(size) <= budget {
-        return Ok(Storage::heap());
+        return Ok(Storage::heap().with_budget(budget));
     }
     let dir = match &engine.scratch {
         Some(d) => d.clone(),
         None => scratch_beside(output),
     };
-    Storage::scratch(&dir)
+    Ok(Storage::scratch(&dir)?.with_budget(budget))
 }
 
 /// Only binary PLY decodes straight into scratch; other formats land on the heap. Refuse to go on

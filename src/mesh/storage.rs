@@ -41,6 +41,8 @@ unsafe impl Pod for DVec3 {}
 #[derive(Debug)]
 pub struct Storage {
     scratch: Option<PathBuf>,
+    /// The run's memory budget, named when a heap array cannot be allocated.
+    budget: Option<u64>,
     /// Bytes of arrays placed in scratch files so far (for reports).
     mapped_bytes: AtomicU64,
     counter: AtomicUsize,
@@ -51,6 +53,7 @@ impl Storage {
     pub fn heap() -> Self {
         Storage {
             scratch: None,
+            budget: None,
             mapped_bytes: AtomicU64::new(0),
             counter: AtomicUsize::new(0),
         }
@@ -70,9 +73,19 @@ impl Storage {
         }
         Ok(Storage {
             scratch: Some(dir.to_path_buf()),
+            budget: None,
             mapped_bytes: AtomicU64::new(0),
             counter: AtomicUsize::new(0),
         })
+    }
+
+    /// The same storage naming `budget` in its errors (an allocation that fails on the heap says
+    /// what it needed and the budget the run had).
+    pub fn with_budget(self, budget: u64) -> Self {
+        Storage {
+            budget: Some(budget),
+            ..self
+        }
     }
 
     /// Whether arrays go to scratch files.
@@ -85,17 +98,19 @@ impl Storage {
         self.mapped_bytes.load(Ordering::Relaxed)
     }
 
-    /// A zero-filled array of `len` elements.
+    /// A zero-filled array of `len` elements. On the heap, an allocation the system refuses is an
+    /// [`Error::Resource`] naming the size and the budget, never an abort.
     pub fn zeroed<T: Pod>(&self, len: usize) -> Result<Buf<T>> {
-        let Some(dir) = &self.scratch else {
-            // SAFETY-free path: zeroed Vec through a value; every Pod is valid as zeros.
-            return Ok(Buf::from_vec(vec![zero::<T>(); len]));
-        };
         let bytes = len.checked_mul(std::mem::size_of::<T>()).ok_or_else(|| {
             Error::resource(format!(
                 "an array of {len} elements overflows the address space"
             ))
         })?;
+        let Some(dir) = &self.scratch else {
+            let mut v = self.heap_vec(len)?;
+            v.resize(len, zero::<T>());
+            return Ok(Buf::from_vec(v));
+        };
         let n = self.counter.fetch_add(1, Ordering::Relaxed);
         let path = dir.join(format!(".vcsmooth-scratch-{}-{n}", std::process::id()));
         let file = OpenOptions::new()
@@ -132,10 +147,22 @@ impl Storage {
         })
     }
 
+    /// An empty heap vector with room for `len` elements, or the error saying how much was needed.
+    fn heap_vec<T: Pod>(&self, len: usize) -> Result<Vec<T>> {
+        let mut v = Vec::new();
+        v.try_reserve_exact(len).map_err(|_| {
+            let bytes = (len as u64).saturating_mul(std::mem::size_of::<T>() as u64);
+            not_enough(&format!("an array of {len} elements"), bytes, self.budget)
+        })?;
+        Ok(v)
+    }
+
     /// An array holding a copy of `data`.
     pub fn copy_of<T: Pod>(&self, data: &[T]) -> Result<Buf<T>> {
         if !self.is_mapped() {
-            return Ok(Buf::from_vec(data.to_vec()));
+            let mut v = self.heap_vec(data.len())?;
+            v.extend_from_slice(data);
+            return Ok(Buf::from_vec(v));
         }
         let mut b = self.zeroed(data.len())?;
         b.copy_from_slice(data);
@@ -472,6 +499,22 @@ pub fn parse_size(s: &str) -> std::result::Result<u64, String> {
         return Err(format!("'{s}' is too large"));
     }
     Ok(bytes as u64)
+}
+
+/// The error of an allocation that failed: `what` names the array, `bytes` its size; `budget`
+/// the run's budget when there is one.
+pub fn not_enough(what: &str, bytes: u64, budget: Option<u64>) -> Error {
+    Error::resource(match budget {
+        Some(b) => format!(
+            "not enough memory for {what} ({} needed, budget {})",
+            format_size(bytes),
+            format_size(b)
+        ),
+        None => format!(
+            "not enough memory for {what} ({} needed)",
+            format_size(bytes)
+        ),
+    })
 }
 
 /// Format a byte count with a binary unit, e.g. `1.50 GiB`.

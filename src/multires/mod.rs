@@ -30,7 +30,7 @@ use rayon::prelude::*;
 
 use crate::engine::reduce;
 use crate::engine::{
-    self, EngineSettings, IterationRecord, Layout, Observer, Plan, Quiet, Report, Statistics,
+    self, EngineSettings, IterationRecord, Layout, Observer, Plan, Report, Statistics,
 };
 use crate::error::{Error, Result};
 use crate::mesh::{Buf, Storage};
@@ -280,9 +280,7 @@ pub fn smooth_plan(
         }
         level.stats.transfer_seconds = t.elapsed().as_secs_f64();
         let t = Instant::now();
-        level
-            .plan
-            .smooth(storage, &coarse_opts, Statistics::Last, &mut Quiet)?;
+        level.plan.smooth_unrecorded(storage, &coarse_opts)?;
         level.stats.smooth_seconds = t.elapsed().as_secs_f64();
         let mut d: Buf<DVec3> = storage.zeroed(level.rest.len())?;
         let r = &level.plan.reordered;

@@ -52,6 +52,9 @@ pub struct GenerateArgs {
     /// Random seed of the noise (same seed, same mesh).
     #[arg(long, value_name = "S", default_value_t = 1, allow_negative_numbers = true, value_parser = crate::cli::shared::whole_in(0, u64::MAX))]
     pub seed: u64,
+    /// Memory allowed, with K/M/G/T suffixes (binary units): a mesh that would need more is refused before any work [default: 3/4 of the available memory, or less under a cgroup limit or ulimit].
+    #[arg(long, value_name = "SIZE", value_parser = memory::parse_size)]
+    pub memory_budget: Option<u64>,
 }
 
 /// `vcsmooth generate`, resolved.
@@ -68,6 +71,7 @@ pub struct GenerateConfig {
     /// Noise standard deviation relative to the mean edge length (≥ 0).
     pub noise: f64,
     pub seed: u64,
+    pub budget: memory::Budget,
 }
 
 impl GenerateConfig {
@@ -124,6 +128,7 @@ impl GenerateConfig {
             subdivide: a.subdivide,
             noise: a.noise,
             seed: a.seed,
+            budget: memory::budget_or_default(a.memory_budget)?,
         })
     }
 }
@@ -145,18 +150,7 @@ pub fn run(cfg: &GenerateConfig, progress: &mut Progress, out: &mut dyn Write) -
             ),
         ));
     }
-    let triangles = triangles_at(cfg.shape, k);
-    let need = memory::generate_bytes(triangles, cfg.noise > 0.0);
-    let available = memory::mem_available().unwrap_or(u64::MAX);
-    if need > available {
-        return Err(Error::resource(format!(
-            "{}: --subdivisions {k} makes {triangles} triangles and needs about {} of memory, \
-             but only {} is available",
-            cfg.output.display(),
-            gib(need),
-            gib(available)
-        )));
-    }
+    check_memory(cfg, k, "--subdivide L streams larger meshes")?;
 
     progress.phase(format!("generating {} level {k}", shape_name(cfg.shape)));
     let mut mesh = match cfg.shape {
@@ -186,6 +180,10 @@ pub fn run(cfg: &GenerateConfig, progress: &mut Progress, out: &mut dyn Write) -
 
 /// `vcsmooth generate … --subdivide L` (and the `mesh` shape): refine a base mesh and stream it.
 fn run_streamed(cfg: &GenerateConfig, progress: &mut Progress, out: &mut dyn Write) -> Result<()> {
+    if cfg.from.is_none() {
+        // The base is generated in memory (the refined output is streamed).
+        check_memory(cfg, cfg.subdivisions, "its 4^L pieces are streamed")?;
+    }
     let base = match (&cfg.from, cfg.shape) {
         (Some(path), _) => {
             progress.phase(format!("reading {}", path.display()));
@@ -255,8 +253,22 @@ fn triangles_at(shape: Shape, k: u32) -> u64 {
     base << (2 * k.min(max_subdivisions(shape)))
 }
 
-fn gib(bytes: u64) -> String {
-    format!("{:.1} GiB", bytes as f64 / (1u64 << 30) as f64)
+/// Refuse, before any work, a level `k` whose mesh the memory budget cannot hold (`hint`: what
+/// else to try).
+fn check_memory(cfg: &GenerateConfig, k: u32, hint: &str) -> Result<()> {
+    let k = k.min(max_subdivisions(cfg.shape));
+    let triangles = triangles_at(cfg.shape, k);
+    let need = memory::generate_bytes(triangles, cfg.noise > 0.0);
+    let what = format!(
+        "{} level {k} ({triangles} triangles)",
+        shape_name(cfg.shape)
+    );
+    memory::check_fits(&what, need, cfg.budget).map_err(|e| {
+        Error::resource(format!(
+            "{}: {e}; choose a smaller --subdivisions ({hint}) or raise --memory-budget",
+            cfg.output.display()
+        ))
+    })
 }
 
 #[cfg(test)]

@@ -10,7 +10,8 @@ use clap::Args as ClapArgs;
 use crate::cli::output::{check_files, refined_mesh_output, stdout_error};
 use crate::cli::progress::Progress;
 use crate::cli::shared::{InOut, length};
-use crate::error::Result;
+use crate::engine::memory;
+use crate::error::{Error, Result};
 use crate::io;
 use crate::modes::refine;
 
@@ -22,6 +23,9 @@ pub struct SubdivideArgs {
     /// δ: split triangles (conforming longest-edge bisection) until no edge is longer than this; new vertices lie on the input's triangles.
     #[arg(long, value_name = "DELTA", allow_hyphen_values = true, value_parser = length)]
     pub max_edge: f64,
+    /// Memory allowed, with K/M/G/T suffixes (binary units): a δ whose output would need more is refused before any work [default: 3/4 of the available memory, or less under a cgroup limit or ulimit].
+    #[arg(long, value_name = "SIZE", value_parser = memory::parse_size)]
+    pub memory_budget: Option<u64>,
 }
 
 /// `vcsmooth subdivide`, resolved.
@@ -30,6 +34,7 @@ pub struct SubdivideConfig {
     pub input: PathBuf,
     pub output: PathBuf,
     pub max_edge: f64,
+    pub budget: memory::Budget,
 }
 
 impl SubdivideConfig {
@@ -41,6 +46,7 @@ impl SubdivideConfig {
             input: a.files.input,
             output: a.files.output,
             max_edge: a.max_edge,
+            budget: memory::budget_or_default(a.memory_budget)?,
         })
     }
 }
@@ -49,6 +55,19 @@ impl SubdivideConfig {
 pub fn run(cfg: &SubdivideConfig, progress: &mut Progress, out: &mut dyn Write) -> Result<()> {
     progress.phase(format!("reading {}", cfg.input.display()));
     let mut mesh = io::read_mesh(&cfg.input)?;
+    // The output is built in memory: its size (at least the estimate) is checked first.
+    let triangles = refine::estimate_triangles(&mesh, cfg.max_edge);
+    if triangles <= refine::MAX_TRIANGLES as f64 {
+        let need = memory::subdivide_bytes(triangles as u64);
+        let what = format!("at least {triangles:.3e} triangles");
+        memory::check_fits(&what, need, cfg.budget).map_err(|e| {
+            Error::resource(format!(
+                "{}: --max-edge {}: {e}; choose a larger --max-edge or raise --memory-budget",
+                cfg.output.display(),
+                cfg.max_edge
+            ))
+        })?;
+    }
     progress.phase("subdividing");
     let s = refine::subdivide(&mut mesh, cfg.max_edge).map_err(|e| e.in_file(&cfg.input))?;
     progress.phase(format!("writing {}", cfg.output.display()));
