@@ -81,38 +81,29 @@ pub fn parent_exists(path: &Path) -> Result<()> {
 /// `--report`, …), for [`check_files`].
 pub type Named<'a> = (&'a str, &'a Path);
 
-/// Check, before anything is read or smoothed, every file a command will write (`writes`: the
-/// output first, then its side files such as reports and plots): each can be written (see
-/// [`writable`]), none is one of the files the command reads (`reads`), and no two are the same
-/// file. "The same" is decided by identity: device and inode when the file exists (which also
+/// Check, before anything is read or smoothed, every file a command will write: `output` (if any) and
+/// its side files (`sides`: reports, plots). Each can be written (see [`writable`]); no side file
+/// is one of the files the command reads (`reads`), the output or another side file. The output
+/// itself may be an input: it replaces the file atomically, which is how a file is smoothed in
+/// place. "The same" is decided by identity: device and inode when the file exists (which also
 /// catches hard links, symbolic links and spellings such as `./a/../x.ply`), else the absolute
 /// path with `.`, `..` and the symbolic links of its existing part resolved. The error names the
 /// flag of the file that would be overwritten.
-pub fn check_files(reads: &[Named], writes: &[Named]) -> Result<()> {
-    let read_ids: Vec<Identity> = reads.iter().map(|(_, p)| Identity::of(p)).collect();
-    let mut written: Vec<(&str, Identity)> = Vec::with_capacity(writes.len());
-    for &(name, path) in writes {
+pub fn check_files(reads: &[Named], output: Option<Named>, sides: &[Named]) -> Result<()> {
+    let mut taken: Vec<(&str, Identity)> =
+        reads.iter().map(|&(n, p)| (n, Identity::of(p))).collect();
+    taken.extend(output.map(|(n, p)| (n, Identity::of(p))));
+    for &(name, path) in sides {
         let id = Identity::of(path);
-        let clash = reads
-            .iter()
-            .zip(&read_ids)
-            .find(|(_, r)| **r == id)
-            .map(|((other, _), _)| *other)
-            .or_else(|| {
-                written
-                    .iter()
-                    .find(|(_, w)| *w == id)
-                    .map(|(other, _)| *other)
-            });
-        if let Some(other) = clash {
+        if let Some((other, _)) = taken.iter().find(|(_, t)| *t == id) {
             return Err(Error::invalid(
                 path,
                 format!("{name} names the same file as {other}: it would be overwritten"),
             ));
         }
-        written.push((name, id));
+        taken.push((name, id));
     }
-    for &(_, path) in writes {
+    for (_, path) in output.iter().chain(sides) {
         writable(path)?;
     }
     Ok(())

@@ -61,7 +61,7 @@ pub struct CurvesConfig {
 impl CurvesConfig {
     pub fn from_args(a: CurvesArgs) -> Result<CurvesConfig> {
         svg_output(&a.plot)?;
-        check_files(&[("IN", &a.input)], &[("--plot", &a.plot)])?;
+        check_files(&[("IN", &a.input)], None, &[("--plot", &a.plot)])?;
         let methods = distinct(a.methods);
         if methods.is_empty() {
             return Err(flags::parameter("methods", "names no method"));

@@ -83,7 +83,7 @@ impl GenerateConfig {
             .map(|f| ("--from", f))
             .into_iter()
             .collect();
-        check_files(&reads, &[("OUT", &a.output)])?;
+        check_files(&reads, Some(("OUT", &a.output)), &[])?;
         if a.noise < 0.0 {
             return Err(flags::parameter(
                 "noise",

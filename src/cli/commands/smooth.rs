@@ -88,10 +88,10 @@ impl SmoothConfig {
                 ));
             }
         }
-        let mut writes = vec![("OUT", a.files.output.as_path())];
-        writes.extend(a.report.as_deref().map(|r| ("--report", r)));
-        writes.extend(a.plot.as_deref().map(|p| ("--plot", p)));
-        check_files(&[("IN", &a.files.input)], &writes)?;
+        let mut sides = Vec::new();
+        sides.extend(a.report.as_deref().map(|r| ("--report", r)));
+        sides.extend(a.plot.as_deref().map(|p| ("--plot", p)));
+        check_files(&[("IN", &a.files.input)], Some(("OUT", &a.files.output)), &sides)?;
         let mut engine = a.smoothing.engine.resolve()?;
         engine.with_stats = a.report.is_some();
         engine.statistics = a.stats;
