@@ -12,6 +12,7 @@
 //!   gives one clear line and no partial output.
 
 mod cli;
+mod geometry;
 mod memory;
 
 #[path = "corpus/cases.rs"]

@@ -671,15 +671,18 @@ mod tests {
     }
 
     #[test]
-    fn a_vertex_of_huge_degree_gives_no_plan() {
-        // A fan of 70,000 triangles around one vertex: its first ring alone exceeds 16-bit ids.
+    fn a_tile_beyond_16_bit_ids_gives_no_plan() {
+        // A closed bipyramid over a rim of 70,000 vertices: a tile of 65,536 rim vertices has
+        // neighbours beyond 16-bit local ids.
         let m = 70_000u32;
-        let tris: Vec<[u32; 3]> = (0..m).map(|k| [0, 1 + k, 1 + (k + 1) % m]).collect();
-        let topo = Topology::build(m as usize + 1, &tris).unwrap();
+        let tris: Vec<[u32; 3]> = (0..m)
+            .flat_map(|k| [[m, k, (k + 1) % m], [m + 1, (k + 1) % m, k]])
+            .collect();
+        let topo = Topology::build(m as usize + 2, &tris).unwrap();
         // The round says so and leaves its input alone.
-        let pos: Vec<DVec3> = (0..=m).map(|k| DVec3::new(k as f64, 1.0, 0.0)).collect();
+        let pos: Vec<DVec3> = (0..m + 2).map(|k| DVec3::new(k as f64, 1.0, 0.0)).collect();
         let mut out = vec![DVec3::ZERO; pos.len()];
-        let plan = TilePlan::lazy(&topo, 1, 2);
+        let plan = TilePlan::lazy(&topo, 1 << 16, 1);
         assert!(round(&plan, &pos, &mut out, &[0.5], None).is_none());
     }
 }

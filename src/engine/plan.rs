@@ -87,7 +87,7 @@ impl Plan {
         layout: Layout,
     ) -> Result<Plan> {
         let t = Instant::now();
-        let reordered = match layout {
+        let mut reordered = match layout {
             Layout::Patches(0) => {
                 return Err(Error::parameter("patch_size", "must be at least 1"));
             }
@@ -104,7 +104,10 @@ impl Plan {
         };
         let reorder = t.elapsed().as_secs_f64();
         let t = Instant::now();
-        let topology = Topology::build_in(storage, positions.len(), &reordered.triangles)?;
+        let mut topology = Topology::build_in(storage, positions.len(), &reordered.triangles)?;
+        // The plan's copy of the faces is what the stencils' volumes read; the output keeps the
+        // input's faces.
+        topology.orient(&mut reordered.triangles, &reordered.positions);
         let topology_s = t.elapsed().as_secs_f64();
         let t = Instant::now();
         let (patches, schedule) = match layout {

@@ -19,6 +19,24 @@ pub struct MeshInfo {
     pub non_manifold_edges: usize,
     pub non_manifold_vertices: usize,
     pub degenerate_triangles: usize,
+    /// Edges whose two triangles traverse them in the same direction: the faces are not
+    /// consistently oriented (see [`crate::topology`]). Volume, area and roughness are measured,
+    /// and meshes smoothed, with the faces oriented consistently; files keep them as they came.
+    #[serde(default)]
+    pub inconsistent_orientation_edges: usize,
+    /// Components that cannot be oriented consistently (a Möbius strip, a Klein bottle).
+    #[serde(default)]
+    pub non_orientable_components: usize,
+    /// Edges that stay inconsistent in those components; their vertices are fixed.
+    #[serde(default)]
+    pub orientation_seam_edges: usize,
+    /// Vertices with more neighbours than [`crate::topology::MAX_FREE_DEGREE`]; they are fixed.
+    #[serde(default)]
+    pub high_degree_vertices: usize,
+    /// Vertices that no method moves (boundary, non-manifold, degenerate, unreferenced, hubs,
+    /// orientation seams).
+    #[serde(default)]
+    pub fixed_vertices: usize,
     /// Connected components of the (non-degenerate) triangles, through shared vertices;
     /// unreferenced vertices are not components.
     pub components: usize,
@@ -26,7 +44,8 @@ pub struct MeshInfo {
     /// Every edge has exactly two triangles (no boundary, no non-manifold edge), and there is at
     /// least one triangle.
     pub closed: bool,
-    /// Signed volume ([`crate::metrics::volume`]): positive for an outward-oriented closed mesh.
+    /// Signed volume ([`crate::metrics::volume`]): positive for an outward-oriented closed mesh
+    /// (of the consistently oriented faces, see `inconsistent_orientation_edges`).
     pub volume: f64,
     pub area: f64,
     /// Bounding box of all vertices (unreferenced ones included); zeros for an empty mesh.
@@ -39,12 +58,20 @@ pub struct MeshInfo {
 }
 
 /// Measure `mesh` with its topology (`topo` built from `mesh.triangles` over `mesh.positions`).
+/// Faces that are not consistently oriented are measured as the smoothing sees them: oriented
+/// ([`Topology::orient`]) in a copy.
 pub fn info(mesh: &Mesh, topo: &Topology) -> MeshInfo {
-    info_of(&mesh.positions, &mesh.triangles, &mesh.source, topo)
+    if topo.stats.inconsistent_orientation_edges == 0 {
+        return info_of(&mesh.positions, &mesh.triangles, &mesh.source, topo);
+    }
+    let (mut topo, mut triangles) = (topo.clone(), mesh.triangles.to_vec());
+    topo.orient(&mut triangles, &mesh.positions);
+    info_of(&mesh.positions, &triangles, &mesh.source, &topo)
 }
 
 /// [`info`] from the parts of a mesh (e.g. the reordered arrays of the patch engine; every figure
-/// is independent of the vertex and triangle order).
+/// is independent of the vertex and triangle order). The triangles are measured as they are:
+/// oriented already when they come from a plan.
 pub fn info_of(
     pos: &[DVec3],
     triangles: &[[u32; 3]],
@@ -68,6 +95,11 @@ pub fn info_of(
         non_manifold_edges: s.non_manifold_edges,
         non_manifold_vertices: s.non_manifold_vertices,
         degenerate_triangles: s.degenerate_triangles,
+        inconsistent_orientation_edges: s.inconsistent_orientation_edges,
+        non_orientable_components: s.non_orientable_components,
+        orientation_seam_edges: s.orientation_seam_edges,
+        high_degree_vertices: s.high_degree_vertices,
+        fixed_vertices: s.fixed_vertices,
         components: components(topo),
         unreferenced_vertices: s.unreferenced_vertices,
         closed: s.boundary_edges == 0 && s.non_manifold_edges == 0 && !triangles.is_empty(),
@@ -152,7 +184,7 @@ pub fn roughness(pos: &[DVec3], triangles: &[[u32; 3]], topo: &Topology) -> f64 
     let mut sum = 0.0;
     let mut count = 0usize;
     for [i, j] in topo.edges() {
-        let Some([f, g]) = two_common(topo.faces_of(i), topo.faces_of(j)) else {
+        let Some([f, g]) = two_faces(topo, triangles, i, j) else {
             continue;
         };
         if let (Some(n1), Some(n2)) = (normal(f), normal(g)) {
@@ -168,24 +200,23 @@ pub(crate) fn angle_deg(a: DVec3, b: DVec3) -> f64 {
     a.cross(b).length().atan2(a.dot(b)).to_degrees()
 }
 
-/// The common elements of two ascending lists, if there are exactly two.
-fn two_common(a: &[u32], b: &[u32]) -> Option<[u32; 2]> {
+/// The faces of edge `i`–`j`, if there are exactly two: found among the faces of the endpoint with
+/// fewer, so that the edges of a vertex of degree d cost O(d) together, not O(d²).
+fn two_faces(topo: &Topology, triangles: &[[u32; 3]], i: u32, j: u32) -> Option<[u32; 2]> {
+    let (x, y) = if topo.faces_of(i).len() <= topo.faces_of(j).len() {
+        (i, j)
+    } else {
+        (j, i)
+    };
     let mut found = [0u32; 2];
     let mut n = 0;
-    let (mut x, mut y) = (0, 0);
-    while x < a.len() && y < b.len() {
-        match a[x].cmp(&b[y]) {
-            std::cmp::Ordering::Less => x += 1,
-            std::cmp::Ordering::Greater => y += 1,
-            std::cmp::Ordering::Equal => {
-                if n == 2 {
-                    return None;
-                }
-                found[n] = a[x];
-                n += 1;
-                x += 1;
-                y += 1;
+    for &t in topo.faces_of(x) {
+        if triangles[t as usize].contains(&y) {
+            if n == 2 {
+                return None;
             }
+            found[n] = t;
+            n += 1;
         }
     }
     (n == 2).then_some(found)
@@ -338,8 +369,8 @@ mod tests {
         let t = topo(&m);
         // Edge 0-1: 90 degrees; edge 1-2 borders the zero-area triangle: skipped.
         assert!((roughness(&m.positions, &m.triangles, &t) - 90.0).abs() < 1e-12);
-        assert_eq!(two_common(&[1, 2, 3], &[2, 3, 4]), Some([2, 3]));
-        assert_eq!(two_common(&[1, 2, 3], &[1, 2, 3]), None);
-        assert_eq!(two_common(&[1, 5], &[2, 5]), None);
+        assert_eq!(two_faces(&t, &m.triangles, 0, 1), Some([0, 1]));
+        assert_eq!(two_faces(&t, &m.triangles, 1, 2), Some([0, 2]));
+        assert_eq!(two_faces(&t, &m.triangles, 0, 3), None);
     }
 }

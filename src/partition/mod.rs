@@ -26,7 +26,8 @@ pub struct Reordered {
     pub order: Buf<u32>,
     /// Positions in the new order.
     pub positions: Buf<DVec3>,
-    /// Triangles in new ids, smallest vertex first, sorted ascending.
+    /// Triangles in new ids, smallest vertex first, sorted ascending (sorted by first vertex only
+    /// once [`Topology::orient`] has flipped some: it swaps the last two corners).
     pub triangles: Buf<[u32; 3]>,
 }
 

@@ -175,7 +175,8 @@ pub struct SweepStats {
     pub applied: u64,
     /// Stencils with a fixed (boundary or non-manifold) free vertex.
     pub skipped_fixed: u64,
-    /// Stencils whose normal matrix or volume gradient was too small to solve, or gave a non-finite result.
+    /// Stencils whose normal matrix or volume gradient was too small to solve, or whose result was
+    /// not finite or would have moved a vertex farther than a few times the stencil's size.
     pub skipped_degenerate: u64,
     /// Stencils rejected because their energy would have increased.
     pub rejected: u64,

@@ -104,9 +104,9 @@ impl<'t> TilePlan<'t> {
     /// The plan with the default tile size and depth. Tiles are planned by the first round that
     /// runs them (in the thread that runs them, while their adjacency is in cache), so that round
     /// pays for the plan. A tile cannot be planned when it and its rings exceed the 16-bit local
-    /// ids (a vertex of enormous degree, or a vertex order without locality) or a vertex that is
-    /// not fixed has no neighbours: [`TilePlan::run_tile`] then returns `None`, and callers run plain steps,
-    /// which give the same result.
+    /// ids (a vertex order without locality), or a vertex that is not fixed has 255 or more
+    /// neighbours or none: [`TilePlan::run_tile`] then returns `None`, and callers run plain
+    /// steps, which give the same result.
     pub fn new(topo: &'t Topology) -> TilePlan<'t> {
         TilePlan::lazy(topo, TILE, DEPTH)
     }

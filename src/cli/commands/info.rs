@@ -97,6 +97,17 @@ fn print_info(out: &mut dyn Write, doc: &InfoDoc) -> Result<()> {
     rows.push(("non-manifold edges", i.non_manifold_edges.to_string()));
     rows.push(("non-manifold vertices", i.non_manifold_vertices.to_string()));
     rows.push(("degenerate triangles", i.degenerate_triangles.to_string()));
+    rows.push(("orientation", orientation(i)));
+    if i.high_degree_vertices > 0 {
+        rows.push((
+            "high-degree vertices",
+            format!(
+                "{} (more than {} neighbours: fixed)",
+                i.high_degree_vertices,
+                crate::topology::MAX_FREE_DEGREE
+            ),
+        ));
+    }
     rows.push(("components", i.components.to_string()));
     rows.push(("unreferenced vertices", i.unreferenced_vertices.to_string()));
     rows.push(("closed", if i.closed { "yes" } else { "no" }.to_string()));
@@ -115,6 +126,25 @@ fn print_info(out: &mut dyn Write, doc: &InfoDoc) -> Result<()> {
         },
     ));
     print_rows(out, &rows)
+}
+
+/// Whether the faces are consistently oriented, and what smoothing does about it when not.
+fn orientation(i: &MeshInfo) -> String {
+    if i.inconsistent_orientation_edges == 0 {
+        return "consistent".to_string();
+    }
+    let mut s = format!(
+        "inconsistent at {} (oriented consistently to measure and smooth; files keep their faces)",
+        count(i.inconsistent_orientation_edges, "edge")
+    );
+    if i.non_orientable_components > 0 {
+        s += &format!(
+            "; {} non-orientable, {} fixed",
+            count(i.non_orientable_components, "component"),
+            count(i.orientation_seam_edges, "seam edge")
+        );
+    }
+    s
 }
 
 /// Three coordinates, or one [`UNDEFINED`] for all of them.
