@@ -14,6 +14,7 @@
 mod cli;
 mod geometry;
 mod memory;
+mod readers;
 
 #[path = "corpus/cases.rs"]
 mod cases;

@@ -6,10 +6,16 @@ use vcsmooth::io::{Format, read_format_bytes, read_mesh_bytes};
 
 /// Decodes `data` with `format`'s reader (and once more through content detection, as
 /// `read_mesh` would) and checks the result: an error is one line naming the file; a mesh has
-/// finite positions and triangle indices in range, and its face bookkeeping is consistent.
+/// finite positions and triangle indices in range, and its face bookkeeping is consistent; an
+/// OBJ mesh has a vertex (OBJ has no header: bytes in which no `v` or `f` was recognised are
+/// refused, never read as an empty mesh).
 pub fn read(data: &[u8], format: Format, name: &str) {
     let name = Path::new(name);
-    check(read_format_bytes(data, format, name), name);
+    let own = read_format_bytes(data, format, name);
+    if let (Format::Obj, Ok(mesh)) = (format, &own) {
+        assert!(!mesh.positions.is_empty(), "an OBJ without vertices accepted");
+    }
+    check(own, name);
     check(read_mesh_bytes(data, name), name);
 }
 

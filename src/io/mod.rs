@@ -1,14 +1,13 @@
 //! Mesh file input and output. Knows nothing of smoothing.
 //!
-//! - [`read_mesh`] maps the file (one `unsafe` boundary, with a plain-read fallback), picks the
-//!   reader from the content — `ply` magic, `OFF` magic, a binary STL whose size is exactly
-//!   `84 + 50·n`, an ASCII STL starting with `solid` — and otherwise from the extension (`.obj`).
+//! - [`read_mesh`] reads only regular files. It recognises the file from its first 64 KiB before
+//!   anything else is read (`detect`): `ply` magic, `OFF` magic, a binary STL whose size is
+//!   exactly `84 + 50·n`, an ASCII STL starting with `solid`, and otherwise the extension
+//!   (`.obj`); compressed data, UTF-16 text and zeroed files are refused there. Then it maps the
+//!   file (one `unsafe` boundary, with a plain-read fallback) and decodes it.
 //! - [`write_mesh`] picks the writer from the output's extension (`.ply .obj .off .stl`, any case)
 //!   and writes atomically: a temporary file beside the target, flushed, synced and renamed into
 //!   place only when complete; on failure nothing is left under the target's name.
-//! - [`write_ply_streamed`] writes a mesh larger than memory as binary PLY, its vertices and
-//!   triangles handed over one at a time (e.g. by [`crate::shapes::Subdivision`]): the same
-//!   header and records as [`write_mesh`] writes for that mesh, written atomically too.
 //! - [`write_ply_streamed`] writes a mesh larger than memory as binary PLY, its vertices and
 //!   triangles handed over one at a time (e.g. by [`crate::shapes::Subdivision`]): the same
 //!   header and records as [`write_mesh`] writes for that mesh, written atomically too.
@@ -18,9 +17,13 @@
 //! | format | read | write |
 //! |---|---|---|
 //! | PLY | binary little/big-endian (memory-mapped, own header parser, stride decode); ASCII (own strict parser, see `ply::ascii`) | the input's layout when it came from PLY, else binary little-endian `x y z float` (or `double`, see [`Precision`]) + `list uchar int vertex_indices` |
-//! | OBJ | `v` (first three numbers), `f` with `i`, `i/t`, `i//n`, `i/t/n` and negative (relative) indices; every other statement ignored | `v` + `f` |
+//! | OBJ | `v` (first three numbers), `f` with `i`, `i/t`, `i//n`, `i/t/n` and negative (relative) indices; every other statement whose keyword is a name ignored (see `obj`) | `v` + `f` |
 //! | OFF | `OFF` and its `C`/`N`/`ST` variants (extra vertex columns and face colours ignored), `#` comments | `OFF` |
-//! | STL | binary and ASCII | binary |
+//! | STL | binary and ASCII (keywords in any case) | binary |
+//!
+//! Text (OBJ, OFF, ASCII STL, a PLY header) is ASCII or UTF-8, with an optional UTF-8 byte-order
+//! mark, which is skipped; lines end with LF or CRLF. A header line (PLY, OFF's magic and counts,
+//! STL's `solid` line) is at most 64 KiB, a PLY header at most 1 MiB.
 //!
 //! # Conventions
 //!
@@ -30,9 +33,10 @@
 //!   [`Source::face_sizes`] keeps the corner counts so that PLY/OBJ/OFF outputs write the original
 //!   polygons back. Degenerate faces (a repeated index) and duplicate faces are valid and kept.
 //! - STL stores every triangle with its own three corners: the reader merges corners whose
-//!   coordinates are bitwise equal (so `0.0` and `-0.0` stay apart) into one vertex, numbered in
-//!   order of first appearance, so that the mesh has connectivity. STL coordinates are single
-//!   precision by definition; ASCII STL values are rounded to `f32` before merging.
+//!   coordinates are equal (as values: `0.0` and `-0.0` are one vertex) into one vertex, numbered
+//!   in order of first appearance and placed where it first appears, so that the mesh has
+//!   connectivity. STL coordinates are single precision by definition; ASCII STL values are
+//!   rounded to `f32` before merging.
 //! - Positions are `f64` in memory. A `float` output rounds them to `f32`; ASCII outputs print the
 //!   shortest text that reads back to the same value (`f32` or `f64` as the precision says).
 //!
@@ -58,9 +62,15 @@
 //! from 1. Header counts are checked against the file size before anything is allocated from them.
 //! Rejected: NaN/Inf coordinates, indices out of range or negative, faces with fewer than 3
 //! corners, truncated data, trailing non-whitespace after the data, a missing `end_header`, tokens
-//! that are not numbers, unknown formats. A binary PLY header whose counts need more bytes than
-//! the file has is reported as such before any count is used, however large (a 1 KB file claiming
-//! 10^12 vertices fails in microseconds). Tokens that are not UTF-8 are shown with their bytes
+//! that are not numbers, unknown formats, and any file in which nothing was recognised: anything
+//! but a regular file (a directory, a device such as `/dev/zero`, a named pipe), a file of zero
+//! bytes, compressed data or an archive, UTF-16 or UTF-32 text, lines ending in a bare carriage
+//! return, an OBJ without a single `v` or `f` statement or with a line that starts with something
+//! other than a keyword (binary data, prose with punctuation). Each says what the file looks like,
+//! e.g. `gzip-compressed data: decompress it first`. A well-formed empty mesh (`OFF` with
+//! `0 0 0`, a PLY with 0 vertices) is read as one. A binary PLY header whose counts need more
+//! bytes than the file has is reported as such before any count is used, however large (a 1 KB
+//! file claiming 10^12 vertices fails in microseconds). Tokens that are not UTF-8 are shown with their bytes
 //! escaped (`"\xff\xfe"`). The corpus in `tests/corpus/cases.rs` lists every such case with its
 //! exact message, and `fuzz/` fuzzes each reader.
 //!
@@ -83,6 +93,7 @@
 //!   any, is left as it was.
 
 mod atomic;
+mod detect;
 mod obj;
 mod off;
 mod ply;
@@ -136,37 +147,32 @@ fn read_mesh_observed(
     storage: &crate::mesh::Storage,
     decoded: impl FnOnce(&Path),
 ) -> Result<Mesh> {
+    // The type before opening: opening a named pipe blocks until a writer comes.
+    let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
+    detect::file_type(&meta).map_err(|what| Error::invalid(path, what))?;
     let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
     let before = file.metadata().map_err(|e| Error::io(path, e))?;
-    let contents = Contents::load(&mut file, &before).map_err(|e| Error::io(path, e))?;
-    let mesh = match detect(&contents, path) {
-        Ok(Format::Ply) => ply::read_in(&contents, storage).map_err(|e| match e {
-            ply::ReadError::Invalid(what) => Error::invalid(path, what),
-            ply::ReadError::Storage(e) => e,
-        }),
-        _ => parse(&contents, path).map_err(|what| Error::invalid(path, what)),
-    };
-    drop(contents);
+    // Again on the opened file, in case another one was put under the name meanwhile.
+    detect::file_type(&before).map_err(|what| Error::invalid(path, what))?;
+    let mesh = read_open(&mut file, before.len(), path, storage);
     decoded(path);
     // A file rewritten under us decodes into a mix of old and new bytes, or into an error about
     // bytes that are no longer there: compare the size and modification time seen before and
     // after the decode, and report a change before whatever the decode made of it. (A file
     // replaced by a rename is another inode: the one opened here is read consistently.)
     let after = file.metadata().map_err(|e| Error::io(path, e))?;
-    if before.is_file() {
-        let what = if before.len() != after.len() {
-            Some(format!("size {} -> {} bytes", before.len(), after.len()))
-        } else if before.modified().ok() != after.modified().ok() {
-            Some("modification time changed".to_string())
-        } else {
-            None
-        };
-        if let Some(what) = what {
-            return Err(Error::invalid(
-                path,
-                format!("file changed while it was being read ({what})"),
-            ));
-        }
+    let what = if before.len() != after.len() {
+        Some(format!("size {} -> {} bytes", before.len(), after.len()))
+    } else if before.modified().ok() != after.modified().ok() {
+        Some("modification time changed".to_string())
+    } else {
+        None
+    };
+    if let Some(what) = what {
+        return Err(Error::invalid(
+            path,
+            format!("file changed while it was being read ({what})"),
+        ));
     }
     mesh
 }
@@ -202,9 +208,33 @@ pub fn write_mesh(path: &Path, mesh: &Mesh) -> Result<()> {
     })
 }
 
+/// Recognises and decodes an opened regular file of `len` bytes: its first bytes are read and
+/// recognised before the whole file is mapped (a zeroed or compressed file of any size is refused
+/// after one read of at most 64 KiB).
+fn read_open(
+    file: &mut File,
+    len: u64,
+    path: &Path,
+    storage: &crate::mesh::Storage,
+) -> Result<Mesh> {
+    let mut head = Vec::with_capacity(detect::HEAD.min(usize::try_from(len).unwrap_or(0)));
+    Read::take(&mut *file, detect::HEAD as u64)
+        .read_to_end(&mut head)
+        .map_err(|e| Error::io(path, e))?;
+    let format = detect::detect(&head, len, path).map_err(|what| Error::invalid(path, what))?;
+    let contents = Contents::load(file, head, len).map_err(|e| Error::io(path, e))?;
+    match format {
+        Format::Ply => ply::read_in(&contents, storage).map_err(|e| match e {
+            ply::ReadError::Invalid(what) => Error::invalid(path, what),
+            ply::ReadError::Storage(e) => e,
+        }),
+        format => decode(&contents, format).map_err(|what| Error::invalid(path, what)),
+    }
+}
+
 /// Decode a whole file's bytes; the error is the message without the path.
 fn parse(bytes: &[u8], path: &Path) -> std::result::Result<Mesh, String> {
-    decode(bytes, detect(bytes, path)?)
+    decode(bytes, detect::detect(bytes, bytes.len() as u64, path)?)
 }
 
 /// Decode bytes with one format's reader; the error is the message without the path.
@@ -217,35 +247,6 @@ fn decode(bytes: &[u8], format: Format) -> std::result::Result<Mesh, String> {
     }
 }
 
-/// The format of a file: by content where a format has a signature, else by extension.
-fn detect(bytes: &[u8], path: &Path) -> std::result::Result<Format, String> {
-    if bytes.is_empty() {
-        return Err("empty file".into());
-    }
-    if bytes
-        .split(|&b| b == b'\n')
-        .next()
-        .is_some_and(|l| l.trim_ascii() == b"ply")
-    {
-        return Ok(Format::Ply);
-    }
-    if off::has_magic(bytes) {
-        return Ok(Format::Off);
-    }
-    if stl::is_binary(bytes) || stl::is_ascii(bytes) {
-        return Ok(Format::Stl);
-    }
-    match Format::from_extension(path) {
-        // OBJ has no signature; the others get their own reader's message about what is wrong.
-        Some(format) => Ok(format),
-        None => Err(
-            "unknown format: not PLY, OFF or STL by content, and the extension is not \
-             .ply, .obj, .off or .stl"
-                .into(),
-        ),
-    }
-}
-
 /// The bytes of an input file: memory-mapped when possible, read into memory otherwise.
 enum Contents {
     Mapped(memmap2::Mmap),
@@ -253,8 +254,9 @@ enum Contents {
 }
 
 impl Contents {
-    fn load(file: &mut File, meta: &std::fs::Metadata) -> std::io::Result<Contents> {
-        if meta.is_file() && meta.len() > 0 {
+    /// The whole of a regular file of `len` bytes whose first bytes, `head`, were read already.
+    fn load(file: &mut File, mut head: Vec<u8>, len: u64) -> std::io::Result<Contents> {
+        if len > 0 {
             // `populate` (MAP_POPULATE): every byte is read anyway, and faulting the pages in with
             // one call costs much less than one fault per page (armadillo: 0.8 → 1.2 GB/s).
             //
@@ -268,10 +270,10 @@ impl Contents {
                 return Ok(Contents::Mapped(map));
             }
         }
-        // Not mappable (a pipe, an empty file, a file system without mmap): read it instead.
-        let mut bytes = Vec::with_capacity(usize::try_from(meta.len()).unwrap_or(0));
-        file.read_to_end(&mut bytes)?;
-        Ok(Contents::Read(bytes))
+        // Not mappable (a file system without mmap): read the rest after the head.
+        head.reserve(usize::try_from(len).unwrap_or(0).saturating_sub(head.len()));
+        file.read_to_end(&mut head)?;
+        Ok(Contents::Read(head))
     }
 }
 
@@ -514,6 +516,15 @@ pub(crate) fn bad_index(v: i64, vertices: usize) -> String {
     } else {
         format!("vertex index {v} out of range (0..{vertices})")
     }
+}
+
+/// The longest header line a reader accepts (a PLY header line, OFF's magic and counts lines,
+/// ASCII STL's `solid` line): a file whose header runs on is refused once this much is read.
+pub(crate) const MAX_HEADER_LINE: usize = 64 << 10;
+
+/// Text without its UTF-8 byte-order mark, if it has one.
+pub(crate) fn without_bom(text: &[u8]) -> &[u8] {
+    text.strip_prefix(b"\xef\xbb\xbf").unwrap_or(text)
 }
 
 /// Text lines numbered from 1, without their `\n` (a trailing `\r` is left for the whitespace

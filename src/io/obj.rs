@@ -5,19 +5,37 @@
 //! - `f a b c …`: each corner is `i`, `i/t`, `i//n` or `i/t/n`; `i` counts from 1, and a negative
 //!   `i` counts back from the last vertex defined so far. Texture and normal references must be
 //!   integers and are otherwise ignored. Positive indices may refer to vertices defined later.
-//! - Every other statement (`vt`, `vn`, `g`, `o`, `s`, `usemtl`, `l`, …) and everything after a
-//!   `#` is ignored.
+//! - Every other statement (`vt`, `vn`, `g`, `o`, `s`, `mtllib`, `usemtl`, `l`, `p`, …) and
+//!   everything after a `#` is ignored, and so is a statement with a keyword OBJ does not define,
+//!   as long as the keyword is a name (ASCII letters, digits and `_`, starting with a letter or
+//!   `_`): exporters add their own statements, and a reader that knows fewer keywords than the
+//!   writer must still read the mesh.
+//! - A line that starts with anything else (a number, punctuation, a zero byte, bytes that are
+//!   not ASCII) is not OBJ, and is refused: a binary file or prose given an `.obj` name stops at
+//!   its first such line. A file with no `v` and no `f` statement at all is refused too (`no OBJ
+//!   vertex or face found`): there is nothing OBJ in it, and it would otherwise read as an empty
+//!   mesh. A UTF-8 byte-order mark at the start is skipped.
 
 use std::io::{self, Write};
 
 use glam::DVec3;
 
 use super::{
-    FaceBuilder, Faces, Format, Precision, Source, integer, lines, text_position, tokens, write_xyz,
+    FaceBuilder, Faces, Format, Precision, Source, integer, lines, show, text_position, tokens,
+    without_bom, write_xyz,
 };
 use crate::mesh::Mesh;
 
+/// Whether `word` can be an OBJ keyword: a name of ASCII letters, digits and `_`, not starting
+/// with a digit.
+fn is_keyword(word: &[u8]) -> bool {
+    word.first()
+        .is_some_and(|b| b.is_ascii_alphabetic() || *b == b'_')
+        && word.iter().all(|b| b.is_ascii_alphanumeric() || *b == b'_')
+}
+
 pub(crate) fn read(bytes: &[u8]) -> Result<Mesh, String> {
+    let bytes = without_bom(bytes);
     let mut positions: Vec<DVec3> = Vec::new();
     let mut faces = FaceBuilder::with_capacity(0);
     let mut precision = Precision::Float;
@@ -82,8 +100,15 @@ pub(crate) fn read(bytes: &[u8]) -> Result<Mesh, String> {
                 }
                 faces.polygon(&corners);
             }
-            _ => {}
+            Some(keyword) if is_keyword(keyword) => {}
+            Some(other) => {
+                return Err(format!("line {n}: {} is not an OBJ statement", show(other)));
+            }
+            None => {}
         }
+    }
+    if positions.is_empty() && faces.len() == 0 {
+        return Err("no OBJ vertex or face found".into());
     }
     let count = positions.len();
     if u32::try_from(count).is_err() {

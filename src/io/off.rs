@@ -3,13 +3,14 @@
 //!
 //! The `C`, `N` and `ST` variants (`COFF`, `NOFF`, `STCNOFF`, …) add vertex columns, and faces may
 //! carry a colour after their indices: those numbers are checked to be numbers and ignored.
-//! Comments run from `#` to the end of the line. Binary OFF and 4-D / n-D OFF are refused.
+//! Comments run from `#` to the end of the line. Binary OFF and 4-D / n-D OFF are refused. A
+//! UTF-8 byte-order mark is skipped; the magic and counts lines are at most 64 KiB.
 
 use std::io::{self, Write};
 
 use super::{
-    FaceBuilder, Faces, Format, Precision, Source, bad_index, integer, number, show, text_position,
-    tokens, write_xyz,
+    FaceBuilder, Faces, Format, MAX_HEADER_LINE, Precision, Source, bad_index, integer, number,
+    show, text_position, tokens, without_bom, write_xyz,
 };
 use crate::mesh::Mesh;
 
@@ -27,18 +28,30 @@ fn is_magic(word: &[u8]) -> bool {
         && word[..word.len() - 3].iter().all(|b| b"STCN4n".contains(b))
 }
 
-/// Whether the file starts (after comments) with an OFF magic word.
-pub(crate) fn has_magic(bytes: &[u8]) -> bool {
-    significant(bytes)
+/// Whether the text (after any byte-order mark) starts, after comments, with an OFF magic word.
+pub(crate) fn has_magic(text: &[u8]) -> bool {
+    significant(text)
         .next()
         .and_then(|(_, line)| tokens(line).next())
         .is_some_and(is_magic)
 }
 
+/// A header line, refused when it is longer than [`MAX_HEADER_LINE`].
+fn header_line((n, line): (usize, &[u8])) -> Result<(usize, &[u8]), String> {
+    if line.len() > MAX_HEADER_LINE {
+        return Err(format!(
+            "line {n} is longer than {} KiB",
+            MAX_HEADER_LINE >> 10
+        ));
+    }
+    Ok((n, line))
+}
+
 pub(crate) fn read(bytes: &[u8]) -> Result<Mesh, String> {
+    let bytes = without_bom(bytes);
     let mut lines = significant(bytes);
     let last_line = super::lines(bytes).count();
-    let (n, line) = lines.next().ok_or("not an OFF file (no OFF line)")?;
+    let (n, line) = header_line(lines.next().ok_or("not an OFF file (no OFF line)")?)?;
     let mut words = tokens(line);
     let magic = words.next().unwrap_or_default();
     if !is_magic(magic) {
@@ -54,16 +67,19 @@ pub(crate) fn read(bytes: &[u8]) -> Result<Mesh, String> {
         ));
     }
     // The counts follow the magic word on its line, or on the next line.
-    let mut counts: Vec<&[u8]> = words.collect();
+    // At most 4 words: 3 counts, and one more to see that there are too many.
+    let mut counts: Vec<&[u8]> = words.take(4).collect();
     let mut counts_line = n;
     if counts.first() == Some(&&b"BINARY"[..]) {
         return Err(format!("line {n}: binary OFF is not supported"));
     }
     if counts.is_empty() {
-        let (n, line) = lines
-            .next()
-            .ok_or(format!("line {}: file ends before the counts", last_line))?;
-        counts = tokens(line).collect();
+        let (n, line) = header_line(
+            lines
+                .next()
+                .ok_or(format!("line {}: file ends before the counts", last_line))?,
+        )?;
+        counts = tokens(line).take(4).collect();
         counts_line = n;
     }
     let at = |what: String| format!("counts (line {counts_line}): {what}");

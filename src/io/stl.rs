@@ -1,42 +1,73 @@
 //! STL, binary and ASCII. Written as binary.
 //!
 //! STL stores each triangle with its own three corners and no vertex ids. The reader merges corners
-//! whose coordinates are bitwise-equal `f32`s into one vertex (numbered in order of first
-//! appearance), so that the mesh has connectivity: exactly what was written as the same vertex
-//! comes back as one. Nearby but different coordinates are not merged, and `0.0` / `-0.0` stay
-//! apart. Facet normals are ignored on read (recomputed on write) and the 2-byte attribute is
-//! neither kept nor written (always 0).
+//! whose coordinates are equal `f32` values into one vertex (numbered in order of first
+//! appearance, placed where it first appears), so that the mesh has connectivity: exactly what was
+//! written as the same vertex comes back as one. `0.0` and `-0.0` are the same value and merge
+//! (apart, they would open a crack along every edge through a zero coordinate); nearby but
+//! different coordinates are not merged. Facet normals are ignored on read (recomputed on write)
+//! and the 2-byte attribute is neither kept nor written (always 0).
 //!
 //! A file whose size is exactly `84 + 50·n`, with `n` the triangle count at byte 80, is binary —
-//! even when its 80-byte header starts with `solid`, as many exporters write. Otherwise a file
-//! starting with `solid` is ASCII: `solid name`, then `facet normal nx ny nz`, `outer loop`,
-//! `vertex x y z` (3 or more; polygons are fan-triangulated), `endloop`, `endfacet`, …,
-//! `endsolid name`; several solids in one file are concatenated.
+//! even when its 80-byte header starts with `solid`, as many exporters write. Otherwise a text
+//! file starting with `solid` whose next line starts with `facet` or `endsolid` is ASCII:
+//! `solid name`, then `facet normal nx ny nz`, `outer loop`, `vertex x y z` (3 or more; polygons
+//! are fan-triangulated), `endloop`, `endfacet`, …, `endsolid name`; several solids in one file
+//! are concatenated. Keywords are matched in any case (`SOLID`, `Facet Normal`, …), a UTF-8
+//! byte-order mark is skipped, and the `solid` line (the name) is at most 64 KiB.
 
 use std::collections::HashMap;
 use std::io::{self, Write};
 
 use glam::DVec3;
 
-use super::{FaceBuilder, Format, Source, show, tokens};
+use super::{FaceBuilder, Format, MAX_HEADER_LINE, Source, show, without_bom};
 use crate::mesh::Mesh;
 
 const HEADER: usize = 84;
 const FACET: usize = 50;
 
-/// Whether the file's size is exactly what its triangle count says a binary STL has.
-pub(crate) fn is_binary(bytes: &[u8]) -> bool {
-    triangle_count(bytes)
-        .is_some_and(|n| HEADER as u64 + FACET as u64 * u64::from(n) == bytes.len() as u64)
+/// Whether a file of `len` bytes that starts with `head` has exactly the size its triangle count
+/// says a binary STL has.
+pub(crate) fn is_binary(head: &[u8], len: u64) -> bool {
+    triangle_count(head).is_some_and(|n| HEADER as u64 + FACET as u64 * u64::from(n) == len)
 }
 
-/// Whether the file is ASCII STL: it starts with `solid` and is text. (A binary STL whose header
-/// starts with `solid` has zero bytes in its count, attributes and coordinates: a damaged one
-/// gets the binary size message rather than an ASCII parse error.)
-pub(crate) fn is_ascii(bytes: &[u8]) -> bool {
-    let first_line = bytes.trim_ascii_start().split(|&b| b == b'\n').next();
-    tokens(first_line.unwrap_or_default()).next() == Some(b"solid")
-        && !bytes[..bytes.len().min(1024)].contains(&0)
+/// Whether the text (after any byte-order mark) is ASCII STL: its first word is `solid`, its first
+/// KiB has no zero byte, and the first word of its second line is `facet` or `endsolid` (any case)
+/// or there is no second line within [`MAX_HEADER_LINE`] bytes (the reader says what is wrong). A
+/// binary STL whose header starts with `solid` fails these tests (zero bytes in its count,
+/// attributes and coordinates; no keyword after the header), so a damaged one gets the binary
+/// size message rather than an ASCII parse error.
+pub(crate) fn is_ascii(text: &[u8]) -> bool {
+    let mut words = Words::new(text);
+    if !(is_text(text) && starts_with_solid(text)) {
+        return false;
+    }
+    words.next();
+    let rest = &text[words.pos..];
+    match rest
+        .iter()
+        .take(MAX_HEADER_LINE + 1)
+        .position(|&b| b == b'\n')
+    {
+        None => true,
+        Some(end) => Words::new(&rest[end..]).next().is_none_or(|w| {
+            w.eq_ignore_ascii_case(b"facet") || w.eq_ignore_ascii_case(b"endsolid")
+        }),
+    }
+}
+
+/// Whether the first KiB has no zero byte: text, not a binary STL (whose count, attributes and
+/// small coordinates hold zero bytes).
+fn is_text(bytes: &[u8]) -> bool {
+    !bytes[..bytes.len().min(1024)].contains(&0)
+}
+
+fn starts_with_solid(text: &[u8]) -> bool {
+    Words::new(text)
+        .next()
+        .is_some_and(|w| w.eq_ignore_ascii_case(b"solid"))
 }
 
 fn triangle_count(bytes: &[u8]) -> Option<u32> {
@@ -46,10 +77,14 @@ fn triangle_count(bytes: &[u8]) -> Option<u32> {
 }
 
 pub(crate) fn read(bytes: &[u8]) -> Result<Mesh, String> {
-    if is_binary(bytes) {
+    let text = without_bom(bytes);
+    if is_binary(bytes, bytes.len() as u64) {
         read_binary(bytes)
-    } else if is_ascii(bytes) {
-        read_ascii(bytes)
+    } else if is_text(text) && starts_with_solid(text) {
+        // Its own messages say where the ASCII goes wrong.
+        read_ascii(text)
+    } else if is_text(text) {
+        Err("not an STL file: text that does not start with 'solid'".into())
     } else if let Some(n) = triangle_count(bytes) {
         Err(format!(
             "binary STL: the header declares {n} triangles ({} bytes) but the file has {} bytes",
@@ -64,8 +99,8 @@ pub(crate) fn read(bytes: &[u8]) -> Result<Mesh, String> {
     }
 }
 
-/// Merges corners with bitwise-equal coordinates. std's keyed hasher: STL files come from
-/// anywhere, and a keyed hash keeps a hostile file from making the merge quadratic.
+/// Merges corners with equal coordinates. std's keyed hasher: STL files come from anywhere, and a
+/// keyed hash keeps a hostile file from making the merge quadratic.
 #[derive(Default)]
 struct Merger {
     positions: Vec<DVec3>,
@@ -76,7 +111,10 @@ impl Merger {
     fn vertex(&mut self, p: [f32; 3]) -> Result<u32, String> {
         let Merger { positions, ids } = self;
         let next = positions.len();
-        let id = *ids.entry(p.map(f32::to_bits)).or_insert_with(|| {
+        // Keyed by bits with -0.0 made +0.0 (`x + 0.0`): equal values, equal keys (NaN never
+        // comes here). The position stored is the corner as first seen, sign of zero included.
+        let key = p.map(|x| (x + 0.0).to_bits());
+        let id = *ids.entry(key).or_insert_with(|| {
             positions.push(DVec3::from_array(p.map(f64::from)));
             next as u32
         });
@@ -129,29 +167,25 @@ fn read_binary(bytes: &[u8]) -> Result<Mesh, String> {
 }
 
 fn read_ascii(bytes: &[u8]) -> Result<Mesh, String> {
-    let mut words = Words {
-        bytes,
-        pos: 0,
-        line: 1,
-    };
+    let mut words = Words::new(bytes);
     let mut merger = Merger::default();
     let mut faces = FaceBuilder::with_capacity(0);
     let mut corners = Vec::new();
     while let Some(w) = words.next() {
-        if w != b"solid" {
+        if !w.eq_ignore_ascii_case(b"solid") {
             return Err(format!(
                 "line {}: expected 'solid', found {}",
                 words.line,
                 show(w)
             ));
         }
-        words.skip_line(); // the solid's name
+        words.skip_name()?;
         loop {
             let f = faces.len();
             match words.next() {
-                Some(b"facet") => {}
-                Some(b"endsolid") => {
-                    words.skip_line();
+                Some(w) if w.eq_ignore_ascii_case(b"facet") => {}
+                Some(w) if w.eq_ignore_ascii_case(b"endsolid") => {
+                    words.skip_name()?;
                     break;
                 }
                 w => return Err(words.unexpected(f, "'facet' or 'endsolid'", w)),
@@ -163,7 +197,10 @@ fn read_ascii(bytes: &[u8]) -> Result<Mesh, String> {
             words.expect(f, "outer")?;
             words.expect(f, "loop")?;
             corners.clear();
-            while words.peek() == Some(b"vertex") {
+            while words
+                .peek()
+                .is_some_and(|w| w.eq_ignore_ascii_case(b"vertex"))
+            {
                 words.next();
                 let p = [words.number(f)?, words.number(f)?, words.number(f)?];
                 if !p.iter().all(|x| x.is_finite()) {
@@ -203,6 +240,14 @@ struct Words<'a> {
 }
 
 impl<'a> Words<'a> {
+    fn new(bytes: &'a [u8]) -> Self {
+        Words {
+            bytes,
+            pos: 0,
+            line: 1,
+        }
+    }
+
     fn next(&mut self) -> Option<&'a [u8]> {
         while let Some(&b) = self.bytes.get(self.pos).filter(|b| b.is_ascii_whitespace()) {
             self.line += usize::from(b == b'\n');
@@ -222,9 +267,26 @@ impl<'a> Words<'a> {
         ahead.next()
     }
 
-    fn skip_line(&mut self) {
+    /// Skips the rest of a `solid` or `endsolid` line: the name, at most [`MAX_HEADER_LINE`]
+    /// bytes.
+    fn skip_name(&mut self) -> Result<(), String> {
         let rest = &self.bytes[self.pos..];
-        self.pos += rest.iter().position(|&b| b == b'\n').unwrap_or(rest.len());
+        match rest
+            .iter()
+            .take(MAX_HEADER_LINE + 1)
+            .position(|&b| b == b'\n')
+        {
+            Some(end) => self.pos += end,
+            None if rest.len() <= MAX_HEADER_LINE => self.pos += rest.len(),
+            None => {
+                return Err(format!(
+                    "line {}: the solid's name runs on for more than {} KiB",
+                    self.line,
+                    MAX_HEADER_LINE >> 10
+                ));
+            }
+        }
+        Ok(())
     }
 
     fn unexpected(&self, f: usize, want: &str, found: Option<&[u8]>) -> String {
@@ -241,9 +303,10 @@ impl<'a> Words<'a> {
         }
     }
 
+    /// The keyword `want`, in any case.
     fn expect(&mut self, f: usize, want: &str) -> Result<(), String> {
         match self.next() {
-            Some(w) if w == want.as_bytes() => Ok(()),
+            Some(w) if w.eq_ignore_ascii_case(want.as_bytes()) => Ok(()),
             w => Err(self.unexpected(f, &format!("'{want}'"), w)),
         }
     }

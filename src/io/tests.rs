@@ -577,7 +577,7 @@ fn off_variants_comments_and_colours() {
 }
 
 #[test]
-fn stl_merges_bitwise_equal_corners_only() {
+fn stl_merges_equal_corners_only() {
     let facet = |corners: [[f32; 3]; 3]| {
         let mut b = vec![0; 12];
         b.extend(corners.iter().flatten().flat_map(|x| x.to_le_bytes()));
@@ -590,10 +590,21 @@ fn stl_merges_bitwise_equal_corners_only() {
     bytes.extend(3u32.to_le_bytes());
     bytes.extend(facet([[0., 0., 0.], [1., 0., 0.], [0., 1., 0.]]));
     bytes.extend(facet([[1., 0., 0.], [1., 1., 0.], [0., 1., 0.]]));
-    bytes.extend(facet([[-0., 0., 0.], [1., 0., 0.], [0., 1., 0.]]));
+    bytes.extend(facet([[-0., 0., -0.], [1., 0., 0.], [0., 1., 0.]]));
     let mesh = parse_as(&bytes, "m.stl").unwrap();
-    assert_eq!(mesh.positions.len(), 5, "-0.0 is not merged with 0.0");
-    assert_eq!(mesh.triangles, [[0, 1, 2], [1, 3, 2], [4, 1, 2]]);
+    assert_eq!(mesh.positions.len(), 4, "-0.0 is merged with 0.0");
+    assert_eq!(mesh.triangles, [[0, 1, 2], [1, 3, 2], [0, 1, 2]]);
+    // A vertex is placed where it first appears: a -0.0 seen first stays -0.0 (the output bytes
+    // of a mesh without mixed zeros are those of a bitwise merge).
+    let first_negative = [&bytes[..84], &bytes[84 + 100..], &bytes[84..84 + 100]].concat();
+    let mesh = parse_as(&first_negative, "m.stl").unwrap();
+    assert_eq!(mesh.triangles, [[0, 1, 2], [0, 1, 2], [1, 3, 2]]);
+    assert!(mesh.positions[0].x.is_sign_negative() && mesh.positions[0].z.is_sign_negative());
+    // Nearby but different values stay apart.
+    let tiny = facet([[f32::MIN_POSITIVE, 0., 0.], [1., 0., 0.], [0., 1., 0.]]);
+    let mut apart = [&bytes[..84 + 100], &tiny[..]].concat();
+    apart[80..84].copy_from_slice(&3u32.to_le_bytes());
+    assert_eq!(parse_as(&apart, "m.stl").unwrap().positions.len(), 5);
 
     let ascii = "solid name with words\n facet normal 0 0 1\n  outer loop\n   vertex 0 0 0\n\
                  vertex 1 0 0\n   vertex 1 1 0\n   vertex 0 1 0\n  endloop\n endfacet\nendsolid name\n\
@@ -744,8 +755,9 @@ fn malformed_inputs_give_clear_one_line_errors() {
         ("m.off", b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1\n".to_vec(), "face 0 (line 6): face lists 3 vertices but has only 2".into()),
         ("m.off", b"OFF BINARY\n".to_vec(), "binary OFF is not supported".into()),
         ("m.off", b"4OFF\n".to_vec(), "(4-D or n-D OFF) is not supported".into()),
-        ("m.stl", vec![0; 100], "binary STL: the header declares 0 triangles (84 bytes) but the file has 100 bytes".into()),
-        ("m.stl", vec![0; 50], "binary STL: 50 bytes, shorter than the 84-byte header".into()),
+        ("m.stl", [vec![b' '; 99], vec![0]].concat(), "binary STL: the header declares 538976288 triangles (26948814484 bytes) but the file has 100 bytes".into()),
+        ("m.stl", [vec![0xff; 49], vec![0]].concat(), "binary STL: 50 bytes, shorter than the 84-byte header".into()),
+        ("m.stl", vec![0; 100], "the file is 100 zero bytes: not a mesh file".into()),
         ("m.stl", stl_truncated, "binary STL: the header declares 1 triangles (134 bytes) but the file has 120 bytes".into()),
         ("m.stl", stl_ascii.as_bytes().to_vec(), "facet 0 (line 7): expected 'endloop', found \"endfacet\"".into()),
         ("m.stl", b"solid s\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\n".to_vec(), "facet 0 (line 5): file ends early, expected 'endloop'".into()),
@@ -1085,4 +1097,177 @@ fn parallel_binary_decode_reports_the_first_problem_and_handles_late_polygons() 
     assert_eq!(m.triangles[94_999], [94_999, 95_000, 95_001]);
     assert_eq!(&m.triangles[95_000..95_002], &[[1, 2, 3], [1, 3, 4]]);
     assert_eq!(m.source.polygons_triangulated, 1);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Recognition: nothing unrecognised reads as a mesh
+
+/// Prose, zeros, compressed data, other encodings: under every name, refused, never an empty mesh.
+#[test]
+fn unrecognised_bytes_are_refused_under_every_name() {
+    let obj = write_bytes(&octahedron(), "o.obj");
+    let utf16: Vec<u8> = obj.iter().flat_map(|&b| [b, 0]).collect();
+    let inputs: Vec<(&str, Vec<u8>, &str)> = vec![
+        (
+            "prose",
+            b"the quick brown fox\njumps over the lazy dog\n".to_vec(),
+            "",
+        ),
+        (
+            "zeros",
+            vec![0; 300],
+            "the file is 300 zero bytes: not a mesh file",
+        ),
+        (
+            "gzip",
+            [&b"\x1f\x8b\x08\x00"[..], &obj].concat(),
+            "gzip-compressed data: decompress it first",
+        ),
+        ("utf16", utf16.clone(), "UTF-16 text: save it as UTF-8"),
+        (
+            "utf16 bom",
+            [&b"\xff\xfe"[..], &utf16].concat(),
+            "UTF-16 text: save it as UTF-8",
+        ),
+        (
+            "cr",
+            obj.iter()
+                .map(|&b| if b == b'\n' { b'\r' } else { b })
+                .collect(),
+            "lines end with a bare carriage return",
+        ),
+    ];
+    for ext in ["obj", "ply", "off", "stl", "dat"] {
+        let name = format!("m.{ext}");
+        for (what, bytes, message) in &inputs {
+            let e = parse_as(bytes, &name)
+                .map(|m| m.positions.len())
+                .unwrap_err();
+            assert!(
+                e.starts_with(message) && !e.contains('\n'),
+                "{what} as {name}: {e}"
+            );
+        }
+    }
+    // What each reader says about prose on its own.
+    let prose = &inputs[0].1;
+    for (name, message) in [
+        ("m.obj", "no OBJ vertex or face found"),
+        ("m.ply", "not a PLY file (the first line is not 'ply')"),
+        ("m.off", "line 1: not an OFF file (\"the\" instead of OFF)"),
+        (
+            "m.stl",
+            "not an STL file: text that does not start with 'solid'",
+        ),
+    ] {
+        assert_eq!(parse_as(prose, name).map(|_| ()), Err(message.into()));
+    }
+}
+
+#[test]
+fn obj_keeps_unknown_statements_and_refuses_what_is_not_a_statement() {
+    let mut text = String::from_utf8(write_bytes(&octahedron(), "o.obj")).unwrap();
+    text += "vendor_ext 1 2 3\nZBrushPolyGroup 4\nthe end\n";
+    let mesh = parse_as(text.as_bytes(), "m.obj").unwrap();
+    assert_eq!(mesh.triangles.len(), 8);
+    for (line, shown) in [
+        ("1.5 2 3", "\"1.5\""),
+        ("-v 0 0 0", "\"-v\""),
+        ("\u{e9}t\u{e9}", "\"\u{e9}t\u{e9}\""),
+    ] {
+        let bad = format!("{text}{line}\n");
+        assert_eq!(
+            parse_as(bad.as_bytes(), "m.obj").map(|_| ()),
+            Err(format!(
+                "line {}: {shown} is not an OBJ statement",
+                text.lines().count() + 1
+            ))
+        );
+    }
+    // Vertices alone are a mesh (a point cloud); a file with neither is not.
+    assert_eq!(parse_as(b"v 0 0 0\n", "m.obj").unwrap().positions.len(), 1);
+    assert_eq!(
+        parse_as(b"o thing\ng part\n", "m.obj").map(|_| ()),
+        Err("no OBJ vertex or face found".into())
+    );
+}
+
+/// The same file with and without a UTF-8 byte-order mark reads the same, in every text format;
+/// a binary PLY's byte offsets still count from the file's first byte.
+#[test]
+fn a_utf8_byte_order_mark_is_skipped_in_every_text_format() {
+    let rich = oracle_read(RICH.as_bytes());
+    let samples = [
+        ("m.obj", write_bytes(&octahedron(), "m.obj")),
+        ("m.off", write_bytes(&cube(), "m.off")),
+        ("m.ply", RICH.as_bytes().to_vec()),
+        ("b.ply", oracle_write(&rich, Encoding::BinaryLittleEndian)),
+        ("m.stl", b"solid s\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\nendloop\nendfacet\nendsolid s\n".to_vec()),
+    ];
+    for (name, bytes) in samples {
+        let plain = parse_as(&bytes, name).unwrap();
+        let marked = parse_as(&[&b"\xef\xbb\xbf"[..], &bytes].concat(), name).unwrap();
+        assert_eq!(marked.positions[..], plain.positions[..], "{name}");
+        assert_eq!(marked.triangles[..], plain.triangles[..], "{name}");
+        assert!(!plain.positions.is_empty());
+    }
+    let (mut good, header) = triangle_ply();
+    good[header..header + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+    let marked = [&b"\xef\xbb\xbf"[..], &good].concat();
+    assert_eq!(
+        parse_as(&marked, "n.ply").map(|_| ()),
+        Err(format!(
+            "vertex 0 (byte {}): coordinate is not finite (NaN, 0, 0)",
+            header + 3
+        ))
+    );
+}
+
+#[test]
+fn header_lines_are_bounded() {
+    let long = "x".repeat(super::MAX_HEADER_LINE);
+    let refused = |name: &str, text: String, message: &str| {
+        let start = std::time::Instant::now();
+        assert_eq!(
+            parse_as(text.as_bytes(), name).map(|_| ()),
+            Err(message.into())
+        );
+        assert!(start.elapsed().as_millis() < 500);
+    };
+    // One byte over the limit is refused; the limit itself is a line like any other.
+    refused(
+        "m.ply",
+        format!("ply\nformat ascii 1.0\ncomment {long}\n"),
+        "header line 3 is longer than 64 KiB",
+    );
+    let at_limit = format!(
+        "ply\nformat ascii 1.0\ncomment {}\nend_header\n",
+        &long[8..]
+    );
+    assert_eq!(
+        parse_as(at_limit.as_bytes(), "m.ply").map(|_| ()),
+        Err("no 'vertex' element".into())
+    );
+    refused(
+        "m.off",
+        format!("OFF {long}\n"),
+        "line 1 is longer than 64 KiB",
+    );
+    refused(
+        "m.off",
+        format!("OFF\n3 1 0 {long}\n"),
+        "line 2 is longer than 64 KiB",
+    );
+    refused(
+        "m.stl",
+        format!("solid {long}\n"),
+        "line 1: the solid's name runs on for more than 64 KiB",
+    );
+    refused(
+        "m.stl",
+        format!(
+            "solid s\nfacet normal 0 0 1 outer loop vertex 0 0 0 vertex 1 0 0 vertex 0 1 0 endloop endfacet\nendsolid {long}\n"
+        ),
+        "line 3: the solid's name runs on for more than 64 KiB",
+    );
 }

@@ -362,7 +362,7 @@ pub fn cases() -> Vec<Case> {
         error("not_a_number.off", b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 one 0\n3 0 1 2\n".to_vec(), "vertex 2 (line 5): \"one\" is not a number"),
         error("binary.off", b"OFF BINARY\n".to_vec(), "line 1: binary OFF is not supported"),
         // --- STL
-        error("shorter_than_header.stl", vec![0; 50], "binary STL: 50 bytes, shorter than the 84-byte header"),
+        error("shorter_than_header.stl", { let mut b = b"binary".to_vec(); b.resize(50, 0); b }, "binary STL: 50 bytes, shorter than the 84-byte header"),
         error("binary_truncated.stl", stl_binary(2, &octa_facets()[..1]), "binary STL: the header declares 2 triangles (184 bytes) but the file has 134 bytes"),
         error("binary_trailing_garbage.stl", [stl_binary(1, &octa_facets()[..1]), b"junk".to_vec()].concat(), "binary STL: the header declares 1 triangles (134 bytes) but the file has 138 bytes"),
         error("binary_billion_triangles.stl", stl_binary(1_000_000_000, &octa_facets()), "binary STL: the header declares 1000000000 triangles (50000000084 bytes) but the file has 484 bytes"),
@@ -455,5 +455,302 @@ pub fn cases() -> Vec<Case> {
         let name: &'static str = format!("list_{count}_{index}_{format}.ply").leak();
         cases.push(valid(name, typed_octa("double", 0., count, index, format)));
     }
+    cases.extend(recognition());
     cases
+}
+
+/// `text` in UTF-16, little- or big-endian, with or without a byte-order mark.
+fn utf16(text: &[u8], big: bool, bom: bool) -> Vec<u8> {
+    let mut out = Vec::new();
+    let units = std::str::from_utf8(text).unwrap().encode_utf16();
+    for u in bom.then_some(0xfeff).into_iter().chain(units) {
+        out.extend(if big {
+            u.to_be_bytes()
+        } else {
+            u.to_le_bytes()
+        });
+    }
+    out
+}
+
+/// The octahedron as binary STL with every zero coordinate of every other facet written `-0.0`:
+/// merged bit for bit, its corners would fall apart into cracks.
+pub fn octa_stl_negative_zero() -> Vec<u8> {
+    let facets: Vec<[[f32; 3]; 3]> = octa_facets()
+        .into_iter()
+        .enumerate()
+        .map(|(i, f)| f.map(|p| p.map(|x| if x == 0. && i % 2 == 1 { -0. } else { x })))
+        .collect();
+    stl_binary(facets.len() as u32, &facets)
+}
+
+/// The octahedron as ASCII STL with upper- or mixed-case keywords.
+pub fn octa_stl_cased(keywords: [&str; 7]) -> Vec<u8> {
+    let [solid, facet, outer, vertex, endloop, endfacet, endsolid] = keywords;
+    let mut text = format!("{solid} octa\n");
+    let corners = octa_v();
+    for f in octa_f() {
+        text += &format!("{facet} 0 0 0\n{outer}\n");
+        for v in f {
+            let p = corners[v as usize];
+            text += &format!("{vertex} {} {} {}\n", p[0], p[1], p[2]);
+        }
+        text += &format!("{endloop}\n{endfacet}\n");
+    }
+    text += &format!("{endsolid} octa\n");
+    text.into_bytes()
+}
+
+/// The octahedron in each text format with a UTF-8 byte-order mark in front (`name`, bytes).
+pub fn octa_with_bom() -> Vec<(&'static str, Vec<u8>)> {
+    let bom = |bytes: Vec<u8>| [b"\xef\xbb\xbf".to_vec(), bytes].concat();
+    vec![
+        ("bom.obj", bom(octa_obj("\n"))),
+        ("bom_crlf.obj", bom(octa_obj("\r\n"))),
+        ("bom.off", bom(octa_off("\n"))),
+        ("bom_ascii.ply", bom(octa_ascii_ply("\n"))),
+        ("bom_binary.ply", bom(octa_ply(&[]))),
+        ("bom_ascii.stl", bom(octa_stl_ascii("\n"))),
+    ]
+}
+
+/// Files in which no mesh format is recognised, or whose text encoding is not one the readers
+/// take: each refused with what it looks like, never read as an empty mesh. And the text quirks
+/// that are accepted (a UTF-8 byte-order mark, keywords in any case, `-0.0` in STL).
+fn recognition() -> Vec<Case> {
+    const GZIP: &[u8] = b"\x1f\x8b\x08\x00\x00\x00\x00\x00\x02\x03\x2b\x53\x30\x00\x41\xae\x32\x05\x43\x28\x6d\x00\x62\x71\xa5\x01\x49\x23\x05\x63\x2e\x00\x43\xf9\x6e\x2a\x20\x00\x00\x00";
+    let junk =
+        |magic: &[u8]| [magic, &b"\x00\x17\xa9junk that follows a magic number"[..]].concat();
+    let obj = octa_obj("\n");
+    let gzip = "gzip-compressed data: decompress it first";
+    let in_utf16 = "UTF-16 text: save it as UTF-8";
+    let bare_cr =
+        "lines end with a bare carriage return (classic Mac OS): convert the line endings to LF";
+    let no_obj = "no OBJ vertex or face found";
+    let mut cases = vec![
+        // --- compressed data and archives, whatever the name
+        error("gzip.obj", GZIP, gzip),
+        error("gzip.ply", GZIP, gzip),
+        error("gzip.stl", GZIP, gzip),
+        error("mesh.obj.gz", GZIP, gzip),
+        error(
+            "zip.obj",
+            junk(b"PK\x03\x04"),
+            "zip archive: extract the mesh first",
+        ),
+        error(
+            "bzip2.off",
+            junk(b"BZh9"),
+            "bzip2-compressed data: decompress it first",
+        ),
+        error(
+            "xz.stl",
+            junk(b"\xfd7zXZ\x00"),
+            "xz-compressed data: decompress it first",
+        ),
+        error(
+            "zstd.ply",
+            junk(b"\x28\xb5\x2f\xfd"),
+            "zstd-compressed data: decompress it first",
+        ),
+        error(
+            "7z.obj",
+            junk(b"7z\xbc\xaf\x27\x1c"),
+            "7-Zip archive: extract the mesh first",
+        ),
+        // --- text in another encoding
+        error("utf16le_bom.obj", utf16(&obj, false, true), in_utf16),
+        error("utf16be_bom.obj", utf16(&obj, true, true), in_utf16),
+        error("utf16le_no_bom.obj", utf16(&obj, false, false), in_utf16),
+        error("utf16be_no_bom.obj", utf16(&obj, true, false), in_utf16),
+        error(
+            "utf16le_bom.off",
+            utf16(&octa_off("\n"), false, true),
+            in_utf16,
+        ),
+        error(
+            "utf16le_no_bom.ply",
+            utf16(&octa_ascii_ply("\n"), false, false),
+            in_utf16,
+        ),
+        error(
+            "utf16be_no_bom.stl",
+            utf16(&octa_stl_ascii("\r\n"), true, false),
+            in_utf16,
+        ),
+        error(
+            "utf32le_bom.obj",
+            [
+                b"\xff\xfe\x00\x00".to_vec(),
+                obj.iter().flat_map(|&b| [b, 0, 0, 0]).collect(),
+            ]
+            .concat(),
+            "UTF-32 text: save it as UTF-8",
+        ),
+        error("cr_only.obj", octa_obj("\r"), bare_cr),
+        error("cr_only.off", octa_off("\r"), bare_cr),
+        error("cr_only.ply", octa_ascii_ply("\r"), bare_cr),
+        error("cr_only.stl", octa_stl_ascii("\r"), bare_cr),
+        // --- zeroed files (an unwritten download, a sparse file)
+        error(
+            "zeros.obj",
+            vec![0; 1000],
+            "the file is 1000 zero bytes: not a mesh file",
+        ),
+        error(
+            "zeros.ply",
+            vec![0; 10],
+            "the file is 10 zero bytes: not a mesh file",
+        ),
+        error(
+            "zeros.off",
+            vec![0; 2],
+            "the file is 2 zero bytes: not a mesh file",
+        ),
+        error(
+            "zeros.stl",
+            vec![0; 84],
+            "the file is 84 zero bytes: not a mesh file",
+        ),
+        // --- text or binary data that is not the format its name says
+        error(
+            "prose.obj",
+            "the quick brown fox\njumps over the lazy dog\n",
+            no_obj,
+        ),
+        error(
+            "prose_with_punctuation.obj",
+            "Hello, reader.\nThis is not a mesh.\n",
+            "line 1: \"Hello,\" is not an OBJ statement",
+        ),
+        error(
+            "comments_only.obj",
+            "# exported by nothing\n# at all\n",
+            no_obj,
+        ),
+        error("blank_lines_only.obj", "\n  \n\t\r\n", no_obj),
+        error(
+            "statements_without_geometry.obj",
+            "mtllib m.mtl\no empty\ng group\nusemtl red\ns off\n",
+            no_obj,
+        ),
+        error(
+            "numbers_first.obj",
+            "0 0 0\n1 0 0\n0 1 0\n",
+            "line 1: \"0\" is not an OBJ statement",
+        ),
+        error(
+            "nul_bytes.obj",
+            [b"\x00\x00\x00\x01v 0 0 0\n".to_vec(), obj.clone()].concat(),
+            "line 1: \"\\0\\0\\0\\u{1}v\" is not an OBJ statement",
+        ),
+        error(
+            "invalid_utf8_keyword.obj",
+            [obj.clone(), b"\xff\xfe 1 2 3\n".to_vec()].concat(),
+            "line 17: \"\\xff\\xfe\" is not an OBJ statement",
+        ),
+        error(
+            "png_named.obj",
+            b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR\x00\x00\x00\x01".to_vec(),
+            "line 1: \"\\x89PNG\" is not an OBJ statement",
+        ),
+        error(
+            "prose.off",
+            "This is not an OFF file.\n",
+            "line 1: not an OFF file (\"This\" instead of OFF)",
+        ),
+        error(
+            "prose.stl",
+            "hello world\n",
+            "not an STL file: text that does not start with 'solid'",
+        ),
+        error(
+            "solid_then_prose.stl",
+            "solid s\nhello world\n",
+            "facet 0 (line 2): expected 'facet' or 'endsolid', found \"hello\"",
+        ),
+        // --- digits and separators that are not ASCII
+        error(
+            "fullwidth_digits.obj",
+            "v \u{ff11} 0 0\n",
+            "vertex 0 (line 1): \"\u{ff11}\" is not a number",
+        ),
+        error(
+            "arabic_indic_digits.off",
+            "OFF\n3 1 0\n\u{661} 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
+            "vertex 0 (line 3): \"\u{661}\" is not a number",
+        ),
+        error(
+            "no_break_space.obj",
+            "v 0\u{a0}1 0\n",
+            "vertex 0 (line 1): \"0\\u{a0}1\" is not a number",
+        ),
+        error(
+            "fullwidth_digits.stl",
+            "solid s\nfacet normal 0 0 1\nouter loop\nvertex \u{ff11} 0 0\n",
+            "facet 0 (line 4): expected a number, found \"\u{ff11}\"",
+        ),
+        error(
+            "arabic_indic_count.ply",
+            ascii_ply_counts("\u{663}"),
+            "header line 3: element count \"\u{663}\" is not a count",
+        ),
+        // --- a binary STL whose header is free-form text
+        error(
+            "binary_header_with_newlines.stl",
+            {
+                let mut b = stl_binary(8, &octa_facets());
+                b.truncate(b.len() - 1);
+                b[..14].copy_from_slice(b"solid x\nfacet\n");
+                b
+            },
+            "binary STL: the header declares 8 triangles (484 bytes) but the file has 483 bytes",
+        ),
+        // --- accepted
+        valid(
+            "trailing_statement.obj",
+            [obj.clone(), b"the_end of file\n".to_vec()].concat(),
+        ),
+        valid("negative_zero.stl", octa_stl_negative_zero()),
+        valid(
+            "uppercase_ascii.stl",
+            octa_stl_cased([
+                "SOLID",
+                "FACET NORMAL",
+                "OUTER LOOP",
+                "VERTEX",
+                "ENDLOOP",
+                "ENDFACET",
+                "ENDSOLID",
+            ]),
+        ),
+        valid(
+            "mixed_case_ascii.stl",
+            octa_stl_cased([
+                "Solid",
+                "Facet Normal",
+                "Outer Loop",
+                "Vertex",
+                "EndLoop",
+                "EndFacet",
+                "EndSolid",
+            ]),
+        ),
+        valid("binary_header_solid_uppercase.stl", {
+            let mut b = stl_binary(8, &octa_facets());
+            b[..10].copy_from_slice(b"SOLID octa");
+            b
+        }),
+    ];
+    cases.extend(
+        octa_with_bom()
+            .into_iter()
+            .map(|(name, bytes)| valid(name, bytes)),
+    );
+    cases
+}
+
+/// An ASCII PLY of one triangle whose vertex count is `count`.
+fn ascii_ply_counts(count: &str) -> String {
+    format!("ply\nformat ascii 1.0\nelement vertex {count}\n{XYZ}end_header\n0 0 0\n")
 }

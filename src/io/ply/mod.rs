@@ -388,21 +388,49 @@ pub(crate) struct Header {
     pub(crate) lines: usize,
 }
 
+/// The longest header: a file that has no `end_header` by then is refused there.
+const MAX_HEADER: usize = 1 << 20;
+
+/// Whether the text (after any byte-order mark) starts with the line `ply`.
+pub(crate) fn has_magic(text: &[u8]) -> bool {
+    text.split(|&b| b == b'\n')
+        .next()
+        .is_some_and(|l| l.trim_ascii() == b"ply")
+}
+
 /// Parses the header. Lines end with `\n` or `\r\n`; blank lines are skipped; the body starts
-/// right after the `end_header` line's `\n`.
+/// right after the `end_header` line's `\n`. A UTF-8 byte-order mark before `ply` is skipped
+/// (byte offsets still count from the file's first byte). A line longer than
+/// [`super::MAX_HEADER_LINE`], or a header longer than [`MAX_HEADER`], is refused as soon as it
+/// is seen.
 pub(crate) fn parse_header(bytes: &[u8]) -> Fallible<Header> {
     let mut encoding = None;
     let mut meta = Vec::new();
     let mut elements: Vec<Element> = Vec::new();
-    let mut pos = 0;
+    let mut pos = bytes.len() - super::without_bom(bytes).len();
     let mut line = 0;
     loop {
-        let Some(len) = bytes[pos..].iter().position(|&b| b == b'\n') else {
+        let window = &bytes[pos..bytes.len().min(pos + super::MAX_HEADER_LINE + 1)];
+        let Some(len) = window.iter().position(|&b| b == b'\n') else {
+            if window.len() > super::MAX_HEADER_LINE {
+                return Err(format!(
+                    "header line {} is longer than {} KiB",
+                    line + 1,
+                    super::MAX_HEADER_LINE >> 10
+                ));
+            }
             return Err(format!(
                 "header: no end_header line (the file ends at line {})",
                 line + 1
             ));
         };
+        if pos + len >= MAX_HEADER {
+            return Err(format!(
+                "header: no end_header line in the first {} MiB (line {})",
+                MAX_HEADER >> 20,
+                line + 1
+            ));
+        }
         let text = &bytes[pos..pos + len];
         pos += len + 1;
         line += 1;
