@@ -1,9 +1,10 @@
 //! What a file is, decided from its type and its first bytes before anything else is read: a
 //! mesh format, or a refusal that says what the file looks like instead.
 //!
-//! Only regular files are read: a directory, a device or a named pipe is refused from its
-//! metadata, before it is opened (opening a pipe blocks until a writer comes, and `/dev/zero`
-//! never ends). Then the first [`HEAD`] bytes decide, in this order:
+//! Regular files are mapped; named pipes and character devices (`<(zcat mesh.ply.gz)`,
+//! `/dev/stdin`) are streams, read into memory up to [`STREAM_LIMIT`]; directories, block devices
+//! and sockets are refused from their metadata. The first [`HEAD`] bytes decide, in this order
+//! (a stream's before the rest of it is read, so that `/dev/zero` is refused at once):
 //!
 //! 1. nothing, or only zero bytes (an unwritten or zeroed file): refused;
 //! 2. a compression or archive signature (gzip, zip, bzip2, xz, zstd, 7-Zip) or a UTF-16/UTF-32
@@ -26,11 +27,24 @@ use super::{Format, off, ply, stl, without_bom};
 /// How many bytes of a file recognise it: everything below is decided from them alone.
 pub(super) const HEAD: usize = 64 << 10;
 
-/// Refuses anything but a regular file, from its metadata (taken without opening it).
-pub(super) fn file_type(meta: &Metadata) -> Result<(), String> {
+/// How an input is read, from its file type.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Kind {
+    /// A regular file: memory-mapped.
+    File,
+    /// A named pipe or a character device: read into memory, at most [`STREAM_LIMIT`] bytes.
+    Stream,
+}
+
+/// The most a stream is read into memory: a larger mesh is saved to a file first (files of any
+/// size are mapped, and can go out of core).
+pub(super) const STREAM_LIMIT: u64 = 4 << 30;
+
+/// How `meta` (taken without opening the file) is read, or why it is refused.
+pub(super) fn file_type(meta: &Metadata) -> Result<Kind, String> {
     let t = meta.file_type();
     if t.is_file() {
-        return Ok(());
+        return Ok(Kind::File);
     }
     if t.is_dir() {
         return Err("is a directory, not a mesh file".into());
@@ -38,11 +52,10 @@ pub(super) fn file_type(meta: &Metadata) -> Result<(), String> {
     #[cfg(unix)]
     {
         use std::os::unix::fs::FileTypeExt;
-        let kind = if t.is_fifo() {
-            "a named pipe"
-        } else if t.is_char_device() {
-            "a character device"
-        } else if t.is_block_device() {
+        if t.is_fifo() || t.is_char_device() {
+            return Ok(Kind::Stream);
+        }
+        let kind = if t.is_block_device() {
             "a block device"
         } else if t.is_socket() {
             "a socket"
@@ -80,26 +93,7 @@ const SIGNATURES: &[(&[u8], &str)] = &[
 /// shorter than [`HEAD`]), or why it is refused. `path` gives the extension for OBJ.
 pub(super) fn detect(head: &[u8], len: u64, path: &Path) -> Result<Format, String> {
     let head = &head[..head.len().min(HEAD)];
-    if len == 0 {
-        return Err("empty file".into());
-    }
-    if head.iter().all(|&b| b == 0) {
-        return Err(if head.len() as u64 == len {
-            format!("the file is {len} zero bytes: not a mesh file")
-        } else {
-            format!(
-                "the first {} bytes are all zero: not a mesh file",
-                head.len()
-            )
-        });
-    }
-    if let Some((_, what)) = SIGNATURES.iter().find(|(magic, _)| head.starts_with(magic)) {
-        return Err((*what).into());
-    }
-    // bzip2: `BZh` and the block size, a digit from 1 to 9 (text may start with `BZh`).
-    if head.starts_with(b"BZh") && head.get(3).is_some_and(|b| (b'1'..=b'9').contains(b)) {
-        return Err("bzip2-compressed data: decompress it first".into());
-    }
+    refuse(head, len)?;
     let text = without_bom(head);
     if ply::has_magic(text) {
         return Ok(Format::Ply);
@@ -126,6 +120,40 @@ pub(super) fn detect(head: &[u8], len: u64, path: &Path) -> Result<Format, Strin
          .ply, .obj, .off or .stl"
             .into()
     })
+}
+
+/// The refusals decided by the first bytes alone, whatever the length: zero bytes only,
+/// compressed data, archives, UTF-16/UTF-32 byte-order marks. `len` is the file's length
+/// (`u64::MAX` for a stream not read to its end).
+pub(super) fn refuse(head: &[u8], len: u64) -> Result<(), String> {
+    if len == 0 || head.is_empty() {
+        return Err("empty file".into());
+    }
+    if head.iter().all(|&b| b == 0) {
+        return Err(if head.len() as u64 == len {
+            format!("the file is {len} zero bytes: not a mesh file")
+        } else {
+            format!(
+                "the first {} bytes are all zero: not a mesh file",
+                head.len()
+            )
+        });
+    }
+    if let Some((_, what)) = SIGNATURES.iter().find(|(magic, _)| head.starts_with(magic)) {
+        return Err((*what).into());
+    }
+    // bzip2: `BZh` and the block size, a digit from 1 to 9 (text may start with `BZh`).
+    if head.starts_with(b"BZh") && head.get(3).is_some_and(|b| (b'1'..=b'9').contains(b)) {
+        return Err("bzip2-compressed data: decompress it first".into());
+    }
+    Ok(())
+}
+
+/// The length a binary STL starting with `head` would have, from its triangle count (a stream
+/// has no length to check it against until it is read).
+pub(super) fn binary_stl_length(head: &[u8]) -> Option<u64> {
+    let count = head.get(80..84)?;
+    Some(84 + 50 * u64::from(u32::from_le_bytes(count.try_into().ok()?)))
 }
 
 /// Whether the text starts as UTF-16 without a byte-order mark: in three quarters or more of its

@@ -149,11 +149,16 @@ fn read_mesh_observed(
 ) -> Result<Mesh> {
     // The type before opening: opening a named pipe blocks until a writer comes.
     let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
-    detect::file_type(&meta).map_err(|what| Error::invalid(path, what))?;
+    let kind = detect::file_type(&meta).map_err(|what| Error::invalid(path, what))?;
     let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
     let before = file.metadata().map_err(|e| Error::io(path, e))?;
     // Again on the opened file, in case another one was put under the name meanwhile.
-    detect::file_type(&before).map_err(|what| Error::invalid(path, what))?;
+    if detect::file_type(&before).map_err(|what| Error::invalid(path, what))? != kind {
+        return Err(Error::invalid(path, "file replaced while it was opened"));
+    }
+    if kind == detect::Kind::Stream {
+        return read_stream(&mut file, path);
+    }
     let mesh = read_open(&mut file, before.len(), path, storage);
     decoded(path);
     // A file rewritten under us decodes into a mix of old and new bytes, or into an error about
@@ -230,6 +235,86 @@ fn read_open(
         }),
         format => decode(&contents, format).map_err(|what| Error::invalid(path, what)),
     }
+}
+
+/// Reads a stream (a pipe, a character device) into memory and decodes it: its first bytes are
+/// checked before the rest is read, and it may not exceed [`detect::STREAM_LIMIT`].
+fn read_stream(file: &mut File, path: &Path) -> Result<Mesh> {
+    let mut bytes = Vec::new();
+    let mut limit = detect::STREAM_LIMIT;
+    let mut checked = false;
+    let mut unrecognised = None;
+    loop {
+        if bytes.len() == bytes.capacity() {
+            bytes.try_reserve(bytes.len().max(detect::HEAD)).map_err(|_| {
+                Error::resource(format!(
+                    "{}: not enough memory to read more than {} bytes from a stream: save it \
+                     to a file (files are memory-mapped)",
+                    path.display(),
+                    bytes.len()
+                ))
+            })?;
+        }
+        let start = bytes.len();
+        let spare = bytes.capacity() - start;
+        bytes.resize(bytes.capacity(), 0);
+        let read = file.read(&mut bytes[start..start + spare]);
+        bytes.truncate(start + *read.as_ref().unwrap_or(&0));
+        let n = match read {
+            Ok(n) => n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(Error::io(path, e)),
+        };
+        if !checked && (bytes.len() >= detect::HEAD || n == 0) {
+            // What the first bytes show decides now; only a binary STL has no signature, and
+            // then its triangle count bounds the read.
+            let len = if n == 0 { bytes.len() as u64 } else { u64::MAX };
+            detect::refuse(&bytes, len).map_err(|what| Error::invalid(path, what))?;
+            let binary_stl = |format| {
+                format == Format::Stl && !stl::is_ascii(without_bom(&bytes))
+            };
+            match detect::detect(&bytes, len, path) {
+                Ok(format) if n > 0 && binary_stl(format) => {
+                    let stl = detect::binary_stl_length(&bytes).unwrap_or(0);
+                    if stl > limit {
+                        return Err(Error::invalid(
+                            path,
+                            format!(
+                                "binary STL: the header declares {stl} bytes, more than a \
+                                 stream may hold ({limit}): save it to a file"
+                            ),
+                        ));
+                    }
+                    limit = stl;
+                }
+                Ok(_) => {}
+                Err(what) => match detect::binary_stl_length(&bytes) {
+                    Some(stl) if n > 0 && stl <= limit => {
+                        limit = stl;
+                        unrecognised = Some(what);
+                    }
+                    _ => return Err(Error::invalid(path, what)),
+                },
+            }
+            checked = true;
+        }
+        if n == 0 {
+            break;
+        }
+        if bytes.len() as u64 > limit {
+            if let Some(what) = unrecognised {
+                return Err(Error::invalid(path, what));
+            }
+            return Err(Error::invalid(
+                path,
+                format!(
+                    "a stream of more than {limit} bytes: save it to a file (files are \
+                     memory-mapped, of any size)"
+                ),
+            ));
+        }
+    }
+    parse(&bytes, path).map_err(|what| Error::invalid(path, what))
 }
 
 /// Decode a whole file's bytes; the error is the message without the path.

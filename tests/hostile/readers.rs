@@ -57,23 +57,37 @@ fn info(path: &Path) -> serde_json::Value {
 }
 
 #[test]
-fn devices_pipes_and_directories_are_refused_without_reading() {
-    for (device, kind) in [
-        ("/dev/zero", "a character device"),
-        ("/dev/null", "a character device"),
+fn endless_devices_and_directories_are_refused_without_reading_them() {
+    for (device, what) in [
+        ("/dev/zero", "the first 65536 bytes are all zero: not a mesh file"),
+        ("/dev/null", "empty file"),
     ] {
         if Path::new(device).exists() {
-            refused_fast(Path::new(device), &format!("not a regular file ({kind})"));
+            refused_fast(Path::new(device), what);
         }
     }
     let dir = tempfile::tempdir().unwrap();
     refused_fast(dir.path(), "is a directory, not a mesh file");
-    // A named pipe that no one writes: opening it would block for ever.
-    let fifo = dir.path().join("mesh.obj");
+}
+
+#[test]
+fn a_mesh_streamed_through_a_named_pipe_is_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = dir.path().join("mesh.ply");
     let made = std::process::Command::new("mkfifo").arg(&fifo).status();
-    if made.is_ok_and(|s| s.success()) {
-        refused_fast(&fifo, "not a regular file (a named pipe)");
+    if !made.is_ok_and(|s| s.success()) {
+        return;
     }
+    let source = crate::util::scan("horse.ply");
+    let writer = {
+        let fifo = fifo.clone();
+        std::thread::spawn(move || std::fs::write(&fifo, std::fs::read(source).unwrap()))
+    };
+    let streamed = info(&fifo);
+    writer.join().unwrap().unwrap();
+    let file = info(&crate::util::scan("horse.ply"));
+    assert_eq!(streamed["vertices"], file["vertices"]);
+    assert_eq!(streamed["volume"], file["volume"]);
 }
 
 #[test]
