@@ -415,6 +415,9 @@ def cases_paths():
     return out
 
 
+FLOAT_FLAGS = {"--lambda", "--mu", "--cell-factor", "--noise", "--max-edge"}
+
+
 def cases_values():
     out = []
     mesh = write("scan.ply", SPHERE_PLY)
@@ -440,8 +443,10 @@ def cases_values():
                         argv = ["generate", "mesh", "out.ply", "--from", "scan.ply", flag, value]
                 else:
                     argv = ["subdivide", "scan.ply", "out.ply", flag, value]
-                # --mu is negative by design; -1 and -0.5 are fine for it.
-                expect = "either" if (flag == "--mu" and value in ("-1", "-0.5")) else "error"
+                # --mu is negative by design; a huge finite value is a legal real number.
+                legal = (flag == "--mu" and value in ("-1", "-0.5")) or (
+                    flag in FLOAT_FLAGS and value == "18446744073709551616")
+                expect = "either" if legal else "error"
                 out.append(Case("values", f"{cmd} {flag} {value!r}", mesh, argv, expect=expect,
                                 output="out.ply", timeout=30))
     for n in ["18446744073709551615", "300000000", "4294967296"]:
@@ -511,8 +516,10 @@ def cases_readers():
                     ["smooth", "/dev/zero", "out.ply"], expect="error", timeout=10))
     out.append(Case("readers", "/dev/zero as .obj", lambda d: os.symlink("/dev/zero", os.path.join(d, "z.obj")),
                     ["info", "z.obj"], expect="error", timeout=10))
-    out.append(Case("readers", "FIFO as input", lambda d: os.mkfifo(os.path.join(d, "f.ply")),
-                    ["info", "f.ply"], expect="error", timeout=10))
+    out.append(Case("readers", "/dev/urandom named .stl", lambda d: os.symlink("/dev/urandom", os.path.join(d, "r.stl")),
+                    ["info", "r.stl"], expect="error", timeout=10))
+    out.append(Case("readers", "/dev/null as input", lambda d: None, ["info", "/dev/null"],
+                    expect="error", timeout=10))
     out.append(Case("readers", "a directory as input", lambda d: os.mkdir(os.path.join(d, "dir.ply")),
                     ["info", "dir.ply"], expect="error"))
     out.append(Case("readers", "an endless header line",

@@ -192,6 +192,12 @@ pub(crate) fn run_file_with(
     let clock = Instant::now();
     let mut mesh = io::read_mesh_in(input, &storage)?;
     t.ingest = clock.elapsed().as_secs_f64();
+    if mesh.triangles.is_empty() && opts.iterations > 0 {
+        return Err(Error::invalid(
+            input,
+            "no triangles to smooth (a point cloud or an empty mesh)",
+        ));
+    }
     check_in_memory_budget(input, &storage, &mesh, mesh_budget)?;
 
     let (plan, mut smoothed) = pool.install(|| -> Result<_> {
