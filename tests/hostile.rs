@@ -11,6 +11,9 @@
 //!   intact; a full disk (a real 256 KiB tmpfs when it can be mounted, an injected `EFBIG` always)
 //!   gives one clear line and no partial output.
 
+mod batch;
+mod signals;
+
 #[path = "corpus/cases.rs"]
 mod cases;
 
