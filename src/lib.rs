@@ -12,6 +12,8 @@
 //! ## The pipeline, module by module
 //! Data flows one way; each module uses only those listed before it.
 //! - [`error`]: the [`Error`] kinds (invalid input, topology, parameter, I/O, resource).
+//! - [`signals`]: temporary files registered while they exist, removed on SIGINT, SIGTERM and
+//!   SIGHUP.
 //! - [`mesh`]: [`Mesh`] (positions and triangles in flat arrays, on the heap or in memory-mapped
 //!   scratch files) and what a file carried besides them.
 //! - [`topology`]: CSR adjacency, boundary and non-manifold masks ([`Topology`]).
@@ -42,6 +44,7 @@ pub mod multires;
 pub mod partition;
 pub mod schedule;
 pub mod shapes;
+pub mod signals;
 
 pub mod smooth;
 pub mod topology;

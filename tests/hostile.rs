@@ -11,10 +11,12 @@
 //!   intact; a full disk (a real 256 KiB tmpfs when it can be mounted, an injected `EFBIG` always)
 //!   gives one clear line and no partial output.
 
+mod batch;
 mod cli;
 mod geometry;
 mod memory;
 mod readers;
+mod signals;
 
 #[path = "corpus/cases.rs"]
 mod cases;

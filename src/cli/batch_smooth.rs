@@ -66,8 +66,19 @@ impl BatchSmooth {
 }
 
 /// The inputs of a batch, checked: at least one, no two with the same stem, none that its output
-/// would overwrite.
+/// would overwrite, and OUTDIR not the input directory (the next run would take the outputs for
+/// inputs, whatever their format).
 pub fn batch_inputs(list_or_dir: &Path, outdir: &Path, format: Format) -> Result<Vec<PathBuf>> {
+    if list_or_dir.is_dir()
+        && let (Ok(a), Ok(b)) = (list_or_dir.canonicalize(), outdir.canonicalize())
+        && a == b
+    {
+        return Err(Error::invalid(
+            outdir,
+            "OUTDIR is the input directory: a later run would take the outputs for inputs; \
+             choose another OUTDIR",
+        ));
+    }
     let inputs = core::list_inputs(list_or_dir)?;
     if inputs.is_empty() {
         return Err(Error::invalid(

@@ -33,6 +33,7 @@ pub mod shared;
 mod tests;
 
 use std::ffi::OsString;
+use std::io::Write;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
@@ -129,6 +130,14 @@ where
     T: Into<OsString>,
 {
     install_panic_hook();
+    // Without it, SIGINT, SIGTERM and SIGHUP still end the process, leaving temporary files.
+    let _ = crate::signals::remove_on_signals(|signal| {
+        // Not `eprintln!`: stderr may be a closed pipe, and this must not panic.
+        let _ = writeln!(
+            std::io::stderr(),
+            "vcsmooth: error: interrupted by {signal}"
+        );
+    });
     let argv: Vec<OsString> = argv.into_iter().map(Into::into).collect();
     let args = match Args::try_parse_from(&argv) {
         Ok(args) => args,

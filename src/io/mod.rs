@@ -84,10 +84,12 @@
 //!   kills the process: nothing is written, but the message is the signal's, not ours.
 //! - **Killed while writing** (`SIGKILL`, power loss): the output is written to
 //!   `.<name>.tmp-<pid>-<n>` beside the target and renamed over it only when complete and synced,
-//!   so the target holds either its previous content or the complete new file. A killed process
-//!   cannot remove its temporary file: a stale `.<name>.tmp-*` can remain (hidden, never under the
-//!   target's name); it is safe to delete and is not cleaned up automatically (another run may be
-//!   writing it).
+//!   so the target holds either its previous content or the complete new file. SIGINT, SIGTERM
+//!   and SIGHUP remove it (`crate::signals`, set up by the command line). SIGKILL cannot: a stale
+//!   `.<name>.tmp-*` can remain (hidden, never under the target's name), and the next write of the
+//!   same target removes it once the process `<pid>` is gone (per `/proc` of the machine that
+//!   writes: on a file system shared by several machines, a temporary file of a process running
+//!   elsewhere can be taken for a leftover, and that run then fails at its rename).
 //! - **Disk full or any write error**: the error is reported as `<target>: <os error>` (e.g. `No
 //!   space left on device (os error 28)`), the temporary file is removed and the previous target, if
 //!   any, is left as it was.

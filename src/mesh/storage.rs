@@ -17,6 +17,7 @@ use glam::DVec3;
 use memmap2::{Mmap, MmapMut};
 
 use crate::error::{Error, Result};
+use crate::signals::Temporary;
 
 /// Plain data that may be stored as raw bytes in a scratch file.
 ///
@@ -113,15 +114,17 @@ impl Storage {
         };
         let n = self.counter.fetch_add(1, Ordering::Relaxed);
         let path = dir.join(format!(".vcsmooth-scratch-{}-{n}", std::process::id()));
-        let file = OpenOptions::new()
-            .read(true)
-            .write(true)
-            .create_new(true)
-            .open(&path)
-            .map_err(|e| Error::io(&path, e))?;
+        // Registered until unlinked, so that a signal in between removes it too.
+        let (temp, file) = Temporary::create(path.clone(), |p| {
+            OpenOptions::new()
+                .read(true)
+                .write(true)
+                .create_new(true)
+                .open(p)
+        })
+        .map_err(|e| Error::io(&path, e))?;
         // Unlink at once: the mapping keeps the data alive, and nothing is left behind on any exit.
-        let removed = std::fs::remove_file(&path);
-        removed.map_err(|e| Error::io(&path, e))?;
+        temp.remove().map_err(|e| Error::io(&path, e))?;
         reserve(&file, bytes as u64).map_err(|e| {
             Error::resource(format!(
                 "{}: cannot reserve {} of scratch space ({e}); free space there or choose another scratch directory",

@@ -3,15 +3,27 @@
 //! and the summary gathered from the markers. The CLI's `batch` and `slurm-script` commands
 //! (`crate::cli::commands::{batch, slurm_script}`) are thin layers over this module.
 //!
-//! * Inputs: the mesh files of a directory (known extensions `.ply .obj .off .stl`, any case; hidden
-//!   files skipped), sorted by file name; or the lines of a list file (blank lines and lines
-//!   starting with `#` skipped; relative paths are relative to the list file's directory).
+//! * Inputs: the entries of a directory with a mesh extension (`.ply .obj .off .stl`, any case;
+//!   hidden ones skipped), sorted by file name; or the lines of a list file (blank lines and lines
+//!   starting with `#` skipped; relative paths are relative to the list file's directory). An
+//!   entry that cannot be read (a dangling symbolic link, a directory, no permission) is an input
+//!   all the same: it fails with one line of its own, counts as failed, and the summary lists it as
+//!   missing, so nothing in the directory is passed over in silence. The command line refuses
+//!   OUTDIR = the input directory: the next run would take the outputs for inputs.
 //! * Share: input `k` (0-based, in that order) belongs to task `k mod N` — a round-robin split, so
 //!   every task gets ⌊n/N⌋ or ⌈n/N⌉ inputs and large and small files (which often sort together)
 //!   are spread over the tasks.
 //! * Outputs: `OUTDIR/<stem>.<ext>`; the success marker `OUTDIR/.done/<stem>.json` is written
 //!   (atomically) only after the output was written (atomically), so a marker means "finished".
-//!   Inputs whose marker exists are skipped: rerunning a failed or killed task finishes the batch.
+//! * Markers certify what they claim ([`Certificate`]): the input (canonical path, size,
+//!   modification time in ns, inode), the settings that define the output (options, patch size,
+//!   format) and the output (size, modification time, inode). A rerun skips an input only when its
+//!   marker reads and all of these still match ([`check_marker`]); anything else (no marker, a
+//!   garbage one, a deleted or changed output, a changed input, other settings) is redone, so
+//!   rerunning a failed or killed task finishes the batch, and the summary counts as done exactly
+//!   what a rerun would skip. The content is not hashed: that would read every input in full on
+//!   every rerun (hours for a batch of large scans); an edit that keeps the size, the modification
+//!   time and the inode goes unnoticed.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -38,7 +50,8 @@ pub fn list_inputs(list_or_dir: &Path) -> Result<Vec<PathBuf>> {
             let entry = entry.map_err(|e| Error::io(list_or_dir, e))?;
             let path = entry.path();
             let hidden = entry.file_name().to_string_lossy().starts_with('.');
-            if !hidden && Format::from_extension(&path).is_some() && path.is_file() {
+            // Readable or not: an entry that cannot be read fails as an input, visibly.
+            if !hidden && Format::from_extension(&path).is_some() {
                 files.push(path);
             }
         }
@@ -218,29 +231,174 @@ pub struct MeshRow {
     pub slurm: Option<SlurmIds>,
 }
 
-/// A success marker, `OUTDIR/.done/<stem>.json`: the summary row flattened at the top, then the
-/// options, the engine settings and the whole [`Report`] report.
+/// A success marker, `OUTDIR/.done/<stem>.json`: the summary row flattened at the top, what the
+/// marker certifies, then the options, the engine settings and the whole [`Report`] report.
 #[derive(Debug, Clone, Serialize)]
 pub struct Marker<'a> {
     pub format: &'static str,
     pub version: &'static str,
     #[serde(flatten)]
     pub row: MeshRow,
+    pub certifies: Certificate,
     pub options: &'a Options,
     pub engine: &'a EngineSettings,
     pub run: &'a Report,
 }
 
-/// What a marker is read as (the rest of it is ignored).
+/// Which file, as far as can be told without reading it.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq, Eq)]
+pub struct FileId {
+    /// Canonical (absolute, links resolved).
+    pub path: String,
+    pub size: u64,
+    /// Modification time, nanoseconds since the Unix epoch.
+    pub mtime_ns: i64,
+    /// Inode number (`None` where the platform has none): a file replaced by another one (a
+    /// rename over it) is noticed even with the same size and time.
+    pub inode: Option<u64>,
+}
+
+impl FileId {
+    /// The identity of the file at `path`. A dangling symbolic link and a directory are errors that
+    /// say so.
+    pub fn of(path: &Path) -> Result<FileId> {
+        let meta = match std::fs::metadata(path) {
+            Ok(m) => m,
+            Err(e) => {
+                return Err(match std::fs::read_link(path) {
+                    Ok(to) if e.kind() == std::io::ErrorKind::NotFound => Error::invalid(
+                        path,
+                        format!(
+                            "a symbolic link to '{}', which does not exist",
+                            to.display()
+                        ),
+                    ),
+                    _ => Error::io(path, e),
+                });
+            }
+        };
+        if !meta.is_file() {
+            return Err(Error::invalid(path, "not a regular file"));
+        }
+        let canonical = path.canonicalize().map_err(|e| Error::io(path, e))?;
+        let mtime_ns = match meta.modified().map_err(|e| Error::io(path, e))? {
+            t if t >= std::time::UNIX_EPOCH => {
+                let d = t.duration_since(std::time::UNIX_EPOCH).unwrap_or_default();
+                i64::try_from(d.as_nanos()).unwrap_or(i64::MAX)
+            }
+            t => {
+                let d = std::time::UNIX_EPOCH.duration_since(t).unwrap_or_default();
+                i64::try_from(d.as_nanos()).map_or(i64::MIN, |n| -n)
+            }
+        };
+        #[cfg(unix)]
+        let inode = Some(std::os::unix::fs::MetadataExt::ino(&meta));
+        #[cfg(not(unix))]
+        let inode = None;
+        Ok(FileId {
+            path: canonical.display().to_string(),
+            size: meta.len(),
+            mtime_ns,
+            inode,
+        })
+    }
+
+    /// What differs from `then` (the same file as before when `None`); the path only if `path`.
+    fn change(&self, then: &FileId, path: bool) -> Option<String> {
+        if path && self.path != then.path {
+            Some(format!("now '{}', was '{}'", self.path, then.path))
+        } else if self.size != then.size {
+            Some(format!("size {} bytes, was {}", self.size, then.size))
+        } else if self.mtime_ns != then.mtime_ns {
+            Some("modification time changed".to_string())
+        } else if self.inode != then.inode {
+            Some("replaced by another file (inode changed)".to_string())
+        } else {
+            None
+        }
+    }
+}
+
+/// What a marker certifies: this output was made from this input with these settings.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq, Eq)]
+pub struct Certificate {
+    pub input: FileId,
+    /// The settings that define the output ([`settings_key`]).
+    pub settings: String,
+    /// The output as written (its path is where it was written; a moved OUTDIR is checked where
+    /// it is now).
+    pub output: FileId,
+}
+
+/// The settings that define a batch's outputs, as canonical JSON: the smoothing options, the
+/// patch size (outputs are identical for any thread count and memory budget, not for any patch
+/// size) and the output format.
+pub fn settings_key(options: &Options, engine: &EngineSettings, format: Format) -> String {
+    serde_json::json!({
+        "options": options,
+        "patch_size": engine.patch_size,
+        "format": extension(format),
+    })
+    .to_string()
+}
+
+/// The settings that differ between two [`settings_key`]s, as `name then -> now`.
+fn settings_change(then: &str, now: &str) -> String {
+    fn flat(prefix: &str, v: &serde_json::Value, out: &mut BTreeMap<String, String>) {
+        match v {
+            serde_json::Value::Object(m) => {
+                for (k, v) in m {
+                    let key = if prefix.is_empty() {
+                        k.clone()
+                    } else {
+                        format!("{prefix}.{k}")
+                    };
+                    flat(&key, v, out);
+                }
+            }
+            other => {
+                out.insert(prefix.to_string(), other.to_string());
+            }
+        }
+    }
+    let parse = |s: &str| {
+        let mut out = BTreeMap::new();
+        flat("", &serde_json::from_str(s).unwrap_or_default(), &mut out);
+        out
+    };
+    let (a, b) = (parse(then), parse(now));
+    let keys: std::collections::BTreeSet<&String> = a.keys().chain(b.keys()).collect();
+    let none = String::from("none");
+    keys.into_iter()
+        .filter(|k| a.get(*k) != b.get(*k))
+        .map(|k| {
+            let name = k.strip_prefix("options.").unwrap_or(k);
+            format!(
+                "{name} {} -> {}",
+                a.get(k).unwrap_or(&none),
+                b.get(k).unwrap_or(&none)
+            )
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// What a marker is read as (the rest of it is ignored). Markers of versions that certified
+/// nothing have no `certifies`.
 #[derive(Debug, Clone, Deserialize)]
 struct MarkerHead {
     format: String,
     #[serde(flatten)]
     row: MeshRow,
+    certifies: Option<Certificate>,
 }
 
 /// Read a marker's summary row.
 pub fn read_marker(path: &Path) -> Result<MeshRow> {
+    read_head(path).map(|h| h.row)
+}
+
+fn read_head(path: &Path) -> Result<MarkerHead> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     let head: MarkerHead = serde_json::from_slice(&bytes)
         .map_err(|e| Error::invalid(path, format!("not a batch marker: {e}")))?;
@@ -253,7 +411,78 @@ pub fn read_marker(path: &Path) -> Result<MeshRow> {
             ),
         ));
     }
-    Ok(head.row)
+    Ok(head)
+}
+
+/// What a marker says about its input.
+#[derive(Debug, Clone, PartialEq)]
+pub enum MarkerCheck {
+    /// It reads, and its input, settings and output are as it certifies: the input is done. With
+    /// the settings it records.
+    Done(Box<MeshRow>, String),
+    /// There is no marker.
+    Missing,
+    /// The marker cannot be read (the error's message): the input is to be redone.
+    Unreadable(String),
+    /// The marker reads but no longer holds (why): the input is to be redone.
+    Stale(String),
+}
+
+/// Check the marker `marker` (`OUTDIR/.done/<stem>.json`) against the input `input` (`None`: the
+/// input it names, when that still exists) and the batch's `settings` ([`settings_key`]; `None`:
+/// not known, not checked). The output is looked for in OUTDIR, under the name it was written
+/// with. `batch` skips an input only on [`MarkerCheck::Done`], and the summary counts only those
+/// as done.
+pub fn check_marker(marker: &Path, input: Option<&Path>, settings: Option<&str>) -> MarkerCheck {
+    let head = match read_head(marker) {
+        Ok(h) => h,
+        Err(Error::Io { source, .. }) if source.kind() == std::io::ErrorKind::NotFound => {
+            return MarkerCheck::Missing;
+        }
+        Err(e) => return MarkerCheck::Unreadable(e.to_string()),
+    };
+    let Some(cert) = &head.certifies else {
+        return MarkerCheck::Stale("the marker certifies no input and output".into());
+    };
+    let input_now = match input {
+        Some(p) => Some(FileId::of(p).map_err(|e| e.to_string())),
+        None => {
+            let p = Path::new(&cert.input.path);
+            p.exists().then(|| FileId::of(p).map_err(|e| e.to_string()))
+        }
+    };
+    match input_now {
+        Some(Err(e)) => return MarkerCheck::Stale(format!("input: {e}")),
+        Some(Ok(now)) => {
+            if let Some(what) = now.change(&cert.input, true) {
+                return MarkerCheck::Stale(format!("input {} changed: {what}", cert.input.path));
+            }
+        }
+        None => {}
+    }
+    if let Some(now) = settings.filter(|s| *s != cert.settings) {
+        return MarkerCheck::Stale(format!(
+            "made with other settings: {}",
+            settings_change(&cert.settings, now)
+        ));
+    }
+    let outdir = marker
+        .parent()
+        .and_then(Path::parent)
+        .unwrap_or(Path::new("."));
+    let Some(name) = Path::new(&cert.output.path).file_name() else {
+        return MarkerCheck::Stale("the marker names no output file".into());
+    };
+    let output = outdir.join(name);
+    match FileId::of(&output) {
+        Err(e) => MarkerCheck::Stale(format!("output: {e}")),
+        Ok(now) => match now.change(&cert.output, false) {
+            Some(what) => {
+                MarkerCheck::Stale(format!("output {} changed: {what}", output.display()))
+            }
+            None => MarkerCheck::Done(Box::new(head.row), cert.settings.clone()),
+        },
+    }
 }
 
 /// Totals over the finished meshes.
@@ -272,37 +501,61 @@ pub struct Totals {
 pub struct BatchSummary {
     pub format: &'static str,
     pub outdir: String,
-    /// One row per marker, by name.
+    /// One row per marker that holds ([`MarkerCheck::Done`]), by name.
     pub meshes: Vec<MeshRow>,
     pub totals: Totals,
     /// Number of inputs in the given input list (`None` when no list was given).
     pub inputs: Option<usize>,
-    /// Inputs of the list without a readable marker.
+    /// Inputs of the list without a marker that holds.
     pub missing: Vec<String>,
     /// Markers that could not be read, with the reason.
     pub unreadable: Vec<String>,
+    /// Markers that read but no longer hold (an output deleted or changed, an input changed), with
+    /// the reason: a rerun redoes their inputs.
+    pub stale: Vec<String>,
+    /// The distinct settings ([`settings_key`]) of the markers that hold: more than one means
+    /// that the outputs were made with different options.
+    pub settings: Vec<String>,
 }
 
-/// Gather the markers of `outdir`; with `inputs`, list those without a marker.
+/// Gather the markers of `outdir`, each checked as a rerun would check it ([`check_marker`],
+/// against its input in `inputs` if listed there, else against the input it names); with
+/// `inputs`, list those without a marker that holds.
 pub fn summarize(outdir: &Path, inputs: Option<&[PathBuf]>) -> Result<BatchSummary> {
     let dir = outdir.join(MARKER_DIR);
+    let mut by_stem: BTreeMap<String, &Path> = BTreeMap::new();
+    for input in inputs.unwrap_or_default() {
+        by_stem.insert(stem(input)?, input);
+    }
     let mut meshes = Vec::new();
     let mut unreadable = Vec::new();
+    let mut stale = Vec::new();
+    let mut settings = std::collections::BTreeSet::new();
+    let mut done = std::collections::BTreeSet::new();
     if dir.is_dir() || inputs.is_none() {
         let entries = std::fs::read_dir(&dir).map_err(|e| Error::io(&dir, e))?;
-        let mut paths: Vec<PathBuf> = Vec::new();
+        let mut paths: Vec<(String, PathBuf)> = Vec::new();
         for entry in entries {
             let entry = entry.map_err(|e| Error::io(&dir, e))?;
             let name = entry.file_name().to_string_lossy().into_owned();
-            if !name.starts_with('.') && name.ends_with(".json") {
-                paths.push(entry.path());
+            if let Some(s) = name
+                .strip_suffix(".json")
+                .filter(|_| !name.starts_with('.'))
+            {
+                paths.push((s.to_string(), entry.path()));
             }
         }
         paths.sort();
-        for p in paths {
-            match read_marker(&p) {
-                Ok(row) => meshes.push(row),
-                Err(e) => unreadable.push(e.to_string()),
+        for (name, p) in paths {
+            match check_marker(&p, by_stem.get(&name).copied(), None) {
+                MarkerCheck::Done(row, s) => {
+                    done.insert(name);
+                    settings.insert(s);
+                    meshes.push(*row);
+                }
+                MarkerCheck::Missing => {} // removed since it was listed
+                MarkerCheck::Unreadable(e) => unreadable.push(e),
+                MarkerCheck::Stale(why) => stale.push(format!("{}: {why}", p.display())),
             }
         }
     }
@@ -325,13 +578,9 @@ pub fn summarize(outdir: &Path, inputs: Option<&[PathBuf]>) -> Result<BatchSumma
         );
     }
     let mut missing = Vec::new();
-    if let Some(list) = inputs {
-        let done: std::collections::BTreeSet<&str> =
-            meshes.iter().map(|m| m.name.as_str()).collect();
-        for input in list {
-            if !done.contains(stem(input)?.as_str()) {
-                missing.push(input.display().to_string());
-            }
+    for input in inputs.unwrap_or_default() {
+        if !done.contains(&stem(input)?) {
+            missing.push(input.display().to_string());
         }
     }
     Ok(BatchSummary {
@@ -342,6 +591,8 @@ pub fn summarize(outdir: &Path, inputs: Option<&[PathBuf]>) -> Result<BatchSumma
         inputs: inputs.map(<[PathBuf]>::len),
         missing,
         unreadable,
+        stale,
+        settings: settings.into_iter().collect(),
     })
 }
 
@@ -406,6 +657,30 @@ mod tests {
         let b = vec![PathBuf::from("x/a.ply"), PathBuf::from("y/a.obj")];
         let e = check_stems(&b).unwrap_err().to_string();
         assert!(e.contains("a.obj") && e.contains("x/a.ply"), "{e}");
+    }
+
+    #[test]
+    fn settings_changes_are_named() {
+        let opts = Options::default();
+        let engine = EngineSettings::default();
+        let a = settings_key(&opts, &engine, Format::Ply);
+        assert_eq!(a, settings_key(&opts, &engine, Format::Ply));
+        let more = Options {
+            iterations: 3,
+            ..opts
+        };
+        let b = settings_key(&more, &engine, Format::Obj);
+        assert_eq!(
+            settings_change(&a, &b),
+            "format \"ply\" -> \"obj\", iterations 10 -> 3"
+        );
+        // Threads and memory do not change the output.
+        let threads = EngineSettings {
+            threads: Some(3),
+            memory_budget: Some(1 << 30),
+            ..EngineSettings::default()
+        };
+        assert_eq!(a, settings_key(&opts, &threads, Format::Ply));
     }
 
     #[test]

@@ -4,17 +4,21 @@
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::sync::Mutex;
 use std::time::Instant;
 
 use clap::Args as ClapArgs;
 
 use crate::cli::batch_smooth::{BatchSmooth, BatchSmoothArgs, batch_inputs};
 use crate::cli::flags;
-use crate::cli::output::{parent_exists, print_error, print_json, stdout_error, write_json};
+use crate::cli::output::{
+    one_line, parent_exists, print_error, print_json, stdout_error, write_json,
+};
 use crate::cli::progress::Progress;
 use crate::engine;
 use crate::error::{Error, Result};
-use crate::modes::batch::{self as core, Marker, MeshRow};
+use crate::io::Format;
+use crate::modes::batch::{self as core, Marker, MarkerCheck, MeshRow};
 
 /// `vcsmooth batch LIST_OR_DIR OUTDIR [smooth options] [--task-index I --task-count N]` or
 /// `vcsmooth batch --summary OUTDIR [--inputs LIST_OR_DIR] [--json FILE|-]`
@@ -139,27 +143,36 @@ fn run_share(
     .map_err(stdout_error)?;
     let host = hostname();
     let slurm = core::SlurmIds::from_env();
+    let settings = core::settings_key(&smooth.options, &smooth.engine, smooth.format);
     let (mut done, mut skipped, mut failed) = (0usize, 0usize, 0usize);
     for k in mine {
         let input = &inputs[k];
         let output = core::output_path(outdir, input, smooth.format)?;
         let marker = core::marker_path(outdir, input)?;
-        if marker.exists() {
-            skipped += 1;
-            writeln!(out, "skipped {}: already done", input.display()).map_err(stdout_error)?;
-            continue;
+        match core::check_marker(&marker, Some(input), Some(&settings)) {
+            MarkerCheck::Done(..) => {
+                skipped += 1;
+                writeln!(out, "skipped {}: already done", input.display()).map_err(stdout_error)?;
+                continue;
+            }
+            MarkerCheck::Missing => {}
+            MarkerCheck::Unreadable(why) | MarkerCheck::Stale(why) => {
+                writeln!(out, "redoing {}: {}", input.display(), one_line(&why))
+                    .map_err(stdout_error)?;
+                // A marker that no longer holds must not be read as one while this input is redone.
+                std::fs::remove_file(&marker).map_err(|e| Error::io(&marker, e))?;
+            }
         }
-        // A task killed while writing leaves its temporary files; this task owns the input now.
-        remove_leftovers(&output);
-        remove_leftovers(&marker);
         let clock = Instant::now();
         progress.phase(format!("smoothing {}", input.display()));
         progress.iterations(smooth.options.method.name(), smooth.options.iterations);
-        let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            engine::run_file(input, &output, &smooth.options, &smooth.engine, progress)
-        }));
+        let result = catch_panic(|| {
+            let input_id = core::FileId::of(input)?;
+            let run = engine::run_file(input, &output, &smooth.options, &smooth.engine, progress)?;
+            Ok((input_id, core::FileId::of(&output)?, run))
+        });
         let result = match result {
-            Ok(r) => r.and_then(|run| {
+            Ok(r) => r.and_then(|(input_id, output_id, run)| {
                 let row = MeshRow {
                     name: core::stem(input)?,
                     input: input.display().to_string(),
@@ -183,6 +196,11 @@ fn run_share(
                     format: core::MARKER_FORMAT,
                     version: env!("CARGO_PKG_VERSION"),
                     row,
+                    certifies: core::Certificate {
+                        input: input_id,
+                        settings: settings.clone(),
+                        output: output_id,
+                    },
                     options: &smooth.options,
                     engine: &smooth.engine,
                     run: &run,
@@ -190,9 +208,9 @@ fn run_share(
                 write_json(&marker, &doc)?;
                 Ok(doc.row)
             }),
-            Err(_) => Err(Error::invalid(
+            Err(panic) => Err(Error::invalid(
                 input,
-                "internal error while smoothing (a bug, please report it)",
+                format!("internal error while smoothing (a bug, please report it): {panic}"),
             )),
         };
         match result {
@@ -213,7 +231,7 @@ fn run_share(
             }
             Err(e) => {
                 failed += 1;
-                print_error(&flags::message(&e));
+                print_error(&failure(input, &e));
             }
         }
     }
@@ -245,6 +263,9 @@ fn summary(
         None => None,
     };
     let s = core::summarize(outdir, list.as_deref())?;
+    if let Some(p) = json.filter(|p| p.as_os_str() != "-") {
+        refuse_batch_file(p, outdir, inputs, list.as_deref().unwrap_or_default(), &s)?;
+    }
     match json {
         Some(p) if p.as_os_str() == "-" => print_json(out, &s)?,
         Some(p) => {
@@ -253,10 +274,11 @@ fn summary(
         }
         None => print_summary(out, &s)?,
     }
-    for u in &s.unreadable {
+    for u in s.unreadable.iter().chain(&s.stale) {
         print_error(u);
     }
-    if !s.missing.is_empty() || !s.unreadable.is_empty() {
+    let mixed = s.settings.len() > 1;
+    if !s.missing.is_empty() || !s.unreadable.is_empty() || !s.stale.is_empty() || mixed {
         let mut what = Vec::new();
         if !s.missing.is_empty() {
             let shown: Vec<&str> = s.missing.iter().take(5).map(String::as_str).collect();
@@ -276,11 +298,89 @@ fn summary(
         if !s.unreadable.is_empty() {
             what.push(format!("{} markers are unreadable", s.unreadable.len()));
         }
+        if !s.stale.is_empty() {
+            what.push(format!(
+                "{} markers no longer hold (see above; a rerun redoes them)",
+                s.stale.len()
+            ));
+        }
+        if mixed {
+            what.push(format!(
+                "the outputs were made with {} different settings: {}",
+                s.settings.len(),
+                s.settings.join(" and ")
+            ));
+        }
         return Err(Error::Incomplete {
             what: format!("{}: {}", outdir.display(), what.join("; ")),
         });
     }
     Ok(())
+}
+
+/// Refuse to write the summary `target` over a file of the batch: its input list, an input, an
+/// output (present or to come) or a marker.
+fn refuse_batch_file(
+    target: &Path,
+    outdir: &Path,
+    list: Option<&Path>,
+    inputs: &[PathBuf],
+    s: &core::BatchSummary,
+) -> Result<()> {
+    let mut files: Vec<(&str, PathBuf)> = Vec::new();
+    if let Some(l) = list.filter(|l| l.is_file()) {
+        files.push(("the input list", l.to_path_buf()));
+    }
+    for input in inputs {
+        files.push(("an input", input.clone()));
+        for format in [Format::Ply, Format::Obj, Format::Off, Format::Stl] {
+            files.push(("an output", core::output_path(outdir, input, format)?));
+        }
+        files.push(("a marker", core::marker_path(outdir, input)?));
+    }
+    for m in &s.meshes {
+        files.push(("an input", PathBuf::from(&m.input)));
+        files.push(("an output", PathBuf::from(&m.output)));
+    }
+    if let Ok(entries) = std::fs::read_dir(outdir.join(core::MARKER_DIR)) {
+        files.extend(entries.flatten().map(|e| ("a marker", e.path())));
+    }
+    match files.into_iter().find(|(_, f)| same_file(target, f)) {
+        Some((what, f)) => Err(Error::invalid(
+            target,
+            format!(
+                "is {what} of the batch ({}): the summary would overwrite it",
+                f.display()
+            ),
+        )),
+        None => Ok(()),
+    }
+}
+
+/// Whether `a` and `b` name the same file: the same place once links are resolved (the file
+/// need not exist), or the same device and inode.
+fn same_file(a: &Path, b: &Path) -> bool {
+    fn place(p: &Path) -> Option<PathBuf> {
+        if let Ok(c) = p.canonicalize() {
+            return Some(c);
+        }
+        let dir = p.parent().filter(|d| !d.as_os_str().is_empty());
+        Some(
+            dir.unwrap_or(Path::new("."))
+                .canonicalize()
+                .ok()?
+                .join(p.file_name()?),
+        )
+    }
+    if place(a).is_some_and(|x| place(b) == Some(x)) {
+        return true;
+    }
+    #[cfg(unix)]
+    if let (Ok(x), Ok(y)) = (std::fs::metadata(a), std::fs::metadata(b)) {
+        use std::os::unix::fs::MetadataExt;
+        return (x.dev(), x.ino()) == (y.dev(), y.ino());
+    }
+    false
 }
 
 fn print_summary(out: &mut dyn Write, s: &core::BatchSummary) -> Result<()> {
@@ -328,21 +428,39 @@ fn print_summary(out: &mut dyn Write, s: &core::BatchSummary) -> Result<()> {
     out.write_all(text.as_bytes()).map_err(stdout_error)
 }
 
-/// Remove the temporary files `.<name>.tmp-*` that an atomic write of `path` interrupted by a
-/// kill left beside it.
-fn remove_leftovers(path: &Path) {
-    let (Some(dir), Some(name)) = (path.parent(), path.file_name()) else {
-        return;
-    };
-    let prefix = format!(".{}.tmp-", name.to_string_lossy());
-    let Ok(entries) = std::fs::read_dir(dir) else {
-        return;
-    };
-    for entry in entries.flatten() {
-        if entry.file_name().to_string_lossy().starts_with(&prefix) {
-            let _ = std::fs::remove_file(entry.path());
+/// The one line of a failed input: the error, led by the input's name unless it names a file.
+fn failure(input: &Path, e: &Error) -> String {
+    let message = flags::message(e);
+    match e {
+        Error::InvalidInput { .. } | Error::Io { .. } | Error::Topology { path: Some(_), .. } => {
+            message
         }
+        _ => format!("{}: {message}", input.display()),
     }
+}
+
+/// Runs `f`; a panic in it (or in the threads it waits for) is returned as its message and
+/// place instead of being printed by the panic hook, so that the input it broke is reported in one
+/// line, with it.
+fn catch_panic<T>(f: impl FnOnce() -> T) -> std::result::Result<T, String> {
+    static LAST: Mutex<String> = Mutex::new(String::new());
+    let previous = std::panic::take_hook();
+    std::panic::set_hook(Box::new(|info| {
+        let what = info
+            .payload()
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| info.payload().downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "panic".to_string());
+        let at = info
+            .location()
+            .map(|l| format!(" at {}:{}", l.file(), l.line()))
+            .unwrap_or_default();
+        *LAST.lock().unwrap_or_else(|e| e.into_inner()) = format!("{what}{at}");
+    }));
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
+    std::panic::set_hook(previous);
+    result.map_err(|_| LAST.lock().unwrap_or_else(|e| e.into_inner()).clone())
 }
 
 fn hostname() -> String {
