@@ -87,7 +87,7 @@ pub struct EngineArgs {
     /// Vertices per patch; the result is identical for any thread count and memory budget for a given patch size [default: 16384].
     #[arg(long, value_name = "VERTICES", value_parser = whole_in(1, u32::MAX as u64 - 1), allow_negative_numbers = true)]
     pub patch_size: Option<u64>,
-    /// Anonymous memory allowed, with K/M/G/T suffixes (binary units); larger meshes go to memory-mapped scratch files [default: 3/4 of available memory].
+    /// Anonymous memory allowed, with K/M/G/T suffixes (binary units); larger meshes go to memory-mapped scratch files [default: 3/4 of available memory, or of a tighter cgroup limit or rlimit].
     #[arg(long, value_name = "SIZE", value_parser = crate::engine::memory::parse_size, allow_hyphen_values = true)]
     pub memory_budget: Option<u64>,
     /// Directory for scratch files (removed on exit, even on error) [default: the output's directory].

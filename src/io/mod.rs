@@ -248,14 +248,16 @@ fn read_stream(file: &mut File, path: &Path) -> Result<Mesh> {
     let mut unrecognised = None;
     loop {
         if bytes.len() == bytes.capacity() {
-            bytes.try_reserve(bytes.len().max(detect::HEAD)).map_err(|_| {
-                Error::resource(format!(
-                    "{}: not enough memory to read more than {} bytes from a stream: save it \
+            bytes
+                .try_reserve(bytes.len().max(detect::HEAD))
+                .map_err(|_| {
+                    Error::resource(format!(
+                        "{}: not enough memory to read more than {} bytes from a stream: save it \
                      to a file (files are memory-mapped)",
-                    path.display(),
-                    bytes.len()
-                ))
-            })?;
+                        path.display(),
+                        bytes.len()
+                    ))
+                })?;
         }
         let start = bytes.len();
         let spare = bytes.capacity() - start;
@@ -272,9 +274,7 @@ fn read_stream(file: &mut File, path: &Path) -> Result<Mesh> {
             // then its triangle count bounds the read.
             let len = if n == 0 { bytes.len() as u64 } else { u64::MAX };
             detect::refuse(&bytes, len).map_err(|what| Error::invalid(path, what))?;
-            let binary_stl = |format| {
-                format == Format::Stl && !stl::is_ascii(without_bom(&bytes))
-            };
+            let binary_stl = |format| format == Format::Stl && !stl::is_ascii(without_bom(&bytes));
             match detect::detect(&bytes, len, path) {
                 Ok(format) if n > 0 && binary_stl(format) => {
                     let stl = detect::binary_stl_length(&bytes).unwrap_or(0);

@@ -272,3 +272,19 @@ fn the_summary_is_never_written_over_a_file_of_the_batch() {
         .unwrap();
     crate::util::fails(&o, 1, &["is an input"]);
 }
+
+#[test]
+fn summary_flags_without_summary_are_refused_not_ignored() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = inputs(dir.path(), 1);
+    let out = dir.path().join("out");
+    let json = dir.path().join("s.json");
+    for extra in [
+        vec!["--json", json.to_str().unwrap()],
+        vec!["--inputs", input.to_str().unwrap()],
+    ] {
+        let o = batch(&input, &out, &extra);
+        crate::util::fails(&o, 2, &["go with --summary"]);
+        assert!(!out.exists() && !json.exists(), "{extra:?} did work");
+    }
+}

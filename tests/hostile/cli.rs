@@ -72,7 +72,11 @@ fn side_files_never_replace_an_input_the_output_or_each_other() {
     // atomically (smoothing in place); a link is replaced, not the file it points to.
     for alias in ["link.ply", "hard.ply"] {
         ok(vcsmooth(["smooth".to_string(), s("scan.ply"), s(alias)]));
-        assert_eq!(std::fs::read(&scan).unwrap(), before, "{alias} changed the input");
+        assert_eq!(
+            std::fs::read(&scan).unwrap(),
+            before,
+            "{alias} changed the input"
+        );
         assert!(!d.join(alias).is_symlink(), "{alias} still a link");
     }
     fails(

@@ -59,7 +59,10 @@ fn info(path: &Path) -> serde_json::Value {
 #[test]
 fn endless_devices_and_directories_are_refused_without_reading_them() {
     for (device, what) in [
-        ("/dev/zero", "the first 65536 bytes are all zero: not a mesh file"),
+        (
+            "/dev/zero",
+            "the first 65536 bytes are all zero: not a mesh file",
+        ),
         ("/dev/null", "empty file"),
     ] {
         if Path::new(device).exists() {

@@ -78,6 +78,13 @@ impl BatchConfig {
                 json: a.json,
             });
         }
+        // clap's `requires` does not hold these to --summary here (the positional OUTDIR also
+        // satisfies it): a flag that would be ignored is refused instead.
+        if a.json.is_some() || a.summary_inputs.is_some() {
+            return Err(Error::Usage {
+                what: "--json and --inputs go with --summary".into(),
+            });
+        }
         let (Some(inputs), Some(outdir)) = (a.inputs, a.outdir) else {
             return Err(Error::Usage {
                 what: "batch needs LIST_OR_DIR and OUTDIR".into(),

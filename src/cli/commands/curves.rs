@@ -104,7 +104,10 @@ pub struct CurvesDoc {
 pub fn run(cfg: &CurvesConfig, progress: &mut Progress, out: &mut dyn Write) -> Result<()> {
     // Each method keeps one record per iteration: refuse counts the budget cannot hold first.
     let budget = cfg.engine.budget()?;
-    engine::memory::check_records(cfg.options.iterations, budget / cfg.methods.len().max(1) as u64)?;
+    engine::memory::check_records(
+        cfg.options.iterations,
+        budget / cfg.methods.len().max(1) as u64,
+    )?;
     progress.phase(format!("reading {}", cfg.input.display()));
     let mesh = crate::io::read_mesh(&cfg.input)?;
     progress.phase("building topology");

@@ -51,7 +51,11 @@ impl RefineConfig {
     pub fn from_args(a: RefineArgs) -> Result<RefineConfig> {
         refine::check_max_edge(a.max_edge)?;
         refined_mesh_output(&a.files.output)?;
-        check_files(&[("IN", &a.files.input)], Some(("OUT", &a.files.output)), &[])?;
+        check_files(
+            &[("IN", &a.files.input)],
+            Some(("OUT", &a.files.output)),
+            &[],
+        )?;
         let mut options = RefineOptions {
             max_edge: a.max_edge,
             rounds: a.rounds as usize,

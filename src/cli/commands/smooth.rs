@@ -91,7 +91,11 @@ impl SmoothConfig {
         let mut sides = Vec::new();
         sides.extend(a.report.as_deref().map(|r| ("--report", r)));
         sides.extend(a.plot.as_deref().map(|p| ("--plot", p)));
-        check_files(&[("IN", &a.files.input)], Some(("OUT", &a.files.output)), &sides)?;
+        check_files(
+            &[("IN", &a.files.input)],
+            Some(("OUT", &a.files.output)),
+            &sides,
+        )?;
         let mut engine = a.smoothing.engine.resolve()?;
         engine.with_stats = a.report.is_some();
         engine.statistics = a.stats;

@@ -41,7 +41,11 @@ impl SubdivideConfig {
     pub fn from_args(a: SubdivideArgs) -> Result<SubdivideConfig> {
         refine::check_max_edge(a.max_edge)?;
         refined_mesh_output(&a.files.output)?;
-        check_files(&[("IN", &a.files.input)], Some(("OUT", &a.files.output)), &[])?;
+        check_files(
+            &[("IN", &a.files.input)],
+            Some(("OUT", &a.files.output)),
+            &[],
+        )?;
         Ok(SubdivideConfig {
             input: a.files.input,
             output: a.files.output,
