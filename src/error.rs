@@ -40,6 +40,10 @@ pub enum Error {
     /// was reported on its own; this is the summary.
     #[error("{what}")]
     Incomplete { what: String },
+    /// Work of which `failed` parts failed, each reported on its own line already (and counted in
+    /// the command's own summary on stdout): nothing more to print, only the exit status.
+    #[error("{failed} failed")]
+    Reported { failed: usize },
     /// Another rank of a cluster run failed (and reports its own error); `what` says at which step.
     #[error("{what}")]
     Peer { what: String },

@@ -44,7 +44,7 @@ use commands::{
 use output::{one_line, print_error};
 pub use progress::Progress;
 
-use crate::error::Result;
+use crate::error::{Error, Result};
 
 /// vcsmooth: smooth triangle meshes without shrinking them (volume-constrained smoothing, Liu et al. 2002).
 #[derive(Debug, Clone, Parser)]
@@ -156,6 +156,7 @@ where
     };
     match run(&config) {
         Ok(()) => ExitCode::SUCCESS,
+        Err(Error::Reported { .. }) => ExitCode::from(EXIT_FAILURE),
         Err(e) => {
             print_error(&flags::message(&e));
             ExitCode::from(EXIT_FAILURE)

@@ -249,11 +249,7 @@ fn run_share(
     )
     .map_err(stdout_error)?;
     if failed > 0 {
-        return Err(Error::Incomplete {
-            what: format!(
-                "{failed} of the inputs of task {index} of {count} failed (see above); rerun the task to retry them"
-            ),
-        });
+        return Err(Error::Reported { failed });
     }
     Ok(())
 }
