@@ -449,17 +449,7 @@ fn catch_panic<T>(f: impl FnOnce() -> T) -> std::result::Result<T, String> {
     static LAST: Mutex<String> = Mutex::new(String::new());
     let previous = std::panic::take_hook();
     std::panic::set_hook(Box::new(|info| {
-        let what = info
-            .payload()
-            .downcast_ref::<&str>()
-            .map(|s| s.to_string())
-            .or_else(|| info.payload().downcast_ref::<String>().cloned())
-            .unwrap_or_else(|| "panic".to_string());
-        let at = info
-            .location()
-            .map(|l| format!(" at {}:{}", l.file(), l.line()))
-            .unwrap_or_default();
-        *LAST.lock().unwrap_or_else(|e| e.into_inner()) = format!("{what}{at}");
+        *LAST.lock().unwrap_or_else(|e| e.into_inner()) = crate::cli::panic_message(info);
     }));
     let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
     std::panic::set_hook(previous);
