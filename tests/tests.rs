@@ -10,6 +10,7 @@ mod bench_cli;
 mod cli;
 mod cluster;
 mod engine;
+mod fidelity;
 mod golden;
 mod hostile;
 mod layout;

@@ -35,5 +35,5 @@ impl Mesh {
 
 pub mod source;
 pub mod storage;
-pub use source::{FileLayout, Format, Precision, Source};
+pub use source::{Carried, FileLayout, Format, Precision, Source};
 pub use storage::{Buf, Storage};

@@ -71,6 +71,29 @@ pub struct Source {
 /// writer, which finds its own type again through [`FileLayout::as_any`].
 pub trait FileLayout: fmt::Debug + Send + Sync {
     fn as_any(&self) -> &dyn Any;
+    /// What the file carries besides positions and faces, for `info` to report (and the writer of
+    /// the same format to keep).
+    fn carries(&self) -> Carried {
+        Carried::default()
+    }
+}
+
+/// What a file carries besides positions and faces. A writer of the same format keeps all of it
+/// (normals are recomputed from the smoothed positions); `info` reports it.
+#[derive(Debug, Clone, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct Carried {
+    /// Texture coordinates (OBJ `vt`, PLY `u v`/`s t`/`texture_u`, glTF `TEXCOORD_n`, OFF `ST`).
+    pub uvs: bool,
+    /// Per-vertex or per-face colours (OBJ `v x y z r g b`, PLY `red green blue`, OFF `C`/`COFF`,
+    /// glTF `COLOR_n`, STL attribute colours).
+    pub colours: bool,
+    /// Normals, recomputed on write (OBJ `vn`, PLY `nx ny nz`, glTF `NORMAL`, OFF `N`).
+    pub normals: bool,
+    /// Materials (OBJ `mtllib`/`usemtl`, glTF materials and images).
+    pub materials: bool,
+    /// Anything else kept, each named as the file names it (PLY properties and elements, OBJ
+    /// statements, STL attribute bytes, glTF attributes and extras).
+    pub other: Vec<String>,
 }
 
 // By hand: `face_sizes` and `layout` hold millions of entries that a `{:?}` must not dump.

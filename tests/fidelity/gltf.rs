@@ -1,0 +1,1 @@
+//! Fidelity of gltf files (see tests/fidelity.rs).

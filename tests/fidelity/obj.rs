@@ -1,0 +1,1 @@
+//! Fidelity of obj files (see tests/fidelity.rs).

@@ -1,0 +1,1 @@
+//! Fidelity of off_stl files (see tests/fidelity.rs).
