@@ -332,3 +332,13 @@ fn the_front_door_smooths_as_the_command_line_does() {
     io::write_mesh(&lib, &mesh).unwrap();
     assert!(std::fs::read(&lib).unwrap() == std::fs::read(&cli).unwrap());
 }
+
+#[test]
+fn thread_counts_beyond_the_limit_are_refused_before_any_thread_starts() {
+    use vcsmooth::engine::{MAX_THREADS, thread_pool};
+    for n in [0, MAX_THREADS + 1, 1_000_000_000] {
+        let e = thread_pool(Some(n)).err().expect("refused");
+        assert!(e.to_string().contains("threads"), "{e}");
+    }
+    assert_eq!(thread_pool(Some(2)).unwrap().current_num_threads(), 2);
+}

@@ -122,10 +122,8 @@ impl EngineArgs {
     }
 }
 
-/// The most worker threads a command accepts (`--threads`, `--cpus`): far above the cores of any
-/// node, and low enough that a pool is built, or refused by the system, at once: a thread count
-/// in the millions would spend seconds spawning threads before it failed.
-pub const MAX_THREADS: u32 = 4096;
+/// The most worker threads a command accepts (`--threads`, `--cpus`): the engine's limit.
+pub const MAX_THREADS: u32 = crate::engine::MAX_THREADS as u32;
 
 /// The values of a list flag without repeats, in the order first given.
 pub fn distinct<T: PartialEq>(values: impl IntoIterator<Item = T>) -> Vec<T> {

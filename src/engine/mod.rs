@@ -154,12 +154,19 @@ impl Plan {
     }
 }
 
-/// A rayon pool of `threads` threads (all cores when `None`).
+/// The most worker threads a pool may have: far beyond any machine's cores, and small enough
+/// that a mistyped count fails at once instead of spawning threads for seconds.
+pub const MAX_THREADS: usize = 4096;
+
+/// A rayon pool of `threads` threads (all cores when `None`; at most [`MAX_THREADS`]).
 pub fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
     let mut builder = rayon::ThreadPoolBuilder::new();
     if let Some(n) = threads {
-        if n == 0 {
-            return Err(Error::parameter("threads", "must be at least 1"));
+        if !(1..=MAX_THREADS).contains(&n) {
+            return Err(Error::parameter(
+                "threads",
+                format!("must be in 1..={MAX_THREADS}, got {n}"),
+            ));
         }
         builder = builder.num_threads(n);
     }
