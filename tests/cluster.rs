@@ -389,3 +389,21 @@ fn a_run_measuring_only_its_last_iteration_resumes() {
             .all(|r| r.max_displacement.is_nan())
     );
 }
+
+#[test]
+fn iteration_counts_the_budget_cannot_record_are_refused_on_every_rank() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = sphere_file(dir.path(), 2);
+    let output = dir.path().join("out.ply");
+    let opts = Options {
+        iterations: 1 << 40,
+        ..Options::default()
+    };
+    let engine = engine_settings(16384, 1);
+    let settings = cluster_settings(&dir.path().join("work"), false, 1);
+    for result in run_ranks(2, &input, &output, &opts, &engine, &settings) {
+        let e = result.err().expect("refused");
+        assert!(e.to_string().contains("record per iteration"), "{e}");
+    }
+    assert!(!output.exists());
+}

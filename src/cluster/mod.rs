@@ -86,6 +86,11 @@ pub fn run_file(
         bytes: budget,
         source: budget_source,
     } = engine.budget_and_source()?;
+    agree(
+        comm,
+        memory::check_records(opts.iterations, budget),
+        "another rank's memory budget cannot hold one record per iteration",
+    )?;
     let pool = agree(
         comm,
         engine::thread_pool(engine.threads),
