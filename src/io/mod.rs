@@ -17,7 +17,7 @@
 //! | format | read | write |
 //! |---|---|---|
 //! | PLY | binary little/big-endian (memory-mapped, own header parser, stride decode); ASCII (own strict parser, see `ply::ascii`) | the input's layout when it came from PLY, else binary little-endian `x y z float` (or `double`, see [`Precision`]) + `list uchar int vertex_indices` |
-//! | OBJ | `v` (first three numbers), `f` with `i`, `i/t`, `i//n`, `i/t/n` and negative (relative) indices; every other statement whose keyword is a name ignored (see `obj`) | `v` + `f` |
+//! | OBJ | `v` (first three numbers), `f` with `i`, `i/t`, `i//n`, `i/t/n` and negative (relative) indices (`vt`/`vn` references checked too); every other statement whose keyword is a name kept (see `obj`) | the input's text with only the `v` positions and the `vn` normals rewritten when it came from OBJ (see `obj::layout`), else `v` + `f` |
 //! | OFF | `OFF` and its `C`/`N`/`ST` variants (extra vertex columns and face colours ignored), `#` comments | `OFF` |
 //! | STL | binary and ASCII (keywords in any case) | binary |
 //!
@@ -196,14 +196,16 @@ pub fn write_mesh(path: &Path, mesh: &Mesh) -> Result<()> {
     check_mesh(mesh)
         .and_then(|()| match format {
             Format::Ply => ply::check_writable(mesh),
-            Format::Obj | Format::Off => {
-                Faces::of(mesh)
-                    .check()
-                    .and_then(|()| match mesh.source.precision {
-                        Precision::Float => fits_single(mesh),
-                        Precision::Double => Ok(()),
-                    })
-            }
+            Format::Obj | Format::Off => Faces::of(mesh)
+                .check()
+                .and_then(|()| match mesh.source.precision {
+                    Precision::Float => fits_single(mesh),
+                    Precision::Double => Ok(()),
+                })
+                .and_then(|()| match format {
+                    Format::Obj => obj::check_writable(mesh),
+                    _ => Ok(()),
+                }),
             Format::Stl => stl::check_writable(mesh),
         })
         .map_err(|what| Error::invalid(path, format!("cannot write: {what}")))?;

@@ -46,6 +46,7 @@ fn valid(name: &'static str, bytes: impl Into<Vec<u8>>) -> Case {
 const CUBE_OFF: &str = "OFF\n8 6 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n0 0 1\n1 0 1\n1 1 1\n0 1 1\n\
                         4 0 3 2 1\n4 4 5 6 7\n4 0 1 5 4\n4 1 2 6 5\n4 2 3 7 6\n4 3 0 4 7\n";
 const CUBE_OBJ: &str = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n\
+                        vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvn 0 -1 0\n\
                         f 1 4 3 2\nf 5 6 7 8\nf 1/1 2/2 6/3 5/4\nf 2//1 3//1 7//1 6//1\nf -6 -5 -1 -2\nf 4 1 5 8\n";
 
 const XYZ: &str = "property float x\nproperty float y\nproperty float z\n";
