@@ -83,7 +83,7 @@ pub fn batch_inputs(list_or_dir: &Path, outdir: &Path, format: Format) -> Result
     if inputs.is_empty() {
         return Err(Error::invalid(
             list_or_dir,
-            "names no mesh files (.ply, .obj, .off or .stl)",
+            "names no mesh files (.ply, .obj, .off, .stl, .gltf or .glb)",
         ));
     }
     core::check_stems(&inputs)?;

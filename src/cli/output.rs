@@ -22,7 +22,7 @@ pub fn mesh_output(path: &Path) -> Result<()> {
         };
         return Err(Error::invalid(
             path,
-            format!("{what} (expected .ply, .obj, .off or .stl)"),
+            format!("{what} (expected .ply, .obj, .off, .stl, .gltf or .glb)"),
         ));
     }
     parent_exists(path)

@@ -17,7 +17,7 @@ pub struct InOut {
     /// Input mesh (PLY, OBJ, OFF or STL).
     #[arg(value_name = "IN")]
     pub input: PathBuf,
-    /// Output mesh; .ply, .obj, .off or .stl. Written atomically, never on failure.
+    /// Output mesh; .ply, .obj, .off, .stl, or .gltf/.glb for a glTF input. Written atomically, never on failure.
     #[arg(value_name = "OUT")]
     pub output: PathBuf,
 }

@@ -9,20 +9,20 @@
 //! 1. nothing, or only zero bytes (an unwritten or zeroed file): refused;
 //! 2. a compression or archive signature (gzip, zip, bzip2, xz, zstd, 7-Zip) or a UTF-16/UTF-32
 //!    byte-order mark: refused, saying what to do;
-//! 3. the line `ply` (after an optional UTF-8 byte-order mark);
+//! 3. the line `ply` (after an optional UTF-8 byte-order mark), or GLB's magic `glTF`;
 //! 4. a binary STL, by its exact size `84 + 50·n` (its 80-byte header is free-form, so it is
 //!    recognised before any text rule can misread it);
 //! 5. UTF-16 without a byte-order mark (every other byte zero) and text whose lines end with a
 //!    bare carriage return (classic Mac OS): refused, saying what to do;
 //! 6. after an optional UTF-8 byte-order mark: an OFF magic word, an ASCII STL (`solid` in any
 //!    case, then `facet` or `endsolid`);
-//! 7. otherwise the extension (OBJ has no signature; a `.ply`, `.off` or `.stl` file that was not
+//! 7. otherwise the extension (OBJ and `.gltf` JSON have no signature; a `.ply`, `.off` or `.stl` file that was not
 //!    recognised gets its own reader's message about what is wrong).
 
 use std::fs::Metadata;
 use std::path::Path;
 
-use super::{Format, off, ply, stl, without_bom};
+use super::{Format, gltf, off, ply, stl, without_bom};
 
 /// How many bytes of a file recognise it: everything below is decided from them alone.
 pub(super) const HEAD: usize = 64 << 10;
@@ -97,6 +97,9 @@ pub(super) fn detect(head: &[u8], len: u64, path: &Path) -> Result<Format, Strin
     let text = without_bom(head);
     if ply::has_magic(text) {
         return Ok(Format::Ply);
+    }
+    if gltf::has_magic(head) {
+        return Ok(Format::Glb);
     }
     if stl::is_binary(head, len) {
         return Ok(Format::Stl);

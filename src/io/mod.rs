@@ -1,13 +1,15 @@
 //! Mesh file input and output. Knows nothing of smoothing.
 //!
 //! - [`read_mesh`] reads only regular files. It recognises the file from its first 64 KiB before
-//!   anything else is read (`detect`): `ply` magic, `OFF` magic, a binary STL whose size is
-//!   exactly `84 + 50·n`, an ASCII STL starting with `solid`, and otherwise the extension
-//!   (`.obj`); compressed data, UTF-16 text and zeroed files are refused there. Then it maps the
-//!   file (one `unsafe` boundary, with a plain-read fallback) and decodes it.
-//! - [`write_mesh`] picks the writer from the output's extension (`.ply .obj .off .stl`, any case)
-//!   and writes atomically: a temporary file beside the target, flushed, synced and renamed into
-//!   place only when complete; on failure nothing is left under the target's name.
+//!   anything else is read (`detect`): `ply` magic, GLB's `glTF` magic, `OFF` magic, a binary
+//!   STL whose size is exactly `84 + 50·n`, an ASCII STL starting with `solid`, and otherwise the
+//!   extension (`.obj`, `.gltf`); compressed data, UTF-16 text and zeroed files are refused
+//!   there. Then it maps the file (one `unsafe` boundary, with a plain-read fallback) and
+//!   decodes it.
+//! - [`write_mesh`] picks the writer from the output's extension (`.ply .obj .off .stl .gltf
+//!   .glb`, any case) and writes atomically: a temporary file beside the target, flushed, synced
+//!   and renamed into place only when complete; on failure nothing is left under the target's
+//!   name (a `.gltf` output's new buffer files are each written so, before it).
 //! - [`write_ply_streamed`] writes a mesh larger than memory as binary PLY, its vertices and
 //!   triangles handed over one at a time (e.g. by [`crate::shapes::Subdivision`]): the same
 //!   header and records as [`write_mesh`] writes for that mesh, written atomically too.
@@ -20,6 +22,7 @@
 //! | OBJ | `v` (first three numbers), `f` with `i`, `i/t`, `i//n`, `i/t/n` and negative (relative) indices (`vt`/`vn` references checked too); every other statement whose keyword is a name kept (see `obj`) | the input's text with only the `v` positions and the `vn` normals rewritten when it came from OBJ (see `obj::layout`), else `v` + `f` |
 //! | OFF | `OFF` and its `C`/`N`/`ST` variants (extra vertex columns and face colours ignored), `#` comments | `OFF` |
 //! | STL | binary and ASCII (keywords in any case) | binary |
+//! | glTF 2.0 | `.glb`, and `.gltf` with external or `data:` URI buffers: the triangle primitives of every mesh (see `gltf`) | only from a glTF input, to the same kind: its JSON and buffers with new positions and normals |
 //!
 //! Text (OBJ, OFF, ASCII STL, a PLY header) is ASCII or UTF-8, with an optional UTF-8 byte-order
 //! mark, which is skipped; lines end with LF or CRLF. A header line (PLY, OFF's magic and counts,
@@ -96,6 +99,7 @@
 
 mod atomic;
 mod detect;
+mod gltf;
 mod obj;
 mod off;
 mod ply;
@@ -111,6 +115,7 @@ use std::path::Path;
 use std::sync::Arc;
 
 pub use crate::mesh::{Format, Precision, Source};
+pub use gltf::GltfLayout;
 pub use ply::{PlyEncoding, PlyLayout};
 pub use stream::{PlyStream, write_ply_streamed};
 
@@ -189,7 +194,7 @@ pub fn write_mesh(path: &Path, mesh: &Mesh) -> Result<()> {
     let format = Format::from_extension(path).ok_or_else(|| {
         Error::invalid(
             path,
-            "unknown output extension (use .ply, .obj, .off or .stl)",
+            "unknown output extension (use .ply, .obj, .off, .stl, .gltf or .glb)",
         )
     })?;
     // Everything that can make a mesh unwritable is found here, before a file exists.
@@ -207,14 +212,18 @@ pub fn write_mesh(path: &Path, mesh: &Mesh) -> Result<()> {
                     _ => Ok(()),
                 }),
             Format::Stl => stl::check_writable(mesh),
+            Format::Gltf | Format::Glb => gltf::check_writable(mesh, format),
         })
         .map_err(|what| Error::invalid(path, format!("cannot write: {what}")))?;
-    atomic::write_atomically(path, |out| match format {
-        Format::Ply => ply::write(out, mesh),
-        Format::Obj => obj::write(out, mesh),
-        Format::Off => off::write(out, mesh),
-        Format::Stl => stl::write(out, mesh),
-    })
+    let write: fn(&mut std::io::BufWriter<File>, &Mesh) -> std::io::Result<()> = match format {
+        Format::Ply => ply::write,
+        Format::Obj => obj::write,
+        Format::Off => off::write,
+        Format::Stl => stl::write,
+        // Also writes buffer files beside the output, each atomically.
+        Format::Gltf | Format::Glb => return gltf::write(path, mesh),
+    };
+    atomic::write_atomically(path, |out| write(out, mesh))
 }
 
 /// Recognises and decodes an opened regular file of `len` bytes: its first bytes are read and
@@ -237,6 +246,12 @@ fn read_open(
             ply::ReadError::Invalid(what) => Error::invalid(path, what),
             ply::ReadError::Storage(e) => e,
         }),
+        // External buffers are relative to the file's directory.
+        Format::Gltf | Format::Glb => {
+            let dir = path.parent().unwrap_or(Path::new(""));
+            gltf::read(&contents, format == Format::Glb, Some(dir))
+                .map_err(|what| Error::invalid(path, what))
+        }
         format => decode(&contents, format).map_err(|what| Error::invalid(path, what)),
     }
 }
@@ -333,6 +348,7 @@ fn decode(bytes: &[u8], format: Format) -> std::result::Result<Mesh, String> {
         Format::Obj => obj::read(bytes),
         Format::Off => off::read(bytes),
         Format::Stl => stl::read(bytes),
+        Format::Gltf | Format::Glb => gltf::read(bytes, format == Format::Glb, None),
     }
 }
 

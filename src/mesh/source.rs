@@ -15,10 +15,14 @@ pub enum Format {
     Obj,
     Off,
     Stl,
+    /// glTF 2.0 JSON (`.gltf`), buffers external or embedded.
+    Gltf,
+    /// glTF 2.0 binary (`.glb`).
+    Glb,
 }
 
 impl Format {
-    /// The format a file name's extension stands for (`.ply .obj .off .stl`, any case).
+    /// The format a file name's extension stands for (`.ply .obj .off .stl .gltf .glb`, any case).
     pub fn from_extension(path: &Path) -> Option<Format> {
         let ext = path.extension()?.to_str()?.to_ascii_lowercase();
         match ext.as_str() {
@@ -26,6 +30,8 @@ impl Format {
             "obj" => Some(Format::Obj),
             "off" => Some(Format::Off),
             "stl" => Some(Format::Stl),
+            "gltf" => Some(Format::Gltf),
+            "glb" => Some(Format::Glb),
             _ => None,
         }
     }

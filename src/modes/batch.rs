@@ -184,6 +184,8 @@ pub fn extension(format: Format) -> &'static str {
         Format::Obj => "obj",
         Format::Off => "off",
         Format::Stl => "stl",
+        Format::Gltf => "gltf",
+        Format::Glb => "glb",
     }
 }
 

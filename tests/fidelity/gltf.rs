@@ -1,1 +1,425 @@
-//! Fidelity of gltf files (see tests/fidelity.rs).
+//! Fidelity of glTF files (see tests/fidelity.rs): a GLB, a `.gltf` with an external `.bin` and
+//! one with an embedded data URI, each a noisy icosphere with `TEXCOORD_0`, `COLOR_0`, `NORMAL`
+//! (interleaved with `POSITION`), a material, an extension and extras, all built here. After
+//! smoothing, only the position and normal bytes of the buffer and the `POSITION` accessor's
+//! `min`/`max` (and a changed buffer's `uri`) may differ; every refusal is one line.
+
+use std::path::Path;
+
+use serde_json::{Value, json};
+use vcsmooth::io;
+
+use crate::util::{fails, json as parse_json, noisy_sphere, ok, vcsmooth};
+
+/// Bytes per vertex of the interleaved `POSITION` + `NORMAL` view.
+const STRIDE: usize = 24;
+
+/// A sphere's glTF: its JSON (buffer 0 without a uri) and its binary buffer. Layout of the buffer:
+/// interleaved positions and normals, then UVs, then RGBA8 colours, then `u16` indices.
+fn sphere() -> (Value, Vec<u8>) {
+    let m = noisy_sphere(2, 0.3, 7);
+    let n = m.positions.len();
+    let mut bin = Vec::new();
+    let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+    for p in m.positions.iter() {
+        let p = p.as_vec3().to_array();
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+        let normal = glam::Vec3::from(p).normalize().to_array();
+        for c in p.iter().chain(&normal) {
+            bin.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    let uv_at = bin.len();
+    for i in 0..n {
+        for c in [i as f32 / n as f32, 1.0 - i as f32 / n as f32] {
+            bin.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    let colour_at = bin.len();
+    for i in 0..n {
+        bin.extend_from_slice(&[(i * 7) as u8, (i * 13) as u8, (i * 29) as u8, 255]);
+    }
+    let index_at = bin.len();
+    for t in m.triangles.iter() {
+        for &v in t {
+            bin.extend_from_slice(&(v as u16).to_le_bytes());
+        }
+    }
+    let index_len = bin.len() - index_at;
+    while bin.len() % 4 != 0 {
+        bin.push(0);
+    }
+    let json = json!({
+        "asset": {"version": "2.0", "generator": "vcsmooth tests"},
+        "extensionsUsed": ["KHR_materials_unlit"],
+        "extras": {"scan": "fixture", "id": 16},
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0, "translation": [10.0, 0.0, 0.0]}],
+        "materials": [{
+            "name": "skin",
+            "pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.6, 0.5, 1.0]},
+            "extensions": {"KHR_materials_unlit": {}}
+        }],
+        "meshes": [{
+            "name": "sphere",
+            "extras": {"note": "noisy"},
+            "primitives": [{
+                "attributes": {"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 2, "COLOR_0": 3},
+                "indices": 4,
+                "material": 0
+            }]
+        }],
+        "buffers": [{"byteLength": bin.len()}],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": uv_at, "byteStride": STRIDE, "target": 34962},
+            {"buffer": 0, "byteOffset": uv_at, "byteLength": colour_at - uv_at, "target": 34962},
+            {"buffer": 0, "byteOffset": colour_at, "byteLength": index_at - colour_at, "target": 34962},
+            {"buffer": 0, "byteOffset": index_at, "byteLength": index_len, "target": 34963}
+        ],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": n, "type": "VEC3", "min": lo, "max": hi},
+            {"bufferView": 0, "byteOffset": 12, "componentType": 5126, "count": n, "type": "VEC3"},
+            {"bufferView": 1, "componentType": 5126, "count": n, "type": "VEC2"},
+            {"bufferView": 2, "componentType": 5121, "normalized": true, "count": n, "type": "VEC4"},
+            {"bufferView": 3, "componentType": 5123, "count": m.triangles.len() * 3, "type": "SCALAR"}
+        ]
+    });
+    (json, bin)
+}
+
+/// A GLB of `json` and `bin`.
+fn glb(json: &Value, bin: &[u8]) -> Vec<u8> {
+    let mut text = serde_json::to_vec(json).unwrap();
+    while text.len() % 4 != 0 {
+        text.push(b' ');
+    }
+    let mut out = b"glTF".to_vec();
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&((12 + 8 + text.len() + 8 + bin.len()) as u32).to_le_bytes());
+    out.extend_from_slice(&(text.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"JSON");
+    out.extend_from_slice(&text);
+    out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"BIN\0");
+    out.extend_from_slice(bin);
+    out
+}
+
+/// The JSON and binary chunk of a GLB (checking its header and lengths).
+fn unglb(bytes: &[u8]) -> (Value, Vec<u8>) {
+    let word = |at: usize| u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap()) as usize;
+    assert_eq!(&bytes[..4], b"glTF");
+    assert_eq!(word(4), 2);
+    assert_eq!(word(8), bytes.len());
+    let json_len = word(12);
+    assert_eq!(&bytes[16..20], b"JSON");
+    let json = serde_json::from_slice(&bytes[20..20 + json_len]).unwrap();
+    let at = 20 + json_len;
+    assert_eq!(&bytes[at + 4..at + 8], b"BIN\0");
+    (json, bytes[at + 8..at + 8 + word(at)].to_vec())
+}
+
+fn smooth(input: &Path, output: &Path) {
+    ok(vcsmooth([
+        "smooth".as_ref(),
+        input.as_os_str(),
+        output.as_os_str(),
+    ]));
+}
+
+fn volume(path: &Path) -> f64 {
+    parse_json(&ok(vcsmooth([
+        "info".as_ref(),
+        path.as_os_str(),
+        "--json".as_ref(),
+    ])))["volume"]
+        .as_f64()
+        .unwrap()
+}
+
+fn f32_at(bin: &[u8], at: usize) -> f32 {
+    f32::from_le_bytes(bin[at..at + 4].try_into().unwrap())
+}
+
+/// The smoothed buffer `after` differs from `before` only in position and normal bytes, the
+/// positions moved, the normals are unit length, and `json_after` is `json_before` but for the
+/// position bounds (which match the new positions) and buffer 0's uri.
+fn check_smoothed(json_before: &Value, bin_before: &[u8], json_after: &Value, bin_after: &[u8]) {
+    assert_eq!(bin_before.len(), bin_after.len());
+    let n = json_before["accessors"][0]["count"].as_u64().unwrap() as usize;
+    let geometry = n * STRIDE;
+    assert_eq!(
+        bin_before[geometry..],
+        bin_after[geometry..],
+        "UVs, colours or indices changed"
+    );
+    let mut moved = 0;
+    let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+    for i in 0..n {
+        let at = i * STRIDE;
+        let p: Vec<f32> = (0..3).map(|k| f32_at(bin_after, at + 4 * k)).collect();
+        let normal: Vec<f32> = (0..3).map(|k| f32_at(bin_after, at + 12 + 4 * k)).collect();
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+        let length = normal.iter().map(|c| c * c).sum::<f32>().sqrt();
+        assert!(
+            (length - 1.0).abs() < 1e-5,
+            "normal {i} has length {length}"
+        );
+        // Outward on a sphere.
+        let dot: f32 = p.iter().zip(&normal).map(|(a, b)| a * b).sum();
+        assert!(dot > 0.0, "normal {i} points inwards");
+        if bin_before[at..at + 12] != bin_after[at..at + 12] {
+            moved += 1;
+        }
+    }
+    assert!(moved > n / 2, "only {moved} of {n} vertices moved");
+    let bounds = &json_after["accessors"][0];
+    let single = |v: &Value| -> Vec<f32> {
+        v.as_array()
+            .unwrap()
+            .iter()
+            .map(|c| c.as_f64().unwrap() as f32)
+            .collect()
+    };
+    assert_eq!(single(&bounds["min"]), lo);
+    assert_eq!(single(&bounds["max"]), hi);
+    let strip = |json: &Value| {
+        let mut json = json.clone();
+        let a = json["accessors"][0].as_object_mut().unwrap();
+        a.remove("min");
+        a.remove("max");
+        json["buffers"][0].as_object_mut().unwrap().remove("uri");
+        json
+    };
+    assert_eq!(strip(json_before), strip(json_after));
+}
+
+#[test]
+fn glb_keeps_everything_but_positions_and_normals() {
+    let dir = tempfile::tempdir().unwrap();
+    let (json, bin) = sphere();
+    let input = dir.path().join("scan.glb");
+    std::fs::write(&input, glb(&json, &bin)).unwrap();
+    let output = dir.path().join("smooth.glb");
+    smooth(&input, &output);
+    let (json_after, bin_after) = unglb(&std::fs::read(&output).unwrap());
+    check_smoothed(&json, &bin, &json_after, &bin_after);
+    let (v0, v1) = (volume(&input), volume(&output));
+    assert!(((v1 - v0) / v0).abs() < 1e-6, "volume {v0} -> {v1}");
+
+    let carried = io::read_mesh(&input)
+        .unwrap()
+        .source
+        .layout
+        .unwrap()
+        .carries();
+    assert!(carried.uvs && carried.colours && carried.normals && carried.materials);
+    assert_eq!(carried.other, ["KHR_materials_unlit"]);
+
+    // As a plain mesh to another format; never to glTF from another format, nor GLB to .gltf.
+    let ply = dir.path().join("smooth.ply");
+    smooth(&input, &ply);
+    let back = io::read_mesh(&ply).unwrap();
+    assert_eq!(back.positions.len(), json["accessors"][0]["count"]);
+    let o = vcsmooth([
+        "smooth".as_ref(),
+        ply.as_os_str(),
+        dir.path().join("x.glb").as_os_str(),
+    ]);
+    fails(&o, 1, &["x.glb", "glTF output needs a glTF input"]);
+    let o = vcsmooth([
+        "smooth".as_ref(),
+        input.as_os_str(),
+        dir.path().join("x.gltf").as_os_str(),
+    ]);
+    fails(&o, 1, &["x.gltf", "a GLB input is written as .glb"]);
+    assert!(!dir.path().join("x.glb").exists() && !dir.path().join("x.gltf").exists());
+}
+
+#[test]
+fn gltf_with_an_external_bin_writes_its_own_bin() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mut json, bin) = sphere();
+    // A percent-escaped uri, as glTF spells a space.
+    json["buffers"][0]["uri"] = json!("scan%20data.bin");
+    let input = dir.path().join("scan.gltf");
+    std::fs::write(&input, serde_json::to_vec_pretty(&json).unwrap()).unwrap();
+    std::fs::write(dir.path().join("scan data.bin"), &bin).unwrap();
+    let output = dir.path().join("smooth.gltf");
+    smooth(&input, &output);
+    let after = crate::util::read_json(&output);
+    assert_eq!(after["buffers"][0]["uri"], "smooth.bin");
+    let bin_after = std::fs::read(dir.path().join("smooth.bin")).unwrap();
+    check_smoothed(&json, &bin, &after, &bin_after);
+    assert_eq!(
+        std::fs::read(dir.path().join("scan data.bin")).unwrap(),
+        bin
+    );
+    let (v0, v1) = (volume(&input), volume(&output));
+    assert!(((v1 - v0) / v0).abs() < 1e-6, "volume {v0} -> {v1}");
+
+    // Smoothing in place never overwrites the input's buffer, even one named after the output.
+    let mut json2 = json.clone();
+    json2["buffers"][0]["uri"] = json!("again.bin");
+    let again = dir.path().join("again.gltf");
+    std::fs::write(&again, serde_json::to_vec(&json2).unwrap()).unwrap();
+    std::fs::write(dir.path().join("again.bin"), &bin).unwrap();
+    smooth(&again, &again);
+    assert_eq!(std::fs::read(dir.path().join("again.bin")).unwrap(), bin);
+    let after = crate::util::read_json(&again);
+    assert_eq!(after["buffers"][0]["uri"], "again-1.bin");
+    let bin_after = std::fs::read(dir.path().join("again-1.bin")).unwrap();
+    check_smoothed(&json2, &bin, &after, &bin_after);
+}
+
+#[test]
+fn gltf_with_a_data_uri_is_re_encoded() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mut json, bin) = sphere();
+    json["buffers"][0]["uri"] = json!(format!(
+        "data:application/octet-stream;base64,{}",
+        base64_text(&bin)
+    ));
+    let input = dir.path().join("embedded.gltf");
+    std::fs::write(&input, serde_json::to_vec(&json).unwrap()).unwrap();
+    let output = dir.path().join("out.gltf");
+    smooth(&input, &output);
+    let after = crate::util::read_json(&output);
+    let uri = after["buffers"][0]["uri"].as_str().unwrap();
+    let data = uri
+        .strip_prefix("data:application/octet-stream;base64,")
+        .expect("a data URI of the same media type");
+    check_smoothed(&json, &bin, &after, &unbase64(data));
+    assert_eq!(
+        crate::util::listing(dir.path()).len(),
+        2,
+        "no other file written"
+    );
+}
+
+/// Every refusal is one line naming the file and the problem, and writes nothing.
+#[test]
+fn malformed_gltf_is_refused_in_one_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let (json, bin) = sphere();
+    let with = |edit: &dyn Fn(&mut Value)| {
+        let mut j = json.clone();
+        edit(&mut j);
+        glb(&j, &bin)
+    };
+    let mut nan = bin.clone();
+    nan[4..8].copy_from_slice(&f32::NAN.to_le_bytes());
+    let mut far_index = bin.clone();
+    let index_at = json["bufferViews"][3]["byteOffset"].as_u64().unwrap() as usize;
+    far_index[index_at..index_at + 2].copy_from_slice(&9999u16.to_le_bytes());
+    let whole = glb(&json, &bin);
+    let cases: Vec<(&str, Vec<u8>, &str)> = vec![
+        (
+            "sparse.glb",
+            with(&|j| j["accessors"][0]["sparse"] = json!({"count": 1})),
+            "POSITION accessor 0 is sparse: not supported",
+        ),
+        (
+            "draco.glb",
+            with(&|j| j["extensionsUsed"] = json!(["KHR_draco_mesh_compression"])),
+            "KHR_draco_mesh_compression compression is not supported",
+        ),
+        (
+            "meshopt.glb",
+            with(&|j| {
+                j["meshes"][0]["primitives"][0]["extensions"] =
+                    json!({"EXT_meshopt_compression": {}})
+            }),
+            "EXT_meshopt_compression compression is not supported",
+        ),
+        (
+            "quantized.glb",
+            with(&|j| j["accessors"][0]["componentType"] = json!(5123)),
+            "KHR_mesh_quantization",
+        ),
+        (
+            "no_buffer.glb",
+            with(&|j| j["bufferViews"][0]["buffer"] = json!(3)),
+            "buffer 3 out of range (0..1)",
+        ),
+        (
+            "missing_bin.glb",
+            with(&|j| j["buffers"][0]["uri"] = json!("nowhere.bin")),
+            "cannot read",
+        ),
+        (
+            "accessor.glb",
+            with(&|j| j["meshes"][0]["primitives"][0]["attributes"]["POSITION"] = json!(99)),
+            "POSITION accessor 99 out of range (0..5)",
+        ),
+        (
+            "index.glb",
+            glb(&json, &far_index),
+            "vertex index 9999 out of range",
+        ),
+        ("nan.glb", glb(&json, &nan), "vertex 0 is not finite"),
+        (
+            "truncated.glb",
+            whole[..whole.len() - 100].to_vec(),
+            "GLB truncated",
+        ),
+        (
+            "chunk.glb",
+            {
+                let mut b = whole.clone();
+                let len = b.len() as u32 - 8;
+                b[8..12].copy_from_slice(&len.to_le_bytes());
+                b.truncate(len as usize);
+                b
+            },
+            "truncated",
+        ),
+    ];
+    for (name, bytes, message) in cases {
+        let input = dir.path().join(name);
+        std::fs::write(&input, bytes).unwrap();
+        let output = dir.path().join("out.glb");
+        let o = vcsmooth(["smooth".as_ref(), input.as_os_str(), output.as_os_str()]);
+        fails(&o, 1, &[name, message]);
+        assert!(!output.exists(), "{name}: output written");
+    }
+}
+
+fn base64_text(bytes: &[u8]) -> String {
+    const A: &[u8] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut s = String::new();
+    for c in bytes.chunks(3) {
+        let n = c
+            .iter()
+            .enumerate()
+            .fold(0u32, |n, (k, &b)| n | u32::from(b) << (16 - 8 * k));
+        for k in 0..=c.len() {
+            s.push(A[(n >> (18 - 6 * k) & 63) as usize] as char);
+        }
+        s.extend(std::iter::repeat_n('=', 3 - c.len()));
+    }
+    s
+}
+
+fn unbase64(text: &str) -> Vec<u8> {
+    const A: &[u8] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut out = Vec::new();
+    let (mut acc, mut bits) = (0u32, 0);
+    for c in text.bytes().filter(|&c| c != b'=') {
+        acc = acc << 6 | A.iter().position(|&a| a == c).unwrap() as u32;
+        bits += 6;
+        if bits >= 8 {
+            bits -= 8;
+            out.push((acc >> bits) as u8);
+            acc &= (1 << bits) - 1;
+        }
+    }
+    out
+}
