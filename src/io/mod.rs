@@ -18,8 +18,8 @@
 //! |---|---|---|
 //! | PLY | binary little/big-endian (memory-mapped, own header parser, stride decode); ASCII (own strict parser, see `ply::ascii`) | the input's layout when it came from PLY, else binary little-endian `x y z float` (or `double`, see [`Precision`]) + `list uchar int vertex_indices` |
 //! | OBJ | `v` (first three numbers), `f` with `i`, `i/t`, `i//n`, `i/t/n` and negative (relative) indices; every other statement whose keyword is a name ignored (see `obj`) | `v` + `f` |
-//! | OFF | `OFF` and its `C`/`N`/`ST` variants (extra vertex columns and face colours ignored), `#` comments | `OFF` |
-//! | STL | binary and ASCII (keywords in any case) | binary |
+//! | OFF | `OFF` and its `C`/`N`/`ST` variants (vertex colours, normals, texture coordinates, face colours), `#` comments | the input's text with new `x y z` (and normals) when it carried colours, normals or texture coordinates, else `OFF` |
+//! | STL | binary and ASCII (keywords in any case) | binary (with the input's header and attribute bytes when it came from binary STL); ASCII with the input's solid names when it came from ASCII STL |
 //!
 //! Text (OBJ, OFF, ASCII STL, a PLY header) is ASCII or UTF-8, with an optional UTF-8 byte-order
 //! mark, which is skipped; lines end with LF or CRLF. A header line (PLY, OFF's magic and counts,
@@ -197,12 +197,14 @@ pub fn write_mesh(path: &Path, mesh: &Mesh) -> Result<()> {
         .and_then(|()| match format {
             Format::Ply => ply::check_writable(mesh),
             Format::Obj | Format::Off => {
-                Faces::of(mesh)
-                    .check()
-                    .and_then(|()| match mesh.source.precision {
-                        Precision::Float => fits_single(mesh),
-                        Precision::Double => Ok(()),
-                    })
+                let faces = match format {
+                    Format::Off => off::check_writable(mesh),
+                    _ => Faces::of(mesh).check(),
+                };
+                faces.and_then(|()| match mesh.source.precision {
+                    Precision::Float => fits_single(mesh),
+                    Precision::Double => Ok(()),
+                })
             }
             Format::Stl => stl::check_writable(mesh),
         })
