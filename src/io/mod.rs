@@ -20,8 +20,8 @@
 //! |---|---|---|
 //! | PLY | binary little/big-endian (memory-mapped, own header parser, stride decode); ASCII (own strict parser, see `ply::ascii`) | the input's layout when it came from PLY, else binary little-endian `x y z float` (or `double`, see [`Precision`]) + `list uchar int vertex_indices` |
 //! | OBJ | `v` (first three numbers), `f` with `i`, `i/t`, `i//n`, `i/t/n` and negative (relative) indices (`vt`/`vn` references checked too); every other statement whose keyword is a name kept (see `obj`) | the input's text with only the `v` positions and the `vn` normals rewritten when it came from OBJ (see `obj::layout`), else `v` + `f` |
-//! | OFF | `OFF` and its `C`/`N`/`ST` variants (extra vertex columns and face colours ignored), `#` comments | `OFF` |
-//! | STL | binary and ASCII (keywords in any case) | binary |
+//! | OFF | `OFF` and its `C`/`N`/`ST` variants (vertex colours, normals, texture coordinates, face colours), `#` comments | the input's text with new `x y z` (and normals) when it carried colours, normals or texture coordinates, else `OFF` |
+//! | STL | binary and ASCII (keywords in any case) | binary (with the input's header and attribute bytes when it came from binary STL); ASCII with the input's solid names when it came from ASCII STL |
 //! | glTF 2.0 | `.glb`, and `.gltf` with external or `data:` URI buffers: the triangle primitives of every mesh (see `gltf`) | only from a glTF input, to the same kind: its JSON and buffers with new positions and normals |
 //!
 //! Text (OBJ, OFF, ASCII STL, a PLY header) is ASCII or UTF-8, with an optional UTF-8 byte-order
@@ -201,16 +201,16 @@ pub fn write_mesh(path: &Path, mesh: &Mesh) -> Result<()> {
     check_mesh(mesh)
         .and_then(|()| match format {
             Format::Ply => ply::check_writable(mesh),
-            Format::Obj | Format::Off => Faces::of(mesh)
-                .check()
-                .and_then(|()| match mesh.source.precision {
+            Format::Obj | Format::Off => {
+                let faces = match format {
+                    Format::Off => off::check_writable(mesh),
+                    _ => Faces::of(mesh).check().and_then(|()| obj::check_writable(mesh)),
+                };
+                faces.and_then(|()| match mesh.source.precision {
                     Precision::Float => fits_single(mesh),
                     Precision::Double => Ok(()),
                 })
-                .and_then(|()| match format {
-                    Format::Obj => obj::check_writable(mesh),
-                    _ => Ok(()),
-                }),
+            }
             Format::Stl => stl::check_writable(mesh),
             Format::Gltf | Format::Glb => gltf::check_writable(mesh, format),
         })

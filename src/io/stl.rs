@@ -5,8 +5,16 @@
 //! appearance, placed where it first appears), so that the mesh has connectivity: exactly what was
 //! written as the same vertex comes back as one. `0.0` and `-0.0` are the same value and merge
 //! (apart, they would open a crack along every edge through a zero coordinate); nearby but
-//! different coordinates are not merged. Facet normals are ignored on read (recomputed on write)
-//! and the 2-byte attribute is neither kept nor written (always 0).
+//! different coordinates are not merged. Facet normals are ignored on read (recomputed on write).
+//!
+//! What else the file holds is kept ([`StlLayout`]) and written back when the output is STL too,
+//! in the input's encoding: a binary input's 80-byte header and each facet's 2 attribute bytes
+//! (some tools keep a colour there), in facet order; an ASCII input's solids, each with its name
+//! and its facets. [`FileLayout::carries`] reports the attribute bytes (`other: ["attribute
+//! bytes"]`) when any is non-zero, and colours when the header holds `COLOR=` (the VisCAM /
+//! SolidView convention: a default colour in the header, a 15-bit colour in each facet's
+//! attribute); an ASCII file carries nothing besides its names. A mesh without an STL layout is
+//! written as binary with a header of our own and zero attributes.
 //!
 //! A file whose size is exactly `84 + 50·n`, with `n` the triangle count at byte 80, is binary —
 //! even when its 80-byte header starts with `solid`, as many exporters write. Otherwise a text
@@ -21,11 +29,79 @@ use std::io::{self, Write};
 
 use glam::DVec3;
 
-use super::{FaceBuilder, Format, MAX_HEADER_LINE, Source, show, without_bom};
-use crate::mesh::Mesh;
+use std::sync::Arc;
+
+use super::{F32, FaceBuilder, Faces, Format, MAX_HEADER_LINE, Source, show, without_bom};
+use crate::mesh::{Carried, FileLayout, Mesh};
 
 const HEADER: usize = 84;
 const FACET: usize = 50;
+
+/// What an STL input holds besides its triangles, for an STL output to repeat.
+#[derive(Clone)]
+pub(crate) enum StlLayout {
+    Binary {
+        header: [u8; 80],
+        /// Each facet's attribute bytes, in facet order.
+        attributes: Vec<[u8; 2]>,
+    },
+    Ascii {
+        solids: Vec<Solid>,
+    },
+}
+
+/// One solid of an ASCII STL: the rest of its `solid` and `endsolid` lines (the name, with its
+/// leading space) and how many facets it has.
+#[derive(Debug, Clone)]
+pub(crate) struct Solid {
+    name: Vec<u8>,
+    end_name: Vec<u8>,
+    facets: usize,
+}
+
+// By hand: a binary file's attributes run to millions.
+impl std::fmt::Debug for StlLayout {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            StlLayout::Binary { attributes, .. } => f
+                .debug_struct("StlLayout::Binary")
+                .field("facets", &attributes.len())
+                .finish(),
+            StlLayout::Ascii { solids } => f
+                .debug_struct("StlLayout::Ascii")
+                .field("solids", solids)
+                .finish(),
+        }
+    }
+}
+
+impl FileLayout for StlLayout {
+    fn as_any(&self) -> &dyn std::any::Any {
+        self
+    }
+
+    fn carries(&self) -> Carried {
+        let StlLayout::Binary { header, attributes } = self else {
+            return Carried::default();
+        };
+        let any_attribute = attributes.iter().any(|a| *a != [0, 0]);
+        Carried {
+            colours: header.windows(6).any(|w| w == b"COLOR="),
+            other: if any_attribute {
+                vec!["attribute bytes".to_string()]
+            } else {
+                Vec::new()
+            },
+            ..Carried::default()
+        }
+    }
+}
+
+/// The STL layout `mesh` came with, if any.
+fn layout_of(mesh: &Mesh) -> Option<&StlLayout> {
+    let layout = mesh.source.layout.as_deref()?;
+    layout.as_any().downcast_ref::<StlLayout>()
+}
 
 /// Whether a file of `len` bytes that starts with `head` has exactly the size its triangle count
 /// says a binary STL has.
@@ -124,11 +200,12 @@ impl Merger {
         Ok(id)
     }
 
-    fn into_mesh(self, faces: FaceBuilder) -> Mesh {
+    fn into_mesh(self, faces: FaceBuilder, layout: StlLayout) -> Mesh {
         faces.into_mesh(
             self.positions,
             Source {
                 format: Some(Format::Stl),
+                layout: Some(Arc::new(layout)),
                 ..Source::default()
             },
         )
@@ -144,7 +221,9 @@ fn read_binary(bytes: &[u8]) -> Result<Mesh, String> {
     let n = facets.len() / FACET; // the size was checked: exactly n facets
     let mut merger = Merger::default();
     let mut faces = FaceBuilder::with_capacity(n);
+    let mut attributes = Vec::with_capacity(n);
     for (i, facet) in facets.chunks_exact(FACET).enumerate() {
+        attributes.push([facet[48], facet[49]]);
         let mut t = [0; 3];
         for (c, id) in t.iter_mut().enumerate() {
             let at = 12 + 12 * c; // after the normal
@@ -163,7 +242,9 @@ fn read_binary(bytes: &[u8]) -> Result<Mesh, String> {
         }
         faces.triangle(t);
     }
-    Ok(merger.into_mesh(faces))
+    let mut header = [0; 80];
+    header.copy_from_slice(&bytes[..80]);
+    Ok(merger.into_mesh(faces, StlLayout::Binary { header, attributes }))
 }
 
 fn read_ascii(bytes: &[u8]) -> Result<Mesh, String> {
@@ -171,6 +252,7 @@ fn read_ascii(bytes: &[u8]) -> Result<Mesh, String> {
     let mut merger = Merger::default();
     let mut faces = FaceBuilder::with_capacity(0);
     let mut corners = Vec::new();
+    let mut solids = Vec::new();
     while let Some(w) = words.next() {
         if !w.eq_ignore_ascii_case(b"solid") {
             return Err(format!(
@@ -179,13 +261,19 @@ fn read_ascii(bytes: &[u8]) -> Result<Mesh, String> {
                 show(w)
             ));
         }
-        words.skip_name()?;
+        let name = words.skip_name()?.to_vec();
+        let first = faces.len();
         loop {
             let f = faces.len();
             match words.next() {
                 Some(w) if w.eq_ignore_ascii_case(b"facet") => {}
                 Some(w) if w.eq_ignore_ascii_case(b"endsolid") => {
-                    words.skip_name()?;
+                    let end_name = words.skip_name()?.to_vec();
+                    solids.push(Solid {
+                        name,
+                        end_name,
+                        facets: f - first,
+                    });
                     break;
                 }
                 w => return Err(words.unexpected(f, "'facet' or 'endsolid'", w)),
@@ -228,7 +316,7 @@ fn read_ascii(bytes: &[u8]) -> Result<Mesh, String> {
             faces.polygon(&corners);
         }
     }
-    Ok(merger.into_mesh(faces))
+    Ok(merger.into_mesh(faces, StlLayout::Ascii { solids }))
 }
 
 /// The whitespace-separated words of an ASCII STL, with the line of the last one read.
@@ -268,16 +356,16 @@ impl<'a> Words<'a> {
     }
 
     /// Skips the rest of a `solid` or `endsolid` line: the name, at most [`MAX_HEADER_LINE`]
-    /// bytes.
-    fn skip_name(&mut self) -> Result<(), String> {
+    /// bytes, returned without the line's end (`\r` of CRLF included).
+    fn skip_name(&mut self) -> Result<&'a [u8], String> {
         let rest = &self.bytes[self.pos..];
-        match rest
+        let len = match rest
             .iter()
             .take(MAX_HEADER_LINE + 1)
             .position(|&b| b == b'\n')
         {
-            Some(end) => self.pos += end,
-            None if rest.len() <= MAX_HEADER_LINE => self.pos += rest.len(),
+            Some(end) => end,
+            None if rest.len() <= MAX_HEADER_LINE => rest.len(),
             None => {
                 return Err(format!(
                     "line {}: the solid's name runs on for more than {} KiB",
@@ -285,8 +373,9 @@ impl<'a> Words<'a> {
                     MAX_HEADER_LINE >> 10
                 ));
             }
-        }
-        Ok(())
+        };
+        self.pos += len;
+        Ok(rest[..len].strip_suffix(b"\r").unwrap_or(&rest[..len]))
     }
 
     fn unexpected(&self, f: usize, want: &str, found: Option<&[u8]>) -> String {
@@ -318,7 +407,8 @@ impl<'a> Words<'a> {
     }
 }
 
-/// Binary STL holds `f32` coordinates and a 32-bit triangle count.
+/// Binary STL holds `f32` coordinates and a 32-bit triangle count; an STL layout's facets must
+/// still be the mesh's.
 pub(crate) fn check_writable(mesh: &Mesh) -> Result<(), String> {
     if u32::try_from(mesh.triangles.len()).is_err() {
         return Err(format!(
@@ -326,20 +416,109 @@ pub(crate) fn check_writable(mesh: &Mesh) -> Result<(), String> {
             mesh.triangles.len()
         ));
     }
+    let (facets, have) = match layout_of(mesh) {
+        Some(StlLayout::Binary { attributes, .. }) => (attributes.len(), mesh.triangles.len()),
+        Some(StlLayout::Ascii { solids }) => {
+            let faces = Faces::of(mesh);
+            faces.check()?;
+            (solids.iter().map(|s| s.facets).sum(), faces.len())
+        }
+        None => (0, 0),
+    };
+    if facets != have {
+        return Err(format!(
+            "the mesh has {have} faces but its STL source has {facets} facets; clear \
+             mesh.source.layout after changing connectivity"
+        ));
+    }
     super::fits_single(mesh)
 }
 
 pub(crate) fn write(out: &mut impl Write, mesh: &Mesh) -> io::Result<()> {
-    // Never starting with "solid": some readers take that for ASCII.
-    let mut header = [b' '; 80];
-    let text = b"binary STL written by vcsmooth";
-    header[..text.len()].copy_from_slice(text);
-    out.write_all(&header)?;
+    match layout_of(mesh) {
+        Some(StlLayout::Binary { header, attributes }) => {
+            write_binary(out, mesh, header, |i| attributes[i])
+        }
+        Some(StlLayout::Ascii { solids }) => write_ascii(out, mesh, solids),
+        None => {
+            // Never starting with "solid": some readers take that for ASCII.
+            let mut header = [b' '; 80];
+            let text = b"binary STL written by vcsmooth";
+            header[..text.len()].copy_from_slice(text);
+            write_binary(out, mesh, &header, |_| [0, 0])
+        }
+    }
+}
+
+/// Each face as an ASCII facet with its corners (polygons as they came) under its solid.
+fn write_ascii(out: &mut impl Write, mesh: &Mesh, solids: &[Solid]) -> io::Result<()> {
+    let faces = Faces::of(mesh);
+    let mut solid = solids.iter().map(|s| (s, s.facets));
+    let mut current: Option<(&Solid, usize)> = None;
+    let close = |out: &mut dyn Write, s: &Solid| -> io::Result<()> {
+        out.write_all(b"endsolid")?;
+        out.write_all(&s.end_name)?;
+        out.write_all(b"\n")
+    };
+    let open = |out: &mut dyn Write, s: &Solid| -> io::Result<()> {
+        out.write_all(b"solid")?;
+        out.write_all(&s.name)?;
+        out.write_all(b"\n")
+    };
+    let f32s = |p: DVec3| p.to_array().map(|x| F32(x as f32));
+    faces.try_for_each(|corners| {
+        // Close the solids that are complete and open the next one with facets left.
+        while current.is_none_or(|(_, left)| left == 0) {
+            if let Some((s, _)) = current {
+                close(out, s)?;
+            }
+            let (s, n) = solid
+                .next()
+                .ok_or_else(|| io::Error::other("facets beyond the solids"))?;
+            open(out, s)?;
+            current = Some((s, n));
+        }
+        let p = |k: usize| mesh.positions[corners[k] as usize];
+        // The polygon's normal: the sum of its fan's cross products.
+        let normal = (2..corners.len())
+            .map(|k| (p(k - 1) - p(0)).cross(p(k) - p(0)))
+            .sum::<DVec3>()
+            .normalize_or_zero();
+        let [x, y, z] = f32s(normal);
+        writeln!(out, "facet normal {x} {y} {z}\nouter loop")?;
+        for k in 0..corners.len() {
+            let [x, y, z] = f32s(p(k));
+            writeln!(out, "vertex {x} {y} {z}")?;
+        }
+        out.write_all(b"endloop\nendfacet\n")?;
+        if let Some((_, left)) = &mut current {
+            *left -= 1;
+        }
+        Ok::<(), io::Error>(())
+    })?;
+    // The solids left: the current one, and any without facets.
+    if let Some((s, _)) = current {
+        close(out, s)?;
+    }
+    for (s, _) in solid {
+        open(out, s)?;
+        close(out, s)?;
+    }
+    Ok(())
+}
+
+fn write_binary(
+    out: &mut impl Write,
+    mesh: &Mesh,
+    header: &[u8; 80],
+    attribute: impl Fn(usize) -> [u8; 2],
+) -> io::Result<()> {
+    out.write_all(header)?;
     out.write_all(&(mesh.triangles.len() as u32).to_le_bytes())?;
     let mut buf = Vec::with_capacity(FACET * 4096);
-    for chunk in mesh.triangles.chunks(4096) {
+    for (k, chunk) in mesh.triangles.chunks(4096).enumerate() {
         buf.clear();
-        for t in chunk {
+        for (i, t) in chunk.iter().enumerate() {
             let [a, b, c] = t.map(|v| mesh.positions[v as usize]);
             let normal = (b - a).cross(c - a).normalize_or_zero();
             for p in [normal, a, b, c] {
@@ -347,7 +526,7 @@ pub(crate) fn write(out: &mut impl Write, mesh: &Mesh) -> io::Result<()> {
                     buf.extend_from_slice(&(x as f32).to_le_bytes());
                 }
             }
-            buf.extend_from_slice(&[0, 0]);
+            buf.extend_from_slice(&attribute(k * 4096 + i));
         }
         out.write_all(&buf)?;
     }

@@ -1,5 +1,6 @@
 //! `vcsmooth info IN [--json]`: a mesh's vertices, faces, edges, boundary, components, volume,
-//! area and bounding box, as a table or JSON.
+//! area and bounding box, and what its file carries besides positions and faces (kept by an
+//! output in the same format), as a table or JSON.
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -11,6 +12,7 @@ use crate::cli::output::print_json;
 use crate::cli::progress::Progress;
 use crate::cli::report::{UNDEFINED, count, fixed, format_name, num, print_rows, undefined_as_nan};
 use crate::error::Result;
+use crate::mesh::Carried;
 use crate::metrics::{self, MeshInfo};
 use crate::topology::Topology;
 
@@ -41,8 +43,9 @@ impl InfoConfig {
     }
 }
 
-/// The JSON of `vcsmooth info --json`: the path, the format and every [`MeshInfo`] field, `null`
-/// for a figure the mesh does not define (see [`undefined_as_nan`]).
+/// The JSON of `vcsmooth info --json`: the path, the format, every [`MeshInfo`] field (`null` for
+/// a figure the mesh does not define, see [`undefined_as_nan`]) and `carries`, what the file
+/// carries besides positions and faces (all `false` for a file whose reader kept no layout).
 #[derive(Debug, Clone, Serialize)]
 pub struct InfoDoc {
     pub path: String,
@@ -50,6 +53,7 @@ pub struct InfoDoc {
     pub format: Option<String>,
     #[serde(flatten)]
     pub info: MeshInfo,
+    pub carries: Carried,
 }
 
 /// `vcsmooth info`.
@@ -64,6 +68,12 @@ pub fn run(cfg: &InfoConfig, progress: &mut Progress, out: &mut dyn Write) -> Re
         path: cfg.input.display().to_string(),
         format: mesh.source.format.map(format_name),
         info: undefined_as_nan(&metrics::info(&mesh, &topo)),
+        carries: mesh
+            .source
+            .layout
+            .as_ref()
+            .map(|l| l.carries())
+            .unwrap_or_default(),
     };
     progress.finish();
     if cfg.json {
@@ -125,7 +135,30 @@ fn print_info(out: &mut dyn Write, doc: &InfoDoc) -> Result<()> {
             format!("{UNDEFINED} (no interior edge between two triangles)")
         },
     ));
+    rows.push(("carries", carried(&doc.carries)));
     print_rows(out, &rows)
+}
+
+/// What the file carries, as a list: `uvs, colours, other: vertex.confidence`.
+fn carried(c: &Carried) -> String {
+    let mut items: Vec<String> = [
+        (c.uvs, "uvs"),
+        (c.colours, "colours"),
+        (c.normals, "normals (recomputed on write)"),
+        (c.materials, "materials"),
+    ]
+    .into_iter()
+    .filter(|&(has, _)| has)
+    .map(|(_, name)| name.to_string())
+    .collect();
+    if !c.other.is_empty() {
+        items.push(format!("other: {}", c.other.join(", ")));
+    }
+    if items.is_empty() {
+        "nothing besides positions and faces".to_string()
+    } else {
+        items.join(", ")
+    }
 }
 
 /// Whether the faces are consistently oriented, and what smoothing does about it when not.

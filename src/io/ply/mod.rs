@@ -243,6 +243,42 @@ impl crate::mesh::FileLayout for PlyLayout {
     fn as_any(&self) -> &dyn std::any::Any {
         self
     }
+
+    /// By property name, in the vertex and face elements: texture coordinates (`u v`, `s t`,
+    /// `texture_u texture_v`, `texcoord`, …), colours (`red green blue alpha`, `r g b a`,
+    /// `diffuse_red` …), normals (`nx ny nz`), materials (`material_index`); every other property
+    /// is named in `other` as `element.property`, and every other element by its name.
+    fn carries(&self) -> crate::mesh::Carried {
+        let mut carried = crate::mesh::Carried::default();
+        for el in &self.elements {
+            if el.name != "vertex" && el.name != "face" {
+                carried.other.push(el.name.clone());
+                continue;
+            }
+            for p in &el.props {
+                let name = p.name.as_str();
+                match name {
+                    "x" | "y" | "z" if el.name == "vertex" => {}
+                    "vertex_indices" | "vertex_index" if el.name == "face" => {}
+                    "nx" | "ny" | "nz" => carried.normals = true,
+                    "u" | "v" | "s" | "t" | "texture_u" | "texture_v" | "texture_s"
+                    | "texture_t" | "texcoord" | "texcoords" => carried.uvs = true,
+                    "red" | "green" | "blue" | "alpha" | "r" | "g" | "b" | "a" => {
+                        carried.colours = true
+                    }
+                    _ if name.starts_with("diffuse_")
+                        || name.starts_with("ambient_")
+                        || name.starts_with("specular_") =>
+                    {
+                        carried.colours = true
+                    }
+                    "material_index" => carried.materials = true,
+                    _ => carried.other.push(format!("{}.{name}", el.name)),
+                }
+            }
+        }
+        carried
+    }
 }
 
 impl PlyLayout {
