@@ -204,7 +204,9 @@ pub fn write_mesh(path: &Path, mesh: &Mesh) -> Result<()> {
             Format::Obj | Format::Off => {
                 let faces = match format {
                     Format::Off => off::check_writable(mesh),
-                    _ => Faces::of(mesh).check().and_then(|()| obj::check_writable(mesh)),
+                    _ => Faces::of(mesh)
+                        .check()
+                        .and_then(|()| obj::check_writable(mesh)),
                 };
                 faces.and_then(|()| match mesh.source.precision {
                     Precision::Float => fits_single(mesh),
