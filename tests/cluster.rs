@@ -402,7 +402,7 @@ fn iteration_counts_the_budget_cannot_record_are_refused_on_every_rank() {
     let engine = engine_settings(16384, 1);
     let settings = cluster_settings(&dir.path().join("work"), false, 1);
     for result in run_ranks(2, &input, &output, &opts, &engine, &settings) {
-        let e = result.err().expect("refused");
+        let e = result.expect_err("refused");
         assert!(e.to_string().contains("record per iteration"), "{e}");
     }
     assert!(!output.exists());

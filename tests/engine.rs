@@ -337,7 +337,7 @@ fn the_front_door_smooths_as_the_command_line_does() {
 fn thread_counts_beyond_the_limit_are_refused_before_any_thread_starts() {
     use vcsmooth::engine::{MAX_THREADS, thread_pool};
     for n in [0, MAX_THREADS + 1, 1_000_000_000] {
-        let e = thread_pool(Some(n)).err().expect("refused");
+        let e = thread_pool(Some(n)).expect_err("refused");
         assert!(e.to_string().contains("threads"), "{e}");
     }
     assert_eq!(thread_pool(Some(2)).unwrap().current_num_threads(), 2);
