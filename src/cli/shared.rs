@@ -22,6 +22,16 @@ pub struct InOut {
     pub output: PathBuf,
 }
 
+impl InOut {
+    /// What `subdivide` and `refine` check before any work: the bound `max_edge`, an output that
+    /// can hold a refined mesh, and the files (see [`crate::cli::output::check_files`]).
+    pub fn check_refined(&self, max_edge: f64) -> Result<()> {
+        crate::modes::refine::check_max_edge(max_edge)?;
+        crate::cli::output::refined_mesh_output(&self.output)?;
+        crate::cli::output::check_files(&[("IN", &self.input)], Some(("OUT", &self.output)), &[])
+    }
+}
+
 /// The smoothing flags shared by `smooth`, `batch` and `slurm-script`: method, iterations, step
 /// sizes, engine.
 #[derive(Debug, Clone, ClapArgs)]

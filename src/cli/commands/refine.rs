@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use clap::Args as ClapArgs;
 
-use crate::cli::output::{check_files, refined_mesh_output, stdout_error};
+use crate::cli::output::stdout_error;
 use crate::cli::progress::Progress;
 use crate::cli::report::{UNDEFINED, fixed, percent_of};
 use crate::cli::shared::{InOut, MAX_THREADS, length};
@@ -49,13 +49,7 @@ pub struct RefineConfig {
 
 impl RefineConfig {
     pub fn from_args(a: RefineArgs) -> Result<RefineConfig> {
-        refine::check_max_edge(a.max_edge)?;
-        refined_mesh_output(&a.files.output)?;
-        check_files(
-            &[("IN", &a.files.input)],
-            Some(("OUT", &a.files.output)),
-            &[],
-        )?;
+        a.files.check_refined(a.max_edge)?;
         let mut options = RefineOptions {
             max_edge: a.max_edge,
             rounds: a.rounds as usize,

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use clap::Args as ClapArgs;
 
-use crate::cli::output::{check_files, refined_mesh_output, stdout_error};
+use crate::cli::output::stdout_error;
 use crate::cli::progress::Progress;
 use crate::cli::shared::{InOut, length};
 use crate::engine::memory;
@@ -39,13 +39,7 @@ pub struct SubdivideConfig {
 
 impl SubdivideConfig {
     pub fn from_args(a: SubdivideArgs) -> Result<SubdivideConfig> {
-        refine::check_max_edge(a.max_edge)?;
-        refined_mesh_output(&a.files.output)?;
-        check_files(
-            &[("IN", &a.files.input)],
-            Some(("OUT", &a.files.output)),
-            &[],
-        )?;
+        a.files.check_refined(a.max_edge)?;
         Ok(SubdivideConfig {
             input: a.files.input,
             output: a.files.output,
