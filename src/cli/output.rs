@@ -111,7 +111,7 @@ pub fn check_files(reads: &[Named], output: Option<Named>, sides: &[Named]) -> R
 
 /// What makes two paths the same file (see [`check_files`]).
 #[derive(Debug, PartialEq, Eq)]
-enum Identity {
+pub(crate) enum Identity {
     /// Device and inode of an existing file.
     Inode(u64, u64),
     /// The resolved absolute path of a file that does not exist (yet).
@@ -119,7 +119,7 @@ enum Identity {
 }
 
 impl Identity {
-    fn of(path: &Path) -> Identity {
+    pub(crate) fn of(path: &Path) -> Identity {
         #[cfg(unix)]
         if let Ok(m) = std::fs::metadata(path) {
             use std::os::unix::fs::MetadataExt;

@@ -12,7 +12,7 @@ use clap::Args as ClapArgs;
 use crate::cli::batch_smooth::{BatchSmooth, BatchSmoothArgs, batch_inputs};
 use crate::cli::flags;
 use crate::cli::output::{
-    one_line, parent_exists, print_error, print_json, stdout_error, write_json,
+    Identity, one_line, parent_exists, print_error, print_json, stdout_error, write_json,
 };
 use crate::cli::progress::Progress;
 use crate::engine;
@@ -348,7 +348,11 @@ fn refuse_batch_file(
     if let Ok(entries) = std::fs::read_dir(outdir.join(core::MARKER_DIR)) {
         files.extend(entries.flatten().map(|e| ("a marker", e.path())));
     }
-    match files.into_iter().find(|(_, f)| same_file(target, f)) {
+    let target_id = Identity::of(target);
+    match files
+        .into_iter()
+        .find(|(_, f)| Identity::of(f) == target_id)
+    {
         Some((what, f)) => Err(Error::invalid(
             target,
             format!(
@@ -358,32 +362,6 @@ fn refuse_batch_file(
         )),
         None => Ok(()),
     }
-}
-
-/// Whether `a` and `b` name the same file: the same place once links are resolved (the file
-/// need not exist), or the same device and inode.
-fn same_file(a: &Path, b: &Path) -> bool {
-    fn place(p: &Path) -> Option<PathBuf> {
-        if let Ok(c) = p.canonicalize() {
-            return Some(c);
-        }
-        let dir = p.parent().filter(|d| !d.as_os_str().is_empty());
-        Some(
-            dir.unwrap_or(Path::new("."))
-                .canonicalize()
-                .ok()?
-                .join(p.file_name()?),
-        )
-    }
-    if place(a).is_some_and(|x| place(b) == Some(x)) {
-        return true;
-    }
-    #[cfg(unix)]
-    if let (Ok(x), Ok(y)) = (std::fs::metadata(a), std::fs::metadata(b)) {
-        use std::os::unix::fs::MetadataExt;
-        return (x.dev(), x.ino()) == (y.dev(), y.ino());
-    }
-    false
 }
 
 fn print_summary(out: &mut dyn Write, s: &core::BatchSummary) -> Result<()> {
