@@ -108,9 +108,7 @@ impl Storage {
             ))
         })?;
         let Some(dir) = &self.scratch else {
-            let mut v = self.heap_vec(len)?;
-            v.resize(len, zero::<T>());
-            return Ok(Buf::from_vec(v));
+            return self.heap_zeroed(len).map(Buf::from_vec);
         };
         let n = self.counter.fetch_add(1, Ordering::Relaxed);
         let path = dir.join(format!(".vcsmooth-scratch-{}-{n}", std::process::id()));
@@ -151,6 +149,29 @@ impl Storage {
     }
 
     /// An empty heap vector with room for `len` elements, or the error saying how much was needed.
+    /// `len` zeros on the heap, from the allocator's zeroed memory: large arrays come as fresh
+    /// pages that are zero already, so nothing is written until the array is used (by the threads
+    /// that use it), instead of one thread writing every zero first.
+    fn heap_zeroed<T: Pod>(&self, len: usize) -> Result<Vec<T>> {
+        let failed = || {
+            let bytes = (len as u64).saturating_mul(std::mem::size_of::<T>() as u64);
+            not_enough(&format!("an array of {len} elements"), bytes, self.budget)
+        };
+        let layout = std::alloc::Layout::array::<T>(len).map_err(|_| failed())?;
+        if layout.size() == 0 {
+            return Ok(Vec::new());
+        }
+        // SAFETY: the layout's size is not zero.
+        let ptr = unsafe { std::alloc::alloc_zeroed(layout) }.cast::<T>();
+        if ptr.is_null() {
+            return Err(failed());
+        }
+        // SAFETY: `ptr` comes from the global allocator with the layout of `len` elements of `T`
+        // (what a `Vec` of capacity `len` holds), and all of them are zeros, which `Pod` makes
+        // valid values.
+        Ok(unsafe { Vec::from_raw_parts(ptr, len, len) })
+    }
+
     fn heap_vec<T: Pod>(&self, len: usize) -> Result<Vec<T>> {
         let mut v = Vec::new();
         v.try_reserve_exact(len).map_err(|_| {
@@ -269,11 +290,6 @@ fn reserve(file: &std::fs::File, bytes: u64) -> std::io::Result<()> {
         left -= n as u64;
     }
     Ok(())
-}
-
-fn zero<T: Pod>() -> T {
-    // SAFETY: `Pod` guarantees that the all-zero bit pattern is a valid `T`.
-    unsafe { std::mem::zeroed() }
 }
 
 enum Inner<T> {

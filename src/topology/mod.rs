@@ -119,6 +119,10 @@ struct VertexScratch {
     keys: Vec<u64>,
     corners: Vec<u32>,
     parent: Vec<usize>,
+    /// A chunk's region of the vertex → face array, and each entry's vertex, while it is sorted
+    /// by vertex.
+    faces: Vec<u32>,
+    local: Vec<u16>,
 }
 
 impl Topology {
@@ -149,69 +153,112 @@ impl Topology {
         };
         let mut fixed: Buf<u8> = storage.zeroed(n_vertices)?;
 
-        // Vertex → face CSR by counting sort (faces come out ascending per vertex).
-        let mut vf_offsets: Buf<usize> = storage.zeroed(n_vertices + 1)?;
-        for (t, tri) in triangles.iter().enumerate() {
-            if tri.iter().any(|&v| v as usize >= n_vertices) {
-                return Err(Error::topology(format!(
-                    "triangle {t} indexes a vertex out of range (0..{n_vertices})"
-                )));
-            }
-            if is_degenerate(tri) {
-                stats.degenerate_triangles += 1;
-                for &v in tri {
-                    fixed[v as usize] = 1;
-                }
-                continue;
-            }
-            for &v in tri {
-                vf_offsets[v as usize + 1] += 1;
+        // Vertex → face CSR, a counting sort in parallel: each block of triangles counts its
+        // corners per chunk of vertices, then scatters its triangle ids into the chunks' regions
+        // (block after block, so each region holds its triangles ascending); each chunk then sorts
+        // its region by vertex, stably, and analyses its vertices (pass 1).
+        let chunks = n_vertices.div_ceil(CHUNK);
+        let block_len = triangles.len().div_ceil(BLOCKS).max(1);
+        let counted: Vec<BlockCount> = triangles
+            .par_chunks(block_len)
+            .enumerate()
+            .map(|(b, block)| count_block(b * block_len, block, n_vertices, chunks))
+            .collect();
+        if let Some(t) = counted.iter().find_map(|c| c.out_of_range) {
+            return Err(Error::topology(format!(
+                "triangle {t} indexes a vertex out of range (0..{n_vertices})"
+            )));
+        }
+        for &t in counted.iter().flat_map(|c| &c.degenerate) {
+            stats.degenerate_triangles += 1;
+            for &v in &triangles[t as usize] {
+                fixed[v as usize] = 1;
             }
         }
-        for v in 0..n_vertices {
-            vf_offsets[v + 1] += vf_offsets[v];
+        // Where each chunk's region starts in `vf`.
+        let mut region_start = Vec::with_capacity(chunks + 1);
+        let mut total = 0usize;
+        for c in 0..chunks {
+            region_start.push(total);
+            total += counted.iter().map(|b| b.per_chunk[c] as usize).sum::<usize>();
         }
-        let mut vf: Buf<u32> = storage.zeroed(vf_offsets[n_vertices])?;
-        {
-            let mut cursor: Buf<usize> = storage.copy_of(&vf_offsets[..n_vertices])?;
-            for (t, tri) in triangles.iter().enumerate() {
-                if is_degenerate(tri) {
-                    continue;
-                }
-                for &v in tri {
-                    vf[cursor[v as usize]] = t as u32;
-                    cursor[v as usize] += 1;
-                }
+        region_start.push(total);
+        let mut vf: Buf<u32> = storage.zeroed(total)?;
+        // Each block's piece of each chunk's region, in chunk order.
+        let mut pieces: Vec<Vec<&mut [u32]>> = (0..counted.len()).map(|_| Vec::with_capacity(chunks)).collect();
+        let mut rest: &mut [u32] = &mut vf;
+        for c in 0..chunks {
+            for (b, count) in counted.iter().enumerate() {
+                let (piece, tail) = std::mem::take(&mut rest).split_at_mut(count.per_chunk[c] as usize);
+                pieces[b].push(piece);
+                rest = tail;
             }
         }
+        pieces
+            .into_par_iter()
+            .zip(triangles.par_chunks(block_len))
+            .enumerate()
+            .for_each(|(b, (mut pieces, block))| {
+                for (k, tri) in block.iter().enumerate() {
+                    if is_degenerate(tri) {
+                        continue;
+                    }
+                    for &v in tri {
+                        let piece = &mut pieces[v as usize / CHUNK];
+                        let (head, tail) = std::mem::take(piece)
+                            .split_first_mut()
+                            .expect("counted");
+                        *head = (b * block_len + k) as u32;
+                        *piece = tail;
+                    }
+                }
+            });
 
-        // Pass 1: per vertex, the number of distinct neighbours, edge counts and the fixed flag.
+        // Pass 1, chunk by chunk: sort the region by vertex into `vf` and its offsets, then per
+        // vertex the number of distinct neighbours, edge counts and the fixed flag.
+        let mut vf_offsets: Buf<usize> = storage.zeroed(n_vertices + 1)?;
         let mut vv_offsets: Buf<usize> = storage.zeroed(n_vertices + 1)?;
-        let found = vv_offsets[1..]
-            .par_chunks_mut(CHUNK)
+        let mut regions = Vec::with_capacity(chunks);
+        let mut rest: &mut [u32] = &mut vf;
+        for c in 0..chunks {
+            let (region, tail) =
+                std::mem::take(&mut rest).split_at_mut(region_start[c + 1] - region_start[c]);
+            regions.push(region);
+            rest = tail;
+        }
+        let found = regions
+            .into_par_iter()
+            .zip(vf_offsets[1..].par_chunks_mut(CHUNK))
+            .zip(vv_offsets[1..].par_chunks_mut(CHUNK))
             .zip(fixed.par_chunks_mut(CHUNK))
             .enumerate()
-            .map_init(VertexScratch::default, |scratch, (c, (degs, fixed))| {
-                let mut st = TopologyStats::default();
-                for (k, (deg, fix)) in degs.iter_mut().zip(fixed.iter_mut()).enumerate() {
-                    let v = (c * CHUNK + k) as u32;
-                    let faces = &vf[vf_offsets[v as usize]..vf_offsets[v as usize + 1]];
-                    let a = analyse_vertex(v, faces, triangles, scratch);
-                    *deg = a.degree;
-                    st.edges += a.edges;
-                    st.boundary_edges += a.boundary_edges;
-                    st.non_manifold_edges += a.non_manifold_edges;
-                    st.non_manifold_vertices += a.non_manifold_vertex as usize;
-                    st.inconsistent_orientation_edges += a.inconsistent_edges;
-                    st.high_degree_vertices += (a.degree > MAX_FREE_DEGREE) as usize;
-                    st.unreferenced_vertices += (a.degree == 0) as usize;
-                    if a.fixed {
-                        *fix = 1;
+            .map_init(
+                VertexScratch::default,
+                |scratch, (c, (((region, ends), degs), fixed))| {
+                    let lo = (c * CHUNK) as u32;
+                    sort_region(lo, region, region_start[c], ends, triangles, scratch);
+                    let mut st = TopologyStats::default();
+                    let mut start = 0;
+                    for (k, (deg, fix)) in degs.iter_mut().zip(fixed.iter_mut()).enumerate() {
+                        let end = ends[k] - region_start[c];
+                        let a = analyse_vertex(lo + k as u32, &region[start..end], triangles, scratch);
+                        start = end;
+                        *deg = a.degree;
+                        st.edges += a.edges;
+                        st.boundary_edges += a.boundary_edges;
+                        st.non_manifold_edges += a.non_manifold_edges;
+                        st.non_manifold_vertices += a.non_manifold_vertex as usize;
+                        st.inconsistent_orientation_edges += a.inconsistent_edges;
+                        st.high_degree_vertices += (a.degree > MAX_FREE_DEGREE) as usize;
+                        st.unreferenced_vertices += (a.degree == 0) as usize;
+                        if a.fixed {
+                            *fix = 1;
+                        }
+                        st.fixed_vertices += (*fix != 0) as usize;
                     }
-                    st.fixed_vertices += (*fix != 0) as usize;
-                }
-                st
-            })
+                    st
+                },
+            )
             .reduce(TopologyStats::default, TopologyStats::add);
         stats = stats.add(found);
         for v in 0..n_vertices {
@@ -555,6 +602,7 @@ fn runs(tri: [u32; 3], a: u32, b: u32) -> bool {
 }
 
 /// What the build learns about one vertex from its faces.
+#[derive(Debug, PartialEq, Eq)]
 struct VertexAnalysis {
     degree: usize,
     /// Edges to higher-numbered neighbours (each undirected edge counted once), by kind.
@@ -567,8 +615,148 @@ struct VertexAnalysis {
     fixed: bool,
 }
 
+/// Blocks of triangles the vertex → face build counts and scatters in parallel (a work size
+/// only, like [`CHUNK`]).
+const BLOCKS: usize = 64;
+
+/// What one block of triangles holds for the vertex → face build.
+struct BlockCount {
+    /// Corners of the block's (non-degenerate) triangles in each chunk of [`CHUNK`] vertices.
+    per_chunk: Vec<u32>,
+    /// The block's degenerate triangles (a repeated corner), ascending.
+    degenerate: Vec<u32>,
+    /// The block's first triangle with a corner out of range.
+    out_of_range: Option<usize>,
+}
+
+/// Count the corners of `block` (triangles `first..`) per chunk of vertices.
+fn count_block(first: usize, block: &[[u32; 3]], n_vertices: usize, chunks: usize) -> BlockCount {
+    let mut count = BlockCount {
+        per_chunk: vec![0; chunks],
+        degenerate: Vec::new(),
+        out_of_range: None,
+    };
+    for (k, tri) in block.iter().enumerate() {
+        if tri.iter().any(|&v| v as usize >= n_vertices) {
+            count.out_of_range = Some(first + k);
+            break;
+        }
+        if is_degenerate(tri) {
+            count.degenerate.push((first + k) as u32);
+            continue;
+        }
+        for &v in tri {
+            count.per_chunk[v as usize / CHUNK] += 1;
+        }
+    }
+    count
+}
+
+/// Sort the region of `vf` of the chunk of vertices from `lo`, which holds the ids of the faces
+/// at its vertices ascending (a face once per corner in the chunk, in a row), by vertex, keeping
+/// each vertex's faces ascending; `ends[k]` gets where vertex `lo + k`'s faces end in `vf` (the
+/// region starts at `start`).
+fn sort_region(
+    lo: u32,
+    region: &mut [u32],
+    start: usize,
+    ends: &mut [usize],
+    triangles: &[[u32; 3]],
+    s: &mut VertexScratch,
+) {
+    const { assert!(CHUNK <= 1 << 16, "local vertex ids are u16") };
+    s.faces.clear();
+    s.faces.extend_from_slice(region);
+    // Each entry's vertex (local id): a face's entries are its corners in the chunk, in order.
+    s.local.clear();
+    let hi = lo + ends.len() as u32;
+    while let Some(&t) = s.faces.get(s.local.len()) {
+        for v in triangles[t as usize] {
+            if v >= lo && v < hi {
+                s.local.push((v - lo) as u16);
+            }
+        }
+    }
+    debug_assert_eq!(s.local.len(), s.faces.len());
+    ends.fill(0);
+    for &k in &s.local {
+        ends[k as usize] += 1;
+    }
+    // `ends` as starts within the region, then advanced past each placed face to the ends.
+    let mut at = 0;
+    for e in ends.iter_mut() {
+        let n = *e;
+        *e = at;
+        at += n;
+    }
+    for (&k, &t) in s.local.iter().zip(&s.faces) {
+        region[ends[k as usize]] = t;
+        ends[k as usize] += 1;
+    }
+    ends.iter_mut().for_each(|e| *e += start);
+}
+
+/// Most faces of a vertex that [`closed_fan`] tries: its tests cost d², the general analysis
+/// d log d. Surface meshes have degrees near 6.
+const FAN_LIMIT: usize = 16;
+
+/// The link edges `(b, c)` of the faces of `v` (each face runs v → b → c) when they form one
+/// consistently oriented cycle through distinct neighbours: the interior vertex of a manifold,
+/// which is nearly every vertex of a scan. Then the b's are exactly the neighbours, each shared
+/// by two faces that traverse their edge in opposite directions, and the link is connected; so
+/// [`analyse_vertex`] and [`write_neighbors`] can skip their sort and union-find.
+/// Returns the number of neighbours above `v` (its edges, each counted at its lower end); `None`
+/// for anything else (or more than [`FAN_LIMIT`] faces), which the general path handles.
+#[inline]
+fn closed_fan(v: u32, faces: &[u32], triangles: &[[u32; 3]]) -> Option<usize> {
+    let d = faces.len();
+    if d < 3 || d > FAN_LIMIT {
+        return None;
+    }
+    let (mut b, mut c) = ([0u32; FAN_LIMIT], [0u32; FAN_LIMIT]);
+    for (k, &t) in faces.iter().enumerate() {
+        (b[k], c[k]) = opposite_edge(&triangles[t as usize], v);
+    }
+    for i in 1..d {
+        if b[..i].contains(&b[i]) {
+            return None;
+        }
+    }
+    // Walk the cycle from face 0: the face after face i is the one whose b is i's c. Coming back
+    // to face 0 first at step d visits every face once, so the c's are the b's permuted.
+    let mut at = 0;
+    for step in 1..=d {
+        at = b[..d].iter().position(|&x| x == c[at])?;
+        if (at == 0) != (step == d) {
+            return None;
+        }
+    }
+    Some(b[..d].iter().filter(|&&u| u > v).count())
+}
+
 /// Classify vertex `v` from its (non-degenerate) faces. O(d log d) in the degree d.
 fn analyse_vertex(
+    v: u32,
+    faces: &[u32],
+    triangles: &[[u32; 3]],
+    s: &mut VertexScratch,
+) -> VertexAnalysis {
+    if let Some(edges) = closed_fan(v, faces, triangles) {
+        return VertexAnalysis {
+            degree: faces.len(),
+            edges,
+            boundary_edges: 0,
+            non_manifold_edges: 0,
+            inconsistent_edges: 0,
+            non_manifold_vertex: false,
+            fixed: false,
+        };
+    }
+    analyse_general(v, faces, triangles, s)
+}
+
+/// [`analyse_vertex`] for any vertex, without the shortcut.
+fn analyse_general(
     v: u32,
     faces: &[u32],
     triangles: &[[u32; 3]],
@@ -647,6 +835,17 @@ fn write_neighbors(
     s: &mut VertexScratch,
     out: &mut [u32],
 ) {
+    if out.len() == faces.len() && faces.len() <= FAN_LIMIT {
+        // The interior vertex of a manifold (see `closed_fan`): its faces' b corners are distinct
+        // and as many as its neighbours, so they are the neighbours.
+        for (o, &t) in out.iter_mut().zip(faces) {
+            *o = opposite_edge(&triangles[t as usize], v).0;
+        }
+        out.sort_unstable();
+        if out.windows(2).all(|w| w[0] < w[1]) {
+            return;
+        }
+    }
     s.corners.clear();
     for &t in faces {
         let (b, c) = opposite_edge(&triangles[t as usize], v);
@@ -915,6 +1114,113 @@ mod tests {
             assert_eq!(t.stats.high_degree_vertices, 2 * hub_fixed as usize);
             assert_eq!(t.stats.fixed_vertices, 2 * hub_fixed as usize);
             assert!(!t.is_fixed(0));
+        }
+    }
+
+    #[test]
+    fn the_closed_fan_shortcut_agrees_with_the_general_analysis() {
+        // Fans around vertex 0 over rims 1..=d: closed, open, with a face flipped, with a rim
+        // vertex repeated (two cycles through 0, a pinch), and a double cover of the rim.
+        let ring = |d: u32| -> Vec<[u32; 3]> { (1..=d).map(|k| [0, k, k % d + 1]).collect() };
+        let mut cases: Vec<Vec<[u32; 3]>> = Vec::new();
+        for d in [3, 4, 6, 16, 17] {
+            cases.push(ring(d));
+            let mut open = ring(d);
+            open.pop();
+            cases.push(open);
+            let mut flipped = ring(d);
+            flipped[1].swap(1, 2);
+            cases.push(flipped);
+            let mut twice = ring(d);
+            twice.extend(ring(d));
+            cases.push(twice);
+        }
+        // Two triangles fans sharing vertex 0 (a pinch): 0-1-2-3 and 0-4-5-6.
+        cases.push(vec![[0, 1, 2], [0, 2, 3], [0, 3, 1], [0, 4, 5], [0, 5, 6], [0, 6, 4]]);
+        // Two cycles through the same rim vertex 1: 1-2-3 and 1-4-5.
+        cases.push(vec![[0, 1, 2], [0, 2, 3], [0, 3, 1], [0, 1, 4], [0, 4, 5], [0, 5, 1]]);
+        let mut s = VertexScratch::default();
+        let mut shortcuts = 0;
+        for tris in &cases {
+            let n = tris.iter().flatten().max().unwrap() + 1;
+            let topo = Topology::build(n as usize, tris).unwrap();
+            for v in 0..n {
+                let faces = topo.faces_of(v);
+                if closed_fan(v, faces, tris).is_some() {
+                    shortcuts += 1;
+                    let fast = analyse_vertex(v, faces, tris, &mut s);
+                    assert_eq!(fast, analyse_general(v, faces, tris, &mut s), "{tris:?} at {v}");
+                }
+                let mut want: Vec<u32> = faces
+                    .iter()
+                    .flat_map(|&t| tris[t as usize])
+                    .filter(|&u| u != v)
+                    .collect();
+                want.sort_unstable();
+                want.dedup();
+                assert_eq!(topo.neighbors(v), &want[..], "{tris:?} at {v}");
+            }
+        }
+        // The closed rings' centres (d <= 16) take the shortcut; nothing else in these cases.
+        assert_eq!(shortcuts, 4);
+    }
+
+    #[test]
+    fn the_parallel_build_gives_the_plain_adjacency_for_any_thread_count() {
+        // Over several chunks and blocks, in a shuffled vertex order (faces of a vertex scattered
+        // over the blocks), with degenerate triangles and unreferenced vertices.
+        let mesh = crate::shapes::icosphere(6);
+        let n = mesh.positions.len() + 5;
+        let mut perm: Vec<u32> = (0..n as u32).collect();
+        let mut x = 0x2545_f491_4f6c_dd1du64;
+        for i in (1..n).rev() {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            perm.swap(i, (x % (i as u64 + 1)) as usize);
+        }
+        let mut tris: Vec<[u32; 3]> = mesh
+            .triangles
+            .iter()
+            .map(|t| t.map(|v| perm[v as usize]))
+            .collect();
+        for k in [0, 17, 5000, 40_000] {
+            tris.insert(k, [perm[k], perm[k], perm[k + 1]]);
+        }
+        assert!(n > 4 * CHUNK && tris.len() > 4 * BLOCKS);
+        let mut faces_of: Vec<Vec<u32>> = vec![Vec::new(); n];
+        let mut nbrs: Vec<Vec<u32>> = vec![Vec::new(); n];
+        for (t, tri) in tris.iter().enumerate() {
+            if is_degenerate(tri) {
+                continue;
+            }
+            for &v in tri {
+                faces_of[v as usize].push(t as u32);
+                nbrs[v as usize].extend(tri.iter().filter(|&&u| u != v));
+            }
+        }
+        nbrs.iter_mut().for_each(|l| {
+            l.sort_unstable();
+            l.dedup();
+        });
+        let mut first = None;
+        for threads in [1, 2, 3] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let topo = pool.install(|| Topology::build(n, &tris)).unwrap();
+            for v in 0..n as u32 {
+                assert_eq!(topo.faces_of(v), &faces_of[v as usize][..], "faces of {v}");
+                assert_eq!(topo.neighbors(v), &nbrs[v as usize][..], "neighbours of {v}");
+            }
+            assert_eq!(topo.stats.degenerate_triangles, 4);
+            assert_eq!(topo.stats.unreferenced_vertices, 5);
+            let fixed = topo.fixed_mask().to_vec();
+            match &first {
+                None => first = Some((topo.stats, fixed)),
+                Some((stats, mask)) => assert!(*stats == topo.stats && *mask == fixed),
+            }
         }
     }
 }
