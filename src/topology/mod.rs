@@ -710,7 +710,7 @@ const FAN_LIMIT: usize = 16;
 #[inline]
 fn closed_fan(v: u32, faces: &[u32], triangles: &[[u32; 3]]) -> Option<usize> {
     let d = faces.len();
-    if d < 3 || d > FAN_LIMIT {
+    if !(3..=FAN_LIMIT).contains(&d) {
         return None;
     }
     let (mut b, mut c) = ([0u32; FAN_LIMIT], [0u32; FAN_LIMIT]);
