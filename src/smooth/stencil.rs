@@ -86,7 +86,6 @@ pub fn apply<const N: usize, P: Field + ?Sized, S: Field + ?Sized>(
     // in the others' lists); `mask` says which lists hold the row.
     let lists: [&[u32]; N] = free.map(|f| topo.neighbors(f));
     let centre = free.iter().fold(DVec3::ZERO, |s, &f| s + pos.get(f)) * (1.0 / N as f64);
-    let mut radius2 = 0.0f64; // squared radius of the stencil about `centre`
     let mut sq = [0.0f64; N]; // Σ_{v∈N(f)} w_v²
     let mut cross = [[0.0f64; N]; N]; // Σ_{v∈N(f)∩N(g)} w_v², f < g
     let mut weighted = [DVec3::ZERO; N]; // Σ_{v∈N(f)} w_v L(v)
@@ -100,7 +99,6 @@ pub fn apply<const N: usize, P: Field + ?Sized, S: Field + ?Sized>(
             let w = inv_deg(topo.deg(v));
             let p = pos.get(v);
             let lap = sums.get(v) * w - p;
-            radius2 = radius2.max((p - centre).length_squared());
             for f in 0..N {
                 if mask & (1 << f) != 0 {
                     weighted[f] += w * lap;
@@ -148,8 +146,19 @@ pub fn apply<const N: usize, P: Field + ?Sized, S: Field + ?Sized>(
             None => return Outcome::SkippedDegenerate,
         }
     }
-    if !within_reach(&d, radius2) {
-        return Outcome::SkippedDegenerate;
+    // The squared radius of the stencil about `centre` is the largest over its rows; the free
+    // vertices are rows, so theirs bounds it from below, and a step within reach of that bound
+    // is within reach of the radius, which then need not be measured (the same decision).
+    let distance2 = |v: u32| (pos.get(v) - centre).length_squared();
+    let near2 = free.iter().fold(0.0f64, |r, &f| r.max(distance2(f)));
+    if !within_reach(&d, near2) {
+        let radius2 = lists
+            .iter()
+            .flat_map(|l| l.iter())
+            .fold(0.0f64, |r, &v| r.max(distance2(v)));
+        if !within_reach(&d, radius2) {
+            return Outcome::SkippedDegenerate;
+        }
     }
     if params.reject_energy_increase {
         // 2 (E(d) − E(0)) = dᵀ(KᵀK)d + 2 dᵀKᵀL = Σ_fg m_fg d_f·d_g − 2 Σ_f d_f·rhs_f: the exact
@@ -261,6 +270,40 @@ fn volume_translation<const N: usize, P: Field + ?Sized>(
     // ΔV = V(P¹) − V(P⁰) and n = ∂V/∂w at P¹, both times 6 (the factor cancels in w).
     let (mut dv, mut scale) = (0.0, 0.0);
     let mut n = DVec3::ZERO;
+    if N == 2 {
+        // Edge stencils, the common case, with the same arithmetic in the same order as below:
+        // a face's other free corner can only be the edge's other end.
+        for fi in 0..2 {
+            let (f, g) = (free[fi], free[1 - fi]);
+            let mut single = DVec3::ZERO;
+            for &t in topo.faces_of(f) {
+                let (b, c) = after(triangles[t as usize], f);
+                let (b_free, c_free) = (b == g, c == g);
+                if !(b_free | c_free) {
+                    let nt = (pos.get(b) - origin).cross(pos.get(c) - origin);
+                    single += nt;
+                    scale += nt.length_squared();
+                    continue;
+                }
+                if fi == 1 {
+                    continue;
+                }
+                let (p, q, r) = (
+                    pos.get(f) - origin,
+                    pos.get(b) - origin,
+                    pos.get(c) - origin,
+                );
+                let db = if b_free { d[1] } else { DVec3::ZERO };
+                let dc = if c_free { d[1] } else { DVec3::ZERO };
+                shared_face(
+                    p, q, r, d[0], db, dc, b_free, c_free, &mut dv, &mut n, &mut scale,
+                );
+            }
+            dv += d[fi].dot(single);
+            n += single;
+        }
+        return translation(dv, n, scale);
+    }
     for (fi, &f) in free.iter().enumerate() {
         // Faces where f is the only free corner (most of them): n_t = p_b × p_c does not depend
         // on f, and ΔV_t = d_f · n_t, so their n_t are summed first and dotted with d_f once.
@@ -302,28 +345,56 @@ fn volume_translation<const N: usize, P: Field + ?Sized>(
                 pos.get(b) - origin,
                 pos.get(c) - origin,
             );
-            let (bp, bq, br) = (p + d[fi], q + db, r + dc);
-            let qr = bq.cross(br);
-            let qr0 = q.cross(r);
-            dv += bp.dot(qr) - p.dot(qr0);
-            // n_t sums p_b × p_c over the free corners a only; its size before the step is the
-            // face's share of the yardstick.
-            let (mut nt, mut nt0) = (qr, qr0);
-            if b_free {
-                nt += br.cross(bp);
-                nt0 += r.cross(p);
-            }
-            if c_free {
-                nt += bp.cross(bq);
-                nt0 += p.cross(q);
-            }
-            n += nt;
-            scale += nt0.length_squared();
+            shared_face(
+                p, q, r, d[fi], db, dc, b_free, c_free, &mut dv, &mut n, &mut scale,
+            );
         }
         dv += d[fi].dot(single);
         n += single;
     }
-    // A gradient that cancels out against its faces' own (|n|² ≪ Σ|n_t|²) is degenerate.
+    translation(dv, n, scale)
+}
+
+/// A face with several free corners, in its cyclic order (f, b, c): `p, q, r` before the step,
+/// displaced by `df, db, dc` (zero for a corner that is not free). Adds its volume change to `dv`,
+/// its gradient (p_b × p_c over its free corners a, after the step) to `n`, and that gradient's
+/// size before the step, the face's share of the yardstick, to `scale`.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn shared_face(
+    p: DVec3,
+    q: DVec3,
+    r: DVec3,
+    df: DVec3,
+    db: DVec3,
+    dc: DVec3,
+    b_free: bool,
+    c_free: bool,
+    dv: &mut f64,
+    n: &mut DVec3,
+    scale: &mut f64,
+) {
+    let (bp, bq, br) = (p + df, q + db, r + dc);
+    let qr = bq.cross(br);
+    let qr0 = q.cross(r);
+    *dv += bp.dot(qr) - p.dot(qr0);
+    let (mut nt, mut nt0) = (qr, qr0);
+    if b_free {
+        nt += br.cross(bp);
+        nt0 += r.cross(p);
+    }
+    if c_free {
+        nt += bp.cross(bq);
+        nt0 += p.cross(q);
+    }
+    *n += nt;
+    *scale += nt0.length_squared();
+}
+
+/// The translation `w = −n ΔV / |n|²`, or `None` when the gradient is degenerate: it cancels out
+/// against its faces' own (|n|² ≪ Σ|n_t|²).
+#[inline]
+fn translation(dv: f64, n: DVec3, scale: f64) -> Option<DVec3> {
     let nn = n.length_squared();
     // Negated so that a NaN counts as degenerate.
     #[allow(clippy::neg_cmp_op_on_partial_ord)]

@@ -180,16 +180,22 @@ impl Topology {
         let mut total = 0usize;
         for c in 0..chunks {
             region_start.push(total);
-            total += counted.iter().map(|b| b.per_chunk[c] as usize).sum::<usize>();
+            total += counted
+                .iter()
+                .map(|b| b.per_chunk[c] as usize)
+                .sum::<usize>();
         }
         region_start.push(total);
         let mut vf: Buf<u32> = storage.zeroed(total)?;
         // Each block's piece of each chunk's region, in chunk order.
-        let mut pieces: Vec<Vec<&mut [u32]>> = (0..counted.len()).map(|_| Vec::with_capacity(chunks)).collect();
+        let mut pieces: Vec<Vec<&mut [u32]>> = (0..counted.len())
+            .map(|_| Vec::with_capacity(chunks))
+            .collect();
         let mut rest: &mut [u32] = &mut vf;
         for c in 0..chunks {
             for (b, count) in counted.iter().enumerate() {
-                let (piece, tail) = std::mem::take(&mut rest).split_at_mut(count.per_chunk[c] as usize);
+                let (piece, tail) =
+                    std::mem::take(&mut rest).split_at_mut(count.per_chunk[c] as usize);
                 pieces[b].push(piece);
                 rest = tail;
             }
@@ -205,9 +211,8 @@ impl Topology {
                     }
                     for &v in tri {
                         let piece = &mut pieces[v as usize / CHUNK];
-                        let (head, tail) = std::mem::take(piece)
-                            .split_first_mut()
-                            .expect("counted");
+                        let (head, tail) =
+                            std::mem::take(piece).split_first_mut().expect("counted");
                         *head = (b * block_len + k) as u32;
                         *piece = tail;
                     }
@@ -241,7 +246,8 @@ impl Topology {
                     let mut start = 0;
                     for (k, (deg, fix)) in degs.iter_mut().zip(fixed.iter_mut()).enumerate() {
                         let end = ends[k] - region_start[c];
-                        let a = analyse_vertex(lo + k as u32, &region[start..end], triangles, scratch);
+                        let a =
+                            analyse_vertex(lo + k as u32, &region[start..end], triangles, scratch);
                         start = end;
                         *deg = a.degree;
                         st.edges += a.edges;
@@ -1136,9 +1142,23 @@ mod tests {
             cases.push(twice);
         }
         // Two triangles fans sharing vertex 0 (a pinch): 0-1-2-3 and 0-4-5-6.
-        cases.push(vec![[0, 1, 2], [0, 2, 3], [0, 3, 1], [0, 4, 5], [0, 5, 6], [0, 6, 4]]);
+        cases.push(vec![
+            [0, 1, 2],
+            [0, 2, 3],
+            [0, 3, 1],
+            [0, 4, 5],
+            [0, 5, 6],
+            [0, 6, 4],
+        ]);
         // Two cycles through the same rim vertex 1: 1-2-3 and 1-4-5.
-        cases.push(vec![[0, 1, 2], [0, 2, 3], [0, 3, 1], [0, 1, 4], [0, 4, 5], [0, 5, 1]]);
+        cases.push(vec![
+            [0, 1, 2],
+            [0, 2, 3],
+            [0, 3, 1],
+            [0, 1, 4],
+            [0, 4, 5],
+            [0, 5, 1],
+        ]);
         let mut s = VertexScratch::default();
         let mut shortcuts = 0;
         for tris in &cases {
@@ -1149,7 +1169,11 @@ mod tests {
                 if closed_fan(v, faces, tris).is_some() {
                     shortcuts += 1;
                     let fast = analyse_vertex(v, faces, tris, &mut s);
-                    assert_eq!(fast, analyse_general(v, faces, tris, &mut s), "{tris:?} at {v}");
+                    assert_eq!(
+                        fast,
+                        analyse_general(v, faces, tris, &mut s),
+                        "{tris:?} at {v}"
+                    );
                 }
                 let mut want: Vec<u32> = faces
                     .iter()
@@ -1212,7 +1236,11 @@ mod tests {
             let topo = pool.install(|| Topology::build(n, &tris)).unwrap();
             for v in 0..n as u32 {
                 assert_eq!(topo.faces_of(v), &faces_of[v as usize][..], "faces of {v}");
-                assert_eq!(topo.neighbors(v), &nbrs[v as usize][..], "neighbours of {v}");
+                assert_eq!(
+                    topo.neighbors(v),
+                    &nbrs[v as usize][..],
+                    "neighbours of {v}"
+                );
             }
             assert_eq!(topo.stats.degenerate_triangles, 4);
             assert_eq!(topo.stats.unreferenced_vertices, 5);
