@@ -258,7 +258,12 @@ impl Run<'_, '_> {
             let measure = self.when.wanted(it, total);
             let start = Instant::now();
             if measure {
-                prev[owned.clone()].copy_from_slice(&pos[owned.clone()]);
+                let now = &pos[owned.clone()];
+                on_pool(&*self.share, || {
+                    reduce::for_chunks_mut(&mut prev[owned.clone()], |at, out| {
+                        out.copy_from_slice(&now[at..at + out.len()])
+                    })
+                });
             }
             on_pool(&*self.share, || {
                 reduce::neighbor_sums(mesh.topo, pos, sums, owned.clone())
