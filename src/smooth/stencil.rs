@@ -69,7 +69,6 @@ const MAX_REACH: f64 = 16.0;
 ///
 /// so one merge of the sorted neighbour lists, computing each row's Laplacian once, gives the
 /// whole system without materialising K.
-#[inline(always)]
 pub fn apply<const N: usize, P: Field + ?Sized, S: Field + ?Sized>(
     topo: &Topology,
     triangles: &[[u32; 3]],
@@ -260,7 +259,6 @@ fn after(tri: [u32; 3], v: u32) -> (u32, u32) {
 /// face's gradient taken before the stencil, so that a step that collapses the stencil's faces
 /// (a triangle stencil on a closed tetrahedron shrinks it to a point) cannot shrink the yardstick
 /// along with the gradient it measures.
-#[inline(always)]
 fn volume_translation<const N: usize, P: Field + ?Sized>(
     topo: &Topology,
     triangles: &[[u32; 3]],
@@ -412,7 +410,6 @@ fn translation(dv: f64, n: DVec3, scale: f64) -> Option<DVec3> {
 /// Cramer's rule, one division instead of two square roots and four divisions.
 // The pivot tests are negated so that a NaN counts as degenerate.
 #[allow(clippy::neg_cmp_op_on_partial_ord)]
-#[inline(always)]
 fn solve_spd<const N: usize>(m: [[f64; N]; N], b: [DVec3; N]) -> Option<[DVec3; N]> {
     if N == 2 {
         let (a, o, c) = (m[0][0], m[0][1], m[1][1]);
@@ -468,48 +465,7 @@ pub fn count(stats: &mut SweepStats, outcome: Outcome) {
 }
 
 /// Apply the edge stencils `edges`, in the given order, Gauss–Seidel (each sees the latest positions).
-///
-/// On x86-64 processors with AVX2 the sweep runs as code compiled for them: three-operand
-/// instructions spare most of the register copies of the baseline's two-operand SSE2 (callgrind:
-/// 8 % fewer instructions). Both are the same IEEE operations in the same order (neither fuses a
-/// multiply with an add), so the results are bit-identical, which a test checks.
 pub fn sweep_edges<P: Field + ?Sized, S: Field + ?Sized>(
-    topo: &Topology,
-    triangles: &[[u32; 3]],
-    pos: &mut P,
-    sums: &mut S,
-    edges: impl IntoIterator<Item = [u32; 2]>,
-    params: StencilParams,
-) -> SweepStats {
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the processor supports AVX2, checked just above.
-        return unsafe { sweep_edges_avx2(topo, triangles, pos, sums, edges, params) };
-    }
-    sweep_edges_baseline(topo, triangles, pos, sums, edges, params)
-}
-
-/// [`sweep_edges`] compiled for AVX2.
-///
-/// # Safety
-/// The processor must support AVX2.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn sweep_edges_avx2<P: Field + ?Sized, S: Field + ?Sized>(
-    topo: &Topology,
-    triangles: &[[u32; 3]],
-    pos: &mut P,
-    sums: &mut S,
-    edges: impl IntoIterator<Item = [u32; 2]>,
-    params: StencilParams,
-) -> SweepStats {
-    sweep_edges_baseline(topo, triangles, pos, sums, edges, params)
-}
-
-/// [`sweep_edges`] for any processor; inlined into the AVX2 variant, so that its kernel is
-/// compiled for AVX2 there.
-#[inline(always)]
-fn sweep_edges_baseline<P: Field + ?Sized, S: Field + ?Sized>(
     topo: &Topology,
     triangles: &[[u32; 3]],
     pos: &mut P,
@@ -740,37 +696,5 @@ mod tests {
             assert!((got[i] - x[i]).length() < 1e-12);
         }
         assert!(solve_spd([[1.0, 1.0], [1.0, 1.0]], [DVec3::ONE; 2]).is_none());
-    }
-
-    #[test]
-    fn the_avx2_sweep_gives_the_baseline_bits() {
-        let mut mesh = crate::shapes::icosphere(4);
-        crate::shapes::add_normal_noise(&mut mesh, 0.3, 7);
-        let tris = mesh.triangles.to_vec();
-        let topo = Topology::build(mesh.positions.len(), &tris).unwrap();
-        let p = StencilParams {
-            volume: true,
-            reject_energy_increase: false,
-        };
-        let run = |sweep: &dyn Fn(&mut [DVec3], &mut [DVec3]) -> SweepStats| {
-            let mut pos = mesh.positions.to_vec();
-            for _ in 0..3 {
-                let mut sums = neighbor_sums(&topo, &pos);
-                sweep(&mut pos, &mut sums);
-            }
-            pos
-        };
-        let baseline =
-            run(&|pos, sums| sweep_edges_baseline(&topo, &tris, pos, sums, topo.edges(), p));
-        let dispatched = run(&|pos, sums| sweep_edges(&topo, &tris, pos, sums, topo.edges(), p));
-        assert_eq!(baseline, dispatched);
-        #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: checked just above.
-            let avx2 = run(&|pos, sums| unsafe {
-                sweep_edges_avx2(&topo, &tris, pos, sums, topo.edges(), p)
-            });
-            assert_eq!(baseline, avx2);
-        }
     }
 }
