@@ -6,6 +6,9 @@ use std::time::Instant;
 
 use glam::DVec3;
 
+use rayon::prelude::*;
+
+use super::reduce;
 use crate::error::{Error, Result};
 use crate::mesh::Storage;
 use crate::partition::{self, Patch, Reordered};
@@ -152,22 +155,37 @@ impl Plan {
         self.len() == 0
     }
 
-    /// Copy the plan's (smoothed) positions into `out` in the input's vertex order.
+    /// Copy the plan's (smoothed) positions into `out` in the input's vertex order, on the
+    /// current pool.
     pub fn positions_in_input_order(&self, out: &mut [DVec3]) {
-        for (new, &old) in self.reordered.order.iter().enumerate() {
-            out[old as usize] = self.reordered.positions[new];
-        }
+        let Reordered {
+            order, positions, ..
+        } = &self.reordered;
+        // A scatter: each thread takes one range of `out` and scans the whole permutation for
+        // the vertices that land in it (a sequential read of 4 bytes per vertex per thread, far
+        // cheaper than the scattered writes it shares out).
+        let part = out.len().div_ceil(rayon::current_num_threads()).max(1);
+        out.par_chunks_mut(part).enumerate().for_each(|(k, out)| {
+            let lo = k * part;
+            for (new, &old) in order.iter().enumerate() {
+                if let Some(slot) = (old as usize).checked_sub(lo).and_then(|i| out.get_mut(i)) {
+                    *slot = positions[new];
+                }
+            }
+        });
     }
 
     /// Set the plan's positions from `input`, given in the input's vertex order (to smooth the
-    /// same mesh again from its start).
+    /// same mesh again from its start), on the current pool.
     pub fn set_positions_from_input(&mut self, input: &[DVec3]) {
         let Reordered {
             order, positions, ..
         } = &mut self.reordered;
-        for (new, &old) in order.iter().enumerate() {
-            positions[new] = input[old as usize];
-        }
+        reduce::for_chunks_mut(positions, |first, chunk| {
+            for (p, &old) in chunk.iter_mut().zip(&order[first..]) {
+                *p = input[old as usize];
+            }
+        });
     }
 
     /// Statistics of the current positions; every figure is order-independent.

@@ -1,7 +1,13 @@
 //! `vcsmooth info`: counts, topology, volume, area, bounding box, edge length and roughness of a mesh.
 
-use glam::DVec3;
+use std::ops::Range;
+use std::sync::atomic::AtomicU32;
+use std::sync::atomic::Ordering::Relaxed;
 
+use glam::DVec3;
+use rayon::prelude::*;
+
+use crate::engine::reduce;
 use crate::mesh::Mesh;
 use crate::topology::Topology;
 
@@ -69,9 +75,11 @@ pub fn info(mesh: &Mesh, topo: &Topology) -> MeshInfo {
     info_of(&mesh.positions, &triangles, &mesh.source, &topo)
 }
 
-/// [`info`] from the parts of a mesh (e.g. the reordered arrays of the patch engine; every figure
-/// is independent of the vertex and triangle order). The triangles are measured as they are:
-/// oriented already when they come from a plan.
+/// [`info`] from the parts of a mesh (e.g. the reordered arrays of the patch engine; every count
+/// is independent of the vertex and triangle order, and every sum is taken in a fixed order of
+/// those arrays, see [`MeshInfo::measure`]). The triangles are measured as they are: oriented
+/// already when they come from a plan. Runs on the current rayon pool; the result does not depend
+/// on its size.
 pub fn info_of(
     pos: &[DVec3],
     triangles: &[[u32; 3]],
@@ -84,8 +92,7 @@ pub fn info_of(
         "topology built for another vertex count"
     );
     let s = &topo.stats;
-    let (lo, hi) = bounding_box(pos);
-    MeshInfo {
+    let mut info = MeshInfo {
         vertices: pos.len(),
         triangles: triangles.len(),
         input_faces: source.input_faces,
@@ -103,26 +110,67 @@ pub fn info_of(
         components: components(topo),
         unreferenced_vertices: s.unreferenced_vertices,
         closed: s.boundary_edges == 0 && s.non_manifold_edges == 0 && !triangles.is_empty(),
-        volume: super::volume(pos, triangles),
-        area: super::area(pos, triangles),
-        bbox_min: lo.to_array(),
-        bbox_max: hi.to_array(),
-        bbox_diagonal: (hi - lo).length(),
-        mean_edge_length: mean_edge_length(pos, topo),
-        roughness_deg: roughness(pos, triangles, topo),
+        ..MeshInfo::default()
+    };
+    info.measure(pos, triangles, topo);
+    info
+}
+
+impl MeshInfo {
+    /// Set the figures that depend on the positions (volume, area, bounding box, mean edge length,
+    /// roughness) to those of `pos`; the counts stay, so this measures new positions of the same
+    /// mesh (a run's output) without counting its connectivity again.
+    ///
+    /// Every sum is taken over chunks of [`reduce::CHUNK`] triangles (volume, area) or vertices
+    /// (the centroid that volume is taken about; edges and dihedral angles, by their smaller
+    /// vertex, in ascending `(i, j)` order), the chunks' sums added in chunk order: the figures
+    /// depend on the order of `pos` and `triangles`, never on the thread count.
+    pub fn measure(&mut self, pos: &[DVec3], triangles: &[[u32; 3]], topo: &Topology) {
+        let (lo, hi) = bounding_box(pos);
+        let (volume, area) = reduce::volume_area(pos, triangles, reduce::centroid(pos));
+        let edges = reduce::map_fold(
+            pos,
+            |first, chunk| {
+                edge_sums(
+                    pos,
+                    triangles,
+                    topo,
+                    first as u32..(first + chunk.len()) as u32,
+                )
+            },
+            EdgeSums::default(),
+            EdgeSums::add,
+        );
+        self.volume = volume;
+        self.area = area;
+        self.bbox_min = lo.to_array();
+        self.bbox_max = hi.to_array();
+        self.bbox_diagonal = (hi - lo).length();
+        self.mean_edge_length = mean(edges.length);
+        self.roughness_deg = mean(edges.angle);
     }
+}
+
+/// `sum / count`, 0 for no items.
+fn mean((sum, count): (f64, usize)) -> f64 {
+    if count == 0 { 0.0 } else { sum / count as f64 }
 }
 
 /// Smallest and largest coordinates over `pos` (NaN coordinates ignored); zeros for none.
 pub(crate) fn bounding_box(pos: &[DVec3]) -> (DVec3, DVec3) {
-    let (lo, hi) = pos.iter().fold(
-        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
-        // f64::min / max ignore NaN (DVec3::min would not).
-        |(lo, hi), p| {
-            let l = DVec3::new(lo.x.min(p.x), lo.y.min(p.y), lo.z.min(p.z));
-            let h = DVec3::new(hi.x.max(p.x), hi.y.max(p.y), hi.z.max(p.z));
-            (l, h)
+    let none = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+    // f64::min / max ignore NaN (DVec3::min would not).
+    let min = |a: DVec3, b: DVec3| DVec3::new(a.x.min(b.x), a.y.min(b.y), a.z.min(b.z));
+    let max = |a: DVec3, b: DVec3| DVec3::new(a.x.max(b.x), a.y.max(b.y), a.z.max(b.z));
+    let (lo, hi) = reduce::map_fold(
+        pos,
+        |_, chunk| {
+            chunk
+                .iter()
+                .fold(none, |(lo, hi), &p| (min(lo, p), max(hi, p)))
         },
+        none,
+        |(lo, hi), (l, h)| (min(lo, l), max(hi, h)),
     );
     // Empty input, or an axis with only NaN: report zeros rather than ±inf.
     let fix = |lo: f64, hi: f64| if lo <= hi { (lo, hi) } else { (0.0, 0.0) };
@@ -130,96 +178,170 @@ pub(crate) fn bounding_box(pos: &[DVec3]) -> (DVec3, DVec3) {
     (DVec3::new(x.0, y.0, z.0), DVec3::new(x.1, y.1, z.1))
 }
 
-/// Connected components over the adjacency, counting only vertices with a neighbour.
+/// Connected components over the adjacency, counting only vertices with a neighbour: a
+/// union–find over the edges, in parallel on the current pool (a count, the same for any order
+/// of the unions).
 fn components(topo: &Topology) -> usize {
-    // A bit per vertex and a breadth-first frontier (on a surface it holds about √n vertices,
-    // where a depth-first stack can grow to n): the count stays cheap in memory for huge meshes.
     let n = topo.len();
-    let mut seen = vec![0u64; n.div_ceil(64)];
-    let mut mark = |v: u32| {
-        let (w, b) = (v as usize / 64, 1u64 << (v % 64));
-        let new = seen[w] & b == 0;
-        seen[w] |= b;
-        new
-    };
-    let mut frontier = std::collections::VecDeque::new();
-    let mut count = 0;
-    for start in 0..n as u32 {
-        if topo.deg(start) == 0 || !mark(start) {
-            continue;
+    // parent[v] ≤ v always: a root is linked under a smaller root, so no cycle can form whatever
+    // the interleaving. Relaxed is enough: each compare-exchange sees the latest value of its
+    // slot, and a stale read only makes a find or a link retry; rayon's join orders the passes.
+    let parent: Vec<AtomicU32> = (0..n as u32).map(AtomicU32::new).collect();
+    let find = |mut v: u32| loop {
+        let p = parent[v as usize].load(Relaxed);
+        if p == v {
+            return v;
         }
-        count += 1;
-        frontier.push_back(start);
-        while let Some(v) = frontier.pop_front() {
+        let g = parent[p as usize].load(Relaxed);
+        // Path halving: point v at its grandparent (a no-op if another thread moved it already).
+        let _ = parent[v as usize].compare_exchange(p, g, Relaxed, Relaxed);
+        v = g;
+    };
+    (0..n as u32)
+        .into_par_iter()
+        .with_min_len(reduce::CHUNK)
+        .for_each(|v| {
             for &u in topo.neighbors(v) {
-                if mark(u) {
-                    frontier.push_back(u);
+                if u < v {
+                    continue;
+                }
+                loop {
+                    let (a, b) = (find(v), find(u));
+                    if a == b {
+                        break;
+                    }
+                    let (lo, hi) = if a < b { (a, b) } else { (b, a) };
+                    if parent[hi as usize]
+                        .compare_exchange(hi, lo, Relaxed, Relaxed)
+                        .is_ok()
+                    {
+                        break;
+                    }
                 }
             }
-        }
-    }
-    count
+        });
+    (0..n as u32)
+        .into_par_iter()
+        .with_min_len(reduce::CHUNK)
+        .filter(|&v| topo.deg(v) > 0 && parent[v as usize].load(Relaxed) == v)
+        .count()
 }
 
-/// Mean length over the undirected edges (0 for none).
+/// Mean length over the undirected edges (0 for none), summed in ascending `(i, j)` order.
 pub fn mean_edge_length(pos: &[DVec3], topo: &Topology) -> f64 {
     let (sum, count) = topo.edges().fold((0.0, 0usize), |(s, c), [i, j]| {
         (s + pos[i as usize].distance(pos[j as usize]), c + 1)
     });
-    if count == 0 { 0.0 } else { sum / count as f64 }
+    mean((sum, count))
 }
 
 /// Mean dihedral angle, in degrees, between the normals of the two triangles of every manifold
-/// interior edge (0 for a plane): the roughness measure of the tests and reports.
+/// interior edge (0 for a plane): the roughness measure of the tests and reports. Summed in
+/// ascending `(i, j)` order.
 ///
 /// Edges with one or three or more triangles are skipped, and so are edges next to a zero-area
 /// triangle (no normal). The angle is `atan2(|n₁ × n₂|, n₁ · n₂)`, accurate near 0°. 0 when no edge
 /// counts.
 pub fn roughness(pos: &[DVec3], triangles: &[[u32; 3]], topo: &Topology) -> f64 {
-    let normal = |t: u32| {
-        let [a, b, c] = triangles[t as usize].map(|v| pos[v as usize]);
+    mean(edge_sums(pos, triangles, topo, 0..topo.len() as u32).angle)
+}
+
+/// Sums over some edges: of their lengths, and of the dihedral angles that [`roughness`] counts,
+/// each with its number of terms.
+#[derive(Debug, Clone, Copy, Default)]
+struct EdgeSums {
+    length: (f64, usize),
+    angle: (f64, usize),
+}
+
+impl EdgeSums {
+    fn add(self, o: EdgeSums) -> EdgeSums {
+        let add = |(s, n): (f64, usize), (t, m): (f64, usize)| (s + t, n + m);
+        EdgeSums {
+            length: add(self.length, o.length),
+            angle: add(self.angle, o.angle),
+        }
+    }
+}
+
+/// [`EdgeSums`] of the edges `(i, j)`, `i < j`, with `i` in `vertices`, in ascending order: one
+/// walk over them for both figures.
+///
+/// The faces of `i` are gathered once per vertex, their normals computed when first needed, so
+/// that a triangle is read and its normal computed at most once per corner rather than once per
+/// edge. An edge's two faces are looked for among the faces of the endpoint with fewer (`i` when
+/// it has few), so that the edges of a vertex of degree d cost O(d) together, not O(d²).
+fn edge_sums(
+    pos: &[DVec3],
+    triangles: &[[u32; 3]],
+    topo: &Topology,
+    vertices: Range<u32>,
+) -> EdgeSums {
+    // Up to this many faces, scanning the faces of `i` costs less than asking how many `j` has.
+    const FEW: usize = 16;
+    let normal = |t: &[u32; 3]| {
+        let [a, b, c] = t.map(|v| pos[v as usize]);
         let n = (b - a).cross(c - a);
         (n.length_squared() > 0.0 && n.is_finite()).then_some(n)
     };
-    let mut sum = 0.0;
-    let mut count = 0usize;
-    for [i, j] in topo.edges() {
-        let Some([f, g]) = two_faces(topo, triangles, i, j) else {
+    let mut sums = EdgeSums::default();
+    // The faces of `i`: corners, and the normal once computed (`None` until then).
+    let mut around: Vec<([u32; 3], Option<Option<DVec3>>)> = Vec::new();
+    for i in vertices {
+        let above = topo.neighbors(i);
+        let above = &above[above.partition_point(|&j| j <= i)..];
+        if above.is_empty() {
             continue;
-        };
-        if let (Some(n1), Some(n2)) = (normal(f), normal(g)) {
-            sum += angle_deg(n1, n2);
-            count += 1;
+        }
+        around.clear();
+        around.extend(
+            topo.faces_of(i)
+                .iter()
+                .map(|&t| (triangles[t as usize], None)),
+        );
+        for &j in above {
+            sums.length.0 += pos[i as usize].distance(pos[j as usize]);
+            sums.length.1 += 1;
+            let pair = if around.len() <= FEW || around.len() <= topo.faces_of(j).len() {
+                two_with(around.iter().map(|(t, _)| t), j).map(|pair| {
+                    pair.map(|k| {
+                        let (t, n) = &mut around[k];
+                        *n.get_or_insert_with(|| normal(t))
+                    })
+                })
+            } else {
+                let faces = topo.faces_of(j);
+                two_with(faces.iter().map(|&t| &triangles[t as usize]), i)
+                    .map(|pair| pair.map(|k| normal(&triangles[faces[k] as usize])))
+            };
+            if let Some([Some(n1), Some(n2)]) = pair {
+                sums.angle.0 += angle_deg(n1, n2);
+                sums.angle.1 += 1;
+            }
         }
     }
-    if count == 0 { 0.0 } else { sum / count as f64 }
+    sums
+}
+
+/// The positions in `faces` of the two faces that use `v`, if exactly two do.
+#[inline]
+fn two_with<'a>(faces: impl Iterator<Item = &'a [u32; 3]>, v: u32) -> Option<[usize; 2]> {
+    let (mut found, mut n) = ([0; 2], 0);
+    for (k, t) in faces.enumerate() {
+        if t[0] == v || t[1] == v || t[2] == v {
+            if n == 2 {
+                return None;
+            }
+            found[n] = k;
+            n += 1;
+        }
+    }
+    (n == 2).then_some(found)
 }
 
 /// The angle between two non-zero vectors, in degrees.
 pub(crate) fn angle_deg(a: DVec3, b: DVec3) -> f64 {
     a.cross(b).length().atan2(a.dot(b)).to_degrees()
-}
-
-/// The faces of edge `i`–`j`, if there are exactly two: found among the faces of the endpoint with
-/// fewer, so that the edges of a vertex of degree d cost O(d) together, not O(d²).
-fn two_faces(topo: &Topology, triangles: &[[u32; 3]], i: u32, j: u32) -> Option<[u32; 2]> {
-    let (x, y) = if topo.faces_of(i).len() <= topo.faces_of(j).len() {
-        (i, j)
-    } else {
-        (j, i)
-    };
-    let mut found = [0u32; 2];
-    let mut n = 0;
-    for &t in topo.faces_of(x) {
-        if triangles[t as usize].contains(&y) {
-            if n == 2 {
-                return None;
-            }
-            found[n] = t;
-            n += 1;
-        }
-    }
-    (n == 2).then_some(found)
 }
 
 #[cfg(test)]
@@ -369,8 +491,8 @@ mod tests {
         let t = topo(&m);
         // Edge 0-1: 90 degrees; edge 1-2 borders the zero-area triangle: skipped.
         assert!((roughness(&m.positions, &m.triangles, &t) - 90.0).abs() < 1e-12);
-        assert_eq!(two_faces(&t, &m.triangles, 0, 1), Some([0, 1]));
-        assert_eq!(two_faces(&t, &m.triangles, 1, 2), Some([0, 2]));
-        assert_eq!(two_faces(&t, &m.triangles, 0, 3), None);
+        // Only edge 0-1 counts.
+        assert_eq!(edge_sums(&m.positions, &m.triangles, &t, 0..1).angle.1, 1);
+        assert_eq!(edge_sums(&m.positions, &m.triangles, &t, 1..5).angle.1, 0);
     }
 }
