@@ -161,18 +161,7 @@ impl Plan {
         let Reordered {
             order, positions, ..
         } = &self.reordered;
-        // A scatter: each thread takes one range of `out` and scans the whole permutation for
-        // the vertices that land in it (a sequential read of 4 bytes per vertex per thread, far
-        // cheaper than the scattered writes it shares out).
-        let part = out.len().div_ceil(rayon::current_num_threads()).max(1);
-        out.par_chunks_mut(part).enumerate().for_each(|(k, out)| {
-            let lo = k * part;
-            for (new, &old) in order.iter().enumerate() {
-                if let Some(slot) = (old as usize).checked_sub(lo).and_then(|i| out.get_mut(i)) {
-                    *slot = positions[new];
-                }
-            }
-        });
+        partition::scatter(out, order, |new| positions[new]);
     }
 
     /// Set the plan's positions from `input`, given in the input's vertex order (to smooth the
@@ -188,14 +177,26 @@ impl Plan {
         });
     }
 
-    /// Statistics of the current positions; every figure is order-independent.
+    /// Statistics of the current positions (see [`reduce::geometry`] for the order of the sums).
     pub fn info(&self, source: &crate::mesh::Source) -> crate::metrics::MeshInfo {
-        crate::metrics::info_of(
-            &self.reordered.positions,
-            &self.reordered.triangles,
+        let mut info = crate::metrics::connectivity(
+            self.len(),
+            self.reordered.triangles.len(),
             source,
             &self.topology,
-        )
+        );
+        info.set_geometry(self.geometry());
+        info
+    }
+
+    /// The figures of [`Plan::info`] that depend on the positions, of the current positions.
+    pub fn geometry(&self) -> crate::metrics::Geometry {
+        let Reordered {
+            positions,
+            triangles,
+            ..
+        } = &self.reordered;
+        reduce::geometry(positions, triangles, &self.topology)
     }
 
     /// The decomposition's figures for reports.
@@ -209,7 +210,7 @@ impl Plan {
             self.schedule.colours.len(),
             &self.schedule.halo,
             self.patches
-                .iter()
+                .par_iter()
                 .map(|p| p.crossing_edges(&self.topology))
                 .sum(),
         )

@@ -268,13 +268,12 @@ fn output_stats(
     let mut info = smoothed.input_stats.clone()?;
     // An output that write_mesh refuses has no statistics; its error is the write's.
     let stored = io::Stored::of(output, mesh)?;
-    let positions = &mut plan.reordered.positions;
     if !stored.is_exact() {
-        reduce::for_chunks_mut(positions, |_, chunk| {
+        reduce::for_chunks_mut(&mut plan.reordered.positions, |_, chunk| {
             chunk.iter_mut().for_each(|p| *p = stored.round(*p))
         });
     }
-    info.measure(positions, &plan.reordered.triangles, &plan.topology);
+    info.set_geometry(plan.geometry());
     Some(info)
 }
 
@@ -298,11 +297,7 @@ pub(crate) fn run_mesh(
         })?;
         let clock = Instant::now();
         smoothed.output_stats = smoothed.input_stats.clone().map(|mut info| {
-            info.measure(
-                &plan.reordered.positions,
-                &plan.reordered.triangles,
-                &plan.topology,
-            );
+            info.set_geometry(plan.geometry());
             info
         });
         t.metrics += clock.elapsed().as_secs_f64();

@@ -7,7 +7,6 @@ use std::sync::atomic::Ordering::Relaxed;
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::engine::reduce;
 use crate::mesh::Mesh;
 use crate::topology::Topology;
 
@@ -76,25 +75,38 @@ pub fn info(mesh: &Mesh, topo: &Topology) -> MeshInfo {
 }
 
 /// [`info`] from the parts of a mesh (e.g. the reordered arrays of the patch engine; every count
-/// is independent of the vertex and triangle order, and every sum is taken in a fixed order of
-/// those arrays, see [`MeshInfo::measure`]). The triangles are measured as they are: oriented
-/// already when they come from a plan. Runs on the current rayon pool; the result does not depend
-/// on its size.
+/// is independent of the vertex and triangle order). The triangles are measured as they are:
+/// oriented already when they come from a plan. The sums run in the arrays' order; the engine
+/// measures its plans over chunks in parallel instead (`engine::reduce::geometry`).
 pub fn info_of(
     pos: &[DVec3],
     triangles: &[[u32; 3]],
     source: &crate::mesh::Source,
     topo: &Topology,
 ) -> MeshInfo {
+    let mut info = connectivity(pos.len(), triangles.len(), source, topo);
+    info.set_geometry(geometry(pos, triangles, topo));
+    info
+}
+
+/// The counts of [`MeshInfo`] (everything but the [`Geometry`], left at zero) of a mesh of
+/// `vertices` and `triangles` with the topology `topo`. They do not depend on the positions: a
+/// run counts its input once and gives its output the same counts.
+pub fn connectivity(
+    vertices: usize,
+    triangles: usize,
+    source: &crate::mesh::Source,
+    topo: &Topology,
+) -> MeshInfo {
     debug_assert_eq!(
         topo.len(),
-        pos.len(),
+        vertices,
         "topology built for another vertex count"
     );
     let s = &topo.stats;
-    let mut info = MeshInfo {
-        vertices: pos.len(),
-        triangles: triangles.len(),
+    MeshInfo {
+        vertices,
+        triangles,
         input_faces: source.input_faces,
         polygons_triangulated: source.polygons_triangulated,
         edges: s.edges,
@@ -109,45 +121,45 @@ pub fn info_of(
         fixed_vertices: s.fixed_vertices,
         components: components(topo),
         unreferenced_vertices: s.unreferenced_vertices,
-        closed: s.boundary_edges == 0 && s.non_manifold_edges == 0 && !triangles.is_empty(),
+        closed: s.boundary_edges == 0 && s.non_manifold_edges == 0 && triangles > 0,
         ..MeshInfo::default()
-    };
-    info.measure(pos, triangles, topo);
-    info
+    }
+}
+
+/// What [`MeshInfo`] reports of the positions, as sums and extremes so that parts of a mesh can
+/// be measured apart and combined.
+#[derive(Debug, Clone, Copy)]
+pub struct Geometry {
+    /// Signed volume ([`crate::metrics::volume`]) and area.
+    pub volume: f64,
+    pub area: f64,
+    /// Smallest and largest coordinates, see [`extent`].
+    pub extent: (DVec3, DVec3),
+    pub edges: EdgeSums,
+}
+
+/// [`Geometry`] of a whole mesh, summed in the order of its arrays.
+pub fn geometry(pos: &[DVec3], triangles: &[[u32; 3]], topo: &Topology) -> Geometry {
+    Geometry {
+        volume: super::volume(pos, triangles),
+        area: super::area(pos, triangles),
+        extent: extent(pos),
+        edges: edge_sums(pos, triangles, topo, 0..topo.len() as u32),
+    }
 }
 
 impl MeshInfo {
     /// Set the figures that depend on the positions (volume, area, bounding box, mean edge length,
-    /// roughness) to those of `pos`; the counts stay, so this measures new positions of the same
-    /// mesh (a run's output) without counting its connectivity again.
-    ///
-    /// Every sum is taken over chunks of [`reduce::CHUNK`] triangles (volume, area) or vertices
-    /// (the centroid that volume is taken about; edges and dihedral angles, by their smaller
-    /// vertex, in ascending `(i, j)` order), the chunks' sums added in chunk order: the figures
-    /// depend on the order of `pos` and `triangles`, never on the thread count.
-    pub fn measure(&mut self, pos: &[DVec3], triangles: &[[u32; 3]], topo: &Topology) {
-        let (lo, hi) = bounding_box(pos);
-        let (volume, area) = reduce::volume_area(pos, triangles, reduce::centroid(pos));
-        let edges = reduce::map_fold(
-            pos,
-            |first, chunk| {
-                edge_sums(
-                    pos,
-                    triangles,
-                    topo,
-                    first as u32..(first + chunk.len()) as u32,
-                )
-            },
-            EdgeSums::default(),
-            EdgeSums::add,
-        );
-        self.volume = volume;
-        self.area = area;
+    /// roughness) from `g`; the counts stay.
+    pub fn set_geometry(&mut self, g: Geometry) {
+        let (lo, hi) = bounding(g.extent);
+        self.volume = g.volume;
+        self.area = g.area;
         self.bbox_min = lo.to_array();
         self.bbox_max = hi.to_array();
         self.bbox_diagonal = (hi - lo).length();
-        self.mean_edge_length = mean(edges.length);
-        self.roughness_deg = mean(edges.angle);
+        self.mean_edge_length = mean(g.edges.length);
+        self.roughness_deg = mean(g.edges.angle);
     }
 }
 
@@ -156,23 +168,30 @@ fn mean((sum, count): (f64, usize)) -> f64 {
     if count == 0 { 0.0 } else { sum / count as f64 }
 }
 
+/// Smallest and largest coordinates over `pos`, NaN coordinates ignored: `(+∞, −∞)` on an axis
+/// with none. Combine the extents of parts with [`extent_union`].
+pub fn extent(pos: &[DVec3]) -> (DVec3, DVec3) {
+    let none = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+    pos.iter().fold(none, |e, &p| extent_union(e, (p, p)))
+}
+
+/// The extent of two parts together.
+pub fn extent_union((lo, hi): (DVec3, DVec3), (l, h): (DVec3, DVec3)) -> (DVec3, DVec3) {
+    // f64::min / max ignore NaN (DVec3::min would not).
+    (
+        DVec3::new(lo.x.min(l.x), lo.y.min(l.y), lo.z.min(l.z)),
+        DVec3::new(hi.x.max(h.x), hi.y.max(h.y), hi.z.max(h.z)),
+    )
+}
+
 /// Smallest and largest coordinates over `pos` (NaN coordinates ignored); zeros for none.
 pub(crate) fn bounding_box(pos: &[DVec3]) -> (DVec3, DVec3) {
-    let none = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
-    // f64::min / max ignore NaN (DVec3::min would not).
-    let min = |a: DVec3, b: DVec3| DVec3::new(a.x.min(b.x), a.y.min(b.y), a.z.min(b.z));
-    let max = |a: DVec3, b: DVec3| DVec3::new(a.x.max(b.x), a.y.max(b.y), a.z.max(b.z));
-    let (lo, hi) = reduce::map_fold(
-        pos,
-        |_, chunk| {
-            chunk
-                .iter()
-                .fold(none, |(lo, hi), &p| (min(lo, p), max(hi, p)))
-        },
-        none,
-        |(lo, hi), (l, h)| (min(lo, l), max(hi, h)),
-    );
-    // Empty input, or an axis with only NaN: report zeros rather than ±inf.
+    bounding(extent(pos))
+}
+
+/// An extent as a bounding box: zeros rather than ±∞ on an axis without coordinates (an empty
+/// mesh, or only NaN).
+fn bounding((lo, hi): (DVec3, DVec3)) -> (DVec3, DVec3) {
     let fix = |lo: f64, hi: f64| if lo <= hi { (lo, hi) } else { (0.0, 0.0) };
     let (x, y, z) = (fix(lo.x, hi.x), fix(lo.y, hi.y), fix(lo.z, hi.z));
     (DVec3::new(x.0, y.0, z.0), DVec3::new(x.1, y.1, z.1))
@@ -182,6 +201,8 @@ pub(crate) fn bounding_box(pos: &[DVec3]) -> (DVec3, DVec3) {
 /// union–find over the edges, in parallel on the current pool (a count, the same for any order
 /// of the unions).
 fn components(topo: &Topology) -> usize {
+    // Vertices per work item: enough to make scheduling negligible.
+    const GRAIN: usize = 1 << 14;
     let n = topo.len();
     // parent[v] ≤ v always: a root is linked under a smaller root, so no cycle can form whatever
     // the interleaving. Relaxed is enough: each compare-exchange sees the latest value of its
@@ -199,7 +220,7 @@ fn components(topo: &Topology) -> usize {
     };
     (0..n as u32)
         .into_par_iter()
-        .with_min_len(reduce::CHUNK)
+        .with_min_len(GRAIN)
         .for_each(|v| {
             for &u in topo.neighbors(v) {
                 if u < v {
@@ -222,7 +243,7 @@ fn components(topo: &Topology) -> usize {
         });
     (0..n as u32)
         .into_par_iter()
-        .with_min_len(reduce::CHUNK)
+        .with_min_len(GRAIN)
         .filter(|&v| topo.deg(v) > 0 && parent[v as usize].load(Relaxed) == v)
         .count()
 }
@@ -249,13 +270,14 @@ pub fn roughness(pos: &[DVec3], triangles: &[[u32; 3]], topo: &Topology) -> f64 
 /// Sums over some edges: of their lengths, and of the dihedral angles that [`roughness`] counts,
 /// each with its number of terms.
 #[derive(Debug, Clone, Copy, Default)]
-struct EdgeSums {
-    length: (f64, usize),
-    angle: (f64, usize),
+pub struct EdgeSums {
+    pub length: (f64, usize),
+    pub angle: (f64, usize),
 }
 
 impl EdgeSums {
-    fn add(self, o: EdgeSums) -> EdgeSums {
+    /// The sums of two sets of edges together (`self`'s terms first).
+    pub fn add(self, o: EdgeSums) -> EdgeSums {
         let add = |(s, n): (f64, usize), (t, m): (f64, usize)| (s + t, n + m);
         EdgeSums {
             length: add(self.length, o.length),
@@ -271,7 +293,7 @@ impl EdgeSums {
 /// that a triangle is read and its normal computed at most once per corner rather than once per
 /// edge. An edge's two faces are looked for among the faces of the endpoint with fewer (`i` when
 /// it has few), so that the edges of a vertex of degree d cost O(d) together, not O(d²).
-fn edge_sums(
+pub fn edge_sums(
     pos: &[DVec3],
     triangles: &[[u32; 3]],
     topo: &Topology,
