@@ -83,7 +83,7 @@ pub fn geometry(pos: &[DVec3], tris: &[[u32; 3]], topo: &Topology) -> metrics::G
             metrics::edge_sums(pos, tris, topo, vertices)
         },
         metrics::EdgeSums::default(),
-        metrics::EdgeSums::add,
+        |a, b| a + b,
     );
     metrics::Geometry {
         volume,

@@ -275,9 +275,11 @@ pub struct EdgeSums {
     pub angle: (f64, usize),
 }
 
-impl EdgeSums {
-    /// The sums of two sets of edges together (`self`'s terms first).
-    pub fn add(self, o: EdgeSums) -> EdgeSums {
+/// The sums of two sets of edges together (`self`'s terms first).
+impl std::ops::Add for EdgeSums {
+    type Output = EdgeSums;
+
+    fn add(self, o: EdgeSums) -> EdgeSums {
         let add = |(s, n): (f64, usize), (t, m): (f64, usize)| (s + t, n + m);
         EdgeSums {
             length: add(self.length, o.length),
