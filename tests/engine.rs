@@ -342,3 +342,59 @@ fn thread_counts_beyond_the_limit_are_refused_before_any_thread_starts() {
     }
     assert_eq!(thread_pool(Some(2)).unwrap().current_num_threads(), 2);
 }
+
+/// A file run's statistics: the output's are those of the written file read back (measured on
+/// the plan's arrays, as the run measures), in every format that keeps the vertices, and none of
+/// them depends on the thread count.
+#[test]
+fn statistics_describe_the_output_as_written_for_any_thread_count() {
+    // Two noisy spheres: more vertices and triangles than one reduction chunk, two components.
+    let mut mesh = noisy_sphere(5, 0.3, 11);
+    let n = mesh.positions.len() as u32;
+    let copy: Vec<DVec3> = mesh.positions.iter().map(|p| *p + DVec3::X * 3.0).collect();
+    let tris: Vec<[u32; 3]> = mesh.triangles.iter().map(|t| t.map(|v| v + n)).collect();
+    mesh.positions.extend(copy);
+    mesh.triangles.extend(tris);
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in.ply");
+    io::write_mesh(&input, &mesh).unwrap();
+    let opts = Options {
+        method: Method::Vcs,
+        iterations: 1,
+        ..Options::default()
+    };
+    for ext in ["ply", "obj", "off", "stl"] {
+        let runs: Vec<_> = (1..=3)
+            .map(|t| {
+                let output = dir.path().join(format!("out{t}.{ext}"));
+                let engine = EngineSettings {
+                    with_stats: true,
+                    ..threads(t)
+                };
+                let r = engine::run_file(&input, &output, &opts, &engine, &mut Quiet).unwrap();
+                (output, engine, r)
+            })
+            .collect();
+        let stats =
+            |r: &engine::Report| serde_json::to_string(&(&r.input_stats, &r.output_stats)).unwrap();
+        for (_, _, r) in &runs[1..] {
+            assert_eq!(stats(r), stats(&runs[0].2), "{ext}: 1 thread and more");
+        }
+        let (output, engine, report) = &runs[0];
+        let input_stats = report.input_stats.as_ref().unwrap();
+        assert_eq!(input_stats.components, 2);
+        if ext == "stl" {
+            continue; // STL renumbers its vertices when read: io's tests cover its rounding.
+        }
+        let read = io::read_mesh(&input).unwrap();
+        let storage = vcsmooth::mesh::Storage::heap();
+        let mut plan =
+            engine::Plan::new(&storage, &read.positions, &read.triangles, engine.layout()).unwrap();
+        plan.set_positions_from_input(&io::read_mesh(output).unwrap().positions);
+        assert_eq!(
+            serde_json::to_string(&plan.info(&read.source)).unwrap(),
+            serde_json::to_string(&report.output_stats).unwrap(),
+            "{ext}: the output as read back"
+        );
+    }
+}

@@ -6,6 +6,9 @@ use std::time::Instant;
 
 use glam::DVec3;
 
+use rayon::prelude::*;
+
+use super::reduce;
 use crate::error::{Error, Result};
 use crate::mesh::Storage;
 use crate::partition::{self, Patch, Reordered};
@@ -152,32 +155,48 @@ impl Plan {
         self.len() == 0
     }
 
-    /// Copy the plan's (smoothed) positions into `out` in the input's vertex order.
+    /// Copy the plan's (smoothed) positions into `out` in the input's vertex order, on the
+    /// current pool.
     pub fn positions_in_input_order(&self, out: &mut [DVec3]) {
-        for (new, &old) in self.reordered.order.iter().enumerate() {
-            out[old as usize] = self.reordered.positions[new];
-        }
+        let Reordered {
+            order, positions, ..
+        } = &self.reordered;
+        partition::scatter(out, order, |new| positions[new]);
     }
 
     /// Set the plan's positions from `input`, given in the input's vertex order (to smooth the
-    /// same mesh again from its start).
+    /// same mesh again from its start), on the current pool.
     pub fn set_positions_from_input(&mut self, input: &[DVec3]) {
         let Reordered {
             order, positions, ..
         } = &mut self.reordered;
-        for (new, &old) in order.iter().enumerate() {
-            positions[new] = input[old as usize];
-        }
+        reduce::for_chunks_mut(positions, |first, chunk| {
+            for (p, &old) in chunk.iter_mut().zip(&order[first..]) {
+                *p = input[old as usize];
+            }
+        });
     }
 
-    /// Statistics of the current positions; every figure is order-independent.
+    /// Statistics of the current positions (see [`reduce::geometry`] for the order of the sums).
     pub fn info(&self, source: &crate::mesh::Source) -> crate::metrics::MeshInfo {
-        crate::metrics::info_of(
-            &self.reordered.positions,
-            &self.reordered.triangles,
+        let mut info = crate::metrics::connectivity(
+            self.len(),
+            self.reordered.triangles.len(),
             source,
             &self.topology,
-        )
+        );
+        info.set_geometry(self.geometry());
+        info
+    }
+
+    /// The figures of [`Plan::info`] that depend on the positions, of the current positions.
+    pub fn geometry(&self) -> crate::metrics::Geometry {
+        let Reordered {
+            positions,
+            triangles,
+            ..
+        } = &self.reordered;
+        reduce::geometry(positions, triangles, &self.topology)
     }
 
     /// The decomposition's figures for reports.
@@ -191,7 +210,7 @@ impl Plan {
             self.schedule.colours.len(),
             &self.schedule.halo,
             self.patches
-                .iter()
+                .par_iter()
                 .map(|p| p.crossing_edges(&self.topology))
                 .sum(),
         )

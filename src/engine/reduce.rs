@@ -1,7 +1,8 @@
 //! Deterministic parallel work over arrays: fixed-size chunks of [`CHUNK`] items, mapped on the
 //! current rayon pool, their results combined in chunk order. The chunking, not the thread count,
 //! decides every rounding, so each result is bit-identical for any number of threads. Every
-//! parallel sum of the engine, the multiresolution mode and the cluster engine goes through here.
+//! parallel sum of the engine (its statistics included), the multiresolution mode and the cluster
+//! engine goes through here.
 
 use std::ops::Range;
 
@@ -62,6 +63,34 @@ pub fn volume_area(pos: &[DVec3], tris: &[[u32; 3]], origin: DVec3) -> (f64, f64
         |(v, a), (pv, pa)| (v + pv, a + pa),
     );
     (v / 6.0, a / 2.0)
+}
+
+/// [`metrics::geometry`] over chunks: volume and area over chunks of triangles, about the
+/// centroid summed over chunks of vertices; the extent, and the edges by their smaller vertex
+/// (in ascending `(i, j)` order within a chunk), over chunks of vertices.
+pub fn geometry(pos: &[DVec3], tris: &[[u32; 3]], topo: &Topology) -> metrics::Geometry {
+    let (volume, area) = volume_area(pos, tris, centroid(pos));
+    let extent = map_fold(
+        pos,
+        |_, chunk| metrics::extent(chunk),
+        metrics::extent(&[]),
+        metrics::extent_union,
+    );
+    let edges = map_fold(
+        pos,
+        |first, chunk| {
+            let vertices = first as u32..(first + chunk.len()) as u32;
+            metrics::edge_sums(pos, tris, topo, vertices)
+        },
+        metrics::EdgeSums::default(),
+        |a, b| a + b,
+    );
+    metrics::Geometry {
+        volume,
+        area,
+        extent,
+        edges,
+    }
 }
 
 /// Signed volume about `origin` ([`metrics::volume_about`]).

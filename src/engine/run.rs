@@ -6,6 +6,7 @@ use std::time::Instant;
 use super::memory::{self, Budget, BudgetSource, PeakSampler};
 use super::observer::{IterationRecord, Observer, Statistics};
 use super::plan::{DEFAULT_PATCH_SIZE, Layout, Plan, PlanStats, PrepTimings};
+use super::reduce;
 use crate::error::{Error, Result};
 use crate::io;
 use crate::mesh::{Buf, Mesh, Storage};
@@ -215,19 +216,26 @@ pub(crate) fn run_file_with(
         Ok((plan, smoothed))
     })?;
 
-    // The plan is kept past the write only to measure the output as written.
+    // The plan is kept past the write only to measure the output as written, which runs beside
+    // the (sequential) write.
     let plan = engine.with_stats.then_some(plan);
-
-    let clock = Instant::now();
-    io::write_mesh(output, &mesh)?;
-    t.write = clock.elapsed().as_secs_f64();
-    if let Some(mut plan) = plan {
-        let clock = Instant::now();
-        let written = io::read_mesh_in(output, &storage)?;
-        as_written(&mut plan, &written);
-        drop(written);
-        smoothed.output_stats = Some(pool.install(|| plan.info(&mesh.source)));
-        t.metrics += clock.elapsed().as_secs_f64();
+    let (written, output_stats) = pool.install(|| {
+        rayon::join(
+            || {
+                let clock = Instant::now();
+                io::write_mesh(output, &mesh).map(|()| clock.elapsed().as_secs_f64())
+            },
+            || {
+                let clock = Instant::now();
+                let stats = plan.map(|plan| output_stats(plan, output, &mesh, &smoothed));
+                (stats, clock.elapsed().as_secs_f64())
+            },
+        )
+    });
+    t.write = written?;
+    if let (Some(stats), seconds) = output_stats {
+        smoothed.output_stats = stats;
+        t.metrics += seconds;
     }
     t.total = start.elapsed().as_secs_f64();
     let memory = MemoryStats {
@@ -246,19 +254,27 @@ pub(crate) fn run_file_with(
     Ok(smoothed.report(&mesh, pool.current_num_threads(), memory, t))
 }
 
-/// Put the positions of the `written` output file into `plan`, so that the output's statistics
-/// describe the file as stored (rounded to its coordinate type: `float`, or `uchar`, `short`, …
-/// of a PLY layout), not the f64 positions before the write. PLY, OBJ and OFF give the plan's
-/// vertices back in the input's order; STL rebuilds its vertices from the triangles' corners
-/// instead, and stores single precision by definition, so its positions are rounded to `f32` here.
-fn as_written(plan: &mut Plan, written: &Mesh) {
-    if written.source.format != Some(io::Format::Stl) && written.positions.len() == plan.len() {
-        plan.set_positions_from_input(&written.positions);
-    } else {
-        for p in plan.reordered.positions.iter_mut() {
-            *p = p.as_vec3().as_dvec3();
-        }
+/// The statistics of the output file as stored (rounded to its coordinate type: `float`, or
+/// `uchar`, `short`, … of a PLY layout, or printed as single-precision text), from the plan's
+/// positions rounded in place as [`io::Stored`] says, without reading the file back. The counts
+/// are the input's: the output has the same connectivity. STL rebuilds its vertices from the
+/// triangles' corners when read; its figures are those of the plan's vertices in `f32`.
+fn output_stats(
+    mut plan: Plan,
+    output: &Path,
+    mesh: &Mesh,
+    smoothed: &Smoothed,
+) -> Option<MeshInfo> {
+    let mut info = smoothed.input_stats.clone()?;
+    // An output that write_mesh refuses has no statistics; its error is the write's.
+    let stored = io::Stored::of(output, mesh)?;
+    if !stored.is_exact() {
+        reduce::for_chunks_mut(&mut plan.reordered.positions, |_, chunk| {
+            chunk.iter_mut().for_each(|p| *p = stored.round(*p))
+        });
     }
+    info.set_geometry(plan.geometry());
+    Some(info)
 }
 
 /// Smooth an in-memory `mesh` in place (see [`crate::smooth()`], the crate's front door).
@@ -280,7 +296,10 @@ pub(crate) fn run_mesh(
             plan.smooth(&storage, opts, engine.statistics, observer)
         })?;
         let clock = Instant::now();
-        smoothed.output_stats = engine.with_stats.then(|| plan.info(&mesh.source));
+        smoothed.output_stats = smoothed.input_stats.clone().map(|mut info| {
+            info.set_geometry(plan.geometry());
+            info
+        });
         t.metrics += clock.elapsed().as_secs_f64();
         plan.positions_in_input_order(&mut mesh.positions);
         Ok(smoothed)

@@ -980,6 +980,22 @@ mod tests {
     }
 
     #[test]
+    fn stored_positions_are_those_read_back() {
+        let mut mesh = read(&primitives(), false, None).unwrap();
+        for p in mesh.positions.iter_mut() {
+            *p = *p * 1.000_000_123 + DVec3::new(0.1, -0.7, 1e-9);
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out.gltf");
+        crate::io::write_mesh(&out, &mesh).unwrap();
+        let back = crate::io::read_mesh(&out).unwrap();
+        let stored = crate::io::Stored::of(&out, &mesh).unwrap();
+        let expected: Vec<DVec3> = mesh.positions.iter().map(|&p| stored.round(p)).collect();
+        assert_eq!(back.positions.to_vec(), expected);
+        assert!(!stored.is_exact());
+    }
+
+    #[test]
     fn percent_escapes_round_trip() {
         assert_eq!(percent_encode("a b%.bin"), "a%20b%25.bin");
         assert_eq!(percent_decode("a%20b%25.bin").as_deref(), Some("a b%.bin"));

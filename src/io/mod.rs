@@ -228,6 +228,68 @@ pub fn write_mesh(path: &Path, mesh: &Mesh) -> Result<()> {
     atomic::write_atomically(path, |out| write(out, mesh))
 }
 
+/// How the coordinates of a mesh read back from the file that [`write_mesh`] makes of it, so that
+/// a caller can measure an output as stored without reading it back (a run's output statistics).
+/// Each coordinate is stored on its own, so this is a function of the value alone: rounded to
+/// the file's type, or printed as text and parsed again.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Stored([Axis; 3]);
+
+/// How one coordinate is stored.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Axis {
+    /// As this binary type: PLY's types (ASCII PLY parses each as its type, so the same), `float`
+    /// for STL (ASCII STL parses `f32`) and glTF, `double` for text in double precision (the
+    /// shortest text that reads back to the same `f64`).
+    Binary(ply::Scalar),
+    /// Text in single precision (OBJ, OFF): the shortest text of the `f32`, read back as `f64`.
+    SingleText,
+}
+
+impl Stored {
+    /// What [`write_mesh`] stores for `mesh` at `path` (the format from its extension); `None`
+    /// when it would not write it (an unknown extension, a PLY layout without coordinates).
+    pub fn of(path: &Path, mesh: &Mesh) -> Option<Stored> {
+        use ply::Scalar::{F32, F64};
+        let text = match mesh.source.precision {
+            Precision::Float => Axis::SingleText,
+            Precision::Double => Axis::Binary(F64),
+        };
+        Some(Stored(match Format::from_extension(path)? {
+            Format::Ply => ply::coordinate_types(mesh)?.map(Axis::Binary),
+            Format::Obj | Format::Off => [text; 3],
+            Format::Stl | Format::Gltf | Format::Glb => [Axis::Binary(F32); 3],
+        }))
+    }
+
+    /// Whether every `f64` reads back as itself.
+    pub fn is_exact(&self) -> bool {
+        self.0 == [Axis::Binary(ply::Scalar::F64); 3]
+    }
+
+    /// `p` as it reads back. `p` must be writable (see [`write_mesh`]'s checks: in the range of
+    /// an integer type, finite in `f32`).
+    pub fn round(&self, p: glam::DVec3) -> glam::DVec3 {
+        let axis = |a: Axis, x: f64| match a {
+            Axis::Binary(t) => {
+                let mut bytes = [0u8; 8];
+                t.put(x, &mut bytes);
+                t.get(&bytes).unwrap_or(x)
+            }
+            Axis::SingleText => {
+                // The writers' text, on the stack: this runs for every coordinate of an output.
+                let mut text = [0u8; 48];
+                let mut rest = &mut text[..];
+                let _ = write!(rest, "{}", F32(x as f32));
+                let len = 48 - rest.len();
+                number(&text[..len]).unwrap_or(x)
+            }
+        };
+        let [a, b, c] = self.0;
+        glam::DVec3::new(axis(a, p.x), axis(b, p.y), axis(c, p.z))
+    }
+}
+
 /// Recognises and decodes an opened regular file of `len` bytes: its first bytes are read and
 /// recognised before the whole file is mapped (a zeroed or compressed file of any size is refused
 /// after one read of at most 64 KiB).

@@ -1271,3 +1271,97 @@ fn header_lines_are_bounded() {
         "line 3: the solid's name runs on for more than 64 KiB",
     );
 }
+
+// ---------------------------------------------------------------------------------------------
+// Positions as stored
+
+/// The bits of each coordinate (`-0.0` and `0.0` differ).
+fn bits(positions: &[DVec3]) -> Vec<[u64; 3]> {
+    positions
+        .iter()
+        .map(|p| p.to_array().map(f64::to_bits))
+        .collect()
+}
+
+/// Writes `mesh` as `name` and checks that [`Stored::round`] gives, bit for bit, the positions
+/// that read back: by vertex, or by triangle corner for STL (which renumbers its vertices).
+fn assert_stored_reads_back(mesh: &Mesh, name: &str) {
+    let stored = Stored::of(Path::new(name), mesh).unwrap();
+    let back = roundtrip(mesh, name);
+    let expected: Vec<DVec3> = mesh.positions.iter().map(|&p| stored.round(p)).collect();
+    if name.ends_with(".stl") {
+        let corners = |m: &[[u32; 3]], p: &[DVec3]| -> Vec<DVec3> {
+            m.iter().flatten().map(|&v| p[v as usize]).collect()
+        };
+        assert_eq!(
+            bits(&corners(&back.triangles, &back.positions)),
+            bits(&corners(&mesh.triangles, &expected)),
+            "{name}"
+        );
+    } else {
+        assert_eq!(bits(&back.positions), bits(&expected), "{name}");
+    }
+    assert_eq!(
+        stored.is_exact(),
+        bits(&expected) == bits(&mesh.positions),
+        "{name}: exact only if nothing is rounded"
+    );
+}
+
+/// Moves every vertex by an amount no float type holds exactly, scaled so that coordinates span
+/// many magnitudes (text in single precision switches to the exponent form outside 1e-5..1e16).
+fn moved(mesh: &Mesh, scale: f64) -> Mesh {
+    let mut m = mesh.clone();
+    for (k, p) in m.positions.iter_mut().enumerate() {
+        *p = (*p * 1.000_000_123_456 + DVec3::new(0.012_345_678_9, -0.3, 1e-3) * k as f64) * scale;
+    }
+    m
+}
+
+#[test]
+fn stored_positions_are_those_read_back_in_every_format_and_layout() {
+    for scale in [1.0, 1e-7, 3.3e4, 1e18] {
+        let mesh = moved(&octahedron(), scale);
+        for name in ["m.ply", "m.obj", "m.off", "m.stl"] {
+            assert_stored_reads_back(&mesh, name);
+        }
+        let mut double = mesh.clone();
+        double.source.precision = Precision::Double;
+        for name in ["d.ply", "d.obj", "d.off", "d.stl"] {
+            assert_stored_reads_back(&double, name);
+        }
+    }
+    // Layouts kept from the input: PLY with every coordinate type (float, double, short) in
+    // every encoding, ASCII STL, OBJ and OFF text with extra columns.
+    let text = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty double y\n\
+                property short z\nproperty uchar red\nelement face 1\n\
+                property list uchar int vertex_indices\nend_header\n\
+                0.5 0.25 -7 1\n1.5 -0.125 12 2\n-2.5 3.75 -300 3\n3 0 1 2\n";
+    let input = oracle_read(text.as_bytes());
+    for encoding in [
+        Encoding::Ascii,
+        Encoding::BinaryLittleEndian,
+        Encoding::BinaryBigEndian,
+    ] {
+        let mesh = parse_as(&oracle_write(&input, encoding), "t.ply").unwrap();
+        assert_stored_reads_back(&moved(&mesh, 1.7), "t.ply");
+        assert_stored_reads_back(&moved(&mesh, 1.7), "t.obj");
+    }
+    let stl = "solid s\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\n\
+               endloop\nendfacet\nendsolid s\n";
+    let mesh = parse_as(stl.as_bytes(), "s.stl").unwrap();
+    assert_stored_reads_back(&moved(&mesh, 0.37), "s.stl");
+    let obj = "# kept\nv 0.1 0.2 0.3 1.0\nv 1 0 0\nv 0 1 0.000001\nvt 0 0\nf 1/1 2/1 3/1\n";
+    let mesh = parse_as(obj.as_bytes(), "o.obj").unwrap();
+    for scale in [0.37, 1e-9, 1e20] {
+        assert_stored_reads_back(&moved(&mesh, scale), "o.obj");
+    }
+    let off = "COFF\n3 1 0\n0 0 0 255 0 0 255\n1 0 0 0 255 0 255\n0 1 0 0 0 255 255\n3 0 1 2\n";
+    let mesh = parse_as(off.as_bytes(), "c.off").unwrap();
+    assert_stored_reads_back(&moved(&mesh, 0.37), "c.off");
+    let mesh = read_mesh(&meshes_dir().join("fertility-9k.ply")).unwrap();
+    for name in ["f.ply", "f.obj", "f.off", "f.stl"] {
+        assert_stored_reads_back(&moved(&mesh, 1.0), name);
+    }
+    assert_eq!(Stored::of(Path::new("m.xyz"), &octahedron()), None);
+}

@@ -1,6 +1,11 @@
 //! `vcsmooth info`: counts, topology, volume, area, bounding box, edge length and roughness of a mesh.
 
+use std::ops::Range;
+use std::sync::atomic::AtomicU32;
+use std::sync::atomic::Ordering::Relaxed;
+
 use glam::DVec3;
+use rayon::prelude::*;
 
 use crate::mesh::Mesh;
 use crate::topology::Topology;
@@ -69,25 +74,39 @@ pub fn info(mesh: &Mesh, topo: &Topology) -> MeshInfo {
     info_of(&mesh.positions, &triangles, &mesh.source, &topo)
 }
 
-/// [`info`] from the parts of a mesh (e.g. the reordered arrays of the patch engine; every figure
+/// [`info`] from the parts of a mesh (e.g. the reordered arrays of the patch engine; every count
 /// is independent of the vertex and triangle order). The triangles are measured as they are:
-/// oriented already when they come from a plan.
+/// oriented already when they come from a plan. The sums run in the arrays' order; the engine
+/// measures its plans over chunks in parallel instead (`engine::reduce::geometry`).
 pub fn info_of(
     pos: &[DVec3],
     triangles: &[[u32; 3]],
     source: &crate::mesh::Source,
     topo: &Topology,
 ) -> MeshInfo {
+    let mut info = connectivity(pos.len(), triangles.len(), source, topo);
+    info.set_geometry(geometry(pos, triangles, topo));
+    info
+}
+
+/// The counts of [`MeshInfo`] (everything but the [`Geometry`], left at zero) of a mesh of
+/// `vertices` and `triangles` with the topology `topo`. They do not depend on the positions: a
+/// run counts its input once and gives its output the same counts.
+pub fn connectivity(
+    vertices: usize,
+    triangles: usize,
+    source: &crate::mesh::Source,
+    topo: &Topology,
+) -> MeshInfo {
     debug_assert_eq!(
         topo.len(),
-        pos.len(),
+        vertices,
         "topology built for another vertex count"
     );
     let s = &topo.stats;
-    let (lo, hi) = bounding_box(pos);
     MeshInfo {
-        vertices: pos.len(),
-        triangles: triangles.len(),
+        vertices,
+        triangles,
         input_faces: source.input_faces,
         polygons_triangulated: source.polygons_triangulated,
         edges: s.edges,
@@ -102,124 +121,251 @@ pub fn info_of(
         fixed_vertices: s.fixed_vertices,
         components: components(topo),
         unreferenced_vertices: s.unreferenced_vertices,
-        closed: s.boundary_edges == 0 && s.non_manifold_edges == 0 && !triangles.is_empty(),
+        closed: s.boundary_edges == 0 && s.non_manifold_edges == 0 && triangles > 0,
+        ..MeshInfo::default()
+    }
+}
+
+/// What [`MeshInfo`] reports of the positions, as sums and extremes so that parts of a mesh can
+/// be measured apart and combined.
+#[derive(Debug, Clone, Copy)]
+pub struct Geometry {
+    /// Signed volume ([`crate::metrics::volume`]) and area.
+    pub volume: f64,
+    pub area: f64,
+    /// Smallest and largest coordinates, see [`extent`].
+    pub extent: (DVec3, DVec3),
+    pub edges: EdgeSums,
+}
+
+/// [`Geometry`] of a whole mesh, summed in the order of its arrays.
+pub fn geometry(pos: &[DVec3], triangles: &[[u32; 3]], topo: &Topology) -> Geometry {
+    Geometry {
         volume: super::volume(pos, triangles),
         area: super::area(pos, triangles),
-        bbox_min: lo.to_array(),
-        bbox_max: hi.to_array(),
-        bbox_diagonal: (hi - lo).length(),
-        mean_edge_length: mean_edge_length(pos, topo),
-        roughness_deg: roughness(pos, triangles, topo),
+        extent: extent(pos),
+        edges: edge_sums(pos, triangles, topo, 0..topo.len() as u32),
     }
+}
+
+impl MeshInfo {
+    /// Set the figures that depend on the positions (volume, area, bounding box, mean edge length,
+    /// roughness) from `g`; the counts stay.
+    pub fn set_geometry(&mut self, g: Geometry) {
+        let (lo, hi) = bounding(g.extent);
+        self.volume = g.volume;
+        self.area = g.area;
+        self.bbox_min = lo.to_array();
+        self.bbox_max = hi.to_array();
+        self.bbox_diagonal = (hi - lo).length();
+        self.mean_edge_length = mean(g.edges.length);
+        self.roughness_deg = mean(g.edges.angle);
+    }
+}
+
+/// `sum / count`, 0 for no items.
+fn mean((sum, count): (f64, usize)) -> f64 {
+    if count == 0 { 0.0 } else { sum / count as f64 }
+}
+
+/// Smallest and largest coordinates over `pos`, NaN coordinates ignored: `(+∞, −∞)` on an axis
+/// with none. Combine the extents of parts with [`extent_union`].
+pub fn extent(pos: &[DVec3]) -> (DVec3, DVec3) {
+    let none = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+    pos.iter().fold(none, |e, &p| extent_union(e, (p, p)))
+}
+
+/// The extent of two parts together.
+pub fn extent_union((lo, hi): (DVec3, DVec3), (l, h): (DVec3, DVec3)) -> (DVec3, DVec3) {
+    // f64::min / max ignore NaN (DVec3::min would not).
+    (
+        DVec3::new(lo.x.min(l.x), lo.y.min(l.y), lo.z.min(l.z)),
+        DVec3::new(hi.x.max(h.x), hi.y.max(h.y), hi.z.max(h.z)),
+    )
 }
 
 /// Smallest and largest coordinates over `pos` (NaN coordinates ignored); zeros for none.
 pub(crate) fn bounding_box(pos: &[DVec3]) -> (DVec3, DVec3) {
-    let (lo, hi) = pos.iter().fold(
-        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
-        // f64::min / max ignore NaN (DVec3::min would not).
-        |(lo, hi), p| {
-            let l = DVec3::new(lo.x.min(p.x), lo.y.min(p.y), lo.z.min(p.z));
-            let h = DVec3::new(hi.x.max(p.x), hi.y.max(p.y), hi.z.max(p.z));
-            (l, h)
-        },
-    );
-    // Empty input, or an axis with only NaN: report zeros rather than ±inf.
+    bounding(extent(pos))
+}
+
+/// An extent as a bounding box: zeros rather than ±∞ on an axis without coordinates (an empty
+/// mesh, or only NaN).
+fn bounding((lo, hi): (DVec3, DVec3)) -> (DVec3, DVec3) {
     let fix = |lo: f64, hi: f64| if lo <= hi { (lo, hi) } else { (0.0, 0.0) };
     let (x, y, z) = (fix(lo.x, hi.x), fix(lo.y, hi.y), fix(lo.z, hi.z));
     (DVec3::new(x.0, y.0, z.0), DVec3::new(x.1, y.1, z.1))
 }
 
-/// Connected components over the adjacency, counting only vertices with a neighbour.
+/// Connected components over the adjacency, counting only vertices with a neighbour: a
+/// union–find over the edges, in parallel on the current pool (a count, the same for any order
+/// of the unions).
 fn components(topo: &Topology) -> usize {
-    // A bit per vertex and a breadth-first frontier (on a surface it holds about √n vertices,
-    // where a depth-first stack can grow to n): the count stays cheap in memory for huge meshes.
+    // Vertices per work item: enough to make scheduling negligible.
+    const GRAIN: usize = 1 << 14;
     let n = topo.len();
-    let mut seen = vec![0u64; n.div_ceil(64)];
-    let mut mark = |v: u32| {
-        let (w, b) = (v as usize / 64, 1u64 << (v % 64));
-        let new = seen[w] & b == 0;
-        seen[w] |= b;
-        new
-    };
-    let mut frontier = std::collections::VecDeque::new();
-    let mut count = 0;
-    for start in 0..n as u32 {
-        if topo.deg(start) == 0 || !mark(start) {
-            continue;
+    // parent[v] ≤ v always: a root is linked under a smaller root, so no cycle can form whatever
+    // the interleaving. Relaxed is enough: each compare-exchange sees the latest value of its
+    // slot, and a stale read only makes a find or a link retry; rayon's join orders the passes.
+    let parent: Vec<AtomicU32> = (0..n as u32).map(AtomicU32::new).collect();
+    let find = |mut v: u32| loop {
+        let p = parent[v as usize].load(Relaxed);
+        if p == v {
+            return v;
         }
-        count += 1;
-        frontier.push_back(start);
-        while let Some(v) = frontier.pop_front() {
+        let g = parent[p as usize].load(Relaxed);
+        // Path halving: point v at its grandparent (a no-op if another thread moved it already).
+        let _ = parent[v as usize].compare_exchange(p, g, Relaxed, Relaxed);
+        v = g;
+    };
+    (0..n as u32)
+        .into_par_iter()
+        .with_min_len(GRAIN)
+        .for_each(|v| {
             for &u in topo.neighbors(v) {
-                if mark(u) {
-                    frontier.push_back(u);
+                if u < v {
+                    continue;
+                }
+                loop {
+                    let (a, b) = (find(v), find(u));
+                    if a == b {
+                        break;
+                    }
+                    let (lo, hi) = if a < b { (a, b) } else { (b, a) };
+                    if parent[hi as usize]
+                        .compare_exchange(hi, lo, Relaxed, Relaxed)
+                        .is_ok()
+                    {
+                        break;
+                    }
                 }
             }
-        }
-    }
-    count
+        });
+    (0..n as u32)
+        .into_par_iter()
+        .with_min_len(GRAIN)
+        .filter(|&v| topo.deg(v) > 0 && parent[v as usize].load(Relaxed) == v)
+        .count()
 }
 
-/// Mean length over the undirected edges (0 for none).
+/// Mean length over the undirected edges (0 for none), summed in ascending `(i, j)` order.
 pub fn mean_edge_length(pos: &[DVec3], topo: &Topology) -> f64 {
     let (sum, count) = topo.edges().fold((0.0, 0usize), |(s, c), [i, j]| {
         (s + pos[i as usize].distance(pos[j as usize]), c + 1)
     });
-    if count == 0 { 0.0 } else { sum / count as f64 }
+    mean((sum, count))
 }
 
 /// Mean dihedral angle, in degrees, between the normals of the two triangles of every manifold
-/// interior edge (0 for a plane): the roughness measure of the tests and reports.
+/// interior edge (0 for a plane): the roughness measure of the tests and reports. Summed in
+/// ascending `(i, j)` order.
 ///
 /// Edges with one or three or more triangles are skipped, and so are edges next to a zero-area
 /// triangle (no normal). The angle is `atan2(|n₁ × n₂|, n₁ · n₂)`, accurate near 0°. 0 when no edge
 /// counts.
 pub fn roughness(pos: &[DVec3], triangles: &[[u32; 3]], topo: &Topology) -> f64 {
-    let normal = |t: u32| {
-        let [a, b, c] = triangles[t as usize].map(|v| pos[v as usize]);
+    mean(edge_sums(pos, triangles, topo, 0..topo.len() as u32).angle)
+}
+
+/// Sums over some edges: of their lengths, and of the dihedral angles that [`roughness`] counts,
+/// each with its number of terms.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct EdgeSums {
+    pub length: (f64, usize),
+    pub angle: (f64, usize),
+}
+
+/// The sums of two sets of edges together (`self`'s terms first).
+impl std::ops::Add for EdgeSums {
+    type Output = EdgeSums;
+
+    fn add(self, o: EdgeSums) -> EdgeSums {
+        let add = |(s, n): (f64, usize), (t, m): (f64, usize)| (s + t, n + m);
+        EdgeSums {
+            length: add(self.length, o.length),
+            angle: add(self.angle, o.angle),
+        }
+    }
+}
+
+/// [`EdgeSums`] of the edges `(i, j)`, `i < j`, with `i` in `vertices`, in ascending order: one
+/// walk over them for both figures.
+///
+/// The faces of `i` are gathered once per vertex, their normals computed when first needed, so
+/// that a triangle is read and its normal computed at most once per corner rather than once per
+/// edge. An edge's two faces are looked for among the faces of the endpoint with fewer (`i` when
+/// it has few), so that the edges of a vertex of degree d cost O(d) together, not O(d²).
+pub fn edge_sums(
+    pos: &[DVec3],
+    triangles: &[[u32; 3]],
+    topo: &Topology,
+    vertices: Range<u32>,
+) -> EdgeSums {
+    // Up to this many faces, scanning the faces of `i` costs less than asking how many `j` has.
+    const FEW: usize = 16;
+    let normal = |t: &[u32; 3]| {
+        let [a, b, c] = t.map(|v| pos[v as usize]);
         let n = (b - a).cross(c - a);
         (n.length_squared() > 0.0 && n.is_finite()).then_some(n)
     };
-    let mut sum = 0.0;
-    let mut count = 0usize;
-    for [i, j] in topo.edges() {
-        let Some([f, g]) = two_faces(topo, triangles, i, j) else {
+    let mut sums = EdgeSums::default();
+    // The faces of `i`: corners, and the normal once computed (`None` until then).
+    let mut around: Vec<([u32; 3], Option<Option<DVec3>>)> = Vec::new();
+    for i in vertices {
+        let above = topo.neighbors(i);
+        let above = &above[above.partition_point(|&j| j <= i)..];
+        if above.is_empty() {
             continue;
-        };
-        if let (Some(n1), Some(n2)) = (normal(f), normal(g)) {
-            sum += angle_deg(n1, n2);
-            count += 1;
+        }
+        around.clear();
+        around.extend(
+            topo.faces_of(i)
+                .iter()
+                .map(|&t| (triangles[t as usize], None)),
+        );
+        for &j in above {
+            sums.length.0 += pos[i as usize].distance(pos[j as usize]);
+            sums.length.1 += 1;
+            let pair = if around.len() <= FEW || around.len() <= topo.faces_of(j).len() {
+                two_with(around.iter().map(|(t, _)| t), j).map(|pair| {
+                    pair.map(|k| {
+                        let (t, n) = &mut around[k];
+                        *n.get_or_insert_with(|| normal(t))
+                    })
+                })
+            } else {
+                let faces = topo.faces_of(j);
+                two_with(faces.iter().map(|&t| &triangles[t as usize]), i)
+                    .map(|pair| pair.map(|k| normal(&triangles[faces[k] as usize])))
+            };
+            if let Some([Some(n1), Some(n2)]) = pair {
+                sums.angle.0 += angle_deg(n1, n2);
+                sums.angle.1 += 1;
+            }
         }
     }
-    if count == 0 { 0.0 } else { sum / count as f64 }
+    sums
+}
+
+/// The positions in `faces` of the two faces that use `v`, if exactly two do.
+#[inline]
+fn two_with<'a>(faces: impl Iterator<Item = &'a [u32; 3]>, v: u32) -> Option<[usize; 2]> {
+    let (mut found, mut n) = ([0; 2], 0);
+    for (k, t) in faces.enumerate() {
+        if t[0] == v || t[1] == v || t[2] == v {
+            if n == 2 {
+                return None;
+            }
+            found[n] = k;
+            n += 1;
+        }
+    }
+    (n == 2).then_some(found)
 }
 
 /// The angle between two non-zero vectors, in degrees.
 pub(crate) fn angle_deg(a: DVec3, b: DVec3) -> f64 {
     a.cross(b).length().atan2(a.dot(b)).to_degrees()
-}
-
-/// The faces of edge `i`–`j`, if there are exactly two: found among the faces of the endpoint with
-/// fewer, so that the edges of a vertex of degree d cost O(d) together, not O(d²).
-fn two_faces(topo: &Topology, triangles: &[[u32; 3]], i: u32, j: u32) -> Option<[u32; 2]> {
-    let (x, y) = if topo.faces_of(i).len() <= topo.faces_of(j).len() {
-        (i, j)
-    } else {
-        (j, i)
-    };
-    let mut found = [0u32; 2];
-    let mut n = 0;
-    for &t in topo.faces_of(x) {
-        if triangles[t as usize].contains(&y) {
-            if n == 2 {
-                return None;
-            }
-            found[n] = t;
-            n += 1;
-        }
-    }
-    (n == 2).then_some(found)
 }
 
 #[cfg(test)]
@@ -369,8 +515,8 @@ mod tests {
         let t = topo(&m);
         // Edge 0-1: 90 degrees; edge 1-2 borders the zero-area triangle: skipped.
         assert!((roughness(&m.positions, &m.triangles, &t) - 90.0).abs() < 1e-12);
-        assert_eq!(two_faces(&t, &m.triangles, 0, 1), Some([0, 1]));
-        assert_eq!(two_faces(&t, &m.triangles, 1, 2), Some([0, 2]));
-        assert_eq!(two_faces(&t, &m.triangles, 0, 3), None);
+        // Only edge 0-1 counts.
+        assert_eq!(edge_sums(&m.positions, &m.triangles, &t, 0..1).angle.1, 1);
+        assert_eq!(edge_sums(&m.positions, &m.triangles, &t, 1..5).angle.1, 0);
     }
 }

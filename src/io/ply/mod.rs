@@ -1278,6 +1278,19 @@ fn layout_of(mesh: &Mesh) -> Cow<'_, PlyLayout> {
     }
 }
 
+/// The types a PLY output stores `x y z` in, those of [`layout_of`]; `None` when the layout has
+/// no usable vertex element (the writer refuses such a mesh).
+pub(crate) fn coordinate_types(mesh: &Mesh) -> Option<[Scalar; 3]> {
+    let own = mesh.source.layout.as_deref();
+    let Some(layout) = own.and_then(|l| l.as_any().downcast_ref::<PlyLayout>()) else {
+        // The plain layout's, without building it.
+        return Some([PlainRecords::new(0, 3, mesh.source.precision).coordinate; 3]);
+    };
+    let roles = Roles::find(&layout.elements).ok()?;
+    let vertex = &layout.elements[roles.vertex];
+    Some(roles.xyz.map(|k| vertex.scalar(k)))
+}
+
 /// Whether `mesh` (already checked by `io::check_mesh`) can be written as PLY.
 pub(crate) fn check_writable(mesh: &Mesh) -> Fallible<()> {
     let layout = layout_of(mesh);
