@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use clap::{Args as ClapArgs, ValueEnum};
 
-use super::shared::SmoothingArgs;
+use super::shared::{PinPropertyArg, SmoothingArgs};
 use crate::engine::EngineSettings;
 use crate::error::{Error, Result};
 use crate::io::Format;
@@ -37,6 +37,8 @@ impl From<OutputFormat> for Format {
 pub struct BatchSmoothArgs {
     #[command(flatten)]
     pub smoothing: SmoothingArgs,
+    #[command(flatten)]
+    pub pins: PinPropertyArg,
     /// Format of the outputs, OUTDIR/<input's stem>.<format>.
     #[arg(long, value_enum, default_value_t = OutputFormat::Ply)]
     pub format: OutputFormat,
@@ -56,6 +58,7 @@ impl BatchSmooth {
     pub fn from_args(a: BatchSmoothArgs) -> Result<BatchSmooth> {
         let mut engine = a.smoothing.engine.resolve()?;
         engine.with_stats = true;
+        engine.pins = a.pins.resolve();
         Ok(BatchSmooth {
             options: a.smoothing.options(),
             engine,
