@@ -524,6 +524,12 @@ fn bad_pins_are_one_line_errors_and_write_nothing() {
             vec![s(&props), "'weight'".into(), "x, y, z, pin, quality".into()],
         ),
         (
+            s(&props),
+            vec!["--pin-property".into(), "x".into()],
+            1,
+            vec!["'x'".into(), "coordinate".into()],
+        ),
+        (
             s(&input),
             report_over_pins.to_vec(),
             2,
@@ -591,4 +597,45 @@ fn batch_pins_by_property_and_certifies_it() {
     let text = batch(&[]);
     assert_eq!(text.matches("\ndone ").count(), 1, "{text}");
     assert!(vertex_records(&input)[0] != vertex_records(&output)[0]);
+}
+
+/// An ASCII PLY whose vertex element has a list (`tags`) and a `short` flag: the records are
+/// walked, and the pinned vertices keep their coordinates.
+#[test]
+fn pin_property_in_ascii_records_with_lists() {
+    let dir = tempfile::tempdir().unwrap();
+    let mesh = noisy_sphere(3, 0.3, 4);
+    let n = mesh.positions.len();
+    let mut text = format!(
+        "ply\nformat ascii 1.0\nelement vertex {n}\nproperty float x\nproperty float y\n\
+         property float z\nproperty list uchar int tags\nproperty short keep\n\
+         element face {}\nproperty list uchar int vertex_indices\nend_header\n",
+        mesh.triangles.len()
+    );
+    for (v, p) in mesh.positions.iter().enumerate() {
+        let [x, y, z] = p.as_vec3().to_array();
+        let keep = if v % 5 == 0 { -2 } else { 0 };
+        text += &format!("{x} {y} {z} 2 {v} 7 {keep}\n");
+    }
+    for t in mesh.triangles.iter() {
+        text += &format!("3 {} {} {}\n", t[0], t[1], t[2]);
+    }
+    let input = dir.path().join("tags.ply");
+    std::fs::write(&input, text).unwrap();
+    let out = dir.path().join("out.ply");
+    ok(vcsmooth([
+        "smooth",
+        &s(&input),
+        &s(&out),
+        "--pin-property",
+        "keep",
+        "--iterations",
+        "3",
+    ]));
+    let (a, b) = (io::read_mesh(&input).unwrap(), io::read_mesh(&out).unwrap());
+    let moved = (0..n).filter(|&v| a.positions[v] != b.positions[v]).count();
+    for v in (0..n).step_by(5) {
+        assert_eq!(a.positions[v], b.positions[v], "vertex {v} moved");
+    }
+    assert!(moved > n / 2, "only {moved} moved");
 }

@@ -233,3 +233,35 @@ impl Plan {
             .pin(|new| pins.contains(order[new as usize] as usize));
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pin_files_and_keys() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("pins.txt");
+        std::fs::write(&path, "# comment\n\n 5 \n3 # three\n5\n").unwrap();
+        assert_eq!(read_pin_file(&path).unwrap(), vec![(3, 5), (4, 3), (5, 5)]);
+        // The key names the distinct indices, whatever their order, repeats or source.
+        let key = Pins::File(path.clone()).key().unwrap();
+        assert_eq!(key, Pins::Indices(vec![3, 5]).key().unwrap());
+        let mask = (0..6).map(|v| v == 3 || v == 5).collect();
+        assert_eq!(key, Pins::Mask(mask).key().unwrap());
+        assert_ne!(key, Pins::Indices(vec![3]).key().unwrap());
+        assert_eq!(Pins::None.key().unwrap(), "");
+        std::fs::write(&path, "1\n2.5\n").unwrap();
+        let e = Pins::File(path).key().unwrap_err().to_string();
+        assert!(e.contains("line 2: '2.5' is not a vertex index"), "{e}");
+    }
+
+    #[test]
+    fn reports_name_the_source_not_the_indices() {
+        let json = |p: &Pins| serde_json::to_string(p).unwrap();
+        assert_eq!(json(&Pins::None), "null");
+        assert_eq!(json(&Pins::Indices(vec![1, 2, 2])), r#"{"indices":3}"#);
+        assert_eq!(json(&Pins::Mask(vec![true, false])), r#"{"mask":1}"#);
+        assert_eq!(json(&Pins::Property("q".into())), r#"{"property":"q"}"#);
+    }
+}

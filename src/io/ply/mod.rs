@@ -304,7 +304,7 @@ impl PlyLayout {
     /// Call `f(i, value)` with the value of the scalar vertex property `name` of every vertex `i`,
     /// in file order (every PLY type converts to `f64` exactly). Fails, with a message that names
     /// the property and lists those present, when there is no such property, when it is a list,
-    /// or when its values are not kept (only `x y z` and normals, which the mesh holds).
+    /// or when it is a coordinate or a normal (`x y z nx ny nz`, which the mesh holds).
     pub fn vertex_values(&self, name: &str, mut f: impl FnMut(usize, f64)) -> Fallible<()> {
         let listed = || self.vertex_properties().join(", ");
         let Some(el) = self.elements.iter().find(|e| e.name == "vertex") else {
@@ -323,7 +323,13 @@ impl PlyLayout {
                 "vertex property '{name}' is a list, not one number per vertex"
             ));
         };
-        let Some(records) = el.records.as_deref() else {
+        // The writer rebuilds these from the mesh, and stores no records for a vertex element of
+        // only these.
+        let records = el
+            .records
+            .as_deref()
+            .filter(|_| !matches!(name, "x" | "y" | "z" | "nx" | "ny" | "nz"));
+        let Some(records) = records else {
             return Err(format!(
                 "vertex property '{name}' is a coordinate or normal, not a per-vertex flag \
                  (its vertex properties: {})",
