@@ -563,7 +563,7 @@ fn bad_pins_are_one_line_errors_and_write_nothing() {
         "--pin",
         &s(&pins),
     ]);
-    fails(&o, 2, &["--pin"]);
+    fails(&o, 2, &["--pin FILE", "--pin-property NAME"]);
 }
 
 /// `batch --pin-property`: pinned outputs, and markers that certify the pins (a rerun without
@@ -597,6 +597,15 @@ fn batch_pins_by_property_and_certifies_it() {
     let text = batch(&[]);
     assert_eq!(text.matches("\ndone ").count(), 1, "{text}");
     assert!(vertex_records(&input)[0] != vertex_records(&output)[0]);
+    // The job script repeats the flag for its batch.
+    let script = ok(vcsmooth([
+        "slurm-script",
+        &s(&inputs),
+        &s(&outdir),
+        "--pin-property",
+        "pin",
+    ]));
+    assert!(script.contains(" --pin-property pin "), "{script}");
 }
 
 /// An ASCII PLY whose vertex element has a list (`tags`) and a `short` flag: the records are

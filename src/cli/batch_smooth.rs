@@ -39,6 +39,9 @@ pub struct BatchSmoothArgs {
     pub smoothing: SmoothingArgs,
     #[command(flatten)]
     pub pins: PinPropertyArg,
+    /// Refused with a reason: one list of vertex indices cannot name the vertices of several meshes.
+    #[arg(long, value_name = "FILE", hide = true)]
+    pub pin: Option<PathBuf>,
     /// Format of the outputs, OUTDIR/<input's stem>.<format>.
     #[arg(long, value_enum, default_value_t = OutputFormat::Ply)]
     pub format: OutputFormat,
@@ -56,6 +59,13 @@ pub struct BatchSmooth {
 
 impl BatchSmooth {
     pub fn from_args(a: BatchSmoothArgs) -> Result<BatchSmooth> {
+        if a.pin.is_some() {
+            return Err(Error::Usage {
+                what: "--pin FILE names the vertices of one mesh, not of every mesh of a batch; \
+                       pin by a PLY vertex property of each mesh with --pin-property NAME"
+                    .into(),
+            });
+        }
         let mut engine = a.smoothing.engine.resolve()?;
         engine.with_stats = true;
         engine.pins = a.pins.resolve();
