@@ -16,4 +16,5 @@ mod hostile;
 mod layout;
 mod multires;
 mod patches;
+mod pins;
 mod refine;

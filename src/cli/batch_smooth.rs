@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use clap::{Args as ClapArgs, ValueEnum};
 
-use super::shared::SmoothingArgs;
+use super::shared::{PinPropertyArg, SmoothingArgs};
 use crate::engine::EngineSettings;
 use crate::error::{Error, Result};
 use crate::io::Format;
@@ -37,6 +37,11 @@ impl From<OutputFormat> for Format {
 pub struct BatchSmoothArgs {
     #[command(flatten)]
     pub smoothing: SmoothingArgs,
+    #[command(flatten)]
+    pub pins: PinPropertyArg,
+    /// Refused with a reason: one list of vertex indices cannot name the vertices of several meshes.
+    #[arg(long, value_name = "FILE", hide = true)]
+    pub pin: Option<PathBuf>,
     /// Format of the outputs, OUTDIR/<input's stem>.<format>.
     #[arg(long, value_enum, default_value_t = OutputFormat::Ply)]
     pub format: OutputFormat,
@@ -54,8 +59,16 @@ pub struct BatchSmooth {
 
 impl BatchSmooth {
     pub fn from_args(a: BatchSmoothArgs) -> Result<BatchSmooth> {
+        if a.pin.is_some() {
+            return Err(Error::Usage {
+                what: "--pin FILE names the vertices of one mesh, not of every mesh of a batch; \
+                       pin by a PLY vertex property of each mesh with --pin-property NAME"
+                    .into(),
+            });
+        }
         let mut engine = a.smoothing.engine.resolve()?;
         engine.with_stats = true;
+        engine.pins = a.pins.resolve();
         Ok(BatchSmooth {
             options: a.smoothing.options(),
             engine,

@@ -128,7 +128,52 @@ impl EngineArgs {
             scratch: self.scratch.clone(),
             with_stats: false,
             statistics: crate::engine::Statistics::Every,
+            pins: crate::engine::Pins::None,
         })
+    }
+}
+
+/// Pinned vertices, `smooth`'s flags (`batch` and `slurm-script` take `--pin-property` alone:
+/// one list of indices cannot name the vertices of several meshes).
+#[derive(Debug, Clone, ClapArgs)]
+pub struct PinArgs {
+    /// Vertices that never move: a text file of 0-based vertex indices, one per line ('#' comments allowed); a stencil containing one is skipped, so volumes stay exact.
+    #[arg(long, value_name = "FILE", conflicts_with = "pin_property")]
+    pub pin: Option<PathBuf>,
+    #[command(flatten)]
+    pub property: PinPropertyArg,
+}
+
+/// `--pin-property` (`smooth`, `batch`, `slurm-script`).
+#[derive(Debug, Clone, ClapArgs)]
+pub struct PinPropertyArg {
+    /// Pin the vertices whose PLY vertex property NAME (any numeric type) is non-zero.
+    #[arg(long, value_name = "NAME")]
+    pub pin_property: Option<String>,
+}
+
+impl PinArgs {
+    /// The pins these flags ask for; a pin file is read at once, so that a malformed one fails
+    /// before the mesh is read.
+    pub fn resolve(&self) -> Result<crate::engine::Pins> {
+        match &self.pin {
+            Some(file) => {
+                let pins = crate::engine::Pins::File(file.clone());
+                pins.key()?;
+                Ok(pins)
+            }
+            None => Ok(self.property.resolve()),
+        }
+    }
+}
+
+impl PinPropertyArg {
+    /// The pins this flag asks for.
+    pub fn resolve(&self) -> crate::engine::Pins {
+        match &self.pin_property {
+            Some(name) => crate::engine::Pins::Property(name.clone()),
+            None => crate::engine::Pins::None,
+        }
     }
 }
 

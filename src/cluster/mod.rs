@@ -24,7 +24,7 @@
 //!
 //! Checkpoints: after every `--checkpoint-every` iterations (and the last), each rank writes its
 //! owned positions into the work directory and rank 0 records the iteration ([`store`]). A run
-//! started again with the same input, options and patch size resumes after the last recorded
+//! started again with the same input, options, patch size and pins resumes after the last recorded
 //! iteration, with any number of ranks. The output is assembled by rank 0 from the input and the
 //! final positions file, on the heap or in scratch files by `--memory-budget` as in `smooth`, so no
 //! rank ever holds the whole mesh in memory.
@@ -243,7 +243,7 @@ fn ensure_plan(
     budget: u64,
     t: &mut PhaseTimings,
 ) -> Result<()> {
-    let key = PlanKey::of(input, opts, engine.patch_size)?;
+    let key = PlanKey::of(input, opts, engine.patch_size, &engine.pins)?;
     if let Some(doc) = work.read_plan_doc()?
         && doc.key == key
     {
@@ -253,14 +253,17 @@ fn ensure_plan(
     let storage = engine::storage_for(input, output, engine, budget)?;
     let mesh = io::read_mesh_in(input, &storage)?;
     engine::check_in_memory_budget(input, &storage, &mesh, budget)?;
+    let pins = engine.pins.resolve(&mesh, Some(input))?.unwrap_or_default();
     t.ingest = clock.elapsed().as_secs_f64();
-    let new_plan = engine::Plan::new(
+    let mut new_plan = engine::Plan::new(
         &storage,
         &mesh.positions,
         &mesh.triangles,
         Layout::Patches(engine.patch_size),
     )
     .map_err(|e| e.in_file(input))?;
+    // Pinned vertices are fixed in the stored topology (`fixed.u8`), which every rank maps.
+    new_plan.pin(&pins);
     t.add_preparation(&new_plan.timings);
     // Measured always: a resumed run may ask for a report that the first run did not.
     let input_stats = Some(new_plan.info(&mesh.source));

@@ -43,12 +43,20 @@ pub struct PlanKey {
     /// The options that change results (method, λ, μ, rejection), as JSON.
     pub options: String,
     pub patch_size: usize,
+    /// The pinned vertices ([`crate::engine::Pins::key`]); empty for none.
+    #[serde(default)]
+    pub pins: String,
 }
 
 impl PlanKey {
     /// The key of `input` smoothed with `options` (iterations excluded: a resumed run may go on
-    /// further) at `patch_size`.
-    pub fn of(input: &Path, opts: &crate::Options, patch_size: usize) -> Result<PlanKey> {
+    /// further) at `patch_size` with `pins`.
+    pub fn of(
+        input: &Path,
+        opts: &crate::Options,
+        patch_size: usize,
+        pins: &crate::engine::Pins,
+    ) -> Result<PlanKey> {
         let meta = fs::metadata(input).map_err(|e| Error::io(input, e))?;
         let modified = meta
             .modified()
@@ -71,6 +79,7 @@ impl PlanKey {
             input_modified_ns: modified,
             options: options.to_string(),
             patch_size,
+            pins: pins.key()?,
         })
     }
 }

@@ -9,11 +9,13 @@
 //!   sums) over fixed-size chunks, so results do not depend on the thread count.
 //! - [`observer`]: per-iteration records and the [`Observer`] that receives them.
 //! - [`run`]: the run from file to file, its settings and its [`Report`].
+//! - [`pins`]: the caller's pinned vertices ([`Pins`]), fixed in the plan's topology.
 //! - [`memory`]: the memory budget, the memory model (bytes per triangle) and peak sampling.
 
 pub mod iterate;
 pub mod memory;
 pub mod observer;
+pub mod pins;
 pub mod plan;
 pub mod reduce;
 pub mod run;
@@ -22,6 +24,7 @@ use glam::DVec3;
 
 pub use iterate::Reference;
 pub use observer::{IterationRecord, Observer, Quiet, Statistics};
+pub use pins::{PinSet, Pins};
 pub use plan::{DEFAULT_PATCH_SIZE, Layout, Plan, PlanStats, PrepTimings};
 pub use run::{ClusterStats, EngineSettings, MemoryStats, PhaseTimings, Report, run_file};
 pub(crate) use run::{check_in_memory_budget, run_file_with, storage_for};

@@ -5,6 +5,7 @@ use std::time::Instant;
 
 use super::memory::{self, Budget, BudgetSource, PeakSampler};
 use super::observer::{IterationRecord, Observer, Statistics};
+use super::pins::Pins;
 use super::plan::{DEFAULT_PATCH_SIZE, Layout, Plan, PlanStats, PrepTimings};
 use super::reduce;
 use crate::error::{Error, Result};
@@ -13,9 +14,9 @@ use crate::mesh::{Buf, Mesh, Storage};
 use crate::metrics::MeshInfo;
 use crate::smooth::Options;
 
-/// How the engine runs: threads, patches, memory, statistics. Only `patch_size` is part of the
-/// result's definition: outputs are identical for any thread count and memory budget for the
-/// same patch size.
+/// How the engine runs: threads, patches, memory, statistics, pins. Only `patch_size` and `pins`
+/// are part of the result's definition: outputs are identical for any thread count and memory
+/// budget for the same patch size and pins.
 #[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
 pub struct EngineSettings {
     /// Worker threads; `None`: all cores.
@@ -34,6 +35,8 @@ pub struct EngineSettings {
     pub with_stats: bool,
     /// Which iterations measure volume, area and displacement. Default: every one.
     pub statistics: Statistics,
+    /// Vertices that never move, in the input's order (see [`Pins`]). Default: none.
+    pub pins: Pins,
 }
 
 impl Default for EngineSettings {
@@ -45,6 +48,7 @@ impl Default for EngineSettings {
             scratch: None,
             with_stats: false,
             statistics: Statistics::Every,
+            pins: Pins::None,
         }
     }
 }
@@ -200,10 +204,12 @@ pub(crate) fn run_file_with(
         ));
     }
     check_in_memory_budget(input, &storage, &mesh, mesh_budget)?;
+    let pins = engine.pins.resolve(&mesh, Some(input))?;
 
     let (plan, mut smoothed) = pool.install(|| -> Result<_> {
         let mut plan = Plan::new(&storage, &mesh.positions, &mesh.triangles, engine.layout())
             .map_err(|e| e.in_file(input))?;
+        plan.pin(&pins.unwrap_or_default());
         // The plan holds its own (reordered) copy: the input-order positions are not needed until
         // the write, so their memory is given back while smoothing (the peak of an in-core run).
         let n = mesh.positions.len();
@@ -290,8 +296,10 @@ pub(crate) fn run_mesh(
     let pool = super::thread_pool(engine.threads)?;
     let storage = Storage::heap();
     let mut t = PhaseTimings::default();
+    let pins = engine.pins.resolve(mesh, None)?.unwrap_or_default();
     let smoothed = pool.install(|| -> Result<_> {
         let mut plan = Plan::new(&storage, &mesh.positions, &mesh.triangles, layout)?;
+        plan.pin(&pins);
         let mut smoothed = smooth_planned(&mut plan, engine, &mesh.source, &mut t, |plan| {
             plan.smooth(&storage, opts, engine.statistics, observer)
         })?;

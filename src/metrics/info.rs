@@ -42,6 +42,10 @@ pub struct MeshInfo {
     /// orientation seams).
     #[serde(default)]
     pub fixed_vertices: usize,
+    /// Vertices pinned by the run (`pins` of [`crate::EngineSettings`]); included in
+    /// `fixed_vertices`.
+    #[serde(default)]
+    pub pinned_vertices: usize,
     /// Connected components of the (non-degenerate) triangles, through shared vertices;
     /// unreferenced vertices are not components.
     pub components: usize,
@@ -119,6 +123,7 @@ pub fn connectivity(
         orientation_seam_edges: s.orientation_seam_edges,
         high_degree_vertices: s.high_degree_vertices,
         fixed_vertices: s.fixed_vertices,
+        pinned_vertices: s.pinned_vertices,
         components: components(topo),
         unreferenced_vertices: s.unreferenced_vertices,
         closed: s.boundary_edges == 0 && s.non_manifold_edges == 0 && triangles > 0,

@@ -335,13 +335,21 @@ pub struct Certificate {
 /// The settings that define a batch's outputs, as canonical JSON: the smoothing options, the
 /// patch size (outputs are identical for any thread count and memory budget, not for any patch
 /// size) and the output format.
+/// Pins, when there are any, are part of it (`pins`, [`crate::engine::Pins::key`]; a pin
+/// file that cannot be read counts as its own key, and the run then fails on it).
 pub fn settings_key(options: &Options, engine: &EngineSettings, format: Format) -> String {
-    serde_json::json!({
+    let mut key = serde_json::json!({
         "options": options,
         "patch_size": engine.patch_size,
         "format": extension(format),
-    })
-    .to_string()
+    });
+    if !engine.pins.is_none() {
+        key["pins"] = match engine.pins.key() {
+            Ok(k) => k.into(),
+            Err(e) => e.to_string().into(),
+        };
+    }
+    key.to_string()
 }
 
 /// The settings that differ between two [`settings_key`]s, as `name then -> now`.

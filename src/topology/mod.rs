@@ -81,6 +81,10 @@ pub struct TopologyStats {
     /// Vertices with more than [`MAX_FREE_DEGREE`] neighbours (fixed).
     #[serde(default)]
     pub high_degree_vertices: usize,
+    /// Vertices pinned by the caller ([`Topology::pin`]): fixed whatever their topology, and
+    /// counted in `fixed_vertices`.
+    #[serde(default)]
+    pub pinned_vertices: usize,
 }
 
 impl TopologyStats {
@@ -456,6 +460,32 @@ impl Topology {
         if let Some(a) = self.vf.advisor() {
             a.will_need(self.vf_offsets[lo]..self.vf_offsets[hi]);
         }
+    }
+
+    /// Fix the vertices for which `pinned(v)` holds (this topology's ids), whatever their
+    /// topology: no method moves them, and a stencil containing one is skipped like one with a
+    /// boundary vertex, so stencil volumes stay exact. Counts them in
+    /// [`TopologyStats::pinned_vertices`] and those not fixed before in `fixed_vertices`.
+    /// Parallel over vertices; the result does not depend on the number of threads.
+    pub fn pin(&mut self, pinned: impl Fn(u32) -> bool + Sync) {
+        let (pins, newly) = self
+            .fixed
+            .par_chunks_mut(CHUNK)
+            .enumerate()
+            .map(|(c, chunk)| {
+                let (mut pins, mut newly) = (0, 0);
+                for (k, f) in chunk.iter_mut().enumerate() {
+                    if pinned((c * CHUNK + k) as u32) {
+                        pins += 1;
+                        newly += (*f == 0) as usize;
+                        *f = 1;
+                    }
+                }
+                (pins, newly)
+            })
+            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+        self.stats.pinned_vertices += pins;
+        self.stats.fixed_vertices += newly;
     }
 
     /// Bytes held by the adjacency arrays (for memory reports).

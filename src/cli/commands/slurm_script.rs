@@ -161,6 +161,9 @@ pub fn run(cfg: &SlurmScriptConfig, out: &mut dyn Write) -> Result<()> {
     if let Some(s) = &a.engine.scratch {
         flags.extend(["--scratch".into(), absolute(s)?.display().to_string()]);
     }
+    if let Some(name) = &cfg.smooth.args.pins.pin_property {
+        flags.extend(["--pin-property".into(), name.clone()]);
+    }
     flags.extend(["--format".into(), core::extension(cfg.smooth.format).into()]);
     let flags: Vec<String> = flags.iter().map(|f| quote(f)).collect();
 

@@ -16,7 +16,7 @@ use crate::cli::output::{
 use crate::cli::plot::{Curve, file_name, volume_curve, write_volume_plot};
 use crate::cli::progress::Progress;
 use crate::cli::report::{FileStats, Summary, Tool, count, fixed};
-use crate::cli::shared::{InOut, SmoothingArgs};
+use crate::cli::shared::{InOut, PinArgs, SmoothingArgs};
 use crate::engine::{self, EngineSettings, IterationRecord, Statistics};
 use crate::error::{Error, Result};
 use crate::smooth::Options;
@@ -28,6 +28,8 @@ pub struct SmoothArgs {
     pub files: InOut,
     #[command(flatten)]
     pub smoothing: SmoothingArgs,
+    #[command(flatten)]
+    pub pins: PinArgs,
     #[command(flatten)]
     pub multires: MultiresArgs,
     /// Write a JSON report (options, input/output statistics, timings, per-iteration table).
@@ -91,12 +93,11 @@ impl SmoothConfig {
         let mut sides = Vec::new();
         sides.extend(a.report.as_deref().map(|r| ("--report", r)));
         sides.extend(a.plot.as_deref().map(|p| ("--plot", p)));
-        check_files(
-            &[("IN", &a.files.input)],
-            Some(("OUT", &a.files.output)),
-            &sides,
-        )?;
+        let mut reads = vec![("IN", a.files.input.as_path())];
+        reads.extend(a.pins.pin.as_deref().map(|p| ("--pin", p)));
+        check_files(&reads, Some(("OUT", &a.files.output)), &sides)?;
         let mut engine = a.smoothing.engine.resolve()?;
+        engine.pins = a.pins.resolve()?;
         engine.with_stats = a.report.is_some();
         engine.statistics = a.stats;
         let options = a.smoothing.options();

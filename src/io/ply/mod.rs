@@ -292,6 +292,70 @@ impl PlyLayout {
         self.meta.iter().map(String::as_str)
     }
 
+    /// The names of the vertex element's properties, in header order.
+    pub fn vertex_properties(&self) -> Vec<&str> {
+        self.elements
+            .iter()
+            .find(|e| e.name == "vertex")
+            .map(|e| e.props.iter().map(|p| p.name.as_str()).collect())
+            .unwrap_or_default()
+    }
+
+    /// Call `f(i, value)` with the value of the scalar vertex property `name` of every vertex `i`,
+    /// in file order (every PLY type converts to `f64` exactly). Fails, with a message that names
+    /// the property and lists those present, when there is no such property, when it is a list,
+    /// or when it is a coordinate or a normal (`x y z nx ny nz`, which the mesh holds).
+    pub fn vertex_values(&self, name: &str, mut f: impl FnMut(usize, f64)) -> Fallible<()> {
+        let listed = || self.vertex_properties().join(", ");
+        let Some(el) = self.elements.iter().find(|e| e.name == "vertex") else {
+            return Err(format!(
+                "has no vertex property '{name}' (no vertex element)"
+            ));
+        };
+        let Some(k) = el.prop(name) else {
+            return Err(format!(
+                "has no vertex property '{name}' (its vertex properties: {})",
+                listed()
+            ));
+        };
+        let Kind::Scalar(t) = el.props[k].kind else {
+            return Err(format!(
+                "vertex property '{name}' is a list, not one number per vertex"
+            ));
+        };
+        // The writer rebuilds these from the mesh, and stores no records for a vertex element of
+        // only these.
+        let records = el
+            .records
+            .as_deref()
+            .filter(|_| !matches!(name, "x" | "y" | "z" | "nx" | "ny" | "nz"));
+        let Some(records) = records else {
+            return Err(format!(
+                "vertex property '{name}' is a coordinate or normal, not a per-vertex flag \
+                 (its vertex properties: {})",
+                listed()
+            ));
+        };
+        let corrupt = || "stored PLY vertex records are corrupt".to_string();
+        match el.stride() {
+            Some(stride) => {
+                let at = el.offset(k);
+                for (i, r) in records.chunks_exact(stride).take(el.count).enumerate() {
+                    f(i, t.get(&r[at..]).ok_or_else(corrupt)?);
+                }
+            }
+            None => {
+                let (mut fields, mut pos) = (Vec::new(), 0);
+                for i in 0..el.count {
+                    pos = walk_record(records, pos, &el.props, false, &mut fields)
+                        .map_err(|_| corrupt())?;
+                    f(i, t.get(&records[fields[k].at..]).ok_or_else(corrupt)?);
+                }
+            }
+        }
+        Ok(())
+    }
+
     /// The layout of a mesh without a PLY source: binary little-endian `x y z` in the mesh's
     /// precision and the smallest list types that hold its faces (`uchar` / `int` in practice).
     fn plain(mesh: &Mesh) -> PlyLayout {

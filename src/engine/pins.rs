@@ -1,0 +1,267 @@
+//! Pinned vertices: vertices the caller wants kept where they are, named in the input's vertex
+//! order (indices, a mask, a file of indices, or a PLY vertex property). The engine resolves them
+//! against the mesh it read into a [`PinSet`] and marks them fixed in the plan's topology
+//! ([`Plan::pin`]), in its own vertex order: no method moves a pinned vertex, and a stencil that
+//! contains one is skipped like a stencil with a boundary vertex, so the volumes of the stencils
+//! that are applied stay exact.
+
+use std::path::{Path, PathBuf};
+
+use serde::ser::SerializeMap;
+
+use super::plan::Plan;
+use crate::error::{Error, Result};
+use crate::io::PlyLayout;
+use crate::mesh::Mesh;
+
+/// Which vertices never move, in the input's vertex order. Part of the result's definition (like
+/// the patch size): [`Pins::key`] says which pins a stored plan or a batch marker was made with.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub enum Pins {
+    /// Nothing pinned.
+    #[default]
+    None,
+    /// 0-based vertex indices; duplicates are allowed, an index past the last vertex is an error.
+    Indices(Vec<u32>),
+    /// One flag per vertex, `true`: pinned; its length must be the vertex count.
+    Mask(Vec<bool>),
+    /// A text file of 0-based vertex indices, one per line; blank lines and `#` comments (whole
+    /// lines or after an index) are allowed. Read when the run starts; errors name the file.
+    File(PathBuf),
+    /// A scalar vertex property of a PLY input (any numeric type): a non-zero value pins the vertex.
+    Property(String),
+}
+
+/// Pins resolved against a mesh: one bit per vertex in the input's order.
+#[derive(Debug, Clone, Default)]
+pub struct PinSet {
+    bits: Vec<u64>,
+    count: usize,
+}
+
+impl PinSet {
+    fn new(n: usize) -> PinSet {
+        PinSet {
+            bits: vec![0; n.div_ceil(64)],
+            count: 0,
+        }
+    }
+
+    fn insert(&mut self, v: usize) {
+        let (w, b) = (v / 64, 1u64 << (v % 64));
+        if self.bits[w] & b == 0 {
+            self.bits[w] |= b;
+            self.count += 1;
+        }
+    }
+
+    /// Whether input vertex `v` is pinned.
+    #[inline]
+    pub fn contains(&self, v: usize) -> bool {
+        self.bits
+            .get(v / 64)
+            .is_some_and(|w| w & (1 << (v % 64)) != 0)
+    }
+
+    /// Distinct pinned vertices.
+    pub fn len(&self) -> usize {
+        self.count
+    }
+
+    /// Whether nothing is pinned.
+    pub fn is_empty(&self) -> bool {
+        self.count == 0
+    }
+}
+
+impl Pins {
+    /// Whether these pins name no vertex source at all.
+    pub fn is_none(&self) -> bool {
+        matches!(self, Pins::None)
+    }
+
+    /// The pins of `mesh` (read from `input`, which errors name; `None` for an in-memory mesh).
+    /// `Ok(None)` when nothing is asked for.
+    pub fn resolve(&self, mesh: &Mesh, input: Option<&Path>) -> Result<Option<PinSet>> {
+        let n = mesh.positions.len();
+        let mut set = PinSet::new(n);
+        let out_of_range = |i: u64| {
+            format!(
+                "vertex index {i} is out of range: {} has {n} vertices",
+                input.map_or("the mesh".into(), |p| p.display().to_string())
+            )
+        };
+        match self {
+            Pins::None => return Ok(None),
+            Pins::Indices(indices) => {
+                for &i in indices {
+                    if i as usize >= n {
+                        return Err(Error::parameter("pins", out_of_range(i.into())));
+                    }
+                    set.insert(i as usize);
+                }
+            }
+            Pins::Mask(mask) => {
+                if mask.len() != n {
+                    return Err(Error::parameter(
+                        "pins",
+                        format!(
+                            "has {} flags for a mesh of {n} vertices (one per vertex)",
+                            mask.len()
+                        ),
+                    ));
+                }
+                mask.iter()
+                    .enumerate()
+                    .filter(|(_, p)| **p)
+                    .for_each(|(v, _)| set.insert(v));
+            }
+            Pins::File(path) => {
+                for (line, i) in read_pin_file(path)? {
+                    if i >= n as u64 {
+                        return Err(Error::invalid(
+                            path,
+                            format!("line {line}: {}", out_of_range(i)),
+                        ));
+                    }
+                    set.insert(i as usize);
+                }
+            }
+            Pins::Property(name) => {
+                let fail = |what: String| match input {
+                    Some(p) => Error::invalid(p, what),
+                    None => Error::parameter("pins", format!("(the mesh) {what}")),
+                };
+                let ply = mesh
+                    .source
+                    .layout
+                    .as_ref()
+                    .and_then(|l| l.as_any().downcast_ref::<PlyLayout>());
+                let Some(ply) = ply else {
+                    return Err(fail(format!(
+                        "has no vertex property '{name}': pinning by a vertex property needs a PLY input"
+                    )));
+                };
+                ply.vertex_values(name, |v, x| {
+                    if x != 0.0 && v < n {
+                        set.insert(v);
+                    }
+                })
+                .map_err(fail)?;
+            }
+        }
+        Ok(Some(set))
+    }
+
+    /// What a stored plan or a batch marker records of these pins, so that a run with other pins
+    /// does not reuse it: empty for none; the property's name; for indices, a mask or a file, the
+    /// count and a hash of the distinct pinned indices (a file is read for it; its errors are
+    /// the run's). The plan's or marker's input identity covers what a property holds.
+    pub fn key(&self) -> Result<String> {
+        let mut indices: Vec<u64> = match self {
+            Pins::None => return Ok(String::new()),
+            Pins::Property(name) => return Ok(format!("property {name}")),
+            Pins::Indices(i) => i.iter().map(|&i| i.into()).collect(),
+            Pins::Mask(m) => (0..m.len() as u64).filter(|&v| m[v as usize]).collect(),
+            Pins::File(path) => read_pin_file(path)?.into_iter().map(|(_, i)| i).collect(),
+        };
+        indices.sort_unstable();
+        indices.dedup();
+        // FNV-1a over the little-endian indices: stable across builds and platforms.
+        let hash = indices
+            .iter()
+            .flat_map(|i| i.to_le_bytes())
+            .fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
+                (h ^ b as u64).wrapping_mul(0x0100_0000_01b3)
+            });
+        Ok(format!("{} vertices {hash:016x}", indices.len()))
+    }
+}
+
+/// The indices of a pin file with their line numbers (1-based), in file order.
+fn read_pin_file(path: &Path) -> Result<Vec<(usize, u64)>> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let text = std::str::from_utf8(&bytes)
+        .map_err(|_| Error::invalid(path, "is not a text file of vertex indices"))?;
+    let mut out = Vec::new();
+    for (k, line) in text.lines().enumerate() {
+        let entry = line.split('#').next().unwrap_or_default().trim();
+        if entry.is_empty() {
+            continue;
+        }
+        let i = entry.parse::<u64>().map_err(|_| {
+            Error::invalid(
+                path,
+                format!(
+                    "line {}: '{entry}' is not a vertex index (a whole number from 0)",
+                    k + 1
+                ),
+            )
+        })?;
+        out.push((k + 1, i));
+    }
+    Ok(out)
+}
+
+/// In reports: `null`, or what was pinned by (`{"indices": n}`, `{"mask": n}`, `{"file": path}`,
+/// `{"property": name}`), never the indices themselves.
+impl serde::Serialize for Pins {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        if self.is_none() {
+            return s.serialize_none();
+        }
+        let mut m = s.serialize_map(Some(1))?;
+        match self {
+            Pins::None => unreachable!("serialized as null above"),
+            Pins::Indices(i) => m.serialize_entry("indices", &i.len())?,
+            Pins::Mask(mask) => m.serialize_entry("mask", &mask.iter().filter(|p| **p).count())?,
+            Pins::File(path) => m.serialize_entry("file", path)?,
+            Pins::Property(name) => m.serialize_entry("property", name)?,
+        }
+        m.end()
+    }
+}
+
+impl Plan {
+    /// Fix the vertices of `pins` (input order) in the plan's topology, in the plan's order.
+    pub fn pin(&mut self, pins: &PinSet) {
+        if pins.is_empty() {
+            return;
+        }
+        let order = &self.reordered.order;
+        self.topology
+            .pin(|new| pins.contains(order[new as usize] as usize));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pin_files_and_keys() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("pins.txt");
+        std::fs::write(&path, "# comment\n\n 5 \n3 # three\n5\n").unwrap();
+        assert_eq!(read_pin_file(&path).unwrap(), vec![(3, 5), (4, 3), (5, 5)]);
+        // The key names the distinct indices, whatever their order, repeats or source.
+        let key = Pins::File(path.clone()).key().unwrap();
+        assert_eq!(key, Pins::Indices(vec![3, 5]).key().unwrap());
+        let mask = (0..6).map(|v| v == 3 || v == 5).collect();
+        assert_eq!(key, Pins::Mask(mask).key().unwrap());
+        assert_ne!(key, Pins::Indices(vec![3]).key().unwrap());
+        assert_eq!(Pins::None.key().unwrap(), "");
+        std::fs::write(&path, "1\n2.5\n").unwrap();
+        let e = Pins::File(path).key().unwrap_err().to_string();
+        assert!(e.contains("line 2: '2.5' is not a vertex index"), "{e}");
+    }
+
+    #[test]
+    fn reports_name_the_source_not_the_indices() {
+        let json = |p: &Pins| serde_json::to_string(p).unwrap();
+        assert_eq!(json(&Pins::None), "null");
+        assert_eq!(json(&Pins::Indices(vec![1, 2, 2])), r#"{"indices":3}"#);
+        assert_eq!(json(&Pins::Mask(vec![true, false])), r#"{"mask":1}"#);
+        assert_eq!(json(&Pins::Property("q".into())), r#"{"property":"q"}"#);
+    }
+}
