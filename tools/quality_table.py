@@ -40,86 +40,9 @@ import time
 
 import numpy as np
 
-# --------------------------------------------------------------------------------------------
-# PLY (binary little/big endian and ASCII; triangles only)
-
-_PLY_TYPES = {
-    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
-    "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
-    "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
-    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
-}
-
-
-def read_ply(path):
-    """Return (vertices float64 (n,3), faces int64 (m,3))."""
-    with open(path, "rb") as fh:
-        data = fh.read()
-    end = data.find(b"end_header")
-    if end < 0:
-        raise ValueError(f"{path}: not a PLY file (no end_header)")
-    nl = data.find(b"\n", end)
-    header = data[:end].decode("ascii", "replace").splitlines()
-    body = data[nl + 1:]
-    fmt = None
-    elements = []  # [name, count, [props]]; prop = (name, type) or (name, ('list', ct, it))
-    for line in header:
-        tok = line.split()
-        if not tok:
-            continue
-        if tok[0] == "format":
-            fmt = tok[1]
-        elif tok[0] == "element":
-            elements.append([tok[1], int(tok[2]), []])
-        elif tok[0] == "property":
-            if tok[1] == "list":
-                elements[-1][2].append((tok[4], ("list", _PLY_TYPES[tok[2]], _PLY_TYPES[tok[3]])))
-            else:
-                elements[-1][2].append((tok[2], _PLY_TYPES[tok[1]]))
-    if fmt == "ascii":
-        return _read_ply_ascii(path, body, elements)
-    endian = "<" if fmt == "binary_little_endian" else ">"
-    off = 0
-    verts = faces = None
-    for name, count, props in elements:
-        has_list = any(isinstance(t, tuple) for _, t in props)
-        if not has_list:
-            dt = np.dtype([(p, endian + t) for p, t in props])
-            arr = np.frombuffer(body, dtype=dt, count=count, offset=off)
-            off += dt.itemsize * count
-            if name == "vertex":
-                verts = np.stack([arr["x"], arr["y"], arr["z"]], axis=1).astype(np.float64)
-            continue
-        if name != "face" or len(props) != 1:
-            raise ValueError(f"{path}: unsupported list element {name}")
-        _, (_, ct, it) = props[0]
-        # fast path: every face a triangle
-        dt = np.dtype([("n", endian + ct), ("i", endian + it, 3)])
-        arr = np.frombuffer(body, dtype=dt, count=count, offset=off)
-        if not np.all(arr["n"] == 3):
-            raise ValueError(f"{path}: only triangle faces are supported")
-        faces = arr["i"].astype(np.int64)
-        off += dt.itemsize * count
-    return verts, faces
-
-
-def _read_ply_ascii(path, body, elements):
-    lines = body.decode("ascii").split("\n")
-    pos = 0
-    verts = faces = None
-    for name, count, props in elements:
-        rows = lines[pos:pos + count]
-        pos += count
-        if name == "vertex":
-            names = [p for p, _ in props]
-            a = np.array([r.split() for r in rows], dtype=np.float64)
-            verts = a[:, [names.index("x"), names.index("y"), names.index("z")]]
-        elif name == "face":
-            a = np.array([r.split()[:4] for r in rows], dtype=np.int64)
-            if not np.all(a[:, 0] == 3):
-                raise ValueError(f"{path}: only triangle faces are supported")
-            faces = a[:, 1:4]
-    return verts, faces
+# The PLY reader is compare_peers.py's (binary and ASCII; polygons fan-triangulated).
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from compare_peers import read_ply  # noqa: E402
 
 
 # --------------------------------------------------------------------------------------------

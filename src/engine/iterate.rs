@@ -566,14 +566,7 @@ mod tests {
         let mut mesh = shapes::icosphere(5);
         shapes::add_normal_noise(&mut mesh, 0.3, 4);
         let n = mesh.positions.len();
-        let mut perm: Vec<u32> = (0..n as u32).collect();
-        let mut x = 0x9e37_79b9_7f4a_7c15u64;
-        for i in (1..n).rev() {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            perm.swap(i, (x % (i as u64 + 1)) as usize);
-        }
+        let perm = crate::shapes::permutation(n, 0x9e37_79b9_7f4a_7c15u64);
         let mut pos = vec![DVec3::ZERO; n];
         for (old, &new) in perm.iter().enumerate() {
             pos[new as usize] = mesh.positions[old];

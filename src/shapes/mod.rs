@@ -240,6 +240,21 @@ fn generated(positions: Vec<DVec3>, triangles: Vec<[u32; 3]>) -> Mesh {
     mesh
 }
 
+/// A random permutation of `0..n` (a xorshift Fisher–Yates, deterministic per seed): for tests
+/// that renumber a mesh's vertices so that its neighbourhoods are scattered.
+#[cfg(test)]
+pub(crate) fn permutation(n: usize, seed: u64) -> Vec<u32> {
+    let mut perm: Vec<u32> = (0..n as u32).collect();
+    let mut x = seed | 1;
+    for i in (1..n).rev() {
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        perm.swap(i, (x % (i as u64 + 1)) as usize);
+    }
+    perm
+}
+
 /// Displace every vertex along its (area-weighted) normal by Gaussian noise of standard deviation
 /// `sigma` × the mean edge length; deterministic for a seed.
 ///

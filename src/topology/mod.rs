@@ -1225,14 +1225,7 @@ mod tests {
         // over the blocks), with degenerate triangles and unreferenced vertices.
         let mesh = crate::shapes::icosphere(6);
         let n = mesh.positions.len() + 5;
-        let mut perm: Vec<u32> = (0..n as u32).collect();
-        let mut x = 0x2545_f491_4f6c_dd1du64;
-        for i in (1..n).rev() {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            perm.swap(i, (x % (i as u64 + 1)) as usize);
-        }
+        let perm = crate::shapes::permutation(n, 0x2545_f491_4f6c_dd1du64);
         let mut tris: Vec<[u32; 3]> = mesh
             .triangles
             .iter()
