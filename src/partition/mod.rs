@@ -96,11 +96,13 @@ pub fn reorder(
 }
 
 /// `out[index[k]] = value(k)` for every `k`, on the current pool; `index` must be a permutation
-/// of `0..out.len()` (a slot that no index names keeps its value). Each thread takes one range of
-/// `out` and scans all of `index` for the slots in it: a sequential read of 4 bytes per item per
-/// thread, far cheaper than the scattered writes it shares out, and no unsafe code.
+/// of `0..out.len()` (a slot that no index names keeps its value). Each of a few ranges of `out`
+/// scans all of `index` for the slots in it: a sequential read of 4 bytes per item per range, far
+/// cheaper than the scattered writes it shares out, and no unsafe code. The ranges are at most
+/// [`SCATTER_RANGES`], so that the reading does not grow with the thread count of a large node.
 pub fn scatter<T: Send>(out: &mut [T], index: &[u32], value: impl Fn(usize) -> T + Sync) {
-    let part = out.len().div_ceil(rayon::current_num_threads()).max(1);
+    let ranges = rayon::current_num_threads().clamp(1, SCATTER_RANGES);
+    let part = out.len().div_ceil(ranges).max(1);
     out.par_chunks_mut(part).enumerate().for_each(|(c, out)| {
         let lo = c * part;
         for (k, &i) in index.iter().enumerate() {
@@ -110,6 +112,9 @@ pub fn scatter<T: Send>(out: &mut [T], index: &[u32], value: impl Fn(usize) -> T
         }
     });
 }
+
+/// Most ranges [`scatter`] shares out: each reads the whole index.
+const SCATTER_RANGES: usize = 8;
 
 /// Interleave the low 21 bits of x, y, z into a 63-bit Morton key.
 pub(crate) fn morton3(x: u64, y: u64, z: u64) -> u64 {
@@ -218,5 +223,24 @@ mod tests {
         );
         assert_eq!(ps[0].triangles, 0..3);
         assert_eq!(ps[1].triangles, 3..5);
+    }
+
+    #[test]
+    fn scatter_places_every_item_for_any_thread_count() {
+        let n = 10_007;
+        let index = crate::shapes::permutation(n, 0x1234_5679);
+        let mut want = vec![0u64; n];
+        for (k, &i) in index.iter().enumerate() {
+            want[i as usize] = k as u64 * 3;
+        }
+        for threads in [1, 3, 16] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let mut out = vec![0u64; n];
+            pool.install(|| scatter(&mut out, &index, |k| k as u64 * 3));
+            assert_eq!(out, want, "{threads} threads");
+        }
     }
 }
