@@ -9,6 +9,7 @@ mod batch;
 mod bench_cli;
 mod cli;
 mod cluster;
+mod controls;
 mod engine;
 mod fidelity;
 mod golden;

@@ -12,6 +12,8 @@ pub(super) const FLAGS: &[(&str, &str)] = &[
     ("iterations", "--iterations"),
     ("lambda", "--lambda"),
     ("mu", "--mu"),
+    ("crease_angle", "--crease-angle"),
+    ("max_deviation", "--max-deviation"),
     // Engine (`EngineSettings`) and cluster runs.
     ("threads", "--threads"),
     ("patch_size", "--patch-size"),

@@ -73,6 +73,12 @@ pub struct MethodParams {
     /// Skip a stencil whose result has a higher stencil energy than before (lem, vcs, vcs-triangle) [default: off].
     #[arg(long)]
     pub reject_energy_increase: bool,
+    /// Creases: edges whose two faces' normals differ by more than DEG degrees, in (0, 180), on the input; their vertices stay where they are, corners included (every method) [default: none].
+    #[arg(long, value_name = "DEG", value_parser = crease_angle, allow_hyphen_values = true)]
+    pub crease_angle: Option<f64>,
+    /// No vertex ends farther than D (model units, > 0) from its input position: lem, vcs and vcs-triangle skip a stencil that would move one farther (the volume stays exact); laplacian and taubin clamp each vertex (they do not keep the volume) [default: none].
+    #[arg(long, value_name = "D", value_parser = length, allow_hyphen_values = true)]
+    pub max_deviation: Option<f64>,
 }
 
 impl MethodParams {
@@ -84,6 +90,8 @@ impl MethodParams {
             lambda: self.lambda,
             mu: self.mu,
             reject_energy_increase: self.reject_energy_increase,
+            crease_angle: self.crease_angle,
+            max_deviation: self.max_deviation,
         }
     }
 }
@@ -244,6 +252,16 @@ fn step_lambda(s: &str) -> std::result::Result<f64, String> {
 /// `--mu` (clap value parser).
 fn step_mu(s: &str) -> std::result::Result<f64, String> {
     step("mu", s)
+}
+
+/// `--crease-angle`: degrees in (0, 180) (clap value parser).
+fn crease_angle(s: &str) -> std::result::Result<f64, String> {
+    let x = number(s)?;
+    if x > 0.0 && x < 180.0 {
+        Ok(x)
+    } else {
+        Err(format!("'{s}' is not an angle in (0, 180) degrees"))
+    }
 }
 
 /// A length such as `--max-edge`: a finite number > 0 (clap value parser).

@@ -77,6 +77,13 @@ pub fn run_file(
     observer: &mut dyn Observer,
 ) -> Result<Report> {
     opts.check()?;
+    if opts.max_deviation.is_some() {
+        // The ranks would need the input positions beside the checkpoint slots.
+        return Err(Error::parameter(
+            "max_deviation",
+            "is not supported by the cluster engine yet",
+        ));
+    }
     if cluster.checkpoint_every == 0 {
         return Err(Error::parameter("checkpoint_every", "must be at least 1"));
     }
@@ -250,7 +257,7 @@ fn ensure_plan(
         return Ok(());
     }
     let clock = Instant::now();
-    let storage = engine::storage_for(input, output, engine, budget)?;
+    let storage = engine::storage_for(input, output, engine, budget, false)?;
     let mesh = io::read_mesh_in(input, &storage)?;
     engine::check_in_memory_budget(input, &storage, &mesh, budget)?;
     let pins = engine.pins.resolve(&mesh, Some(input))?.unwrap_or_default();
@@ -264,6 +271,7 @@ fn ensure_plan(
     .map_err(|e| e.in_file(input))?;
     // Pinned vertices are fixed in the stored topology (`fixed.u8`), which every rank maps.
     new_plan.pin(&pins);
+    new_plan.crease(opts.crease_angle);
     t.add_preparation(&new_plan.timings);
     // Measured always: a resumed run may ask for a report that the first run did not.
     let input_stats = Some(new_plan.info(&mesh.source));
@@ -281,7 +289,7 @@ fn write_output(
     engine: &EngineSettings,
     budget: u64,
 ) -> Result<Option<metrics::MeshInfo>> {
-    let storage = engine::storage_for(input, output, engine, budget)?;
+    let storage = engine::storage_for(input, output, engine, budget, false)?;
     let mut mesh = io::read_mesh_in(input, &storage)?;
     if mesh.positions.len() != plan.doc.vertices || mesh.triangles.len() != plan.doc.triangles {
         return Err(Error::invalid(
@@ -549,6 +557,7 @@ impl<'a> RankRun<'a> {
             pos: &mut pos,
             scratch: &mut scratch,
             prev: &mut prev,
+            input: &[],
         };
         iterate(
             &mesh, buffers, opts, first, when, &reference, &mut self, observer,

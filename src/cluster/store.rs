@@ -63,12 +63,16 @@ impl PlanKey {
             .ok()
             .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
             .map_or(0, |d| d.as_nanos());
-        let options = serde_json::json!({
+        let mut options = serde_json::json!({
             "method": opts.method,
             "lambda": opts.lambda,
             "mu": opts.mu,
             "reject_energy_increase": opts.reject_energy_increase,
         });
+        // Creases are fixed in the stored topology; keys without them are as they were.
+        if let Some(a) = opts.crease_angle {
+            options["crease_angle"] = a.into();
+        }
         Ok(PlanKey {
             format: FORMAT,
             input_name: input

@@ -157,6 +157,9 @@ pub struct Buffers<'b> {
     pub scratch: &'b mut [DVec3],
     /// The stencil methods' copy before a measured sweep (may be empty for Jacobi methods).
     pub prev: &'b mut [DVec3],
+    /// The input positions, read when the options bound the deviation (`max_deviation`);
+    /// empty otherwise.
+    pub input: &'b [DVec3],
 }
 
 /// Iterations `first ..= opts.iterations` of `opts` on `mesh`, measuring the statistics `when`
@@ -249,10 +252,11 @@ impl Run<'_, '_> {
             pos,
             scratch: sums,
             prev,
+            input,
         } = buf;
         let mesh = self.mesh;
         let owned = self.share.owned();
-        let params = stencil_params(self.opts);
+        let params = stencil_params(self.opts, input);
         let total = self.opts.iterations;
         for it in first..=total {
             let measure = self.when.wanted(it, total);
@@ -319,7 +323,14 @@ impl Run<'_, '_> {
     /// round also plans the tiles. Without a plan every iteration is one or two plain steps over
     /// the owned vertices, each followed by the exchange. Both give bit-identical positions.
     fn jacobi(&mut self, buf: Buffers, first_iteration: usize) -> Result<()> {
-        let Buffers { pos, scratch, .. } = buf;
+        let Buffers {
+            pos,
+            scratch,
+            input,
+            ..
+        } = buf;
+        // With a deviation bound every step is a plain, clamped one.
+        let clamp = self.opts.max_deviation.map(|limit| (input, limit));
         let mesh = self.mesh;
         let total = self.opts.iterations;
         let factors: &[f64] = if self.opts.method == Method::Taubin {
@@ -340,8 +351,8 @@ impl Run<'_, '_> {
         let mut start = Instant::now();
         // Planned tile by tile by the first round (see `TilePlan::new`); dropped if a tile cannot be.
         // Only a process that owns every vertex: a round writes all of `dst` and exchanges nothing.
-        let mut plan =
-            (mesh.tiles && owned.len() == mesh.topo.len()).then(|| TilePlan::new(mesh.topo));
+        let mut plan = (mesh.tiles && owned.len() == mesh.topo.len() && clamp.is_none())
+            .then(|| TilePlan::new(mesh.topo));
         // Whether the current positions are in `scratch` (else in `pos`).
         let mut in_scratch = false;
         let mut first = first_iteration;
@@ -375,11 +386,11 @@ impl Run<'_, '_> {
                     measure.then_some(st)
                 }
                 None => {
-                    let mut moved = self.step(src, dst, &owned, factors[0], Previous::Src);
+                    let mut moved = self.step(src, dst, &owned, factors[0], Previous::Src, clamp);
                     if let Some(&mu) = factors.get(1) {
                         // The pair goes `src` → `dst` → `src`: the μ step measures against the
                         // position it overwrites, the one before the pair.
-                        moved = self.step(dst, src, &owned, mu, Previous::Dst);
+                        moved = self.step(dst, src, &owned, mu, Previous::Dst, clamp);
                     } else {
                         in_scratch = !in_scratch;
                     }
@@ -401,7 +412,8 @@ impl Run<'_, '_> {
         Ok(())
     }
 
-    /// One plain Jacobi step over the owned vertices, measured against `previous`, then exchanged.
+    /// One plain Jacobi step over the owned vertices, measured against `previous`, then exchanged;
+    /// `clamp`: the input positions and the largest distance from them (`max_deviation`).
     fn step(
         &mut self,
         src: &[DVec3],
@@ -409,6 +421,7 @@ impl Run<'_, '_> {
         owned: &Range<usize>,
         factor: f64,
         previous: Previous,
+        clamp: Option<(&[DVec3], f64)>,
     ) -> StepStats {
         let topo = self.mesh.topo;
         let offset = owned.start;
@@ -416,8 +429,25 @@ impl Run<'_, '_> {
         let moved = on_pool(&*self.share, || {
             reduce::map_fold_mut(
                 out,
-                |at, out| {
-                    laplacian::jacobi_step_measured(topo, src, out, offset + at, factor, previous)
+                |at, out| match clamp {
+                    None => laplacian::jacobi_step_measured(
+                        topo,
+                        src,
+                        out,
+                        offset + at,
+                        factor,
+                        previous,
+                    ),
+                    Some((input, limit)) => laplacian::jacobi_step_clamped(
+                        topo,
+                        src,
+                        out,
+                        offset + at,
+                        factor,
+                        previous,
+                        input,
+                        limit,
+                    ),
                 },
                 StepStats::default(),
                 StepStats::then,
@@ -449,6 +479,7 @@ impl Run<'_, '_> {
             stencils.skipped_fixed,
             stencils.skipped_degenerate,
             stencils.rejected,
+            stencils.deviation_limited,
         ];
         let mut local = vec![sum_d];
         local.extend(counts.iter().map(|&c| c as f64));
@@ -467,6 +498,7 @@ impl Run<'_, '_> {
                 skipped_fixed: sums[2] as u64,
                 skipped_degenerate: sums[3] as u64,
                 rejected: sums[4] as u64,
+                deviation_limited: sums[5] as u64,
             },
             seconds: maxima[1],
         };
@@ -486,11 +518,15 @@ impl Run<'_, '_> {
     }
 }
 
-/// The stencil kernel's parameters for `opts`.
-fn stencil_params(opts: &Options) -> StencilParams {
+/// The stencil kernel's parameters for `opts`; `input`: the input positions, read when
+/// `opts.max_deviation` bounds the deviation.
+fn stencil_params<'a>(opts: &Options, input: &'a [DVec3]) -> StencilParams<'a> {
     StencilParams {
         volume: matches!(opts.method, Method::Vcs | Method::VcsTriangle),
         reject_energy_increase: opts.reject_energy_increase,
+        deviation: opts
+            .max_deviation
+            .map(|limit| stencil::Deviation { input, limit }),
     }
 }
 

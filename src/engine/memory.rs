@@ -23,6 +23,9 @@ pub const MIN_BUDGET: u64 = 64 << 20;
 /// at 87–95 B per triangle on a 5.2M-triangle sphere (laplacian, taubin, vcs); the model adds a
 /// fifth for the reports' statistics and the allocator.
 pub const HEAP_BYTES_PER_TRIANGLE: u64 = 114;
+/// A run whose options bound the deviation (`max_deviation`) keeps the input positions beside
+/// the working ones: f64 positions at about half a vertex per triangle, in the plan's storage.
+pub const DEVIATION_BYTES_PER_TRIANGLE: u64 = 12;
 /// An in-memory [`Mesh`](crate::Mesh) itself: f64 positions (about half a vertex per triangle)
 /// and u32 triangles.
 pub const MESH_BYTES_PER_TRIANGLE: u64 = 24;
@@ -82,6 +85,18 @@ pub fn in_core_bytes(triangles: u64) -> u64 {
 /// [`in_core_bytes`] of the mesh in a file of `size` bytes.
 pub fn in_core_bytes_of_file(size: u64) -> u64 {
     size.saturating_mul(HEAP_BYTES_PER_TRIANGLE) / FILE_BYTES_PER_TRIANGLE
+}
+
+/// [`in_core_bytes_of_file`], with [`DEVIATION_BYTES_PER_TRIANGLE`] more when the run keeps the
+/// input positions for a deviation bound.
+pub fn in_core_bytes_of_file_with(size: u64, deviation: bool) -> u64 {
+    let per_triangle = HEAP_BYTES_PER_TRIANGLE
+        + if deviation {
+            DEVIATION_BYTES_PER_TRIANGLE
+        } else {
+            0
+        };
+    size.saturating_mul(per_triangle) / FILE_BYTES_PER_TRIANGLE
 }
 
 /// Memory a job needs to smooth a file of `size` bytes in core, the process included.

@@ -116,10 +116,19 @@ impl Plan {
         let n = reordered.positions.len();
         let mut prev: Buf<DVec3> = storage.zeroed(if opts.method.is_jacobi() { 0 } else { n })?;
         let mut scratch: Buf<DVec3> = storage.zeroed(n)?;
-        let advisors: Vec<_> = [reordered.positions.advisor(), scratch.advisor()]
-            .into_iter()
-            .flatten()
-            .collect();
+        // The input positions, for a deviation bound: in the plan's storage (scratch out of core).
+        let input: Buf<DVec3> = match opts.max_deviation {
+            Some(_) => storage.copy_of(&reordered.positions)?,
+            None => Buf::default(),
+        };
+        let advisors: Vec<_> = [
+            reordered.positions.advisor(),
+            scratch.advisor(),
+            input.advisor(),
+        ]
+        .into_iter()
+        .flatten()
+        .collect();
         let tris: &[[u32; 3]] = &reordered.triangles;
         let pos: &mut [DVec3] = &mut reordered.positions;
         let queue = 2 * rayon::current_num_threads();
@@ -141,6 +150,7 @@ impl Plan {
                 pos,
                 scratch: &mut scratch,
                 prev: &mut prev,
+                input: &input,
             };
             match records {
                 Some(records) => {

@@ -3,7 +3,8 @@
 //! against the mesh it read into a [`PinSet`] and marks them fixed in the plan's topology
 //! ([`Plan::pin`]), in its own vertex order: no method moves a pinned vertex, and a stencil that
 //! contains one is skipped like a stencil with a boundary vertex, so the volumes of the stencils
-//! that are applied stay exact.
+//! that are applied stay exact. Crease vertices ([`Plan::crease`], the options' `crease_angle`)
+//! are fixed the same way.
 
 use std::path::{Path, PathBuf};
 
@@ -231,6 +232,18 @@ impl Plan {
         let order = &self.reordered.order;
         self.topology
             .pin(|new| pins.contains(order[new as usize] as usize));
+    }
+
+    /// Fix the vertices on creases sharper than `angle` degrees (see [`Topology::crease`]),
+    /// measured on the plan's current positions (the input's, before smoothing); nothing when
+    /// `None`. Like pins, creases are part of the result's definition.
+    ///
+    /// [`Topology::crease`]: crate::Topology::crease
+    pub fn crease(&mut self, angle: Option<f64>) {
+        if let Some(angle) = angle {
+            let r = &self.reordered;
+            self.topology.crease(&r.triangles, &r.positions, angle);
+        }
     }
 }
 

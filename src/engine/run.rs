@@ -192,7 +192,13 @@ pub(crate) fn run_file_with(
     let mesh_budget = budget
         .bytes
         .saturating_sub(memory::records_bytes(opts.iterations));
-    let storage = storage_for(input, output, engine, mesh_budget)?;
+    let storage = storage_for(
+        input,
+        output,
+        engine,
+        mesh_budget,
+        opts.max_deviation.is_some(),
+    )?;
 
     let clock = Instant::now();
     let mut mesh = io::read_mesh_in(input, &storage)?;
@@ -210,6 +216,7 @@ pub(crate) fn run_file_with(
         let mut plan = Plan::new(&storage, &mesh.positions, &mesh.triangles, engine.layout())
             .map_err(|e| e.in_file(input))?;
         plan.pin(&pins.unwrap_or_default());
+        plan.crease(opts.crease_angle);
         // The plan holds its own (reordered) copy: the input-order positions are not needed until
         // the write, so their memory is given back while smoothing (the peak of an in-core run).
         let n = mesh.positions.len();
@@ -300,6 +307,7 @@ pub(crate) fn run_mesh(
     let smoothed = pool.install(|| -> Result<_> {
         let mut plan = Plan::new(&storage, &mesh.positions, &mesh.triangles, layout)?;
         plan.pin(&pins);
+        plan.crease(opts.crease_angle);
         let mut smoothed = smooth_planned(&mut plan, engine, &mesh.source, &mut t, |plan| {
             plan.smooth(&storage, opts, engine.statistics, observer)
         })?;
@@ -382,17 +390,18 @@ impl Smoothed {
 }
 
 /// Heap or scratch, decided before reading from the file size by the memory model
-/// ([`memory::in_core_bytes_of_file`]).
+/// ([`memory::in_core_bytes_of_file_with`]; `deviation`: the run keeps the input positions).
 pub(crate) fn storage_for(
     input: &Path,
     output: &Path,
     engine: &EngineSettings,
     budget: u64,
+    deviation: bool,
 ) -> Result<Storage> {
     let size = std::fs::metadata(input)
         .map_err(|e| Error::io(input, e))?
         .len();
-    if memory::in_core_bytes_of_file(size) <= budget {
+    if memory::in_core_bytes_of_file_with(size, deviation) <= budget {
         return Ok(Storage::heap().with_budget(budget));
     }
     let dir = match &engine.scratch {

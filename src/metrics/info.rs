@@ -46,6 +46,13 @@ pub struct MeshInfo {
     /// `fixed_vertices`.
     #[serde(default)]
     pub pinned_vertices: usize,
+    /// Crease edges of the run (`crease_angle` of [`crate::Options`]): edges whose faces' normals
+    /// differ by more than the angle on the input.
+    #[serde(default)]
+    pub crease_edges: usize,
+    /// Vertices on crease edges; fixed, and included in `fixed_vertices`.
+    #[serde(default)]
+    pub crease_vertices: usize,
     /// Connected components of the (non-degenerate) triangles, through shared vertices;
     /// unreferenced vertices are not components.
     pub components: usize,
@@ -124,6 +131,8 @@ pub fn connectivity(
         high_degree_vertices: s.high_degree_vertices,
         fixed_vertices: s.fixed_vertices,
         pinned_vertices: s.pinned_vertices,
+        crease_edges: s.crease_edges,
+        crease_vertices: s.crease_vertices,
         components: components(topo),
         unreferenced_vertices: s.unreferenced_vertices,
         closed: s.boundary_edges == 0 && s.non_manifold_edges == 0 && triangles > 0,

@@ -112,6 +112,12 @@ pub struct MultiresStats {
 
 /// Check that `opts` and `m` make a multiresolution run.
 pub fn validate(opts: &Options, m: &MultiresOptions) -> Result<()> {
+    if opts.max_deviation.is_some() {
+        return Err(Error::parameter(
+            "max_deviation",
+            "is not supported in multiresolution mode yet (its coarse levels are not bounded)",
+        ));
+    }
     if !matches!(opts.method, Method::Vcs | Method::VcsTriangle) {
         return Err(Error::parameter(
             "multires",

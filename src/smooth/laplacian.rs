@@ -26,7 +26,7 @@ pub fn jacobi_step(
     first: usize,
     lambda: f64,
 ) -> u64 {
-    step::<NO_MEASURE>(topo, src, dst, first, lambda).moved
+    step::<NO_MEASURE, false>(topo, src, dst, first, lambda, (&[], 0.0)).moved
 }
 
 /// What a measured Jacobi step did over its vertex range.
@@ -73,8 +73,31 @@ pub fn jacobi_step_measured(
     previous: Previous,
 ) -> StepStats {
     match previous {
-        Previous::Src => step::<FROM_SRC>(topo, src, dst, first, lambda),
-        Previous::Dst => step::<FROM_DST>(topo, src, dst, first, lambda),
+        Previous::Src => step::<FROM_SRC, false>(topo, src, dst, first, lambda, (&[], 0.0)),
+        Previous::Dst => step::<FROM_DST, false>(topo, src, dst, first, lambda, (&[], 0.0)),
+    }
+}
+
+/// [`jacobi_step_measured`] that then moves each new position back onto the ball of radius
+/// `limit` around its `input` position (indexed like `src`) when it ends outside: the
+/// `max_deviation` bound of `laplacian` and `taubin`. The volume is not kept (it never is by
+/// these methods); the displacement is measured on the clamped positions.
+#[allow(clippy::too_many_arguments)]
+pub fn jacobi_step_clamped(
+    topo: &Topology,
+    src: &[DVec3],
+    dst: &mut [DVec3],
+    first: usize,
+    lambda: f64,
+    previous: Previous,
+    input: &[DVec3],
+    limit: f64,
+) -> StepStats {
+    assert!(input.len() >= first + dst.len());
+    let bound = (input, limit);
+    match previous {
+        Previous::Src => step::<FROM_SRC, true>(topo, src, dst, first, lambda, bound),
+        Previous::Dst => step::<FROM_DST, true>(topo, src, dst, first, lambda, bound),
     }
 }
 
@@ -89,12 +112,13 @@ const FROM_DST: u8 = 2;
 /// bounds check per neighbour: this loop is the time of `laplacian` and `taubin` when they run
 /// plain steps (out of core, and in the cluster engine).
 #[inline(always)]
-fn step<const MEASURE: u8>(
+fn step<const MEASURE: u8, const CLAMP: bool>(
     topo: &Topology,
     src: &[DVec3],
     dst: &mut [DVec3],
     first: usize,
     lambda: f64,
+    (input, limit): (&[DVec3], f64),
 ) -> StepStats {
     let n = dst.len();
     let (offsets, vv) = topo.csr();
@@ -119,7 +143,19 @@ fn step<const MEASURE: u8>(
                 // SAFETY: `u < topo.len() <= src.len()` (asserted above).
                 sum += unsafe { *src.get_unchecked(u as usize) };
             }
-            p + lambda * (sum * inv_deg(nbrs.len()) - p)
+            let new = p + lambda * (sum * inv_deg(nbrs.len()) - p);
+            if CLAMP {
+                let origin = input[first + k];
+                let off = new - origin;
+                let length = off.length();
+                if length > limit {
+                    origin + off * (limit / length)
+                } else {
+                    new
+                }
+            } else {
+                new
+            }
         };
         if MEASURE != NO_MEASURE {
             let before = if MEASURE == FROM_SRC { p } else { dst[k] };

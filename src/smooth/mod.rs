@@ -100,6 +100,8 @@ impl FromStr for Method {
 /// | `lambda` | 0.5 | `laplacian` (its step), `taubin` (its first step) |
 /// | `mu` | −0.53 | `taubin` (its second step; negative, `|μ| > λ`) |
 /// | `reject_energy_increase` | false | `lem`, `vcs`, `vcs-triangle` |
+/// | `crease_angle` | none | every method: vertices on edges whose faces' normals differ by more than this many degrees (measured on the input) are fixed |
+/// | `max_deviation` | none | every method: no vertex ends farther than this from its input position (see below) |
 ///
 /// The stencil methods (`lem`, `vcs`, `vcs-triangle`) have no step size: each stencil is moved to
 /// its local energy minimum (and, for `vcs`, translated back to its volume).
@@ -114,13 +116,42 @@ pub struct Options {
     pub mu: f64,
     /// Skip a stencil whose 2-step result has a higher stencil energy than before (§3.1).
     pub reject_energy_increase: bool,
+    /// Crease angle in degrees, in (0, 180): an edge of two triangles whose normals differ by
+    /// more than this (on the input positions) is a crease, and its vertices are fixed, so
+    /// corners where creases meet are too. `None`: no creases.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub crease_angle: Option<f64>,
+    /// Largest distance, in model units (> 0, finite), a vertex may end from its input position.
+    /// The stencil methods skip a stencil that would move a free vertex farther (their volume
+    /// stays exact; counted in [`SweepStats::deviation_limited`]); `laplacian` and `taubin`
+    /// clamp each vertex to the ball of this radius around its input position, which does not
+    /// keep the volume (they never did). `None`: no bound.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_deviation: Option<f64>,
 }
 
 impl Options {
     /// Check the options: the step sizes in their ranges (see [`check_step`]).
     pub fn check(&self) -> crate::Result<()> {
         check_step("lambda", self.lambda)?;
-        check_step("mu", self.mu)
+        check_step("mu", self.mu)?;
+        if let Some(a) = self.crease_angle {
+            if !(a > 0.0 && a < 180.0) {
+                return Err(crate::Error::parameter(
+                    "crease_angle",
+                    format!("must be in (0, 180) degrees, got {a}"),
+                ));
+            }
+        }
+        if let Some(d) = self.max_deviation {
+            if !(d > 0.0 && d.is_finite()) {
+                return Err(crate::Error::parameter(
+                    "max_deviation",
+                    format!("must be a finite number above 0, got {d}"),
+                ));
+            }
+        }
+        Ok(())
     }
 }
 
@@ -164,6 +195,8 @@ impl Default for Options {
             lambda: 0.5,
             mu: -0.53,
             reject_energy_increase: false,
+            crease_angle: None,
+            max_deviation: None,
         }
     }
 }
@@ -180,6 +213,10 @@ pub struct SweepStats {
     pub skipped_degenerate: u64,
     /// Stencils rejected because their energy would have increased.
     pub rejected: u64,
+    /// Stencils skipped because they would have moved a free vertex farther than the options'
+    /// `max_deviation` from its input position.
+    #[serde(default)]
+    pub deviation_limited: u64,
 }
 
 impl SweepStats {
@@ -189,11 +226,16 @@ impl SweepStats {
         self.skipped_fixed += o.skipped_fixed;
         self.skipped_degenerate += o.skipped_degenerate;
         self.rejected += o.rejected;
+        self.deviation_limited += o.deviation_limited;
     }
 
     /// Stencils considered: applied + skipped + rejected.
     pub fn considered(&self) -> u64 {
-        self.applied + self.skipped_fixed + self.skipped_degenerate + self.rejected
+        self.applied
+            + self.skipped_fixed
+            + self.skipped_degenerate
+            + self.rejected
+            + self.deviation_limited
     }
 }
 

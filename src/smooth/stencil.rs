@@ -2,7 +2,8 @@
 //! `vcs-triangle`) of Liu et al. 2002, on edge stencils (2 free vertices) and triangle stencils
 //! (3 free vertices).
 //!
-//! For free vertices F, the rows are every v in F ∪ N(F). With displacements `d_f` of the free
+//! For free vertices F, the rows are every v in F ∪ N(F) except crease vertices
+//! ([`Topology::crease`]: fixed, and their Laplacian across the crease is a feature to keep). With displacements `d_f` of the free
 //! vertices, the row's Laplacian becomes `L(v) + Σ_f k[v][f] d_f`, where `k[v][f]` is −1 if v = f,
 //! `1/deg v` if f ∈ N(v), else 0. The stencil energy is `E(d) = ½ Σ_v |L(v) + Σ_f k[v][f] d_f|²`
 //! (the paper's `½‖KP − Q‖²` written in displacements, which makes it translation-invariant).
@@ -22,12 +23,24 @@ use glam::DVec3;
 use super::{Field, SweepStats, Topology, inv_deg};
 
 /// What a stencil kernel does after the energy minimisation.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct StencilParams {
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StencilParams<'a> {
     /// Restore the stencil's volume (step 2): `vcs` and `vcs-triangle`; false gives `lem`.
     pub volume: bool,
     /// Reject a stencil whose final energy exceeds its energy before the stencil.
     pub reject_energy_increase: bool,
+    /// Skip a stencil whose result would move a free vertex too far from its input position.
+    pub deviation: Option<Deviation<'a>>,
+}
+
+/// A bound on how far a vertex may end from its input position.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Deviation<'a> {
+    /// The input positions, indexed like the positions the kernel smooths (only the free
+    /// vertices' entries are read).
+    pub input: &'a [DVec3],
+    /// The largest distance allowed (> 0).
+    pub limit: f64,
 }
 
 /// The result of one stencil.
@@ -37,6 +50,8 @@ pub enum Outcome {
     SkippedFixed,
     SkippedDegenerate,
     Rejected,
+    /// Skipped because a free vertex would have ended beyond the [`Deviation`] limit.
+    DeviationLimited,
 }
 
 /// Relative size below which a pivot of `KᵀK`, or `|n|` against the stencil's area, counts as degenerate.
@@ -54,7 +69,10 @@ const MAX_REACH: f64 = 16.0;
 /// Apply one stencil with free vertices `free` to `pos`, updating the neighbour-sum cache `sums`.
 /// It reads positions of F ∪ N(F) and sums of F ∪ N(F); it writes positions of F and sums of N(F).
 /// A stencil is skipped as degenerate when its system or volume gradient is nearly singular, or
-/// when its result would move a free vertex farther than [`MAX_REACH`] times the stencil's radius.
+/// when its result would move a free vertex farther than [`MAX_REACH`] times the stencil's radius;
+/// with a [`Deviation`] bound, it is skipped when its result (after the volume step) would leave
+/// a free vertex farther than the limit from its input position, so every applied stencil keeps
+/// its volume exactly.
 ///
 /// `triangles` is the array the topology was built from (its faces give the stencil volume).
 /// Positions and sums are written only when the outcome is [`Outcome::Applied`]. The free vertices
@@ -91,11 +109,18 @@ pub fn apply<const N: usize, P: Field + ?Sized, S: Field + ?Sized>(
     let mut weighted = [DVec3::ZERO; N]; // Σ_{v∈N(f)} w_v L(v)
     let mut lap_free = [DVec3::ZERO; N]; // L(f)
     let mut free_mask = [0u8; N]; // which lists hold free vertex f: all but f's own when adjacent
+    // Crease vertices' rows stay out of the energy: their Laplacian across the crease is the
+    // feature, not noise, and minimising it would pull their free neighbours off the faces.
+    let creases = topo.stats.crease_vertices > 0;
     // Inlined at each of the merge's call sites, where the mask is a constant for edge stencils.
     merge_rows(
         lists,
         #[inline(always)]
         |v, mask| {
+            if creases && topo.is_crease(v) {
+                // Never a free vertex (those are not fixed), so only a row is left out.
+                return;
+            }
             let w = inv_deg(topo.deg(v));
             let p = pos.get(v);
             let lap = sums.get(v) * w - p;
@@ -158,6 +183,16 @@ pub fn apply<const N: usize, P: Field + ?Sized, S: Field + ?Sized>(
             .fold(0.0f64, |r, &v| r.max(distance2(v)));
         if !within_reach(&d, radius2) {
             return Outcome::SkippedDegenerate;
+        }
+    }
+    if let Some(bound) = params.deviation {
+        // The whole stencil or nothing: a step scaled back would need its volume step again.
+        let limit2 = bound.limit * bound.limit;
+        let beyond = |fi: usize, f: u32| {
+            (pos.get(f) + d[fi] - bound.input[f as usize]).length_squared() > limit2
+        };
+        if free.iter().enumerate().any(|(fi, &f)| beyond(fi, f)) {
+            return Outcome::DeviationLimited;
         }
     }
     if params.reject_energy_increase {
@@ -461,6 +496,7 @@ pub fn count(stats: &mut SweepStats, outcome: Outcome) {
         Outcome::SkippedFixed => stats.skipped_fixed += 1,
         Outcome::SkippedDegenerate => stats.skipped_degenerate += 1,
         Outcome::Rejected => stats.rejected += 1,
+        Outcome::DeviationLimited => stats.deviation_limited += 1,
     }
 }
 
@@ -539,6 +575,7 @@ mod tests {
             let p = StencilParams {
                 volume: true,
                 reject_energy_increase: false,
+                deviation: None,
             };
             let out = apply(&topo, &tris, &mut pos[..], &mut sums[..], [0, 2], p);
             assert_eq!(out, Outcome::Applied);
@@ -561,6 +598,7 @@ mod tests {
         let p = StencilParams {
             volume: false,
             reject_energy_increase: false,
+            deviation: None,
         };
         apply(&topo, &tris, &mut pos[..], &mut sums[..], [0, 2], p);
         let e1 = energy(&topo, &pos, &rows);
@@ -584,6 +622,7 @@ mod tests {
         let p = StencilParams {
             volume: true,
             reject_energy_increase: false,
+            deviation: None,
         };
         let stats = sweep_triangles(&topo, &tris, &mut pos[..], &mut sums[..], 0..8, p);
         assert_eq!(stats.applied, 8);
@@ -600,6 +639,7 @@ mod tests {
         let p = StencilParams {
             volume: true,
             reject_energy_increase: false,
+            deviation: None,
         };
         let before = pos.clone();
         let out = apply(&topo, &tris, &mut pos[..], &mut sums[..], [0, 1], p);
@@ -631,6 +671,7 @@ mod tests {
             let p = StencilParams {
                 volume: true,
                 reject_energy_increase: false,
+                deviation: None,
             };
             let mut pos = pos0.clone();
             let mut sums = neighbor_sums(&topo, &pos);
@@ -667,6 +708,7 @@ mod tests {
         let p = StencilParams {
             volume: true,
             reject_energy_increase: true,
+            deviation: None,
         };
         let all: Vec<u32> = (0..6).collect();
         for _ in 0..20 {

@@ -85,6 +85,13 @@ pub struct TopologyStats {
     /// counted in `fixed_vertices`.
     #[serde(default)]
     pub pinned_vertices: usize,
+    /// Edges of two triangles whose normals differ by more than the run's crease angle
+    /// ([`Topology::crease`]); 0 when no crease angle is given.
+    #[serde(default)]
+    pub crease_edges: usize,
+    /// Vertices on a crease edge: fixed, and counted in `fixed_vertices`.
+    #[serde(default)]
+    pub crease_vertices: usize,
 }
 
 impl TopologyStats {
@@ -113,6 +120,11 @@ pub const MAX_FREE_DEGREE: usize = 1024;
 /// Vertices per parallel work item of the build (a work size only: every chunk's result is
 /// placed by vertex id, so the topology does not depend on it).
 const CHUNK: usize = 1 << 13;
+
+/// Bits of the fixed-vertex mask: any non-zero entry is a fixed vertex; [`CREASE`] also marks it
+/// as a crease vertex ([`Topology::crease`]), whose row the stencil energy leaves out.
+const FIXED: u8 = 1;
+const CREASE: u8 = 2;
 
 /// Reusable per-thread buffers of the per-vertex analysis.
 #[derive(Default)]
@@ -412,7 +424,7 @@ impl Topology {
         self.fixed[v as usize] != 0
     }
 
-    /// The fixed-vertex mask, one entry per vertex (1 = fixed).
+    /// The fixed-vertex mask, one entry per vertex (non-zero = fixed; bit 2 also marks a crease vertex).
     pub fn fixed_mask(&self) -> &[u8] {
         &self.fixed
     }
@@ -468,24 +480,119 @@ impl Topology {
     /// [`TopologyStats::pinned_vertices`] and those not fixed before in `fixed_vertices`.
     /// Parallel over vertices; the result does not depend on the number of threads.
     pub fn pin(&mut self, pinned: impl Fn(u32) -> bool + Sync) {
-        let (pins, newly) = self
-            .fixed
+        let (pins, newly) = self.fix_where(pinned);
+        self.stats.pinned_vertices += pins;
+        self.stats.fixed_vertices += newly;
+    }
+
+    /// Fix the vertices on crease edges: edges of two triangles whose normals, measured on
+    /// `positions` (this topology's ids), differ by more than `angle_deg` degrees (0° where the
+    /// surface is flat, 90° on a cube's edge). The angle does not depend on the faces'
+    /// orientation. Counts the edges in [`TopologyStats::crease_edges`], their vertices in
+    /// `crease_vertices` and those not fixed before in `fixed_vertices`. Corners where creases
+    /// meet are crease vertices too. Parallel over vertices; the result does not depend on the
+    /// number of threads.
+    pub fn crease(&mut self, triangles: &[[u32; 3]], positions: &[DVec3], angle_deg: f64) {
+        let cos_limit = angle_deg.to_radians().cos();
+        let n = self.len();
+        // Crease edges at each vertex; a vertex's edges to higher ids count the edges once.
+        let counts: Vec<(u32, u32)> = (0..n as u32)
+            .into_par_iter()
+            .with_min_len(CHUNK)
+            .map(|v| {
+                let (mut all, mut above) = (0u32, 0u32);
+                for &u in self.neighbors(v) {
+                    if self.is_crease_edge(triangles, positions, v, u, cos_limit) {
+                        all += 1;
+                        above += (u > v) as u32;
+                    }
+                }
+                (all, above)
+            })
+            .collect();
+        let edges: usize = counts.iter().map(|c| c.1 as usize).sum();
+        let (vertices, newly) = self.fix_where_as(CREASE, |v| counts[v as usize].0 > 0);
+        self.stats.crease_edges += edges;
+        self.stats.crease_vertices += vertices;
+        self.stats.fixed_vertices += newly;
+    }
+
+    /// Whether edge `(v, u)` has exactly two triangles whose normals (each taken in the direction
+    /// the edge is traversed, so that orientation does not matter) make an angle whose cosine is
+    /// below `cos_limit`. A triangle of zero area makes no crease.
+    fn is_crease_edge(
+        &self,
+        triangles: &[[u32; 3]],
+        positions: &[DVec3],
+        v: u32,
+        u: u32,
+        cos_limit: f64,
+    ) -> bool {
+        let mut normals = [DVec3::ZERO; 2];
+        let mut found = 0;
+        for &f in self.faces_of(v) {
+            let t = triangles[f as usize];
+            let Some(k) = t.iter().position(|&x| x == v) else {
+                continue;
+            };
+            let (next, prev) = (t[(k + 1) % 3], t[(k + 2) % 3]);
+            let sign = if next == u {
+                1.0
+            } else if prev == u {
+                -1.0
+            } else {
+                continue;
+            };
+            if found == 2 {
+                return false;
+            }
+            let [a, b, c] = t.map(|x| positions[x as usize]);
+            normals[found] = sign * (b - a).cross(c - a);
+            found += 1;
+        }
+        if found != 2 {
+            return false;
+        }
+        // Opposite traversals (a consistent pair) give opposite signs: flip one back.
+        let (n0, n1) = (normals[0], -normals[1]);
+        let (l0, l1) = (n0.length(), n1.length());
+        if l0 == 0.0 || l1 == 0.0 {
+            return false;
+        }
+        n0.dot(n1) / (l0 * l1) < cos_limit
+    }
+
+    /// Whether `v` is a crease vertex ([`Topology::crease`]; such a vertex is also fixed).
+    #[inline]
+    pub fn is_crease(&self, v: u32) -> bool {
+        self.fixed[v as usize] & CREASE != 0
+    }
+
+    /// Fix the vertices for which `fixed(v)` holds; returns how many did and how many of them
+    /// were not fixed before.
+    fn fix_where(&mut self, fixed: impl Fn(u32) -> bool + Sync) -> (usize, usize) {
+        self.fix_where_as(FIXED, fixed)
+    }
+
+    /// [`Topology::fix_where`], marking the vertices with `mark` (a fixed mark, [`FIXED`] or
+    /// [`FIXED`] | [`CREASE`]).
+    fn fix_where_as(&mut self, mark: u8, fixed: impl Fn(u32) -> bool + Sync) -> (usize, usize) {
+        let mark = mark | FIXED;
+        self.fixed
             .par_chunks_mut(CHUNK)
             .enumerate()
             .map(|(c, chunk)| {
-                let (mut pins, mut newly) = (0, 0);
+                let (mut all, mut newly) = (0, 0);
                 for (k, f) in chunk.iter_mut().enumerate() {
-                    if pinned((c * CHUNK + k) as u32) {
-                        pins += 1;
+                    if fixed((c * CHUNK + k) as u32) {
+                        all += 1;
                         newly += (*f == 0) as usize;
-                        *f = 1;
+                        *f |= mark;
                     }
                 }
-                (pins, newly)
+                (all, newly)
             })
-            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
-        self.stats.pinned_vertices += pins;
-        self.stats.fixed_vertices += newly;
+            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1))
     }
 
     /// Bytes held by the adjacency arrays (for memory reports).

@@ -149,6 +149,12 @@ pub fn run(cfg: &SlurmScriptConfig, out: &mut dyn Write) -> Result<()> {
     if a.params.reject_energy_increase {
         flags.push("--reject-energy-increase".into());
     }
+    if let Some(a) = a.params.crease_angle {
+        flags.extend(["--crease-angle".into(), a.to_string()]);
+    }
+    if let Some(d) = a.params.max_deviation {
+        flags.extend(["--max-deviation".into(), d.to_string()]);
+    }
     flags.extend(["--threads".into(), cpus.to_string()]);
     if let Some(p) = a.engine.patch_size {
         flags.extend(["--patch-size".into(), p.to_string()]);
