@@ -14,6 +14,7 @@ import argparse
 import json
 import os
 import shlex
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -91,6 +92,7 @@ def main():
                      f"nerr {m['nerr'] / b['nerr'] - 1:+.1%}")
             print(line, flush=True)
             results.append(row)
+    shutil.rmtree(work, ignore_errors=True)
     print(f"\nfirst lab column: {npass}/{len(results)} cases PASS")
     if args.json:
         with open(args.json, "w") as fh:

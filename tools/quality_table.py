@@ -32,6 +32,7 @@ import argparse
 import json
 import os
 import shlex
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -433,6 +434,8 @@ def main():
             for name, _ in cols:
                 if "error" in row[name]:
                     print(f"    {name}: {row[name]['error']}", file=sys.stderr)
+    if args.workdir is None:
+        shutil.rmtree(work, ignore_errors=True)
     npass = sum(r["pass"] for r in results)
     print(f"\n{npass}/{len(results)} cases PASS (candidate vs baseline: rms <=, nerr <=, "
           f"max <= 1.1x, |dvol| <= 1e-9); extra columns marked +/- by the same test")
