@@ -80,6 +80,18 @@ fn lap(p: &[DVec3], t: &Topo, v: usize) -> DVec3 {
     s / ns.len() as f64 - p[v]
 }
 
+/// Scale-dependent umbrella (Fujiwara): neighbours weighted by 1 / edge length.
+fn lap_fuji(p: &[DVec3], t: &Topo, v: usize) -> DVec3 {
+    let (mut s, mut w) = (DVec3::ZERO, 0.0);
+    for &u in &t.nb[t.nb_off[v]..t.nb_off[v + 1]] {
+        let e = p[u as usize] - p[v];
+        let wi = 1.0 / e.length().max(1e-300);
+        s += e * wi;
+        w += wi;
+    }
+    s / w
+}
+
 fn volume(p: &[DVec3], tris: &[[u32; 3]]) -> f64 {
     tris.iter()
         .map(|t| p[t[0] as usize].dot(p[t[1] as usize].cross(p[t[2] as usize])))
@@ -390,12 +402,21 @@ fn main() {
                 // exact common translation of the stencil that restores its volume
                 let r = g("r", 1.0) as usize;
                 let mut q = p.clone();
+                let fuji = g("fuji", 0.0) != 0.0;
                 for step in [lambda, mu] {
                     let old = q.clone();
                     for v in 0..n {
                         if !t.fixed[v] {
-                            q[v] = old[v] + step * s * lap(&old, &t, v);
+                            let l = if fuji { lap_fuji(&old, &t, v) } else { lap(&old, &t, v) };
+                            q[v] = old[v] + step * s * l;
                         }
+                    }
+                }
+                if g("proj", 0.0) != 0.0 {
+                    let nr = vertex_normals(&p, &tris, &t);
+                    for v in 0..n {
+                        let dv = q[v] - p[v];
+                        q[v] = p[v] + nr[v] * dv.dot(nr[v]);
                     }
                 }
                 if rings.is_empty() {
