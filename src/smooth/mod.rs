@@ -18,6 +18,7 @@ use std::str::FromStr;
 use glam::DVec3;
 
 pub mod laplacian;
+pub mod lowpass;
 pub mod stencil;
 pub mod tiled;
 
