@@ -281,6 +281,9 @@ impl ValueEnum for Method {
             Method::Lem => "local energy minimisation on edge stencils, no volume constraint",
             Method::Vcs => "volume-constrained smoothing on edge stencils (Liu et al. 2002)",
             Method::VcsTriangle => "volume-constrained smoothing on triangle stencils",
+            Method::VcsLowpass => {
+                "Taubin's λ|μ displacement, volume restored exactly on 2-ring stencils"
+            }
         };
         Some(PossibleValue::new(self.name()).help(help))
     }

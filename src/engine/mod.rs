@@ -133,6 +133,7 @@ impl Plan {
                 tris,
                 patches,
                 colours: &schedule.colours,
+                ring_colours: &schedule.ring_colours,
                 prefetch: (!*in_memory).then_some(prefetch),
                 tiles: *in_memory,
             };

@@ -1,7 +1,13 @@
 //! `vcs-lowpass` (issue #15): Taubin's λ|μ low-pass displacement as the first step of Liu et al.'s
 //! 2-step approach, the volume restored exactly on vertex-ring stencils; and the automatic stop
-//! rule of `--iterations auto`. Research kernel, sequential, whole-mesh (not yet in the engine);
-//! see docs/quality-research.md for the definition, the evidence and the numbers.
+//! rule of `--iterations auto`; see docs/quality-research.md for the definition, the evidence and
+//! the numbers. Two parts:
+//! - the engine's kernel ([`ring_of`], [`shares_into`], [`apply_ring`], [`sweep_rings`]), which
+//!   `Method::VcsLowpass` runs patch by patch through `engine::iterate` (volume step shared with
+//!   `stencil.rs`);
+//! - the research prototype ([`RingStencils`], [`lowpass_iteration`]: sequential, whole mesh,
+//!   its own volume arithmetic), kept as the independent reference the kernel is tested against,
+//!   and [`AutoStop`] for `--iterations auto` (not in the engine yet).
 //!
 //! One iteration on positions `P`:
 //! 1. `D = T(P) − P`, `T` = Taubin's λ then μ umbrella step, Jacobi, fixed vertices kept.
@@ -16,12 +22,147 @@
 //! (2 vertices) that is half of each vertex's denoising, over a 2-ring (~19 vertices) the noise
 //! averages out and mostly the low-frequency shrink/inflation is removed.
 
+use std::ops::Range;
+
 use glam::DVec3;
 
+use super::stencil::{self, Outcome};
+use super::{Field, SweepStats};
 use crate::topology::Topology;
 
 /// Graph radius of the restoring stencils (1 fails the quality target, 2 meets it).
 pub const RING_RADIUS: usize = 2;
+
+// ---------------------------------------------------------------------------------------------
+// The engine's kernel (`Method::VcsLowpass`): one ring stencil at a time, over a `Field`, so the
+// same code runs a whole mesh and the patches of one colour in parallel. What it reads and
+// writes (the schedule's conflict rule for this method rests on it, see `crate::schedule`):
+// - stencil `v` writes the positions of `F_v` (within 2 rings of `v`);
+// - it reads the positions of every corner of the faces touching `F_v` (within 3 rings) and the
+//   step-1 shares of `F_v`, which are computed before the sweep and only read during it.
+
+/// `F_v` into `ring` (cleared first): `v` and the movable vertices reachable from `v` in at most
+/// [`RING_RADIUS`] steps through movable vertices, ascending; empty when `v` is fixed. The
+/// relation is symmetric (a path of movable vertices reversed is one), so `u ∈ F_v ⇔ v ∈ F_u`
+/// and the number of stencils holding `u` is `|F_u|`: no per-vertex count has to be stored.
+pub fn ring_of(topo: &Topology, v: u32, ring: &mut Vec<u32>) {
+    const { assert!(RING_RADIUS == 2, "ring_of walks exactly two rings") };
+    ring.clear();
+    if topo.is_fixed(v) {
+        return;
+    }
+    ring.push(v);
+    for &u in topo.neighbors(v) {
+        if !topo.is_fixed(u) {
+            ring.push(u);
+            ring.extend(topo.neighbors(u).iter().filter(|&&w| !topo.is_fixed(w)));
+        }
+    }
+    ring.sort_unstable();
+    ring.dedup();
+}
+
+/// Step 1's share for the vertices `first .. first + out.len()`: `(t_u − p_u) / |F_u|`, with `t`
+/// the positions after one Jacobi λ|μ pair from `pos` (so summed over the `|F_u|` stencils that
+/// hold `u`, every vertex receives its whole Taubin displacement once); zero for a fixed vertex.
+/// Each entry depends only on `pos` and `taubin`, so any split of the range gives the same bits.
+pub fn shares_into(
+    topo: &Topology,
+    pos: &[DVec3],
+    taubin: &[DVec3],
+    out: &mut [DVec3],
+    first: usize,
+) {
+    let mut ring = Vec::with_capacity(32);
+    for (k, o) in out.iter_mut().enumerate() {
+        let u = first + k;
+        ring_of(topo, u as u32, &mut ring);
+        *o = if ring.is_empty() {
+            DVec3::ZERO
+        } else {
+            (taubin[u] - pos[u]) * (1.0 / ring.len() as f64)
+        };
+    }
+}
+
+/// Apply the ring stencil of `v`: every `u ∈ F_v` moves by its share `shares[u]` (step 1) plus
+/// the common translation `w` that gives the faces touching `F_v` their volume back exactly
+/// (step 2). The volume change and gradient are those of the edge and triangle stencils, face by
+/// face through [`stencil::shared_face`] about the origin `p_v`, and `w` and the degenerate test
+/// are [`stencil::translation`]'s, so a ring stencil restores its volume with the same arithmetic
+/// as `vcs`. `ring` is scratch space. Writes only when the outcome is [`Outcome::Applied`].
+pub fn apply_ring<P: Field + ?Sized, D: Field + ?Sized>(
+    topo: &Topology,
+    triangles: &[[u32; 3]],
+    pos: &mut P,
+    shares: &D,
+    v: u32,
+    ring: &mut Vec<u32>,
+) -> Outcome {
+    ring_of(topo, v, ring);
+    if ring.is_empty() {
+        return Outcome::SkippedFixed;
+    }
+    let origin = pos.get(v);
+    let free = |u: u32| ring.binary_search(&u).is_ok();
+    let share = |free: bool, u: u32| if free { shares.get(u) } else { DVec3::ZERO };
+    let (mut dv, mut n, mut scale) = (0.0, DVec3::ZERO, 0.0);
+    for &a in ring.iter() {
+        for &t in topo.faces_of(a) {
+            let (b, c) = stencil::after(triangles[t as usize], a);
+            let (b_free, c_free) = (free(b), free(c));
+            // Each face once: at its smallest free corner.
+            if (b_free && b < a) || (c_free && c < a) {
+                continue;
+            }
+            stencil::shared_face(
+                pos.get(a) - origin,
+                pos.get(b) - origin,
+                pos.get(c) - origin,
+                shares.get(a),
+                share(b_free, b),
+                share(c_free, c),
+                b_free,
+                c_free,
+                &mut dv,
+                &mut n,
+                &mut scale,
+            );
+        }
+    }
+    let Some(w) = stencil::translation(dv, n, scale) else {
+        return Outcome::SkippedDegenerate;
+    };
+    if !ring.iter().all(|&u| (shares.get(u) + w).is_finite()) {
+        return Outcome::SkippedDegenerate;
+    }
+    for &u in ring.iter() {
+        pos.add(u, shares.get(u) + w);
+    }
+    Outcome::Applied
+}
+
+/// The ring stencils of the vertices `owned`, in ascending order, Gauss–Seidel (each sees the
+/// latest positions); `shares` from [`shares_into`].
+pub fn sweep_rings<P: Field + ?Sized, D: Field + ?Sized>(
+    topo: &Topology,
+    triangles: &[[u32; 3]],
+    pos: &mut P,
+    shares: &D,
+    owned: Range<u32>,
+) -> SweepStats {
+    let mut stats = SweepStats::default();
+    let mut ring = Vec::with_capacity(32);
+    for v in owned {
+        let outcome = apply_ring(topo, triangles, pos, shares, v, &mut ring);
+        stencil::count(&mut stats, outcome);
+    }
+    stats
+}
+
+// ---------------------------------------------------------------------------------------------
+// The research prototype (sequential, whole mesh, its own volume arithmetic): kept as the
+// independent reference the engine's kernel is checked against (`tests` below).
 
 /// The ring stencils of a mesh: `members[offsets[v]..offsets[v + 1]]` is `F_v` (empty for a fixed
 /// vertex), `share[u] = 1 / c_u` (0 for a vertex in no stencil).
@@ -476,6 +617,76 @@ mod tests {
             rms_radius_error(&p),
             e0
         );
+    }
+
+    /// One engine-kernel iteration over the whole mesh in index order (the prototype's order).
+    fn kernel_iteration(topo: &Topology, tris: &[[u32; 3]], p: &mut [DVec3]) -> SweepStats {
+        let n = p.len();
+        let (mut q, mut t, mut shares) = (
+            vec![DVec3::ZERO; n],
+            vec![DVec3::ZERO; n],
+            vec![DVec3::ZERO; n],
+        );
+        crate::smooth::laplacian::jacobi_step(topo, p, &mut q, 0, 0.5);
+        crate::smooth::laplacian::jacobi_step(topo, &q, &mut t, 0, -0.53);
+        shares_into(topo, p, &t, &mut shares, 0);
+        sweep_rings(topo, tris, p, &shares[..], 0..n as u32)
+    }
+
+    #[test]
+    fn rings_are_symmetric_and_exclude_fixed_vertices() {
+        let mut mesh = icosphere(2);
+        let tris: Vec<[u32; 3]> = mesh
+            .triangles
+            .iter()
+            .copied()
+            .filter(|t| !t.contains(&0))
+            .collect();
+        mesh.triangles = tris.clone().into();
+        let topo = Topology::build(mesh.positions.len(), &tris).unwrap();
+        let st = RingStencils::build(&topo, RING_RADIUS);
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        for v in 0..topo.len() as u32 {
+            ring_of(&topo, v, &mut a);
+            let mut want = st.of(v).to_vec();
+            want.sort_unstable();
+            assert_eq!(a, want, "vertex {v}");
+            for &u in &a {
+                assert!(!topo.is_fixed(u));
+                ring_of(&topo, u, &mut b);
+                assert!(b.binary_search(&v).is_ok());
+            }
+        }
+    }
+
+    #[test]
+    fn the_engine_kernel_follows_the_prototype_and_keeps_volume() {
+        // Same order of work, different rounding (the kernel sums each face's volume change
+        // through the edge stencils' code, the prototype subtracts two volumes): the positions
+        // agree to rounding, and both keep the volume.
+        let mut mesh = icosphere(4);
+        add_normal_noise(&mut mesh, 0.3, 7);
+        let offset = DVec3::new(3.0, -2.0, 5.0);
+        let p0: Vec<DVec3> = mesh.positions.iter().map(|p| *p + offset).collect();
+        let tris = mesh.triangles.to_vec();
+        let topo = Topology::build(p0.len(), &tris).unwrap();
+        let st = RingStencils::build(&topo, RING_RADIUS);
+        let (mut proto, mut kernel) = (p0.clone(), p0.clone());
+        let mut s = Scratch::default();
+        let vol = |p: &[DVec3]| crate::metrics::volume(p, &tris);
+        let v0 = vol(&p0);
+        for _ in 0..8 {
+            lowpass_iteration(&topo, &tris, &st, &mut proto, 0.5, -0.53, &mut s);
+            let stats = kernel_iteration(&topo, &tris, &mut kernel);
+            assert_eq!(stats.applied as usize, topo.len());
+        }
+        let far = proto
+            .iter()
+            .zip(&kernel)
+            .map(|(a, b)| a.distance(*b))
+            .fold(0.0, f64::max);
+        assert!(far < 1e-12, "{far}");
+        assert!(((vol(&kernel) - v0) / v0).abs() < 1e-12);
     }
 
     #[test]

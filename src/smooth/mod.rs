@@ -8,6 +8,7 @@
 //! | [`Method::Lem`] | local energy minimisation on edge stencils | Liu et al. §2.3, eq. 7–9 |
 //! | [`Method::Vcs`] | edge stencils + 2-step volume restoration | Liu et al. §3, §3.1 |
 //! | [`Method::VcsTriangle`] | the same on triangle stencils | Liu et al. §3.2 |
+//! | [`Method::VcsLowpass`] | Taubin's λ\|μ displacement + exact volume restoration on 2-ring stencils | [`lowpass`], docs/quality-research.md |
 //!
 //! Umbrella operator: `L(v) = (1/deg v) Σ_{u∈N(v)} p_u − p_v`. Fixed vertices (see
 //! [`crate::topology`]) never move; a stencil with a fixed free vertex is skipped and counted.
@@ -24,7 +25,8 @@ pub mod tiled;
 
 pub use crate::topology::Topology;
 
-/// A smoothing method, selectable by name (`laplacian`, `taubin`, `lem`, `vcs`, `vcs-triangle`).
+/// A smoothing method, selectable by name (`laplacian`, `taubin`, `lem`, `vcs`, `vcs-triangle`,
+/// `vcs-lowpass`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Method {
@@ -34,6 +36,9 @@ pub enum Method {
     #[default]
     Vcs,
     VcsTriangle,
+    /// Taubin's λ|μ displacement spread over 2-ring stencils, each restoring its faces' volume
+    /// exactly (see [`lowpass`]).
+    VcsLowpass,
 }
 
 impl Method {
@@ -43,12 +48,13 @@ impl Method {
     }
 
     /// Every method, in documentation order.
-    pub const ALL: [Method; 5] = [
+    pub const ALL: [Method; 6] = [
         Method::Laplacian,
         Method::Taubin,
         Method::Lem,
         Method::Vcs,
         Method::VcsTriangle,
+        Method::VcsLowpass,
     ];
 
     /// The method's command-line name.
@@ -59,12 +65,16 @@ impl Method {
             Method::Lem => "lem",
             Method::Vcs => "vcs",
             Method::VcsTriangle => "vcs-triangle",
+            Method::VcsLowpass => "vcs-lowpass",
         }
     }
 
     /// Whether the method works stencil by stencil (Gauss–Seidel) rather than vertex-wise (Jacobi).
     pub fn is_stencil(self) -> bool {
-        matches!(self, Method::Lem | Method::Vcs | Method::VcsTriangle)
+        matches!(
+            self,
+            Method::Lem | Method::Vcs | Method::VcsTriangle | Method::VcsLowpass
+        )
     }
 }
 
@@ -98,8 +108,8 @@ impl FromStr for Method {
 /// |---|---|---|
 /// | `method` | [`Method::Vcs`] | — |
 /// | `iterations` | 10 | every method |
-/// | `lambda` | 0.5 | `laplacian` (its step), `taubin` (its first step) |
-/// | `mu` | −0.53 | `taubin` (its second step; negative, `|μ| > λ`) |
+/// | `lambda` | 0.5 | `laplacian` (its step), `taubin` and `vcs-lowpass` (their first step) |
+/// | `mu` | −0.53 | `taubin` and `vcs-lowpass` (their second step; negative, `|μ| > λ`) |
 /// | `reject_energy_increase` | false | `lem`, `vcs`, `vcs-triangle` |
 ///
 /// The stencil methods (`lem`, `vcs`, `vcs-triangle`) have no step size: each stencil is moved to
