@@ -47,6 +47,7 @@ fn colour(m: Method) -> RGBColor {
         Method::Lem => RGBColor(44, 160, 44),
         Method::Vcs => RGBColor(31, 119, 180),
         Method::VcsTriangle => RGBColor(148, 103, 189),
+        Method::VcsLowpass => RGBColor(140, 86, 75),
     }
 }
 

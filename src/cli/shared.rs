@@ -64,10 +64,10 @@ impl SmoothingArgs {
 /// Step sizes and stencil options shared by `smooth` and `curves`.
 #[derive(Debug, Clone, ClapArgs)]
 pub struct MethodParams {
-    /// Laplacian step size λ, in (0, 1] (laplacian, and the first step of taubin).
+    /// Laplacian step size λ, in (0, 1] (laplacian, and the first step of taubin and vcs-lowpass).
     #[arg(long, value_name = "X", default_value_t = 0.5, value_parser = step_lambda, allow_hyphen_values = true)]
     pub lambda: f64,
-    /// Taubin's second step size μ, in [-1, 0).
+    /// Taubin's second step size μ, in [-1, 0) (taubin and vcs-lowpass).
     #[arg(long, value_name = "Y", default_value_t = -0.53, value_parser = step_mu, allow_hyphen_values = true)]
     pub mu: f64,
     /// Skip a stencil whose result has a higher stencil energy than before (lem, vcs, vcs-triangle) [default: off].
@@ -299,6 +299,9 @@ impl ValueEnum for Method {
             Method::Lem => "local energy minimisation on edge stencils, no volume constraint",
             Method::Vcs => "volume-constrained smoothing on edge stencils (Liu et al. 2002)",
             Method::VcsTriangle => "volume-constrained smoothing on triangle stencils",
+            Method::VcsLowpass => {
+                "Taubin's λ|μ displacement, volume restored exactly on 2-ring stencils"
+            }
         };
         Some(PossibleValue::new(self.name()).help(help))
     }

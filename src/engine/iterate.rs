@@ -7,6 +7,10 @@
 //!   a colour the patches run in parallel (they touch disjoint data), each applying the stencils
 //!   it owns in ascending order: edge stencils `(i, j)`, `i < j`, by `(i, j)`; triangle stencils in
 //!   the plan's triangle order.
+//! - `vcs-lowpass`: first the step-1 shares of every vertex, Jacobi (a λ|μ pair from the
+//!   iteration's start, see [`lowpass::shares_into`]); then Gauss–Seidel as above over the ring
+//!   stencils (one per owned movable vertex, ascending), colour after colour of the plan's
+//!   ring colouring ([`crate::schedule::Schedule::ring_colours`]).
 //! - `laplacian`, `taubin`: Jacobi (every vertex from the previous positions), so the order is
 //!   irrelevant: the output is bit-identical for any thread count and tile size.
 
@@ -23,6 +27,7 @@ use crate::metrics;
 use crate::partition::Patch;
 use crate::schedule::{Prefetch, SharedField};
 use crate::smooth::laplacian::{self, Previous, StepStats};
+use crate::smooth::lowpass;
 use crate::smooth::stencil::{self, StencilParams};
 use crate::smooth::tiled::{Measure, TilePlan};
 use crate::smooth::{Method, Options, SweepStats};
@@ -143,6 +148,9 @@ pub struct Sweep<'a> {
     pub tris: &'a [[u32; 3]],
     pub patches: &'a [Patch],
     pub colours: &'a [Vec<u32>],
+    /// The colours of `vcs-lowpass`'s wider stencils (see [`crate::schedule`]); may be empty
+    /// where that method is refused.
+    pub ring_colours: &'a [Vec<u32>],
     /// Read-ahead hints for memory-mapped arrays (the next colour's patches).
     pub prefetch: Option<&'a Prefetch>,
     /// Whether `laplacian` and `taubin` may hold a [`TilePlan`] on the heap (the mesh is in memory).
@@ -153,7 +161,8 @@ pub struct Sweep<'a> {
 pub struct Buffers<'b> {
     /// The positions: smoothed in place.
     pub pos: &'b mut [DVec3],
-    /// Neighbour sums of the stencil methods, or the second buffer of the Jacobi steps.
+    /// Neighbour sums of the stencil methods, the step-1 shares of `vcs-lowpass`, or the second
+    /// buffer of the Jacobi steps.
     pub scratch: &'b mut [DVec3],
     /// The stencil methods' copy before a measured sweep (may be empty for Jacobi methods).
     pub prev: &'b mut [DVec3],
@@ -258,9 +267,19 @@ impl Run<'_, '_> {
         let owned = self.share.owned();
         let params = stencil_params(self.opts, input);
         let total = self.opts.iterations;
+        let lowpass = self.opts.method == Method::VcsLowpass;
+        let colours = if lowpass {
+            mesh.ring_colours
+        } else {
+            mesh.colours
+        };
         for it in first..=total {
             let measure = self.when.wanted(it, total);
             let start = Instant::now();
+            if lowpass {
+                // `prev` holds the λ|μ pair's result until the shares are taken from it.
+                self.lowpass_shares(pos, sums, prev);
+            }
             if measure {
                 let now = &pos[owned.clone()];
                 on_pool(&*self.share, || {
@@ -269,18 +288,20 @@ impl Run<'_, '_> {
                     })
                 });
             }
-            on_pool(&*self.share, || {
-                reduce::neighbor_sums(mesh.topo, pos, sums, owned.clone())
-            });
-            for &v in self.share.halo_sums() {
-                let v = v as usize;
-                crate::smooth::neighbor_sums_into(mesh.topo, pos, &mut sums[v..v + 1], v);
+            if !lowpass {
+                on_pool(&*self.share, || {
+                    reduce::neighbor_sums(mesh.topo, pos, sums, owned.clone())
+                });
+                for &v in self.share.halo_sums() {
+                    let v = v as usize;
+                    crate::smooth::neighbor_sums_into(mesh.topo, pos, &mut sums[v..v + 1], v);
+                }
             }
             let mut sweep = SweepStats::default();
-            for (c, colour) in mesh.colours.iter().enumerate() {
+            for (c, colour) in colours.iter().enumerate() {
                 if let Some(prefetch) = mesh.prefetch {
                     // Read ahead the next colour (at the end, the first: the next iteration's).
-                    let next = &mesh.colours[(c + 1) % mesh.colours.len()];
+                    let next = &colours[(c + 1) % colours.len()];
                     for &p in next {
                         prefetch.hint(mesh.patches[p as usize].vertices.clone());
                     }
@@ -293,8 +314,9 @@ impl Run<'_, '_> {
                     .collect();
                 self.share.colour_start(pos, sums);
                 // SAFETY: the views are used only by the patches of this colour, which touch
-                // disjoint positions and sums (the colouring invariant of `schedule`); `pos` and
-                // `sums` are not used otherwise while the views live.
+                // disjoint positions and sums (the colouring invariant of `schedule`; for
+                // `vcs-lowpass`, `sums` holds the shares, which every patch only reads); `pos`
+                // and `sums` are not used otherwise while the views live.
                 let (pv, sv) = unsafe { (SharedField::new(pos), SharedField::new(sums)) };
                 let method = self.opts.method;
                 let done = on_pool(&*self.share, || {
@@ -311,6 +333,35 @@ impl Run<'_, '_> {
             self.record(it, pos, moved, sweep, seconds)?;
         }
         Ok(())
+    }
+
+    /// `vcs-lowpass`'s step-1 shares into `shares` (see [`lowpass::shares_into`]): a λ|μ pair
+    /// from `pos` through `shares` into `pair`, each step exchanged, then the shares from `pos`
+    /// and `pair`. Every entry depends only on `pos`, so any split gives the same bits.
+    fn lowpass_shares(&mut self, pos: &[DVec3], shares: &mut [DVec3], pair: &mut [DVec3]) {
+        let topo = self.mesh.topo;
+        let owned = self.share.owned();
+        let (lambda, mu) = (self.opts.lambda, self.opts.mu);
+        let first = owned.start;
+        on_pool(&*self.share, || {
+            reduce::for_chunks_mut(&mut shares[owned.clone()], |at, out| {
+                laplacian::jacobi_step(topo, pos, out, first + at, lambda);
+            })
+        });
+        self.share.step_end(shares);
+        let half: &[DVec3] = shares;
+        on_pool(&*self.share, || {
+            reduce::for_chunks_mut(&mut pair[owned.clone()], |at, out| {
+                laplacian::jacobi_step(topo, half, out, first + at, mu);
+            })
+        });
+        self.share.step_end(pair);
+        let pair: &[DVec3] = pair;
+        on_pool(&*self.share, || {
+            reduce::for_chunks_mut(&mut shares[owned.clone()], |at, out| {
+                lowpass::shares_into(topo, pos, pair, out, first + at)
+            })
+        });
     }
 
     /// `laplacian` and `taubin`: rounds of Jacobi steps, ping-ponging between `pos` and
@@ -545,7 +596,10 @@ fn sweep_patches(
         .par_iter()
         .map(|patch| {
             let (mut pv, mut sv) = (pos, sums);
-            if method == Method::VcsTriangle {
+            if method == Method::VcsLowpass {
+                let owned = patch.vertices.clone();
+                lowpass::sweep_rings(topo, tris, &mut pv, &sv, owned, params.deviation)
+            } else if method == Method::VcsTriangle {
                 let faces = patch.triangles.clone();
                 stencil::sweep_triangles(topo, tris, &mut pv, &mut sv, faces, params)
             } else {

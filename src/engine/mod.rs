@@ -142,6 +142,7 @@ impl Plan {
                 tris,
                 patches,
                 colours: &schedule.colours,
+                ring_colours: &schedule.ring_colours,
                 prefetch: (!*in_memory).then_some(prefetch),
                 tiles: *in_memory,
             };

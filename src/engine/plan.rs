@@ -124,10 +124,7 @@ impl Plan {
                     vertices: 0..positions.len() as u32,
                     triangles: 0..triangles.len() as u32,
                 }],
-                Schedule {
-                    colours: vec![vec![0]],
-                    halo: vec![0],
-                },
+                Schedule::single(),
             ),
         };
         Ok(Plan {

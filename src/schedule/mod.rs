@@ -8,6 +8,16 @@
 //! which is coloured with DSatur (petgraph). Colours run one after another, in ascending colour
 //! number; the patches of one colour run in parallel, and because they touch disjoint data, the
 //! result equals running them one by one in ascending patch order, whatever the thread count.
+//!
+//! `vcs-lowpass` has wider stencils and gets its own colouring ([`Schedule::ring_colours`]): the
+//! stencil of an owned vertex v writes the positions of its 2-ring `F_v` and reads the corners of
+//! the faces touching `F_v`, i.e. the 3-ring of v (its step-1 shares are computed before the sweep
+//! and only read; it keeps no neighbour sums). A patch therefore writes within 2 rings of its
+//! owned range and reads within 3 (halo 3), and two patches can only meet when their owned ranges
+//! are at most 2 + 3 = 5 rings apart: the same rule with 5 conflict rings instead of 4. The edge
+//! and triangle methods keep their 4-ring colouring untouched (a wider one would be correct for
+//! them too, but would change their order of work and so their results); both colourings come
+//! from one breadth-first walk of 5 rings per patch.
 
 use std::collections::HashSet;
 use std::marker::PhantomData;
@@ -24,14 +34,40 @@ use crate::topology::Topology;
 const CONFLICT_RINGS: usize = 4;
 /// Rings of halo a patch reads outside its owned range (F ∪ N(F) with F one ring out).
 const HALO_RINGS: usize = 2;
+/// The same two for the 2-ring stencils of `vcs-lowpass` (see the module doc).
+const RING_CONFLICT_RINGS: usize = 5;
+const RING_HALO_RINGS: usize = 3;
 
 /// The colouring of the patches.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct Schedule {
-    /// Patch indices of each colour, ascending; colours in execution order.
+    /// Patch indices of each colour, ascending; colours in execution order (edge and triangle
+    /// stencils).
     pub colours: Vec<Vec<u32>>,
     /// Per patch: vertices outside its owned range that its stencils read.
     pub halo: Vec<u32>,
+    /// The colouring for the 2-ring stencils of `vcs-lowpass`, in the same form.
+    pub ring_colours: Vec<Vec<u32>>,
+    /// Per patch: vertices outside its owned range that its 2-ring stencils read (3 rings).
+    pub ring_halo: Vec<u32>,
+}
+
+impl Schedule {
+    /// One patch in one colour (a plan that does not cut the mesh).
+    pub fn single() -> Schedule {
+        Schedule {
+            colours: vec![vec![0]],
+            halo: vec![0],
+            ring_colours: vec![vec![0]],
+            ring_halo: vec![0],
+        }
+    }
+}
+
+/// Patches near each patch (higher indices only) and its halo, for one conflict radius.
+struct Near {
+    others: Vec<u32>,
+    halo: u32,
 }
 
 /// Colour the conflict graph of `patches` on `topo` (runs on the current rayon pool; the result
@@ -39,24 +75,46 @@ pub struct Schedule {
 pub fn schedule(topo: &Topology, patches: &[Patch]) -> Schedule {
     let patch_size = patches.first().map_or(1, |p| p.vertices.len().max(1)) as u32;
     let owner = |v: u32| v / patch_size;
-    let near: Vec<(Vec<u32>, u32)> = patches
+    let near: Vec<[Near; 2]> = patches
         .par_iter()
         .enumerate()
         .map(|(a, p)| {
-            let rings = rings_outside(topo, p, CONFLICT_RINGS);
-            let halo = rings.iter().take(HALO_RINGS).map(|r| r.len() as u32).sum();
-            let mut others: Vec<u32> = rings.iter().flatten().map(|&v| owner(v)).collect();
-            others.sort_unstable();
-            others.dedup();
-            others.retain(|&b| b as usize > a);
-            (others, halo)
+            let rings = rings_outside(topo, p, RING_CONFLICT_RINGS);
+            let within = |conflict: usize, halo: usize| {
+                let halo = rings.iter().take(halo).map(|r| r.len() as u32).sum();
+                let mut others: Vec<u32> = rings
+                    .iter()
+                    .take(conflict)
+                    .flatten()
+                    .map(|&v| owner(v))
+                    .collect();
+                others.sort_unstable();
+                others.dedup();
+                others.retain(|&b| b as usize > a);
+                Near { others, halo }
+            };
+            [
+                within(CONFLICT_RINGS, HALO_RINGS),
+                within(RING_CONFLICT_RINGS, RING_HALO_RINGS),
+            ]
         })
         .collect();
+    let (colours, halo) = colour(near.iter().map(|n| &n[0]));
+    let (ring_colours, ring_halo) = colour(near.iter().map(|n| &n[1]));
+    Schedule {
+        colours,
+        halo,
+        ring_colours,
+        ring_halo,
+    }
+}
 
-    let mut graph = UnGraph::<(), ()>::with_capacity(patches.len(), 0);
-    let nodes: Vec<_> = (0..patches.len()).map(|_| graph.add_node(())).collect();
-    for (a, (others, _)) in near.iter().enumerate() {
-        for &b in others {
+/// DSatur colouring of the conflict graph given by each patch's near patches, and the halos.
+fn colour<'a>(near: impl ExactSizeIterator<Item = &'a Near> + Clone) -> (Vec<Vec<u32>>, Vec<u32>) {
+    let mut graph = UnGraph::<(), ()>::with_capacity(near.len(), 0);
+    let nodes: Vec<_> = (0..near.len()).map(|_| graph.add_node(())).collect();
+    for (a, n) in near.clone().enumerate() {
+        for &b in &n.others {
             graph.add_edge(nodes[a], nodes[b as usize], ());
         }
     }
@@ -66,10 +124,7 @@ pub fn schedule(topo: &Topology, patches: &[Patch]) -> Schedule {
         colours[colouring[node]].push(p as u32);
     }
     colours.retain(|c| !c.is_empty());
-    Schedule {
-        colours,
-        halo: near.into_iter().map(|(_, h)| h).collect(),
-    }
+    (colours, near.map(|n| n.halo).collect())
 }
 
 /// The vertices outside `p`'s owned range, ring by ring (ring 1 first), up to `depth` rings.
@@ -237,5 +292,32 @@ mod tests {
         // Each patch's halo: 2 rings on each side of a ladder, 2 vertices per ring.
         assert_eq!(s.halo[3], 8);
         assert_eq!(s.halo[0], 4);
+        // The 2-ring stencils read 3 rings.
+        assert_eq!(s.ring_halo[3], 12);
+        assert_eq!(s.ring_halo[0], 6);
+    }
+
+    #[test]
+    fn patches_of_one_ring_colour_are_more_than_5_rings_apart() {
+        // Patches of 4 vertices (2 rungs) on a ladder: ring distance between rungs is their
+        // index difference, so the owned ranges of patches p and q are 2|p − q| − 1 rings apart.
+        let tris = ladder(120);
+        let topo = Topology::build(240, &tris).unwrap();
+        let ps = partition::patches(240, &tris, 4);
+        let s = schedule(&topo, &ps);
+        let ring_colour = |p: u32| s.ring_colours.iter().position(|c| c.contains(&p)).unwrap();
+        let edge_colour = |p: u32| s.colours.iter().position(|c| c.contains(&p)).unwrap();
+        for p in 0..ps.len() as u32 {
+            for q in p + 1..(p + 4).min(ps.len() as u32) {
+                // 1, 3 and 5 rings apart: conflicts for the ring stencils.
+                assert_ne!(ring_colour(p), ring_colour(q), "{p} {q}");
+            }
+            for q in p + 1..(p + 3).min(ps.len() as u32) {
+                assert_ne!(edge_colour(p), edge_colour(q), "{p} {q}");
+            }
+        }
+        // 3 vertices apart is 5 rings: conflicts for ring stencils only; the colourings differ.
+        assert!(s.ring_colours.len() > s.colours.len());
+        assert_eq!(s.ring_colours.iter().map(Vec::len).sum::<usize>(), ps.len());
     }
 }

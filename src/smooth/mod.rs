@@ -8,6 +8,7 @@
 //! | [`Method::Lem`] | local energy minimisation on edge stencils | Liu et al. §2.3, eq. 7–9 |
 //! | [`Method::Vcs`] | edge stencils + 2-step volume restoration | Liu et al. §3, §3.1 |
 //! | [`Method::VcsTriangle`] | the same on triangle stencils | Liu et al. §3.2 |
+//! | [`Method::VcsLowpass`] | Taubin's λ\|μ displacement + exact volume restoration on 2-ring stencils | [`lowpass`], docs/quality-research.md |
 //!
 //! Umbrella operator: `L(v) = (1/deg v) Σ_{u∈N(v)} p_u − p_v`. Fixed vertices (see
 //! [`crate::topology`]) never move; a stencil with a fixed free vertex is skipped and counted.
@@ -18,12 +19,14 @@ use std::str::FromStr;
 use glam::DVec3;
 
 pub mod laplacian;
+pub mod lowpass;
 pub mod stencil;
 pub mod tiled;
 
 pub use crate::topology::Topology;
 
-/// A smoothing method, selectable by name (`laplacian`, `taubin`, `lem`, `vcs`, `vcs-triangle`).
+/// A smoothing method, selectable by name (`laplacian`, `taubin`, `lem`, `vcs`, `vcs-triangle`,
+/// `vcs-lowpass`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Method {
@@ -33,6 +36,9 @@ pub enum Method {
     #[default]
     Vcs,
     VcsTriangle,
+    /// Taubin's λ|μ displacement spread over 2-ring stencils, each restoring its faces' volume
+    /// exactly (see [`lowpass`]).
+    VcsLowpass,
 }
 
 impl Method {
@@ -41,13 +47,19 @@ impl Method {
         matches!(self, Method::Laplacian | Method::Taubin)
     }
 
+    /// `vcs`, `vcs-triangle` and `vcs-lowpass`: every stencil restores its local volume exactly.
+    pub fn keeps_volume(self) -> bool {
+        matches!(self, Method::Vcs | Method::VcsTriangle | Method::VcsLowpass)
+    }
+
     /// Every method, in documentation order.
-    pub const ALL: [Method; 5] = [
+    pub const ALL: [Method; 6] = [
         Method::Laplacian,
         Method::Taubin,
         Method::Lem,
         Method::Vcs,
         Method::VcsTriangle,
+        Method::VcsLowpass,
     ];
 
     /// The method's command-line name.
@@ -58,12 +70,16 @@ impl Method {
             Method::Lem => "lem",
             Method::Vcs => "vcs",
             Method::VcsTriangle => "vcs-triangle",
+            Method::VcsLowpass => "vcs-lowpass",
         }
     }
 
     /// Whether the method works stencil by stencil (Gauss–Seidel) rather than vertex-wise (Jacobi).
     pub fn is_stencil(self) -> bool {
-        matches!(self, Method::Lem | Method::Vcs | Method::VcsTriangle)
+        matches!(
+            self,
+            Method::Lem | Method::Vcs | Method::VcsTriangle | Method::VcsLowpass
+        )
     }
 }
 
@@ -97,8 +113,8 @@ impl FromStr for Method {
 /// |---|---|---|
 /// | `method` | [`Method::Vcs`] | — |
 /// | `iterations` | 10 | every method |
-/// | `lambda` | 0.5 | `laplacian` (its step), `taubin` (its first step) |
-/// | `mu` | −0.53 | `taubin` (its second step; negative, `|μ| > λ`) |
+/// | `lambda` | 0.5 | `laplacian` (its step), `taubin` and `vcs-lowpass` (their first step) |
+/// | `mu` | −0.53 | `taubin` and `vcs-lowpass` (their second step; negative, `|μ| > λ`) |
 /// | `reject_energy_increase` | false | `lem`, `vcs`, `vcs-triangle` |
 /// | `crease_angle` | none | every method: vertices on edges whose faces' normals differ by more than this many degrees (measured on the input) are fixed |
 /// | `max_deviation` | none | every method: no vertex ends farther than this from its input position (see below) |

@@ -278,7 +278,7 @@ fn merge_rows<const N: usize>(lists: [&[u32]; N], mut row: impl FnMut(u32, u8)) 
 
 /// The two corners of `tri` after `v`, in the face's cyclic order (`v` must be a corner).
 #[inline]
-fn after(tri: [u32; 3], v: u32) -> (u32, u32) {
+pub(crate) fn after(tri: [u32; 3], v: u32) -> (u32, u32) {
     if tri[0] == v {
         (tri[1], tri[2])
     } else if tri[1] == v {
@@ -396,7 +396,7 @@ fn volume_translation<const N: usize, P: Field + ?Sized>(
 /// size before the step, the face's share of the yardstick, to `scale`.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn shared_face(
+pub(crate) fn shared_face(
     p: DVec3,
     q: DVec3,
     r: DVec3,
@@ -429,7 +429,7 @@ fn shared_face(
 /// The translation `w = −n ΔV / |n|²`, or `None` when the gradient is degenerate: it cancels out
 /// against its faces' own (|n|² ≪ Σ|n_t|²).
 #[inline]
-fn translation(dv: f64, n: DVec3, scale: f64) -> Option<DVec3> {
+pub(crate) fn translation(dv: f64, n: DVec3, scale: f64) -> Option<DVec3> {
     let nn = n.length_squared();
     // Negated so that a NaN counts as degenerate.
     #[allow(clippy::neg_cmp_op_on_partial_ord)]
