@@ -425,7 +425,7 @@ fn batch_certifies_the_controls_and_slurm_script_repeats_them() {
 }
 
 /// The cluster engine's ranks fix the same creases as one process, and a plan kept without
-/// creases is not reused for a run with them; a deviation bound is refused there (not yet).
+/// creases is not reused for a run with them.
 #[test]
 fn the_ranks_of_the_cluster_engine_keep_the_creases() {
     let dir = tempfile::tempdir().unwrap();
@@ -483,13 +483,82 @@ fn the_ranks_of_the_cluster_engine_keep_the_creases() {
         std::fs::read(&out).unwrap() == expected,
         "stale plan reused"
     );
-    let bounded = Options {
-        max_deviation: Some(0.1),
-        ..opts
-    };
-    let e = run_ranks(1, &input, &out, &bounded, &engine_settings(64, 1), &kept)
-        .remove(0)
-        .unwrap_err()
-        .to_string();
-    assert!(e.contains("max_deviation"), "{e}");
+}
+
+/// A deviation bound and `vcs-lowpass` in the cluster engine: 1–3 ranks write the bytes of the
+/// single-process engine, also when a kept plan is resumed after an interrupted run; a kept plan
+/// without the bound is not reused for a run with it.
+#[test]
+fn the_ranks_of_the_cluster_engine_keep_the_deviation_bound_and_run_vcs_lowpass() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("sphere.ply");
+    io::write_mesh(&input, &noisy_sphere(3, 0.3, 11)).unwrap();
+    for method in [Method::Vcs, Method::Taubin, Method::VcsLowpass] {
+        for max_deviation in [None, Some(0.004)] {
+            let opts = Options {
+                method,
+                iterations: 4,
+                max_deviation,
+                ..Options::default()
+            };
+            let what = format!("{method}, bound {max_deviation:?}");
+            let reference = dir.path().join("plain.ply");
+            let report = engine::run_file(
+                &input,
+                &reference,
+                &opts,
+                &engine_settings(48, 2),
+                &mut Quiet,
+            )
+            .unwrap();
+            let limited: u64 = report
+                .records
+                .iter()
+                .map(|r| r.stencils.deviation_limited)
+                .sum();
+            if max_deviation.is_some() && method.is_stencil() {
+                assert!(limited > 0, "{what}: the bound limited nothing");
+            }
+            let expected = std::fs::read(&reference).unwrap();
+            for ranks in [1, 2, 3] {
+                let out = dir.path().join(format!("ranks-{ranks}.ply"));
+                let work = dir.path().join(format!("ranks-{ranks}.work"));
+                run_ranks(
+                    ranks,
+                    &input,
+                    &out,
+                    &opts,
+                    &engine_settings(48, 1),
+                    &cluster_settings(&work, false, 2),
+                )
+                .remove(0)
+                .unwrap();
+                assert!(
+                    std::fs::read(&out).unwrap() == expected,
+                    "{what}: {ranks} ranks differ from the single-process engine"
+                );
+                assert!(!work.exists(), "{what}: work directory left behind");
+            }
+            // Two iterations kept, then resumed to four on another rank count.
+            let work = dir.path().join("resumed.work");
+            let out = dir.path().join("resumed.ply");
+            let kept = cluster_settings(&work, true, 1);
+            let half = Options {
+                iterations: 2,
+                ..opts
+            };
+            run_ranks(3, &input, &out, &half, &engine_settings(48, 1), &kept)
+                .remove(0)
+                .unwrap();
+            let resumed = run_ranks(2, &input, &out, &opts, &engine_settings(48, 1), &kept)
+                .remove(0)
+                .unwrap();
+            assert_eq!(resumed.cluster.unwrap().resumed_after, 2, "{what}");
+            assert!(
+                std::fs::read(&out).unwrap() == expected,
+                "{what}: the resumed run differs"
+            );
+            std::fs::remove_dir_all(&work).unwrap();
+        }
+    }
 }

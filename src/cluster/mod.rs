@@ -77,21 +77,6 @@ pub fn run_file(
     observer: &mut dyn Observer,
 ) -> Result<Report> {
     opts.check()?;
-    if opts.max_deviation.is_some() {
-        // The ranks would need the input positions beside the checkpoint slots.
-        return Err(Error::parameter(
-            "max_deviation",
-            "is not supported by the cluster engine yet",
-        ));
-    }
-    if opts.method == crate::smooth::Method::VcsLowpass {
-        // Its ranks would need the ring colouring in the stored plan and the shares' halo
-        // exchanged before each sweep: not built yet.
-        return Err(Error::parameter(
-            "method",
-            "vcs-lowpass does not run in the cluster engine yet",
-        ));
-    }
     if cluster.checkpoint_every == 0 {
         return Err(Error::parameter("checkpoint_every", "must be at least 1"));
     }
@@ -284,7 +269,7 @@ fn ensure_plan(
     // Measured always: a resumed run may ask for a report that the first run did not.
     let input_stats = Some(new_plan.info(&mesh.source));
     drop(mesh);
-    work.write_plan(&new_plan, key, input_stats)
+    work.write_plan(&new_plan, key, input_stats, opts.max_deviation.is_some())
 }
 
 /// Rank 0: the input with the final positions, written atomically; output statistics if asked.
@@ -540,6 +525,11 @@ impl<'a> RankRun<'a> {
         observer: &mut dyn Observer,
     ) -> Result<(StateDoc, Traffic)> {
         let [mut pos, mut scratch, mut prev] = arrays;
+        // Only the region's pages of the input are ever read (the free vertices' entries).
+        let input = match opts.max_deviation {
+            Some(_) => Some(self.work.map_input(self.plan.doc.vertices)?),
+            None => None,
+        };
         let patches: Vec<Patch> = (0..self.plan.doc.patches.len())
             .map(|p| self.plan.doc.patch(p))
             .collect();
@@ -549,7 +539,7 @@ impl<'a> RankRun<'a> {
             tris: &plan.triangles,
             patches: &patches,
             colours: &plan.doc.colours,
-            ring_colours: &[],
+            ring_colours: &plan.doc.ring_colours,
             prefetch: None,
             tiles: false,
         };
@@ -566,7 +556,7 @@ impl<'a> RankRun<'a> {
             pos: &mut pos,
             scratch: &mut scratch,
             prev: &mut prev,
-            input: &[],
+            input: input.as_deref().unwrap_or(&[]),
         };
         iterate(
             &mesh, buffers, opts, first, when, &reference, &mut self, observer,

@@ -11,6 +11,7 @@
 //!   iteration's positions go to the slot that `state.json` does not name; only when every rank
 //!   has written and synced its part does rank 0 switch `state.json` (atomic rename) to it. A run
 //!   killed at any moment therefore finds a complete slot for the iteration `state.json` names.
+//! - `input.f64`: the reordered input positions, only for a deviation bound (`max_deviation`).
 //!
 //! The directory must be on a file system every rank sees (for one machine, any directory).
 
@@ -31,6 +32,7 @@ use crate::topology::{Topology, TopologyStats};
 const FORMAT: u32 = 1;
 const PLAN: &str = "plan.json";
 const STATE: &str = "state.json";
+const INPUT: &str = "input.f64";
 
 /// What a plan was made from; a plan is reused only when all of it matches.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -69,9 +71,13 @@ impl PlanKey {
             "mu": opts.mu,
             "reject_energy_increase": opts.reject_energy_increase,
         });
-        // Creases are fixed in the stored topology; keys without them are as they were.
+        // Creases are fixed in the stored topology, the deviation bound needs the stored input
+        // positions; keys without them are as they were.
         if let Some(a) = opts.crease_angle {
             options["crease_angle"] = a.into();
+        }
+        if let Some(d) = opts.max_deviation {
+            options["max_deviation"] = d.into();
         }
         Ok(PlanKey {
             format: FORMAT,
@@ -98,6 +104,10 @@ pub struct PlanDoc {
     pub patches: Vec<[u32; 4]>,
     pub colours: Vec<Vec<u32>>,
     pub halo: Vec<u32>,
+    /// `vcs-lowpass`'s colouring (see [`crate::schedule::Schedule::ring_colours`]); empty in
+    /// plans made before it.
+    #[serde(default)]
+    pub ring_colours: Vec<Vec<u32>>,
     pub crossing_edge_stencils: u64,
     pub topology: TopologyStats,
     /// Input statistics, when the run that made the plan measured them.
@@ -173,12 +183,14 @@ impl WorkDir {
         write_json(&self.path(STATE), state)
     }
 
-    /// Store `made` (fresh from [`engine::Plan::new`]) as the plan, replacing whatever plan was there.
+    /// Store `made` (fresh from [`engine::Plan::new`]) as the plan, replacing whatever plan was
+    /// there; with `keep_input`, also its positions as `input.f64` (read by a deviation bound).
     pub fn write_plan(
         &self,
         made: &engine::Plan,
         key: PlanKey,
         input_stats: Option<MeshInfo>,
+        keep_input: bool,
     ) -> Result<()> {
         fs::create_dir_all(&self.dir).map_err(|e| Error::io(&self.dir, e))?;
         // The plan's marker goes first and comes back last: a half-written plan is never used.
@@ -202,6 +214,9 @@ impl WorkDir {
             let name = format!("positions-{slot}.f64");
             self.write_array(&name, &made.reordered.positions)?;
         }
+        if keep_input {
+            self.write_array(INPUT, &made.reordered.positions)?;
+        }
         self.write_state(&StateDoc::default())?;
         let stats = made.stats();
         let doc = PlanDoc {
@@ -222,6 +237,7 @@ impl WorkDir {
                 .collect(),
             colours: made.schedule.colours.clone(),
             halo: made.schedule.halo.clone(),
+            ring_colours: made.schedule.ring_colours.clone(),
             crossing_edge_stencils: stats.crossing_edge_stencils,
             topology: made.topology.stats,
             input_stats,
@@ -263,6 +279,7 @@ impl WorkDir {
             && doc
                 .colours
                 .iter()
+                .chain(&doc.ring_colours)
                 .flatten()
                 .all(|&p| (p as usize) < doc.patches.len());
         if !patches_ok {
@@ -275,6 +292,11 @@ impl WorkDir {
             doc,
             dir: self.dir.clone(),
         })
+    }
+
+    /// Map the input positions (stored for a deviation bound; read-only use).
+    pub fn map_input(&self, n: usize) -> Result<Buf<DVec3>> {
+        Buf::map_file(&self.path(INPUT), n)
     }
 
     /// Map the positions of `slot` (read-only use; private mapping).
@@ -311,6 +333,7 @@ impl WorkDir {
             "fixed.u8",
             "positions-0.f64",
             "positions-1.f64",
+            INPUT,
         ] {
             let _ = fs::remove_file(self.path(name));
         }

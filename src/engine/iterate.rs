@@ -362,6 +362,8 @@ impl Run<'_, '_> {
                 lowpass::shares_into(topo, pos, pair, out, first + at)
             })
         });
+        // A stencil of an owned vertex reaches two rings out, whose shares other processes own.
+        self.share.step_end(shares);
     }
 
     /// `laplacian` and `taubin`: rounds of Jacobi steps, ping-ponging between `pos` and
