@@ -36,7 +36,14 @@ struct Run {
 /// inward-oriented, with unreferenced vertices).
 fn runs(sphere: &Path, torus: &Path, big: &Path) -> Vec<Run> {
     let mut runs = Vec::new();
-    let methods = ["laplacian", "taubin", "lem", "vcs", "vcs-triangle"];
+    let methods = [
+        "laplacian",
+        "taubin",
+        "lem",
+        "vcs",
+        "vcs-triangle",
+        "vcs-lowpass",
+    ];
     for (m, t) in methods
         .iter()
         .flat_map(|m| ["1", "2"].into_iter().map(move |t| (*m, t)))
@@ -61,7 +68,7 @@ fn runs(sphere: &Path, torus: &Path, big: &Path) -> Vec<Run> {
             args,
         });
     }
-    let more: [(&'static str, &Path, &'static str, &'static [&'static str]); 16] = [
+    let more: [(&'static str, &Path, &'static str, &'static [&'static str]); 19] = [
         (
             "sphere4-vcs-reject",
             sphere,
@@ -230,6 +237,55 @@ fn runs(sphere: &Path, torus: &Path, big: &Path) -> Vec<Run> {
                 "2",
                 "--transfer",
                 "smooth",
+            ],
+        ),
+        (
+            "bunny-vcs-lowpass-creases-deviation",
+            &scan("stanford-bunny.ply"),
+            "ply",
+            &[
+                "--method",
+                "vcs-lowpass",
+                "--iterations",
+                "3",
+                "--threads",
+                "2",
+                "--patch-size",
+                "4096",
+                "--crease-angle",
+                "40",
+                "--max-deviation",
+                "0.0005",
+            ],
+        ),
+        (
+            "fertility-vcs-deviation",
+            &scan("fertility-9k.ply"),
+            "ply",
+            &[
+                "--method",
+                "vcs",
+                "--iterations",
+                "4",
+                "--max-deviation",
+                "0.3",
+                "--patch-size",
+                "1000",
+            ],
+        ),
+        (
+            "kitten-taubin-creases-deviation",
+            &scan("kitten-25k.ply"),
+            "ply",
+            &[
+                "--method",
+                "taubin",
+                "--iterations",
+                "5",
+                "--crease-angle",
+                "30",
+                "--max-deviation",
+                "0.05",
             ],
         ),
         (

@@ -41,25 +41,115 @@ pub const RING_RADIUS: usize = 2;
 // - it reads the positions of every corner of the faces touching `F_v` (within 3 rings) and the
 //   step-1 shares of `F_v`, which are computed before the sweep and only read during it.
 
+/// A ring stencil's members: ascending, with a hash set beside them for membership, because a
+/// ring stencil asks "is this corner free?" for every face it touches (about six per member), and
+/// the 2-ring is found through its vertices' neighbour lists, which repeat most vertices.
+/// Scratch space: one per thread, reused from stencil to stencil.
+#[derive(Debug, Clone)]
+pub struct Ring {
+    /// The members, ascending (after [`ring_of`]).
+    pub members: Vec<u32>,
+    /// Open addressing, linear probing: `stamp << 32 | vertex`; a slot of another stamp is empty,
+    /// so clearing is one increment.
+    slots: Vec<u64>,
+    stamp: u32,
+}
+
+impl Default for Ring {
+    fn default() -> Ring {
+        Ring {
+            members: Vec::with_capacity(64),
+            slots: vec![0; 128],
+            stamp: 1,
+        }
+    }
+}
+
+impl Ring {
+    fn clear(&mut self) {
+        self.members.clear();
+        self.stamp = self.stamp.wrapping_add(1);
+        if self.stamp == 0 {
+            self.slots.fill(0);
+            self.stamp = 1;
+        }
+    }
+
+    /// The slot of `v`: where it is, or the empty slot where it would go.
+    #[inline(always)]
+    fn slot(&self, v: u32) -> (usize, bool) {
+        let mask = self.slots.len() - 1;
+        let bits = self.slots.len().trailing_zeros();
+        // Fibonacci hashing: the top bits of the product spread consecutive ids.
+        let mut at = (v.wrapping_mul(0x9E37_79B9) >> (32 - bits)) as usize;
+        let want = (self.stamp as u64) << 32 | v as u64;
+        loop {
+            let e = self.slots[at];
+            if e == want {
+                return (at, true);
+            }
+            if (e >> 32) as u32 != self.stamp {
+                return (at, false);
+            }
+            at = (at + 1) & mask;
+        }
+    }
+
+    #[inline(always)]
+    fn insert(&mut self, v: u32) {
+        let (at, found) = self.slot(v);
+        if !found {
+            self.slots[at] = (self.stamp as u64) << 32 | v as u64;
+            self.members.push(v);
+            if self.members.len() * 2 > self.slots.len() {
+                self.grow();
+            }
+        }
+    }
+
+    /// Twice the slots, the members placed again (a vertex of unusually high valence).
+    fn grow(&mut self) {
+        self.slots = vec![0; self.slots.len() * 2];
+        self.stamp = 1;
+        for k in 0..self.members.len() {
+            let v = self.members[k];
+            let (at, _) = self.slot(v);
+            self.slots[at] = 1 << 32 | v as u64;
+        }
+    }
+
+    /// Whether `v` is a member.
+    #[inline(always)]
+    pub fn contains(&self, v: u32) -> bool {
+        self.slot(v).1
+    }
+}
+
 /// `F_v` into `ring` (cleared first): `v` and the movable vertices reachable from `v` in at most
 /// [`RING_RADIUS`] steps through movable vertices, ascending; empty when `v` is fixed. The
 /// relation is symmetric (a path of movable vertices reversed is one), so `u ∈ F_v ⇔ v ∈ F_u`
 /// and the number of stencils holding `u` is `|F_u|`: no per-vertex count has to be stored.
-pub fn ring_of(topo: &Topology, v: u32, ring: &mut Vec<u32>) {
+/// With `sorted` false the members stay in the order found (enough for counting them).
+pub fn ring_of(topo: &Topology, v: u32, ring: &mut Ring, sorted: bool) {
     const { assert!(RING_RADIUS == 2, "ring_of walks exactly two rings") };
     ring.clear();
     if topo.is_fixed(v) {
         return;
     }
-    ring.push(v);
+    ring.insert(v);
     for &u in topo.neighbors(v) {
         if !topo.is_fixed(u) {
-            ring.push(u);
-            ring.extend(topo.neighbors(u).iter().filter(|&&w| !topo.is_fixed(w)));
+            ring.insert(u);
+            for &w in topo.neighbors(u) {
+                if !topo.is_fixed(w) {
+                    ring.insert(w);
+                }
+            }
         }
     }
-    ring.sort_unstable();
-    ring.dedup();
+    if sorted {
+        ring.members.sort_unstable();
+    }
 }
 
 /// Step 1's share for the vertices `first .. first + out.len()`: `(t_u − p_u) / |F_u|`, with `t`
@@ -73,14 +163,15 @@ pub fn shares_into(
     out: &mut [DVec3],
     first: usize,
 ) {
-    let mut ring = Vec::with_capacity(32);
+    let mut ring = Ring::default();
     for (k, o) in out.iter_mut().enumerate() {
         let u = first + k;
-        ring_of(topo, u as u32, &mut ring);
-        *o = if ring.is_empty() {
+        ring_of(topo, u as u32, &mut ring, false);
+        let count = ring.members.len();
+        *o = if count == 0 {
             DVec3::ZERO
         } else {
-            (taubin[u] - pos[u]) * (1.0 / ring.len() as f64)
+            (taubin[u] - pos[u]) * (1.0 / count as f64)
         };
     }
 }
@@ -100,17 +191,18 @@ pub fn apply_ring<P: Field + ?Sized, D: Field + ?Sized>(
     shares: &D,
     v: u32,
     deviation: Option<stencil::Deviation>,
-    ring: &mut Vec<u32>,
+    ring: &mut Ring,
 ) -> Outcome {
-    ring_of(topo, v, ring);
-    if ring.is_empty() {
+    ring_of(topo, v, ring, true);
+    let ring = &*ring;
+    if ring.members.is_empty() {
         return Outcome::SkippedFixed;
     }
     let origin = pos.get(v);
-    let free = |u: u32| ring.binary_search(&u).is_ok();
+    let free = |u: u32| ring.contains(u);
     let share = |free: bool, u: u32| if free { shares.get(u) } else { DVec3::ZERO };
     let (mut dv, mut n, mut scale) = (0.0, DVec3::ZERO, 0.0);
-    for &a in ring.iter() {
+    for &a in &ring.members {
         for &t in topo.faces_of(a) {
             let (b, c) = stencil::after(triangles[t as usize], a);
             let (b_free, c_free) = (free(b), free(c));
@@ -136,7 +228,11 @@ pub fn apply_ring<P: Field + ?Sized, D: Field + ?Sized>(
     let Some(w) = stencil::translation(dv, n, scale) else {
         return Outcome::SkippedDegenerate;
     };
-    if !ring.iter().all(|&u| (shares.get(u) + w).is_finite()) {
+    if !ring
+        .members
+        .iter()
+        .all(|&u| (shares.get(u) + w).is_finite())
+    {
         return Outcome::SkippedDegenerate;
     }
     if let Some(bound) = deviation {
@@ -144,11 +240,11 @@ pub fn apply_ring<P: Field + ?Sized, D: Field + ?Sized>(
         let beyond = |u: u32| {
             (pos.get(u) + shares.get(u) + w - bound.input[u as usize]).length_squared() > limit2
         };
-        if ring.iter().any(|&u| beyond(u)) {
+        if ring.members.iter().any(|&u| beyond(u)) {
             return Outcome::DeviationLimited;
         }
     }
-    for &u in ring.iter() {
+    for &u in &ring.members {
         pos.add(u, shares.get(u) + w);
     }
     Outcome::Applied
@@ -165,7 +261,7 @@ pub fn sweep_rings<P: Field + ?Sized, D: Field + ?Sized>(
     deviation: Option<stencil::Deviation>,
 ) -> SweepStats {
     let mut stats = SweepStats::default();
-    let mut ring = Vec::with_capacity(32);
+    let mut ring = Ring::default();
     for v in owned {
         let outcome = apply_ring(topo, triangles, pos, shares, v, deviation, &mut ring);
         stencil::count(&mut stats, outcome);
@@ -658,17 +754,40 @@ mod tests {
         mesh.triangles = tris.clone().into();
         let topo = Topology::build(mesh.positions.len(), &tris).unwrap();
         let st = RingStencils::build(&topo, RING_RADIUS);
-        let (mut a, mut b) = (Vec::new(), Vec::new());
+        let (mut a, mut b) = (Ring::default(), Ring::default());
         for v in 0..topo.len() as u32 {
-            ring_of(&topo, v, &mut a);
+            ring_of(&topo, v, &mut a, true);
             let mut want = st.of(v).to_vec();
             want.sort_unstable();
-            assert_eq!(a, want, "vertex {v}");
-            for &u in &a {
+            assert_eq!(a.members, want, "vertex {v}");
+            for &u in &a.members {
                 assert!(!topo.is_fixed(u));
-                ring_of(&topo, u, &mut b);
-                assert!(b.binary_search(&v).is_ok());
+                ring_of(&topo, u, &mut b, false);
+                assert!(b.contains(v));
+                assert!(b.members.contains(&v));
             }
+            for u in 0..topo.len() as u32 {
+                assert_eq!(a.contains(u), want.contains(&u), "{u} in the ring of {v}");
+            }
+        }
+    }
+
+    /// The ring's set through growth (a vertex of high valence) and many clears.
+    #[test]
+    fn a_ring_grows_and_clears() {
+        let mut ring = Ring::default();
+        for round in 0..300u32 {
+            ring.clear();
+            let size = if round % 50 == 0 { 1000 } else { 20 };
+            let members: Vec<u32> = (0..size).map(|k| k * 7919 + round).collect();
+            for &v in &members {
+                ring.insert(v);
+                ring.insert(v);
+            }
+            assert_eq!(ring.members, members);
+            assert!(members.iter().all(|&v| ring.contains(v)));
+            assert!(!ring.contains(size * 7919 + round));
+            assert!(!ring.contains(round + 1));
         }
     }
 
