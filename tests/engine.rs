@@ -430,6 +430,26 @@ fn vcs_lowpass_keeps_volume_is_deterministic_and_follows_the_prototype() {
         "threads change the result"
     );
     assert!(report.plan.patches > 5, "{:?}", report.plan);
+    // The report describes the ring colouring the method ran on, wider than the edge colouring.
+    let mut edge = input.clone();
+    let vcs = Options {
+        method: Method::Vcs,
+        iterations: 1,
+        ..opts
+    };
+    let settings = EngineSettings {
+        patch_size: 700,
+        ..threads(1)
+    };
+    let edge_plan = engine::smooth_with(&mut edge, &vcs, &settings, &mut Quiet)
+        .unwrap()
+        .plan;
+    assert!(
+        report.plan.halo_mean > edge_plan.halo_mean && report.plan.colours >= edge_plan.colours,
+        "ring {:?}, edge {:?}",
+        report.plan,
+        edge_plan
+    );
     let v1 = volume_about(&one, origin);
     assert!(
         rel(v1, v0) <= 1e-9,

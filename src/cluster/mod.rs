@@ -179,10 +179,15 @@ pub fn run_file(
         input_stats: engine.with_stats.then(|| doc.input_stats.clone()).flatten(),
         output_stats,
         plan: pool.install(|| {
+            let (colours, halo) = if opts.method == crate::smooth::Method::VcsLowpass {
+                (&doc.ring_colours, &doc.ring_halo)
+            } else {
+                (&doc.colours, &doc.halo)
+            };
             PlanStats::new(
                 doc.key.patch_size,
-                doc.colours.len(),
-                &doc.halo,
+                colours.len(),
+                halo,
                 doc.crossing_edge_stencils,
             )
         }),

@@ -108,6 +108,8 @@ pub struct PlanDoc {
     /// plans made before it.
     #[serde(default)]
     pub ring_colours: Vec<Vec<u32>>,
+    #[serde(default)]
+    pub ring_halo: Vec<u32>,
     pub crossing_edge_stencils: u64,
     pub topology: TopologyStats,
     /// Input statistics, when the run that made the plan measured them.
@@ -218,7 +220,8 @@ impl WorkDir {
             self.write_array(INPUT, &made.reordered.positions)?;
         }
         self.write_state(&StateDoc::default())?;
-        let stats = made.stats();
+        // The crossing edge stencils do not depend on the method.
+        let stats = made.stats(crate::Method::Vcs);
         let doc = PlanDoc {
             key,
             vertices: made.reordered.positions.len(),
@@ -238,6 +241,7 @@ impl WorkDir {
             colours: made.schedule.colours.clone(),
             halo: made.schedule.halo.clone(),
             ring_colours: made.schedule.ring_colours.clone(),
+            ring_halo: made.schedule.ring_halo.clone(),
             crossing_edge_stencils: stats.crossing_edge_stencils,
             topology: made.topology.stats,
             input_stats,

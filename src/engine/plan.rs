@@ -9,6 +9,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use super::reduce;
+use crate::Method;
 use crate::error::{Error, Result};
 use crate::mesh::Storage;
 use crate::partition::{self, Patch, Reordered};
@@ -196,16 +197,22 @@ impl Plan {
         reduce::geometry(positions, triangles, &self.topology)
     }
 
-    /// The decomposition's figures for reports.
-    pub fn stats(&self) -> PlanStats {
+    /// The decomposition's figures for reports, with the colouring and halo `method` runs on
+    /// (`vcs-lowpass` has its own, see [`Schedule::ring_colours`]).
+    pub fn stats(&self, method: Method) -> PlanStats {
+        let (colours, halo) = if method == Method::VcsLowpass {
+            (&self.schedule.ring_colours, &self.schedule.ring_halo)
+        } else {
+            (&self.schedule.colours, &self.schedule.halo)
+        };
         let patch_size = match self.layout {
             Layout::Patches(size) => size,
             Layout::Whole => self.len(),
         };
         PlanStats::new(
             patch_size,
-            self.schedule.colours.len(),
-            &self.schedule.halo,
+            colours.len(),
+            halo,
             self.patches
                 .par_iter()
                 .map(|p| p.crossing_edges(&self.topology))

@@ -221,7 +221,7 @@ pub(crate) fn run_file_with(
         // the write, so their memory is given back while smoothing (the peak of an in-core run).
         let n = mesh.positions.len();
         mesh.positions = Buf::default();
-        let smoothed = smooth_planned(&mut plan, engine, &mesh.source, &mut t, |plan| {
+        let smoothed = smooth_planned(&mut plan, opts, engine, &mesh.source, &mut t, |plan| {
             smooth(plan, &storage, observer)
         })?;
         mesh.positions = storage.zeroed(n)?;
@@ -308,7 +308,7 @@ pub(crate) fn run_mesh(
         let mut plan = Plan::new(&storage, &mesh.positions, &mesh.triangles, layout)?;
         plan.pin(&pins);
         plan.crease(opts.crease_angle);
-        let mut smoothed = smooth_planned(&mut plan, engine, &mesh.source, &mut t, |plan| {
+        let mut smoothed = smooth_planned(&mut plan, opts, engine, &mesh.source, &mut t, |plan| {
             plan.smooth(&storage, opts, engine.statistics, observer)
         })?;
         let clock = Instant::now();
@@ -341,6 +341,7 @@ struct Smoothed {
 /// timed into `t`.
 fn smooth_planned(
     plan: &mut Plan,
+    opts: &Options,
     engine: &EngineSettings,
     source: &crate::mesh::Source,
     t: &mut PhaseTimings,
@@ -359,7 +360,7 @@ fn smooth_planned(
         records,
         input_stats,
         output_stats: None,
-        plan: plan.stats(),
+        plan: plan.stats(opts.method),
     })
 }
 

@@ -455,7 +455,8 @@ fn run_threads(
     let storage = Storage::heap();
     phase(format!("{}: preparing on {threads} threads", size.label));
     let (mut plan, prepare) = pool.install(|| prepare(settings, &storage, mesh))?;
-    let stats = plan.stats();
+    // The edge colouring's figures (the sizes' table has one plan column for all methods).
+    let stats = plan.stats(Method::Vcs);
     let triangles = mesh.triangles.len() as f64;
     let mut methods = Vec::with_capacity(settings.methods.len());
     for &method in &settings.methods {
