@@ -76,7 +76,7 @@ pub struct MethodParams {
     /// Creases: edges whose two faces' normals differ by more than DEG degrees, in (0, 180), on the input; their vertices stay where they are, corners included (every method) [default: none].
     #[arg(long, value_name = "DEG", value_parser = crease_angle, allow_hyphen_values = true)]
     pub crease_angle: Option<f64>,
-    /// No vertex ends farther than D (model units, > 0) from its input position: lem, vcs and vcs-triangle skip a stencil that would move one farther (the volume stays exact); laplacian and taubin clamp each vertex (they do not keep the volume) [default: none].
+    /// No vertex ends farther than D (model units, > 0) from its input position: the stencil methods skip a stencil that would move one farther (the volume stays exact); laplacian and taubin clamp each vertex (they do not keep the volume) [default: none].
     #[arg(long, value_name = "D", value_parser = length, allow_hyphen_values = true)]
     pub max_deviation: Option<f64>,
 }
