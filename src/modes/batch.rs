@@ -217,6 +217,7 @@ pub struct MeshRow {
     pub input: String,
     pub output: String,
     pub method: String,
+    /// Iterations that ran (with `--iterations auto`, where the automatic stop ended the run).
     pub iterations: usize,
     pub vertices: usize,
     pub triangles: usize,
