@@ -39,7 +39,7 @@ pub struct SmoothingArgs {
     /// Smoothing method.
     #[arg(long, value_enum, default_value_t = Method::Vcs)]
     pub method: Method,
-    /// Number of iterations (0 only converts the file's format), or 'auto': stop when the noise is gone, measured on the input (see the README), after at most 100 iterations.
+    /// Number of iterations (0 only converts the file's format), or 'auto': stop when the noise is gone, after at most 100 iterations. 'auto' estimates the noise from the input (the spread of the second difference of the normal Laplacian) and stops when an iteration removes more along the normals than noise explains, or when little noise is left to remove (see the README).
     #[arg(
         long,
         value_name = "N|auto",

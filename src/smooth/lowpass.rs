@@ -7,7 +7,8 @@
 //!   `stencil.rs`);
 //! - the research prototype ([`RingStencils`], [`lowpass_iteration`]: sequential, whole mesh,
 //!   its own volume arithmetic), kept as the independent reference the kernel is tested against,
-//!   and [`AutoStop`] for `--iterations auto` (not in the engine yet).
+//!   and [`AutoStop`], the sequential prototype of `--iterations auto`, the reference the
+//!   engine's rule (`crate::engine::auto`) is tested against.
 //!
 //! One iteration on positions `P`:
 //! 1. `D = T(P) − P`, `T` = Taubin's λ then μ umbrella step, Jacobi, fixed vertices kept.
