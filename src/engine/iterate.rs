@@ -183,9 +183,9 @@ pub struct Buffers<'b> {
 /// says relative to `reference`; with `opts.auto_stop`, from the first and only up to the one
 /// at which `buf.auto` stops the run (an automatically stopped run measures the displacement of
 /// every iteration, and the volume and area of its last one whatever `when` says). Returns their
-/// records, one per iteration, which grow as the
-/// iterations run (a record the memory cannot hold is an [`Error::Resource`](crate::Error), not
-/// an abort; file runs bound them up front, see [`memory::check_records`](super::memory)).
+/// records, one per iteration, which grow as the iterations run (a record the memory cannot hold
+/// is an [`Error::Resource`](crate::Error), not an abort; file runs bound them up front, see
+/// [`memory::check_records`](super::memory)).
 #[allow(clippy::too_many_arguments)]
 pub fn iterate(
     mesh: &Sweep,
@@ -307,7 +307,8 @@ impl Run<'_, '_> {
         };
         for it in first..=total {
             let wanted = self.when.wanted(it, total);
-            // The stencil methods' automatic stop reads every iteration's displacement.
+            // An automatically stopped run measures every displacement (the rule of lem, vcs and
+            // vcs-triangle reads it).
             let measure = wanted || auto.is_some();
             let start = Instant::now();
             if lowpass {

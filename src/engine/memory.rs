@@ -105,9 +105,9 @@ pub fn in_core_bytes_of_file_with(size: u64, opts: &crate::Options) -> u64 {
     size.saturating_mul(per_triangle) / FILE_BYTES_PER_TRIANGLE
 }
 
-/// Memory a job needs to smooth a file of `size` bytes in core, the process included.
-pub fn job_bytes_of_file(size: u64) -> u64 {
-    in_core_bytes_of_file(size).saturating_add(BASE_BYTES)
+/// Memory a job needs to smooth a file of `size` bytes in core with `opts`, the process included.
+pub fn job_bytes_of_file(size: u64, opts: &crate::Options) -> u64 {
+    in_core_bytes_of_file_with(size, opts).saturating_add(BASE_BYTES)
 }
 
 /// Memory to smooth a mesh of `triangles` that is also held in memory beside the plan (`bench`).
