@@ -83,7 +83,10 @@ fn noisy_scans_stop_before_the_cap_with_every_method() {
             for method in Method::ALL {
                 let (report, stats) = run(&noisy, method);
                 let it = report.iterations_run;
-                assert!((2..DEFAULT_CAP).contains(&it), "{name} {sigma} {method}: {it}");
+                assert!(
+                    (2..DEFAULT_CAP).contains(&it),
+                    "{name} {sigma} {method}: {it}"
+                );
                 assert_ne!(stats.stopped_by, StopReason::Cap);
                 if method.keeps_volume() {
                     let pct = report.records.last().unwrap().volume_pct;
@@ -373,7 +376,12 @@ fn bad_values_and_modes_that_refuse_auto_are_one_line_errors() {
         fails(
             &o,
             2,
-            &["--iterations", bad, "neither a whole number nor 'auto'"],
+            &[
+                "--iterations",
+                bad,
+                "not a whole number in 0..=",
+                "nor 'auto'",
+            ],
         );
     }
     fails(

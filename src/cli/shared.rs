@@ -93,7 +93,7 @@ fn iterations(s: &str) -> std::result::Result<Iterations, String> {
     }
     whole(s)
         .map(Iterations::Count)
-        .map_err(|_| format!("'{s}' is neither a whole number nor 'auto'"))
+        .map_err(|e| format!("{e}, nor 'auto'"))
 }
 
 /// Step sizes and stencil options shared by `smooth` and `curves`.
@@ -365,7 +365,11 @@ mod tests {
         assert_eq!(iterations("auto"), Ok(Iterations::Auto));
         for bad in ["autox", "Auto", "-1", "1.5", ""] {
             let e = iterations(bad).unwrap_err();
-            assert_eq!(e, format!("'{bad}' is neither a whole number nor 'auto'"));
+            let want = format!(
+                "'{bad}' is not a whole number in 0..={}, nor 'auto'",
+                usize::MAX
+            );
+            assert_eq!(e, want);
         }
         assert_eq!(Iterations::Auto.to_string(), "auto");
         assert_eq!(step_lambda("1"), Ok(1.0));
