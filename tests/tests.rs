@@ -5,6 +5,7 @@
 
 mod util;
 
+mod auto;
 mod batch;
 mod bench_cli;
 mod cli;

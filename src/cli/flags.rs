@@ -10,6 +10,7 @@ pub(super) const FLAGS: &[(&str, &str)] = &[
     // Smoothing (`Options`).
     ("method", "--method"),
     ("iterations", "--iterations"),
+    ("auto_stop", "--iterations auto"),
     ("lambda", "--lambda"),
     ("mu", "--mu"),
     ("crease_angle", "--crease-angle"),

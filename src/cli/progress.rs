@@ -7,6 +7,7 @@ use std::time::Duration;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use crate::engine::{IterationRecord, Observer};
+use crate::smooth::Options;
 
 /// Progress display for one command: a spinner for phases (reading, building topology, writing),
 /// a bar for iterations.
@@ -62,6 +63,27 @@ impl Progress {
             );
             bar.set_prefix(label.to_string());
             bar.set_length(total as u64);
+        }
+    }
+
+    /// Start the display of a run of `opts`: a bar of its iterations, or, when it stops
+    /// automatically, a counter that shows the cap as a cap (the run may end long before it).
+    pub fn smoothing(&self, opts: &Options) {
+        if !opts.auto_stop {
+            return self.iterations(opts.method.name(), opts.iterations);
+        }
+        if let Some(bar) = &self.bar {
+            bar.disable_steady_tick();
+            bar.set_message("");
+            bar.reset();
+            bar.set_style(
+                ProgressStyle::with_template(
+                    "{prefix}: iteration {pos} (stops when the noise is gone, at most {len}) {msg} [{elapsed}]",
+                )
+                .unwrap_or_else(|_| ProgressStyle::default_bar()),
+            );
+            bar.set_prefix(opts.method.name());
+            bar.set_length(opts.iterations as u64);
         }
     }
 

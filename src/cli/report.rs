@@ -7,11 +7,11 @@ use std::path::Path;
 use serde::Serialize;
 
 use super::output::stdout_error;
-use crate::engine::IterationRecord;
+use crate::engine::{IterationRecord, Report};
 use crate::error::Result;
 use crate::io::Format;
 use crate::metrics::MeshInfo;
-use crate::smooth::SweepStats;
+use crate::smooth::{Options, SweepStats};
 
 /// The program that wrote a report.
 #[derive(Debug, Clone, Serialize)]
@@ -129,6 +129,21 @@ impl Summary {
             stencils,
             seconds: records.iter().map(|r| r.seconds).sum(),
         }
+    }
+}
+
+/// The iterations a run of `opts` ran, for people: `10 iterations`, or with the automatic stop
+/// `14 iterations (auto: why it stopped; noise estimate σ̂, cap N)`.
+pub fn iterations_run(opts: &Options, run: &Report) -> String {
+    match &run.auto_stop {
+        Some(a) if opts.auto_stop => format!(
+            "{} (auto: {}; noise estimate {}, cap {})",
+            count(run.iterations_run, "iteration"),
+            a.stopped_by.describe(),
+            num(a.noise_estimate),
+            a.cap
+        ),
+        _ => count(opts.iterations, "iteration"),
     }
 }
 

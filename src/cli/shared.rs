@@ -39,15 +39,15 @@ pub struct SmoothingArgs {
     /// Smoothing method.
     #[arg(long, value_enum, default_value_t = Method::Vcs)]
     pub method: Method,
-    /// Number of iterations; 0 only converts the file's format.
+    /// Number of iterations (0 only converts the file's format), or 'auto': stop when the noise is gone, after at most 100 iterations. 'auto' estimates the noise from the input (the spread of the second difference of the normal Laplacian) and stops when an iteration removes more along the normals than noise explains, or when little noise is left to remove (see the README).
     #[arg(
         long,
-        value_name = "N",
-        default_value_t = 10,
+        value_name = "N|auto",
+        default_value = "10",
         allow_negative_numbers = true,
-        value_parser = whole
+        value_parser = iterations
     )]
-    pub iterations: usize,
+    pub iterations: Iterations,
     #[command(flatten)]
     pub params: MethodParams,
     #[command(flatten)]
@@ -57,8 +57,43 @@ pub struct SmoothingArgs {
 impl SmoothingArgs {
     /// The smoothing these flags ask for.
     pub fn options(&self) -> Options {
-        self.params.options(self.method, self.iterations)
+        match self.iterations {
+            Iterations::Count(n) => self.params.options(self.method, n),
+            Iterations::Auto => Options {
+                auto_stop: true,
+                ..self
+                    .params
+                    .options(self.method, crate::engine::auto::DEFAULT_CAP)
+            },
+        }
     }
+}
+
+/// `--iterations`: a count, or `auto` (the library's `auto_stop`, capped at
+/// [`crate::engine::auto::DEFAULT_CAP`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Iterations {
+    Count(usize),
+    Auto,
+}
+
+impl std::fmt::Display for Iterations {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Iterations::Count(n) => write!(f, "{n}"),
+            Iterations::Auto => f.write_str("auto"),
+        }
+    }
+}
+
+/// `--iterations` (clap value parser): a whole number or `auto`.
+fn iterations(s: &str) -> std::result::Result<Iterations, String> {
+    if s.trim() == "auto" {
+        return Ok(Iterations::Auto);
+    }
+    whole(s)
+        .map(Iterations::Count)
+        .map_err(|e| format!("{e}, nor 'auto'"))
 }
 
 /// Step sizes and stencil options shared by `smooth` and `curves`.
@@ -87,6 +122,7 @@ impl MethodParams {
         Options {
             method,
             iterations,
+            auto_stop: false,
             lambda: self.lambda,
             mu: self.mu,
             reject_energy_increase: self.reject_energy_increase,
@@ -325,6 +361,17 @@ mod tests {
             Err("'-1' is not a whole number in 1..=9".into())
         );
         assert!(whole_in(1, 9)("0").is_err() && whole_in(1, 9)("10").is_err());
+        assert_eq!(iterations(" 12"), Ok(Iterations::Count(12)));
+        assert_eq!(iterations("auto"), Ok(Iterations::Auto));
+        for bad in ["autox", "Auto", "-1", "1.5", ""] {
+            let e = iterations(bad).unwrap_err();
+            let want = format!(
+                "'{bad}' is not a whole number in 0..={}, nor 'auto'",
+                usize::MAX
+            );
+            assert_eq!(e, want);
+        }
+        assert_eq!(Iterations::Auto.to_string(), "auto");
         assert_eq!(step_lambda("1"), Ok(1.0));
         assert_eq!(step_mu("-1"), Ok(-1.0));
         for bad in ["0", "1.5", "-0.5", "-inf"] {

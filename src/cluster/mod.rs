@@ -77,6 +77,14 @@ pub fn run_file(
     observer: &mut dyn Observer,
 ) -> Result<Report> {
     opts.check()?;
+    if opts.auto_stop {
+        // A resumed run would need the rule's state (its noise field, the energies so far) in
+        // the checkpoint, and the ranks the field's halo exchanged after every step.
+        return Err(Error::parameter(
+            "auto_stop",
+            "is not supported by the cluster engine yet: its checkpoints do not keep the stop rule's state and its ranks do not exchange the rule's noise field",
+        ));
+    }
     if cluster.checkpoint_every == 0 {
         return Err(Error::parameter("checkpoint_every", "must be at least 1"));
     }
@@ -175,6 +183,8 @@ pub fn run_file(
         input_format: io::Format::from_extension(input),
         vertices: doc.vertices,
         triangles: doc.triangles,
+        iterations_run: state.records.len(),
+        auto_stop: None,
         records: state.records,
         input_stats: engine.with_stats.then(|| doc.input_stats.clone()).flatten(),
         output_stats,
@@ -255,7 +265,7 @@ fn ensure_plan(
         return Ok(());
     }
     let clock = Instant::now();
-    let storage = engine::storage_for(input, output, engine, budget, false)?;
+    let storage = engine::storage_for(input, output, engine, budget, opts)?;
     let mesh = io::read_mesh_in(input, &storage)?;
     engine::check_in_memory_budget(input, &storage, &mesh, budget)?;
     let pins = engine.pins.resolve(&mesh, Some(input))?.unwrap_or_default();
@@ -287,7 +297,8 @@ fn write_output(
     engine: &EngineSettings,
     budget: u64,
 ) -> Result<Option<metrics::MeshInfo>> {
-    let storage = engine::storage_for(input, output, engine, budget, false)?;
+    // Assembling the output keeps no per-run arrays beside the mesh: the default options' model.
+    let storage = engine::storage_for(input, output, engine, budget, &Options::default())?;
     let mut mesh = io::read_mesh_in(input, &storage)?;
     if mesh.positions.len() != plan.doc.vertices || mesh.triangles.len() != plan.doc.triangles {
         return Err(Error::invalid(
@@ -562,6 +573,7 @@ impl<'a> RankRun<'a> {
             scratch: &mut scratch,
             prev: &mut prev,
             input: input.as_deref().unwrap_or(&[]),
+            auto: None,
         };
         iterate(
             &mesh, buffers, opts, first, when, &reference, &mut self, observer,

@@ -13,6 +13,10 @@
 //!   ring colouring ([`crate::schedule::Schedule::ring_colours`]).
 //! - `laplacian`, `taubin`: Jacobi (every vertex from the previous positions), so the order is
 //!   irrelevant: the output is bit-identical for any thread count and tile size.
+//!
+//! With [`Options::auto_stop`] the loop asks its [`AutoStop`] after every iteration whether to go
+//! on (see [`super::auto`]); its measurements are reductions over fixed chunks, so the iteration
+//! at which a run stops does not depend on the thread count or the storage either.
 
 use std::ops::Range;
 use std::time::Instant;
@@ -20,9 +24,10 @@ use std::time::Instant;
 use glam::DVec3;
 use rayon::prelude::*;
 
+use super::auto::AutoStop;
 use super::observer::{IterationRecord, Observer, Statistics};
 use super::reduce;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::metrics;
 use crate::partition::Patch;
 use crate::schedule::{Prefetch, SharedField};
@@ -169,12 +174,18 @@ pub struct Buffers<'b> {
     /// The input positions, read when the options bound the deviation (`max_deviation`);
     /// empty otherwise.
     pub input: &'b [DVec3],
+    /// The automatic stop's state, required when the options ask for it (`auto_stop`), which a
+    /// single process alone can: it reads and sums every vertex.
+    pub auto: Option<&'b mut AutoStop>,
 }
 
 /// Iterations `first ..= opts.iterations` of `opts` on `mesh`, measuring the statistics `when`
-/// says relative to `reference`. Returns their records, one per iteration, which grow as the
-/// iterations run (a record the memory cannot hold is an [`Error::Resource`](crate::Error), not
-/// an abort; file runs bound them up front, see [`memory::check_records`](super::memory)).
+/// says relative to `reference`; with `opts.auto_stop`, from the first and only up to the one
+/// at which `buf.auto` stops the run (an automatically stopped run measures the displacement of
+/// every iteration, and the volume and area of its last one whatever `when` says). Returns their
+/// records, one per iteration, which grow as the iterations run (a record the memory cannot hold
+/// is an [`Error::Resource`](crate::Error), not an abort; file runs bound them up front, see
+/// [`memory::check_records`](super::memory)).
 #[allow(clippy::too_many_arguments)]
 pub fn iterate(
     mesh: &Sweep,
@@ -229,8 +240,28 @@ impl<'r, 'a> Run<'r, 'a> {
         }
     }
 
-    /// Every iteration from `first`; the records kept.
-    fn all(mut self, buf: Buffers, first: usize) -> Result<Vec<IterationRecord>> {
+    /// Every iteration from `first` (until the automatic stop ends the run); the records kept.
+    fn all(mut self, mut buf: Buffers, first: usize) -> Result<Vec<IterationRecord>> {
+        if !self.opts.auto_stop {
+            buf.auto = None;
+        } else if buf.auto.is_none()
+            || first != 1
+            || self.share.owned().len() != self.mesh.topo.len()
+        {
+            return Err(Error::parameter(
+                "auto_stop",
+                "needs a single process smoothing from the first iteration, with the stop's buffers",
+            ));
+        }
+        if let Some(auto) = buf.auto.as_deref_mut() {
+            let (mesh, pos, origin) = (self.mesh, &*buf.pos, self.origin);
+            let stop = on_pool(&*self.share, || {
+                auto.start(mesh.topo, mesh.tris, pos, origin)
+            });
+            if stop.is_some() {
+                return Ok(self.records);
+            }
+        }
         if self.opts.method.is_jacobi() {
             self.jacobi(buf, first)?;
         } else {
@@ -262,6 +293,7 @@ impl Run<'_, '_> {
             scratch: sums,
             prev,
             input,
+            mut auto,
         } = buf;
         let mesh = self.mesh;
         let owned = self.share.owned();
@@ -274,7 +306,10 @@ impl Run<'_, '_> {
             mesh.colours
         };
         for it in first..=total {
-            let measure = self.when.wanted(it, total);
+            let wanted = self.when.wanted(it, total);
+            // An automatically stopped run measures every displacement (the rule of lem, vcs and
+            // vcs-triangle reads it).
+            let measure = wanted || auto.is_some();
             let start = Instant::now();
             if lowpass {
                 // `prev` holds the λ|μ pair's result until the shares are taken from it.
@@ -330,9 +365,29 @@ impl Run<'_, '_> {
                 let (now, before) = (&pos[owned.clone()], &prev[owned.clone()]);
                 on_pool(&*self.share, || reduce::displacement(now, before))
             });
-            self.record(it, pos, moved, sweep, seconds)?;
+            let stop = self.stop_after(auto.as_deref_mut(), pos, moved);
+            self.record(it, pos, moved, wanted || stop, sweep, seconds)?;
+            if stop {
+                break;
+            }
         }
         Ok(())
+    }
+
+    /// Whether the automatic stop (when there is one) ends the run after the iteration that left
+    /// `pos` and moved the vertices by `moved`.
+    fn stop_after(
+        &self,
+        auto: Option<&mut AutoStop>,
+        pos: &[DVec3],
+        moved: Option<StepStats>,
+    ) -> bool {
+        let Some(auto) = auto else {
+            return false;
+        };
+        let mean = moved.map_or(f64::NAN, |m| m.sum_displacement / self.movable as f64);
+        let topo = self.mesh.topo;
+        on_pool(&*self.share, || auto.after(topo, pos, mean)).is_some()
     }
 
     /// `vcs-lowpass`'s step-1 shares into `shares` (see [`lowpass::shares_into`]): a λ|μ pair
@@ -380,6 +435,7 @@ impl Run<'_, '_> {
             pos,
             scratch,
             input,
+            mut auto,
             ..
         } = buf;
         // With a deviation bound every step is a plain, clamped one.
@@ -410,14 +466,17 @@ impl Run<'_, '_> {
         let mut in_scratch = false;
         let mut first = first_iteration;
         while first <= total {
-            let per_round = plan
-                .as_ref()
-                .map_or(1, |p| (p.depth() / factors.len()).max(1));
+            // The automatic stop looks at every iteration's result: one per round.
+            let per_round = match &plan {
+                Some(p) if auto.is_none() => (p.depth() / factors.len()).max(1),
+                _ => 1,
+            };
             let mut last = first;
             while last < total && last - first + 1 < per_round && !self.when.wanted(last, total) {
                 last += 1;
             }
-            let measure = self.when.wanted(last, total);
+            let wanted = self.when.wanted(last, total);
+            let measure = wanted || auto.is_some();
             let (src, dst): (&mut [DVec3], &mut [DVec3]) = if in_scratch {
                 (&mut *scratch, &mut *pos)
             } else {
@@ -452,9 +511,14 @@ impl Run<'_, '_> {
             };
             let seconds = start.elapsed().as_secs_f64() / (last - first + 1) as f64;
             let current: &[DVec3] = if in_scratch { scratch } else { pos };
+            let stop = self.stop_after(auto.as_deref_mut(), current, moved);
             for it in first..=last {
                 let moved = if it == last { moved } else { None };
-                self.record(it, current, moved, sweep, seconds)?;
+                let volume = it == last && (wanted || stop);
+                self.record(it, current, moved, volume, sweep, seconds)?;
+            }
+            if stop {
+                break;
             }
             first = last + 1;
             start = Instant::now();
@@ -511,18 +575,20 @@ impl Run<'_, '_> {
     }
 
     /// Record iteration `it`, which ended at `pos`; `moved` is its displacement when it is
-    /// measured (then the volume and area are measured too), `None` otherwise.
+    /// measured, `None` otherwise; `measure_volume`: measure its volume and area.
     fn record(
         &mut self,
         it: usize,
         pos: &[DVec3],
         moved: Option<StepStats>,
+        measure_volume: bool,
         stencils: SweepStats,
         seconds: f64,
     ) -> Result<()> {
-        let (volume, area) = match moved {
-            Some(_) => volume_area(self.mesh, pos, self.origin, &*self.share),
-            None => (f64::NAN, f64::NAN),
+        let (volume, area) = if measure_volume {
+            volume_area(self.mesh, pos, self.origin, &*self.share)
+        } else {
+            (f64::NAN, f64::NAN)
         };
         let (max_d, sum_d) = moved.map_or((f64::NAN, f64::NAN), |m| {
             (m.max_displacement, m.sum_displacement)

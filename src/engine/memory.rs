@@ -26,6 +26,10 @@ pub const HEAP_BYTES_PER_TRIANGLE: u64 = 114;
 /// A run whose options bound the deviation (`max_deviation`) keeps the input positions beside
 /// the working ones: f64 positions at about half a vertex per triangle, in the plan's storage.
 pub const DEVIATION_BYTES_PER_TRIANGLE: u64 = 12;
+/// A run that stops automatically ([`Options::auto_stop`](crate::Options)) keeps four arrays per
+/// vertex beside the working positions (unit normals, their offsets, a noise field and its second
+/// buffer: 48 B per vertex at about half a vertex per triangle), in the plan's storage.
+pub const AUTO_BYTES_PER_TRIANGLE: u64 = 24;
 /// An in-memory [`Mesh`](crate::Mesh) itself: f64 positions (about half a vertex per triangle)
 /// and u32 triangles.
 pub const MESH_BYTES_PER_TRIANGLE: u64 = 24;
@@ -87,21 +91,23 @@ pub fn in_core_bytes_of_file(size: u64) -> u64 {
     size.saturating_mul(HEAP_BYTES_PER_TRIANGLE) / FILE_BYTES_PER_TRIANGLE
 }
 
-/// [`in_core_bytes_of_file`], with [`DEVIATION_BYTES_PER_TRIANGLE`] more when the run keeps the
-/// input positions for a deviation bound.
-pub fn in_core_bytes_of_file_with(size: u64, deviation: bool) -> u64 {
-    let per_triangle = HEAP_BYTES_PER_TRIANGLE
-        + if deviation {
-            DEVIATION_BYTES_PER_TRIANGLE
-        } else {
-            0
-        };
+/// [`in_core_bytes_of_file`] of a run with `opts`: [`DEVIATION_BYTES_PER_TRIANGLE`] more when it
+/// keeps the input positions for a deviation bound, [`AUTO_BYTES_PER_TRIANGLE`] more when it
+/// stops automatically.
+pub fn in_core_bytes_of_file_with(size: u64, opts: &crate::Options) -> u64 {
+    let mut per_triangle = HEAP_BYTES_PER_TRIANGLE;
+    if opts.max_deviation.is_some() {
+        per_triangle += DEVIATION_BYTES_PER_TRIANGLE;
+    }
+    if opts.auto_stop {
+        per_triangle += AUTO_BYTES_PER_TRIANGLE;
+    }
     size.saturating_mul(per_triangle) / FILE_BYTES_PER_TRIANGLE
 }
 
-/// Memory a job needs to smooth a file of `size` bytes in core, the process included.
-pub fn job_bytes_of_file(size: u64) -> u64 {
-    in_core_bytes_of_file(size).saturating_add(BASE_BYTES)
+/// Memory a job needs to smooth a file of `size` bytes in core with `opts`, the process included.
+pub fn job_bytes_of_file(size: u64, opts: &crate::Options) -> u64 {
+    in_core_bytes_of_file_with(size, opts).saturating_add(BASE_BYTES)
 }
 
 /// Memory to smooth a mesh of `triangles` that is also held in memory beside the plan (`bench`).

@@ -2,6 +2,7 @@
 //!
 //! - [`plan`]: a [`Plan`] orders the mesh (Morton curve), builds its [`Topology`](crate::Topology), cuts it into
 //!   patches and colours them; built once, smoothed any number of times.
+//! - [`auto`]: the automatic stop (`Options::auto_stop`): when the noise is gone.
 //! - [`iterate`]: the one iteration loop: Jacobi rounds for `laplacian` and `taubin`, colour by
 //!   colour Gauss–Seidel sweeps for the stencil methods, statistics when asked. The cluster
 //!   engine's ranks run the same loop, exchanging halos through its [`iterate::Share`] hook.
@@ -12,6 +13,7 @@
 //! - [`pins`]: the caller's pinned vertices ([`Pins`]), fixed in the plan's topology.
 //! - [`memory`]: the memory budget, the memory model (bytes per triangle) and peak sampling.
 
+pub mod auto;
 pub mod iterate;
 pub mod memory;
 pub mod observer;
@@ -22,6 +24,7 @@ pub mod run;
 
 use glam::DVec3;
 
+pub use auto::{AutoStopStats, StopReason};
 pub use iterate::Reference;
 pub use observer::{IterationRecord, Observer, Quiet, Statistics};
 pub use pins::{PinSet, Pins};
@@ -83,9 +86,21 @@ impl Plan {
         when: Statistics,
         observer: &mut dyn Observer,
     ) -> Result<Vec<IterationRecord>> {
+        Ok(self.smooth_stopped(storage, opts, when, observer)?.0)
+    }
+
+    /// [`Plan::smooth`], and with `opts.auto_stop` what the automatic stop measured (the records
+    /// say how many iterations ran; this says why they stopped).
+    pub fn smooth_stopped(
+        &mut self,
+        storage: &Storage,
+        opts: &Options,
+        when: Statistics,
+        observer: &mut dyn Observer,
+    ) -> Result<(Vec<IterationRecord>, Option<AutoStopStats>)> {
         let mut records = Vec::new();
-        self.smooth_into(storage, opts, when, observer, Some(&mut records))?;
-        Ok(records)
+        let auto = self.smooth_into(storage, opts, when, observer, Some(&mut records))?;
+        Ok((records, auto))
     }
 
     /// [`Plan::smooth`] measuring only the last iteration and keeping no record: a step whose
@@ -93,9 +108,11 @@ impl Plan {
     /// not grow with the iteration count.
     pub fn smooth_unrecorded(&mut self, storage: &Storage, opts: &Options) -> Result<()> {
         self.smooth_into(storage, opts, Statistics::Last, &mut Quiet, None)
+            .map(drop)
     }
 
-    /// [`Plan::smooth`], the records into `records` when given.
+    /// [`Plan::smooth`], the records into `records` when given; what the automatic stop
+    /// measured, when the options ask for it.
     fn smooth_into(
         &mut self,
         storage: &Storage,
@@ -103,7 +120,7 @@ impl Plan {
         when: Statistics,
         observer: &mut dyn Observer,
         records: Option<&mut Vec<IterationRecord>>,
-    ) -> Result<()> {
+    ) -> Result<Option<AutoStopStats>> {
         opts.check()?;
         let Plan {
             reordered,
@@ -120,6 +137,10 @@ impl Plan {
         let input: Buf<DVec3> = match opts.max_deviation {
             Some(_) => storage.copy_of(&reordered.positions)?,
             None => Buf::default(),
+        };
+        let mut auto = match opts.auto_stop {
+            true => Some(auto::AutoStop::new(storage, n, opts)?),
+            false => None,
         };
         let advisors: Vec<_> = [
             reordered.positions.advisor(),
@@ -152,6 +173,7 @@ impl Plan {
                 scratch: &mut scratch,
                 prev: &mut prev,
                 input: &input,
+                auto: auto.as_mut(),
             };
             match records {
                 Some(records) => {
@@ -164,7 +186,8 @@ impl Plan {
                     &mesh, buffers, opts, when, &reference, &mut alone, observer,
                 ),
             }
-        })
+        })?;
+        Ok(auto.map(|a| a.stats()))
     }
 }
 

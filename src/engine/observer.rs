@@ -71,7 +71,8 @@ impl Statistics {
 
 /// Receives progress from long runs.
 pub trait Observer: Send {
-    /// Called after each iteration with its record and the total number of iterations.
+    /// Called after each iteration with its record and the total number of iterations (with
+    /// the automatic stop, `Options::auto_stop`, the cap: the run may end sooner).
     fn iteration(&mut self, _record: &IterationRecord, _total: usize) {}
 }
 

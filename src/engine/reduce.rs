@@ -149,3 +149,96 @@ pub fn neighbor_sums(topo: &Topology, pos: &[DVec3], sums: &mut [DVec3], range: 
         crate::smooth::neighbor_sums_into(topo, pos, out, first + at)
     });
 }
+
+/// The median of the values that are not NaN: the element of rank `count / 2` in ascending
+/// order (the upper median of an even count), 0 when there are none.
+///
+/// Found by counting, not by sorting: eight passes, each counting the values that share the
+/// digits found so far by their next byte (of the order-preserving bit pattern of the value)
+/// over chunks, so the result is exact and the same for any thread count, and no copy of the
+/// values is made (they may be a memory-mapped scratch array).
+pub fn median(values: &[f64]) -> f64 {
+    // Ascending values map to ascending keys (negative numbers have their bits inverted).
+    let key = |x: f64| {
+        let b = x.to_bits();
+        if b >> 63 == 1 { !b } else { b | 1 << 63 }
+    };
+    let count = map_fold(
+        values,
+        |_, c| c.iter().filter(|x| !x.is_nan()).count() as u64,
+        0,
+        |a, b| a + b,
+    );
+    if count == 0 {
+        return 0.0;
+    }
+    let mut rank = count / 2;
+    let mut prefix = 0u64;
+    for shift in (0..64).step_by(8).rev() {
+        // The keys that agree with `prefix` above bit `shift + 8`, counted by their byte at `shift`.
+        let high = |k: u64| k.checked_shr(shift + 8).unwrap_or(0);
+        let bins = map_fold(
+            values,
+            |_, c| {
+                let mut bins = [0u64; 256];
+                for k in c.iter().filter(|x| !x.is_nan()).map(|&x| key(x)) {
+                    if high(k) == high(prefix) {
+                        bins[((k >> shift) & 0xff) as usize] += 1;
+                    }
+                }
+                bins
+            },
+            [0u64; 256],
+            |mut a, b| {
+                a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+                a
+            },
+        );
+        let mut byte = 0;
+        while rank >= bins[byte] {
+            rank -= bins[byte];
+            byte += 1;
+        }
+        prefix |= (byte as u64) << shift;
+    }
+    let bits = if prefix >> 63 == 1 {
+        prefix & !(1 << 63)
+    } else {
+        !prefix
+    };
+    f64::from_bits(bits)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_median_counts_as_a_sort_would_select() {
+        let mut state = 7u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        // More than one chunk, negative and positive values, ties, NaNs skipped.
+        let mut values: Vec<f64> = (0..3 * CHUNK + 5).map(|_| next() * 4.0 - 3.0).collect();
+        values.extend([0.25; 9]);
+        values.extend([-0.0, 0.0, f64::NAN, f64::NAN]);
+        let mut sorted: Vec<f64> = values.iter().copied().filter(|x| !x.is_nan()).collect();
+        sorted.sort_by(f64::total_cmp);
+        let want = sorted[sorted.len() / 2];
+        for threads in [1, 3] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            assert_eq!(pool.install(|| median(&values)).to_bits(), want.to_bits());
+        }
+        assert_eq!(median(&[3.0, -1.0, 2.0, 5.0]), 3.0);
+        assert_eq!(median(&[-2.5]), -2.5);
+        assert_eq!(median(&[f64::NAN]), 0.0);
+        assert_eq!(median(&[]), 0.0);
+    }
+}

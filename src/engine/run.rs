@@ -3,6 +3,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use super::auto::AutoStopStats;
 use super::memory::{self, Budget, BudgetSource, PeakSampler};
 use super::observer::{IterationRecord, Observer, Statistics};
 use super::pins::Pins;
@@ -78,6 +79,12 @@ pub struct Report {
     pub vertices: usize,
     pub triangles: usize,
     pub records: Vec<IterationRecord>,
+    /// Iterations that ran: `records.len()`, fewer than the options' `iterations` when the
+    /// automatic stop ended the run.
+    pub iterations_run: usize,
+    /// What the automatic stop measured and why it stopped, when the options asked for it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub auto_stop: Option<AutoStopStats>,
     pub input_stats: Option<MeshInfo>,
     /// A file run's: measured on the output file's positions as stored (rounded to its coordinate
     /// type); an in-memory run's ([`crate::smooth()`]): on the f64 positions.
@@ -163,19 +170,23 @@ pub fn run_file(
         opts,
         engine,
         observer,
-        |plan, storage, obs| plan.smooth(storage, opts, engine.statistics, obs),
+        |plan, storage, obs| plan.smooth_stopped(storage, opts, engine.statistics, obs),
     )
 }
 
+/// What a smoothing step returns: the iteration records, and what the automatic stop measured.
+pub(crate) type Stopped = (Vec<IterationRecord>, Option<AutoStopStats>);
+
 /// [`run_file`] with the smoothing step given: `smooth(plan, storage, observer)` moves the plan's
-/// positions and returns the iteration records (the multiresolution mode's levels plug in here).
+/// positions and returns the iteration records and the automatic stop's figures (the
+/// multiresolution mode's levels plug in here).
 pub(crate) fn run_file_with(
     input: &Path,
     output: &Path,
     opts: &Options,
     engine: &EngineSettings,
     observer: &mut dyn Observer,
-    smooth: impl FnOnce(&mut Plan, &Storage, &mut dyn Observer) -> Result<Vec<IterationRecord>> + Send,
+    smooth: impl FnOnce(&mut Plan, &Storage, &mut dyn Observer) -> Result<Stopped> + Send,
 ) -> Result<Report> {
     opts.check()?;
     let start = Instant::now();
@@ -192,13 +203,7 @@ pub(crate) fn run_file_with(
     let mesh_budget = budget
         .bytes
         .saturating_sub(memory::records_bytes(opts.iterations));
-    let storage = storage_for(
-        input,
-        output,
-        engine,
-        mesh_budget,
-        opts.max_deviation.is_some(),
-    )?;
+    let storage = storage_for(input, output, engine, mesh_budget, opts)?;
 
     let clock = Instant::now();
     let mut mesh = io::read_mesh_in(input, &storage)?;
@@ -309,7 +314,7 @@ pub(crate) fn run_mesh(
         plan.pin(&pins);
         plan.crease(opts.crease_angle);
         let mut smoothed = smooth_planned(&mut plan, opts, engine, &mesh.source, &mut t, |plan| {
-            plan.smooth(&storage, opts, engine.statistics, observer)
+            plan.smooth_stopped(&storage, opts, engine.statistics, observer)
         })?;
         let clock = Instant::now();
         smoothed.output_stats = smoothed.input_stats.clone().map(|mut info| {
@@ -331,6 +336,7 @@ pub(crate) fn run_mesh(
 /// What the smoothing phase of a run gives its report.
 struct Smoothed {
     records: Vec<IterationRecord>,
+    auto_stop: Option<AutoStopStats>,
     input_stats: Option<MeshInfo>,
     output_stats: Option<MeshInfo>,
     plan: PlanStats,
@@ -345,7 +351,7 @@ fn smooth_planned(
     engine: &EngineSettings,
     source: &crate::mesh::Source,
     t: &mut PhaseTimings,
-    smooth: impl FnOnce(&mut Plan) -> Result<Vec<IterationRecord>>,
+    smooth: impl FnOnce(&mut Plan) -> Result<Stopped>,
 ) -> Result<Smoothed> {
     t.add_preparation(&plan.timings);
     let clock = Instant::now();
@@ -353,11 +359,12 @@ fn smooth_planned(
     t.metrics += clock.elapsed().as_secs_f64();
 
     let clock = Instant::now();
-    let records = smooth(plan)?;
+    let (records, auto_stop) = smooth(plan)?;
     t.smoothing = clock.elapsed().as_secs_f64();
 
     Ok(Smoothed {
         records,
+        auto_stop,
         input_stats,
         output_stats: None,
         plan: plan.stats(opts.method),
@@ -376,6 +383,8 @@ impl Smoothed {
             input_format: mesh.source.format,
             vertices: mesh.positions.len(),
             triangles: mesh.triangles.len(),
+            iterations_run: self.records.len(),
+            auto_stop: self.auto_stop,
             records: self.records,
             input_stats: self.input_stats,
             output_stats: self.output_stats,
@@ -391,18 +400,18 @@ impl Smoothed {
 }
 
 /// Heap or scratch, decided before reading from the file size by the memory model
-/// ([`memory::in_core_bytes_of_file_with`]; `deviation`: the run keeps the input positions).
+/// ([`memory::in_core_bytes_of_file_with`], which counts what `opts` keep beside the positions).
 pub(crate) fn storage_for(
     input: &Path,
     output: &Path,
     engine: &EngineSettings,
     budget: u64,
-    deviation: bool,
+    opts: &Options,
 ) -> Result<Storage> {
     let size = std::fs::metadata(input)
         .map_err(|e| Error::io(input, e))?
         .len();
-    if memory::in_core_bytes_of_file_with(size, deviation) <= budget {
+    if memory::in_core_bytes_of_file_with(size, opts) <= budget {
         return Ok(Storage::heap().with_budget(budget));
     }
     let dir = match &engine.scratch {

@@ -217,6 +217,7 @@ pub struct MeshRow {
     pub input: String,
     pub output: String,
     pub method: String,
+    /// Iterations that ran (with `--iterations auto`, where the automatic stop ended the run).
     pub iterations: usize,
     pub vertices: usize,
     pub triangles: usize,
@@ -606,11 +607,14 @@ pub fn summarize(outdir: &Path, inputs: Option<&[PathBuf]>) -> Result<BatchSumma
     })
 }
 
-/// Memory of a Slurm task whose largest input is `largest` bytes: what the memory model says a job
-/// smoothing it in core needs ([`memory::job_bytes_of_file`]), at least 1 GiB; in MiB, rounded up.
-pub fn slurm_mem_mib(largest: u64) -> u64 {
+/// Memory of a Slurm task whose largest input is `largest` bytes, smoothed with `opts`: what the
+/// memory model says a job smoothing it in core needs ([`memory::job_bytes_of_file`]), at least
+/// 1 GiB; in MiB, rounded up.
+pub fn slurm_mem_mib(largest: u64, opts: &Options) -> u64 {
     const MIB: u64 = 1 << 20;
-    memory::job_bytes_of_file(largest).div_ceil(MIB).max(1024)
+    memory::job_bytes_of_file(largest, opts)
+        .div_ceil(MIB)
+        .max(1024)
 }
 
 /// The number of array tasks for `inputs` inputs under `max_array_size` (indices must be below it).
@@ -695,8 +699,15 @@ mod tests {
 
     #[test]
     fn mem_rule() {
-        assert_eq!(slurm_mem_mib(0), 1024);
-        assert_eq!(slurm_mem_mib(1 << 30), 6 * 1024 + 256);
+        let opts = Options::default();
+        assert_eq!(slurm_mem_mib(0, &opts), 1024);
+        assert_eq!(slurm_mem_mib(1 << 30, &opts), 6 * 1024 + 256);
+        // The automatic stop's arrays: 24 B more per triangle (19 B of file).
+        let auto = Options {
+            auto_stop: true,
+            ..opts
+        };
+        assert_eq!(slurm_mem_mib(19 << 26, &auto), 138 * 64 + 256);
         assert_eq!(array_tasks(5000, 1001), 1001);
         assert_eq!(array_tasks(8, 1001), 8);
     }

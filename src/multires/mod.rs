@@ -112,6 +112,12 @@ pub struct MultiresStats {
 
 /// Check that `opts` and `m` make a multiresolution run.
 pub fn validate(opts: &Options, m: &MultiresOptions) -> Result<()> {
+    if opts.auto_stop {
+        return Err(Error::parameter(
+            "auto_stop",
+            "is not supported in multiresolution mode yet (its levels run fixed iteration counts)",
+        ));
+    }
     if opts.max_deviation.is_some() {
         return Err(Error::parameter(
             "max_deviation",
@@ -393,7 +399,7 @@ pub fn run_file(
             )
             .map_err(|e| e.in_file(input))?;
             stats = Some(s);
-            Ok(records)
+            Ok((records, None))
         },
     )?;
     // `run_file_with` returns Ok only after the closure above succeeded.

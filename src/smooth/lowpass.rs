@@ -7,7 +7,8 @@
 //!   `stencil.rs`);
 //! - the research prototype ([`RingStencils`], [`lowpass_iteration`]: sequential, whole mesh,
 //!   its own volume arithmetic), kept as the independent reference the kernel is tested against,
-//!   and [`AutoStop`] for `--iterations auto` (not in the engine yet).
+//!   and [`AutoStop`], the sequential prototype of `--iterations auto`, the reference the
+//!   engine's rule (`crate::engine::auto`) is tested against.
 //!
 //! One iteration on positions `P`:
 //! 1. `D = T(P) − P`, `T` = Taubin's λ then μ umbrella step, Jacobi, fixed vertices kept.
@@ -504,7 +505,8 @@ pub struct AutoStop {
     expected: f64,
     observed: f64,
     iteration: usize,
-    /// Stop when more than `1 − 1/tau` of an iteration's removal is not noise (default 4/3).
+    /// Stop when more than `1 − 1/tau` of an iteration's removal is not noise (the engine's
+    /// [`crate::engine::auto::DETAIL_RATIO`]).
     pub tau: f64,
     /// Stop when the expected gain falls below this fraction of the noise energy (default 0.01).
     pub gone: f64,
@@ -610,7 +612,7 @@ impl AutoStop {
             expected: 0.0,
             observed: 0.0,
             iteration: 0,
-            tau: 4.0 / 3.0,
+            tau: crate::engine::auto::DETAIL_RATIO,
             gone: 0.01,
         }
     }

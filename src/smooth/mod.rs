@@ -20,6 +20,7 @@ use glam::DVec3;
 
 pub mod laplacian;
 pub mod lowpass;
+pub mod noise;
 pub mod stencil;
 pub mod tiled;
 
@@ -112,7 +113,8 @@ impl FromStr for Method {
 /// | field | default | used by |
 /// |---|---|---|
 /// | `method` | [`Method::Vcs`] | — |
-/// | `iterations` | 10 | every method |
+/// | `iterations` | 10 | every method; with `auto_stop`, the cap |
+/// | `auto_stop` | false | every method: stop when the noise is gone (see [`crate::engine::auto`]) |
 /// | `lambda` | 0.5 | `laplacian` (its step), `taubin` and `vcs-lowpass` (their first step) |
 /// | `mu` | −0.53 | `taubin` and `vcs-lowpass` (their second step; negative, `|μ| > λ`) |
 /// | `reject_energy_increase` | false | `lem`, `vcs`, `vcs-triangle` |
@@ -124,8 +126,16 @@ impl FromStr for Method {
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct Options {
     pub method: Method,
-    /// Iterations; each applies every eligible stencil (or every vertex update) once.
+    /// Iterations; each applies every eligible stencil (or every vertex update) once. With
+    /// `auto_stop`, the most that may run (the command line's `--iterations auto` caps at
+    /// [`crate::engine::auto::DEFAULT_CAP`]).
     pub iterations: usize,
+    /// Stop early, after the iteration at which the noise is gone by the rule of
+    /// [`crate::engine::auto`] (data-driven, from the input alone); the report says how many
+    /// ran and why they stopped. Not in the cluster engine or the multiresolution mode.
+    /// Absent from JSON when false (reports and batch settings keys as before).
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub auto_stop: bool,
     /// Laplacian step size λ (`laplacian`, and the first step of `taubin`).
     pub lambda: f64,
     /// Taubin's second step size μ (negative).
@@ -208,6 +218,7 @@ impl Default for Options {
         Options {
             method: Method::Vcs,
             iterations: 10,
+            auto_stop: false,
             lambda: 0.5,
             mu: -0.53,
             reject_energy_increase: false,

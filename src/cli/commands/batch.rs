@@ -172,7 +172,7 @@ fn run_share(
         }
         let clock = Instant::now();
         progress.phase(format!("smoothing {}", input.display()));
-        progress.iterations(smooth.options.method.name(), smooth.options.iterations);
+        progress.smoothing(&smooth.options);
         let result = catch_panic(|| {
             let input_id = core::FileId::of(input)?;
             let run = engine::run_file(input, &output, &smooth.options, &smooth.engine, progress)?;
@@ -185,7 +185,7 @@ fn run_share(
                     input: input.display().to_string(),
                     output: output.display().to_string(),
                     method: smooth.options.method.name().to_string(),
-                    iterations: smooth.options.iterations,
+                    iterations: run.iterations_run,
                     vertices: run.vertices,
                     triangles: run.triangles,
                     volume_pct: run.records.last().map_or(100.0, |r| r.volume_pct),
@@ -225,12 +225,17 @@ fn run_share(
                 done += 1;
                 writeln!(
                     out,
-                    "done {} -> {}: {} triangles, {} × {}, volume {:.6} %, {:.3} s",
+                    "done {} -> {}: {} triangles, {} × {}{}, volume {:.6} %, {:.3} s",
                     row.input,
                     row.output,
                     row.triangles,
                     row.iterations,
                     row.method,
+                    if smooth.options.auto_stop {
+                        " (stopped automatically)"
+                    } else {
+                        ""
+                    },
                     row.volume_pct,
                     row.seconds
                 )

@@ -131,7 +131,7 @@ pub fn run(cfg: &SlurmScriptConfig, out: &mut dyn Write) -> Result<()> {
         },
     };
     let tasks = core::array_tasks(inputs.len(), max_array);
-    let mem = core::slurm_mem_mib(largest.0);
+    let mem = core::slurm_mem_mib(largest.0, &cfg.smooth.options);
     let a = &cfg.smooth.args.smoothing;
     let cpus = cfg.cpus.or(a.engine.threads).unwrap_or(1);
 

@@ -15,7 +15,7 @@ use crate::cli::output::{
 };
 use crate::cli::plot::{Curve, file_name, volume_curve, write_volume_plot};
 use crate::cli::progress::Progress;
-use crate::cli::report::{FileStats, Summary, Tool, count, fixed};
+use crate::cli::report::{FileStats, Summary, Tool, count, fixed, iterations_run};
 use crate::cli::shared::{InOut, PinArgs, SmoothingArgs};
 use crate::engine::{self, EngineSettings, IterationRecord, Statistics};
 use crate::error::{Error, Result};
@@ -102,6 +102,12 @@ impl SmoothConfig {
         engine.statistics = a.stats;
         let options = a.smoothing.options();
         let multires = a.multires.resolve(&options)?;
+        if options.auto_stop && a.cluster.checkpoint.is_some() {
+            return Err(flags::parameter(
+                "auto_stop",
+                "cannot be combined with --checkpoint: the cluster engine does not keep the stop rule's state yet",
+            ));
+        }
         if multires.is_some() && a.cluster.checkpoint.is_some() {
             return Err(flags::parameter(
                 "multires",
@@ -161,6 +167,11 @@ pub struct SmoothReport {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub cluster: Option<crate::engine::ClusterStats>,
     pub summary: Summary,
+    /// Iterations that ran (fewer than `options.iterations` when the automatic stop ended the run).
+    pub iterations_run: usize,
+    /// With `--iterations auto`: what the stop rule measured and why the run ended.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub auto_stop: Option<crate::engine::AutoStopStats>,
     /// One row per iteration (with `--multires`: of the input level).
     pub iterations: Vec<IterationRecord>,
     /// Per level of `--multires`: vertices, method, iterations, seconds.
@@ -176,7 +187,7 @@ pub fn run(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) -> 
     crate::cluster::with_world(|comm| {
         let Some(cluster) = cfg.cluster(comm.size()) else {
             progress.phase(format!("smoothing {}", cfg.input.display()));
-            progress.iterations(cfg.options.method.name(), cfg.options.iterations);
+            progress.smoothing(&cfg.options);
             let (run, multires) = match &cfg.multires {
                 None => (
                     engine::run_file(&cfg.input, &cfg.output, &cfg.options, &cfg.engine, progress)?,
@@ -210,7 +221,7 @@ pub fn run(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) -> 
                 count(comm.size(), "rank"),
                 cluster.work_dir.display()
             ));
-            progress.iterations(cfg.options.method.name(), cfg.options.iterations);
+            progress.smoothing(&cfg.options);
         }
         let observer: &mut dyn engine::Observer = if lead { progress } else { &mut engine::Quiet };
         let run = crate::cluster::run_file(
@@ -269,6 +280,8 @@ fn report(
             timings: run.timings,
             cluster: run.cluster.clone(),
             summary: Summary::of(records),
+            iterations_run: run.iterations_run,
+            auto_stop: run.auto_stop.clone(),
             iterations: records.clone(),
             multires: multires.clone(),
         };
@@ -290,7 +303,7 @@ fn report(
         cfg.input.display(),
         cfg.output.display(),
         cfg.options.method,
-        count(cfg.options.iterations, "iteration"),
+        iterations_run(&cfg.options, run),
         run.vertices,
         run.triangles,
         fixed(s.volume_pct, 6),

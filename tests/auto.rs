@@ -1,0 +1,438 @@
+//! `--iterations auto` (issue #15, item 5; `Options::auto_stop`, `engine::auto`): where runs stop
+//! on meshes of several noise levels, clean ones and the real scans; that the reported figures
+//! follow the documented rule; that the stop and the result are bit-identical for any thread
+//! count and storage; the reports; the command line, its errors and the modes that refuse it.
+
+use std::path::Path;
+
+use glam::DVec3;
+use vcsmooth::engine::auto::{DEFAULT_CAP, DETAIL_RATIO, NOISE_GONE, REMOVED_ENOUGH, SETTLED};
+use vcsmooth::engine::{
+    AutoStopStats, EngineSettings, Layout, Plan, Quiet, Statistics, StopReason, thread_pool,
+};
+use vcsmooth::mesh::Storage;
+use vcsmooth::smooth::lowpass;
+use vcsmooth::{Mesh, Method, Options, Report, Topology, shapes};
+
+use crate::util::{fails, generate_sphere, noisy_sphere, ok, read_json, read_scan, scan, vcsmooth};
+
+fn auto(method: Method) -> Options {
+    Options {
+        method,
+        iterations: DEFAULT_CAP,
+        auto_stop: true,
+        ..Options::default()
+    }
+}
+
+/// `mesh` smoothed in memory with the automatic stop: the report and its stop figures.
+fn run(mesh: &Mesh, method: Method) -> (Report, AutoStopStats) {
+    let mut m = mesh.clone();
+    let report = vcsmooth::smooth(&mut m, &auto(method)).unwrap();
+    let stats = report.auto_stop.clone().expect("auto_stop figures");
+    assert_eq!(report.iterations_run, report.records.len());
+    assert_eq!(stats.removed.len(), report.iterations_run, "{method}");
+    (report, stats)
+}
+
+fn with_noise(mut mesh: Mesh, sigma: f64, seed: u64) -> Mesh {
+    shapes::add_normal_noise(&mut mesh, sigma, seed);
+    mesh
+}
+
+/// The methods whose rule compares the removed energy with a scalar filter's.
+const FILTERS: [Method; 3] = [Method::Laplacian, Method::Taubin, Method::VcsLowpass];
+
+#[test]
+fn more_noise_runs_no_fewer_iterations() {
+    for method in FILTERS {
+        let its: Vec<usize> = [0.05, 0.2, 0.8]
+            .iter()
+            .map(|&sigma| run(&noisy_sphere(5, sigma, 3), method).0.iterations_run)
+            .collect();
+        assert!(its.windows(2).all(|w| w[0] <= w[1]), "{method}: {its:?}");
+        assert!(its[2] >= 5 && its[2] < DEFAULT_CAP, "{method}: {its:?}");
+    }
+}
+
+#[test]
+fn a_clean_mesh_stops_at_once_for_every_method() {
+    for mesh in [shapes::icosphere(4), read_scan("fertility-9k.ply")] {
+        for method in Method::ALL {
+            let (report, stats) = run(&mesh, method);
+            assert!(
+                report.iterations_run <= 2,
+                "{method}: {} iterations, {stats:?}",
+                report.iterations_run
+            );
+            assert!(matches!(
+                stats.stopped_by,
+                StopReason::Detail | StopReason::NoNoise
+            ));
+        }
+    }
+}
+
+#[test]
+fn noisy_scans_stop_before_the_cap_with_every_method() {
+    let scans = ["fertility-9k.ply", "demosthenes-17k.ply"];
+    for name in scans {
+        let clean = read_scan(name);
+        for sigma in [0.2, 0.5] {
+            let noisy = with_noise(clean.clone(), sigma, 1);
+            for method in Method::ALL {
+                let (report, stats) = run(&noisy, method);
+                let it = report.iterations_run;
+                assert!(
+                    (2..DEFAULT_CAP).contains(&it),
+                    "{name} {sigma} {method}: {it}"
+                );
+                assert_ne!(stats.stopped_by, StopReason::Cap);
+                if method.keeps_volume() {
+                    let pct = report.records.last().unwrap().volume_pct;
+                    assert!((pct - 100.0).abs() < 1e-7, "{name} {method}: {pct}");
+                }
+            }
+        }
+    }
+    // The research's stops (docs/quality-research.md §6): vcs-lowpass removes the noise of the
+    // smooth fertility in 14 iterations, and stops early on the detailed demosthenes at σ 0.2.
+    let it = |name: &str, sigma| {
+        let noisy = with_noise(read_scan(name), sigma, 1);
+        run(&noisy, Method::VcsLowpass).0.iterations_run
+    };
+    assert_eq!(it("fertility-9k.ply", 0.2), 14);
+    assert!((5..=9).contains(&it("demosthenes-17k.ply", 0.2)));
+}
+
+#[test]
+fn the_noise_estimate_follows_the_noise() {
+    // σ̂ along the normals, in units of the mean edge the noise was given in.
+    let clean = read_scan("kitten-25k.ply");
+    let edge = vcsmooth::metrics::mean_edge_length(
+        &clean.positions,
+        &Topology::build(clean.positions.len(), &clean.triangles).unwrap(),
+    );
+    for sigma in [0.2, 0.5] {
+        let (_, stats) = run(&with_noise(clean.clone(), sigma, 2), Method::Taubin);
+        let rel = stats.noise_estimate / (sigma * edge);
+        assert!((0.85..1.15).contains(&rel), "σ {sigma}: {rel}");
+    }
+    let (_, clean_stats) = run(&clean, Method::Taubin);
+    assert!(clean_stats.noise_estimate < 0.1 * edge);
+}
+
+#[test]
+fn the_reported_figures_follow_the_rule() {
+    let noisy = with_noise(read_scan("horse.ply"), 0.2, 5);
+    for method in Method::ALL {
+        let (report, s) = run(&noisy, method);
+        let k = report.iterations_run;
+        let stop_at = |j: usize| -> Option<StopReason> {
+            if method.is_stencil() && method != Method::VcsLowpass {
+                let mean = report.records[j].mean_displacement;
+                if s.removed[j] > REMOVED_ENOUGH {
+                    Some(StopReason::Detail)
+                } else if mean < SETTLED * s.noise_estimate {
+                    Some(StopReason::Settled)
+                } else {
+                    None
+                }
+            } else {
+                let (o0, e0) = match j {
+                    0 => (0.0, 0.0),
+                    _ => (s.removed[j - 1], s.expected[j - 1]),
+                };
+                let gain = s.expected[j] - e0;
+                let ratio = (s.removed[j] - o0) / gain;
+                if j >= 1 && ratio > DETAIL_RATIO {
+                    Some(StopReason::Detail)
+                } else if gain < NOISE_GONE {
+                    Some(StopReason::NoiseRemoved)
+                } else {
+                    None
+                }
+            }
+        };
+        for j in 0..k - 1 {
+            assert_eq!(stop_at(j), None, "{method}: iteration {}", j + 1);
+        }
+        assert_eq!(stop_at(k - 1), Some(s.stopped_by), "{method}: {s:?}");
+        // Every iteration's displacement is measured (the stencil methods' rule reads it), and
+        // the last one's volume.
+        assert!(report.records.iter().all(|r| r.mean_displacement > 0.0));
+        assert!(report.records[k - 1].volume_pct.is_finite());
+    }
+}
+
+/// A noisy sphere with a hole (fixed boundary vertices), smoothed with the automatic stop on a
+/// plan of small patches in `storage` on `threads` threads.
+fn plan_run(
+    mesh: &Mesh,
+    method: Method,
+    storage: &Storage,
+    threads: usize,
+    when: Statistics,
+) -> (Vec<DVec3>, usize, AutoStopStats) {
+    thread_pool(Some(threads)).unwrap().install(|| {
+        let mut plan = Plan::new(
+            storage,
+            &mesh.positions,
+            &mesh.triangles,
+            Layout::Patches(64),
+        )
+        .unwrap();
+        let (records, stats) = plan
+            .smooth_stopped(storage, &auto(method), when, &mut Quiet)
+            .unwrap();
+        let mut out = vec![DVec3::ZERO; mesh.positions.len()];
+        plan.positions_in_input_order(&mut out);
+        (out, records.len(), stats.unwrap())
+    })
+}
+
+#[test]
+fn the_stop_and_the_result_are_bit_identical_for_any_thread_count_and_storage() {
+    let mut mesh = noisy_sphere(4, 0.4, 9);
+    let mut tris = mesh.triangles.to_vec();
+    tris.truncate(tris.len() - 5);
+    mesh.triangles = tris.into();
+    let scratch = tempfile::tempdir().unwrap();
+    let mapped = Storage::scratch(scratch.path()).unwrap();
+    for method in Method::ALL {
+        let (want, it, stats) = plan_run(&mesh, method, &Storage::heap(), 1, Statistics::Every);
+        assert!(it > 1 && it < DEFAULT_CAP, "{method}: {it}");
+        for (storage, threads, when) in [
+            (&Storage::heap(), 2, Statistics::Last),
+            (&Storage::heap(), 3, Statistics::Every),
+            (&mapped, 1, Statistics::Every),
+            (&mapped, 3, Statistics::Last),
+        ] {
+            let (got, got_it, got_stats) = plan_run(&mesh, method, storage, threads, when);
+            let what = format!(
+                "{method}, {threads} threads, mapped {}",
+                storage.is_mapped()
+            );
+            assert_eq!(got_it, it, "{what}");
+            assert!(got == want, "{what}: positions differ");
+            assert_eq!(
+                got_stats.noise_estimate.to_bits(),
+                stats.noise_estimate.to_bits()
+            );
+            assert_eq!(got_stats.stopped_by, stats.stopped_by, "{what}");
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&got_stats.removed), bits(&stats.removed), "{what}");
+        }
+    }
+}
+
+#[test]
+fn the_engine_follows_the_prototype_rule() {
+    // The research prototype (`lowpass::AutoStop`, sequential, whole mesh) on the engine's input
+    // order: the same noise estimate and the same stop. Its white noise is the engine's (seed 1,
+    // the same stream) on a closed mesh, where every vertex is movable.
+    let mesh = noisy_sphere(4, 0.3, 7);
+    let tris = mesh.triangles.to_vec();
+    let mut p = mesh.positions.to_vec();
+    let topo = Topology::build(p.len(), &tris).unwrap();
+    let mut proto = lowpass::AutoStop::new(&topo, &tris, &p, 1);
+    let stencils = lowpass::RingStencils::build(&topo, lowpass::RING_RADIUS);
+    let (mut scratch, mut tmp) = (lowpass::Scratch::default(), Vec::new());
+    let mut proto_stop = None;
+    let mut ratios = Vec::new();
+    for k in 1..=DEFAULT_CAP {
+        lowpass::lowpass_iteration(&topo, &tris, &stencils, &mut p, 0.5, -0.53, &mut scratch);
+        lowpass::scalar_taubin_pair(&topo, proto.synthetic_mut(), 0.5, -0.53, &mut tmp);
+        let o = proto.observe(&p);
+        ratios.push(o.ratio);
+        if o.stop {
+            proto_stop = Some(k);
+            break;
+        }
+    }
+    let mut m = mesh.clone();
+    let report = vcsmooth::engine::smooth_in_order(
+        &mut m,
+        &auto(Method::VcsLowpass),
+        &EngineSettings::default(),
+        &mut Quiet,
+    )
+    .unwrap();
+    let s = report.auto_stop.unwrap();
+    let rel = (s.noise_estimate - proto.sigma()).abs() / proto.sigma();
+    assert!(rel < 1e-9, "σ̂ {} vs {}", s.noise_estimate, proto.sigma());
+    assert_eq!(Some(report.iterations_run), proto_stop);
+    for (j, want) in ratios.iter().enumerate().skip(1) {
+        let r = (s.removed[j] - s.removed[j - 1]) / (s.expected[j] - s.expected[j - 1]);
+        assert!(
+            (r - want).abs() < 1e-6,
+            "iteration {}: {r} vs {want}",
+            j + 1
+        );
+    }
+}
+
+fn arg(p: &Path) -> String {
+    p.display().to_string()
+}
+
+#[test]
+fn smooth_reports_the_iterations_that_ran() {
+    let dir = tempfile::tempdir().unwrap();
+    let noisy = dir.path().join("noisy.ply");
+    generate_sphere(&noisy, 4, Some(0.3), Some(2));
+    let smooth = |iterations: &str, extra: &[&str]| {
+        let (out, report) = (dir.path().join("out.ply"), dir.path().join("r.json"));
+        let mut args = vec![
+            "smooth".to_string(),
+            arg(&noisy),
+            arg(&out),
+            "--method".into(),
+            "vcs-lowpass".into(),
+            "--iterations".into(),
+            iterations.into(),
+            "--report".into(),
+            arg(&report),
+        ];
+        args.extend(extra.iter().map(|a| a.to_string()));
+        let text = ok(vcsmooth(&args));
+        (text, read_json(&report), std::fs::read(&out).unwrap())
+    };
+    let (text, r, heap) = smooth("auto", &["--threads", "1"]);
+    let run = r["iterations_run"].as_u64().unwrap() as usize;
+    assert!(run > 1 && run < DEFAULT_CAP, "{run}");
+    assert_eq!(r["iterations"].as_array().unwrap().len(), run);
+    assert_eq!(r["options"]["auto_stop"], true);
+    assert_eq!(r["options"]["iterations"], DEFAULT_CAP);
+    let a = &r["auto_stop"];
+    assert_eq!(a["cap"], DEFAULT_CAP);
+    assert_eq!(a["stopped_by"], "noise-removed", "{a}");
+    assert!(a["noise_estimate"].as_f64().unwrap() > 0.0);
+    assert_eq!(a["removed"].as_array().unwrap().len(), run);
+    assert!(
+        text.contains(&format!(
+            "vcs-lowpass, {run} iterations (auto: the noise the filter can remove is gone;"
+        )),
+        "{text}"
+    );
+    let (_, r, threads) = smooth("auto", &["--threads", "3"]);
+    assert_eq!(r["iterations_run"].as_u64().unwrap() as usize, run);
+    assert!(threads == heap, "the output differs on three threads");
+    // A count: the report as before, with the count of iterations that ran.
+    let (text, r, _) = smooth("7", &[]);
+    assert_eq!(r["iterations_run"], 7);
+    assert!(r.get("auto_stop").is_none() && r["options"].get("auto_stop").is_none());
+    assert!(text.contains("vcs-lowpass, 7 iterations, "), "{text}");
+}
+
+#[test]
+fn auto_out_of_core_equals_in_core() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in.ply");
+    // Level 8 (1.3M triangles) is the smallest sphere whose in-core estimate exceeds 64M.
+    generate_sphere(&input, 8, Some(0.3), None);
+    let run = |name: &str, extra: &[&str]| {
+        let (out, report) = (dir.path().join(name), dir.path().join("r.json"));
+        let mut args = vec![
+            "smooth".to_string(),
+            arg(&input),
+            arg(&out),
+            "--method".into(),
+            "taubin".into(),
+            "--iterations".into(),
+            "auto".into(),
+            "--patch-size".into(),
+            "4096".into(),
+            "--report".into(),
+            arg(&report),
+        ];
+        args.extend(extra.iter().map(|a| a.to_string()));
+        ok(vcsmooth(&args));
+        let r = read_json(&report);
+        (std::fs::read(&out).unwrap(), r)
+    };
+    let (heap, r) = run("heap.ply", &["--threads", "1"]);
+    assert_eq!(r["memory"]["storage"], "heap");
+    let (mapped, m) = run("mapped.ply", &["--threads", "2", "--memory-budget", "64M"]);
+    assert_eq!(m["memory"]["storage"], "scratch");
+    assert_eq!(m["iterations_run"], r["iterations_run"]);
+    assert!(r["iterations_run"].as_u64().unwrap() < DEFAULT_CAP as u64);
+    assert_eq!(m["auto_stop"], r["auto_stop"]);
+    assert!(mapped == heap, "scratch output differs from the heap's");
+}
+
+#[test]
+fn bad_values_and_modes_that_refuse_auto_are_one_line_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = scan("fertility-9k.ply");
+    let out = arg(&dir.path().join("out.ply"));
+    let smooth = |extra: &[&str]| {
+        let mut args = vec!["smooth".to_string(), arg(&input), out.clone()];
+        args.extend(extra.iter().map(|a| a.to_string()));
+        vcsmooth(&args)
+    };
+    for bad in ["autox", "-3", "auto10"] {
+        let o = smooth(&["--iterations", bad]);
+        fails(
+            &o,
+            2,
+            &[
+                "--iterations",
+                bad,
+                "not a whole number in 0..=",
+                "nor 'auto'",
+            ],
+        );
+    }
+    fails(
+        &smooth(&["--iterations", "auto", "--multires"]),
+        2,
+        &["--iterations auto", "multiresolution"],
+    );
+    let work = arg(&dir.path().join("work"));
+    fails(
+        &smooth(&["--iterations", "auto", "--checkpoint", &work]),
+        2,
+        &["--iterations auto", "cluster engine"],
+    );
+    assert!(!dir.path().join("out.ply").exists());
+}
+
+#[test]
+fn batch_and_slurm_script_take_auto() {
+    let dir = tempfile::tempdir().unwrap();
+    let (input, outdir) = (dir.path().join("in"), dir.path().join("out"));
+    std::fs::create_dir(&input).unwrap();
+    for k in 0..2 {
+        generate_sphere(&input.join(format!("m{k}.ply")), 3, Some(0.3), Some(k));
+    }
+    let batch = || {
+        ok(vcsmooth([
+            "batch",
+            &arg(&input),
+            &arg(&outdir),
+            "--method",
+            "taubin",
+            "--iterations",
+            "auto",
+        ]))
+    };
+    let text = batch();
+    assert_eq!(text.matches("(stopped automatically)").count(), 2, "{text}");
+    for k in 0..2 {
+        let marker = read_json(&outdir.join(".done").join(format!("m{k}.json")));
+        let run = marker["run"]["iterations_run"].as_u64().unwrap();
+        assert!(run > 1 && run < DEFAULT_CAP as u64, "{marker}");
+        assert_eq!(marker["iterations"].as_u64().unwrap(), run);
+        assert!(marker["run"]["auto_stop"]["stopped_by"].is_string());
+    }
+    assert_eq!(batch().matches("\nskipped ").count(), 2);
+    let script = ok(vcsmooth([
+        "slurm-script",
+        &arg(&input),
+        &arg(&outdir),
+        "--iterations",
+        "auto",
+    ]));
+    assert!(script.contains(" --iterations auto "), "{script}");
+}
