@@ -236,6 +236,7 @@ fn the_engine_follows_the_prototype_rule() {
     let mut p = mesh.positions.to_vec();
     let topo = Topology::build(p.len(), &tris).unwrap();
     let mut proto = lowpass::AutoStop::new(&topo, &tris, &p, 1);
+    proto.tau = DETAIL_RATIO;
     let stencils = lowpass::RingStencils::build(&topo, lowpass::RING_RADIUS);
     let (mut scratch, mut tmp) = (lowpass::Scratch::default(), Vec::new());
     let mut proto_stop = None;

@@ -65,7 +65,7 @@ fn array_of_three_tasks_rerun_and_summary() {
         let m = read_json(&marker(&out, k));
         assert_eq!(m["format"], "vcsmooth-batch-marker/1");
         assert_eq!(m["name"], format!("m{k}"));
-        assert_eq!(m["method"], "vcs");
+        assert_eq!(m["method"], "vcs-lowpass");
         assert_eq!(m["iterations"], 5);
         assert_eq!(m["triangles"], 20 * 4u64.pow(2 + (k % 2) as u32));
         let v = m["volume_pct"].as_f64().unwrap();

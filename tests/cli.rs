@@ -188,8 +188,8 @@ fn smooth_defaults_and_other_formats() {
             out.as_os_str(),
         ]));
         assert!(out.is_file(), "no .{ext} output");
-        // Default: vcs, 10 iterations.
-        assert!(text.contains("vcs, 10 iterations"), "{text}");
+        // Default: vcs-lowpass, 10 iterations.
+        assert!(text.contains("vcs-lowpass, 10 iterations"), "{text}");
     }
 }
 
@@ -438,7 +438,7 @@ fn help_lists_commands_and_defaults() {
     }
     let smooth = ok(vcsmooth(["smooth", "--help"]));
     for s in [
-        "[default: vcs]",
+        "[default: vcs-lowpass; with --multires, vcs]",
         "[default: 10]",
         "[default: 0.5]",
         "[default: -0.53]",
@@ -528,6 +528,8 @@ fn smooth_output_identical_across_threads_and_memory_budgets() {
             "smooth".into(),
             input.display().to_string(),
             out.display().to_string(),
+            "--method".into(),
+            "vcs".into(),
             "--iterations".into(),
             "1".into(),
             "--patch-size".into(),

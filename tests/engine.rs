@@ -259,6 +259,7 @@ fn energy_rejection_counts_rejections_and_still_preserves_volume() {
     let mut mesh = noisy_sphere(3, 0.05, 9);
     let v0 = metrics::volume(&mesh.positions, &mesh.triangles);
     let opts = Options {
+        method: Method::Vcs,
         iterations: 10,
         reject_energy_increase: true,
         ..Options::default()

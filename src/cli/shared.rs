@@ -36,9 +36,9 @@ impl InOut {
 /// sizes, engine.
 #[derive(Debug, Clone, ClapArgs)]
 pub struct SmoothingArgs {
-    /// Smoothing method.
-    #[arg(long, value_enum, default_value_t = Method::Vcs)]
-    pub method: Method,
+    /// Smoothing method [default: vcs-lowpass; with --multires, vcs].
+    #[arg(long, value_enum)]
+    pub method: Option<Method>,
     /// Number of iterations (0 only converts the file's format), or 'auto': stop when the noise is gone, after at most 100 iterations. 'auto' estimates the noise from the input (the spread of the second difference of the normal Laplacian) and stops when an iteration removes more along the normals than noise explains, or when little noise is left to remove (see the README).
     #[arg(
         long,
@@ -57,13 +57,14 @@ pub struct SmoothingArgs {
 impl SmoothingArgs {
     /// The smoothing these flags ask for.
     pub fn options(&self) -> Options {
+        let method = self.method.unwrap_or_default();
         match self.iterations {
-            Iterations::Count(n) => self.params.options(self.method, n),
+            Iterations::Count(n) => self.params.options(method, n),
             Iterations::Auto => Options {
                 auto_stop: true,
                 ..self
                     .params
-                    .options(self.method, crate::engine::auto::DEFAULT_CAP)
+                    .options(method, crate::engine::auto::DEFAULT_CAP)
             },
         }
     }

@@ -49,7 +49,8 @@ fn defaults_match_the_contract() {
         panic!("not smooth")
     };
     let s = s.smoothing;
-    assert_eq!(s.method, Method::Vcs);
+    assert_eq!(s.method, None);
+    assert_eq!(s.options().method, Method::VcsLowpass);
     assert_eq!(s.iterations, crate::cli::shared::Iterations::Count(10));
     assert_eq!(s.options().iterations, 10);
     assert!(!s.options().auto_stop);

@@ -505,8 +505,8 @@ pub struct AutoStop {
     expected: f64,
     observed: f64,
     iteration: usize,
-    /// Stop when more than `1 − 1/tau` of an iteration's removal is not noise (the engine's
-    /// [`crate::engine::auto::DETAIL_RATIO`]).
+    /// Stop when more than `1 − 1/tau` of an iteration's removal is not noise (default 4/3, the
+    /// research's value; the engine's is `engine::auto::DETAIL_RATIO`).
     pub tau: f64,
     /// Stop when the expected gain falls below this fraction of the noise energy (default 0.01).
     pub gone: f64,
@@ -612,7 +612,7 @@ impl AutoStop {
             expected: 0.0,
             observed: 0.0,
             iteration: 0,
-            tau: crate::engine::auto::DETAIL_RATIO,
+            tau: 4.0 / 3.0,
             gone: 0.01,
         }
     }

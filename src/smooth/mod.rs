@@ -34,11 +34,12 @@ pub enum Method {
     Laplacian,
     Taubin,
     Lem,
-    #[default]
     Vcs,
     VcsTriangle,
     /// Taubin's λ|μ displacement spread over 2-ring stencils, each restoring its faces' volume
-    /// exactly (see [`lowpass`]).
+    /// exactly (see [`lowpass`]). The default: it keeps the volume as `vcs` does and the detail as
+    /// `taubin` does (docs/quality-research.md).
+    #[default]
     VcsLowpass,
 }
 
@@ -112,7 +113,7 @@ impl FromStr for Method {
 ///
 /// | field | default | used by |
 /// |---|---|---|
-/// | `method` | [`Method::Vcs`] | — |
+/// | `method` | [`Method::VcsLowpass`] | — |
 /// | `iterations` | 10 | every method; with `auto_stop`, the cap |
 /// | `auto_stop` | false | every method: stop when the noise is gone (see [`crate::engine::auto`]) |
 /// | `lambda` | 0.5 | `laplacian` (its step), `taubin` and `vcs-lowpass` (their first step) |
@@ -216,7 +217,7 @@ pub fn check_step(name: &'static str, x: f64) -> crate::Result<()> {
 impl Default for Options {
     fn default() -> Self {
         Options {
-            method: Method::Vcs,
+            method: Method::default(),
             iterations: 10,
             auto_stop: false,
             lambda: 0.5,

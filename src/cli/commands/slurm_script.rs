@@ -138,7 +138,7 @@ pub fn run(cfg: &SlurmScriptConfig, out: &mut dyn Write) -> Result<()> {
     // The flags of `batch`, repeated.
     let mut flags: Vec<String> = vec![
         "--method".into(),
-        a.method.name().into(),
+        cfg.smooth.options.method.name().into(),
         "--iterations".into(),
         a.iterations.to_string(),
         "--lambda".into(),

@@ -100,7 +100,11 @@ impl SmoothConfig {
         engine.pins = a.pins.resolve()?;
         engine.with_stats = a.report.is_some();
         engine.statistics = a.stats;
-        let options = a.smoothing.options();
+        let mut options = a.smoothing.options();
+        if a.multires.multires && a.smoothing.method.is_none() {
+            // Multiresolution runs a volume-constrained method on its coarse levels, vcs by default.
+            options.method = crate::Method::Vcs;
+        }
         let multires = a.multires.resolve(&options)?;
         if options.auto_stop && a.cluster.checkpoint.is_some() {
             return Err(flags::parameter(
