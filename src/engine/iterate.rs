@@ -22,7 +22,7 @@ use rayon::prelude::*;
 
 use super::observer::{IterationRecord, Observer, Statistics};
 use super::reduce;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::metrics;
 use crate::partition::Patch;
 use crate::schedule::{Prefetch, SharedField};
@@ -555,6 +555,9 @@ impl Run<'_, '_> {
         };
         if self.share.leads() {
             self.observer.iteration(&record, self.opts.iterations);
+            if self.observer.interrupted() {
+                return Err(Error::Interrupted);
+            }
         }
         self.share.iteration_end(&record, pos)?;
         if self.keep {

@@ -73,6 +73,14 @@ impl Statistics {
 pub trait Observer: Send {
     /// Called after each iteration with its record and the total number of iterations.
     fn iteration(&mut self, _record: &IterationRecord, _total: usize) {}
+
+    /// Asked after each iteration (once [`Observer::iteration`] has seen it): `true` ends the
+    /// run there with [`Error::Interrupted`](crate::Error::Interrupted), before anything is
+    /// written. A host that cannot end the process on a signal (the Python bindings) stops a
+    /// long run this way; the cluster engine's ranks never ask.
+    fn interrupted(&mut self) -> bool {
+        false
+    }
 }
 
 /// An observer that ignores everything.
