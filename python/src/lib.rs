@@ -35,6 +35,31 @@ use run::without_gil;
 /// What the reports and `info` name as the file of a mesh given as arrays.
 const IN_MEMORY: &str = "<memory>";
 
+/// Check that a mesh can be written to `path` before any work: an existing directory
+/// (`FileNotFoundError` / `NotADirectoryError` otherwise, as `open` raises) and an extension the
+/// writer knows (`MeshError`).
+fn check_output(path: &Path) -> PyResult<()> {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        if let Err(e) = std::fs::read_dir(dir) {
+            return Err(to_py(vcsmooth::Error::io(dir, e)));
+        }
+    }
+    vcsmooth::cli::output::mesh_output(path).map_err(to_py)
+}
+
+/// Check that `path` is not a directory, which the library reports as a malformed mesh: the
+/// system's own error (`IsADirectoryError`), as `open` raises it.
+fn check_not_directory(path: &Path) -> PyResult<()> {
+    use std::io::Read;
+    if path.is_dir() {
+        let read = std::fs::File::open(path).and_then(|mut f| f.read(&mut [0u8; 1]));
+        if let Err(e) = read {
+            return Err(to_py(vcsmooth::Error::io(path, e)));
+        }
+    }
+    Ok(())
+}
+
 /// The mesh of `vertices` and `faces`, checked (see [`arrays`]).
 fn mesh_of(vertices: &Bound<'_, PyAny>, faces: &Bound<'_, PyAny>) -> PyResult<Mesh> {
     let positions = arrays::vertices(vertices)?;
@@ -190,7 +215,8 @@ fn smooth_file<'py>(
 ) -> PyResult<Bound<'py, PyAny>> {
     let mut settings = Settings::parse("smooth_file", options, true)?;
     // The checks `vcsmooth smooth` makes before reading anything.
-    vcsmooth::cli::output::mesh_output(&output).map_err(to_py)?;
+    check_not_directory(&input)?;
+    check_output(&output)?;
     let sides: Vec<(&str, &Path)> = settings
         .report
         .as_deref()
@@ -218,6 +244,7 @@ fn smooth_file<'py>(
 /// ``vcsmooth.MeshError`` when it is not a mesh the library reads (the message says where).
 #[pyfunction]
 fn read_mesh<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyTuple>> {
+    check_not_directory(&path)?;
     let mesh = without_gil(py, false, |_| vcsmooth::io::read_mesh(&path))?;
     PyTuple::new(
         py,
@@ -228,10 +255,12 @@ fn read_mesh<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyTuple
     )
 }
 
-/// Write a triangle mesh to ``path``, its format from the extension (.ply: binary, ``double``
-/// coordinates when float32 would round them; .obj, .off, .stl). Written to a temporary file and
-/// renamed into place. Takes the arrays ``smooth`` takes and raises what it raises, plus
-/// ``OSError`` for the file and ``vcsmooth.MeshError`` for an unknown extension.
+/// Write a triangle mesh to ``path``, its format from the extension (.ply, binary; .obj; .off;
+/// .stl, always float32). Coordinates are written as float32 when they all are float32 values,
+/// else as float64 (PLY ``double``, text that reads back to the same float64): nothing is
+/// rounded. Written to a temporary file and renamed into place. Takes the arrays ``smooth``
+/// takes and raises what it raises, plus ``OSError`` for the file and ``vcsmooth.MeshError`` for
+/// an unknown extension.
 #[pyfunction]
 fn write_mesh(
     py: Python<'_>,
@@ -239,8 +268,17 @@ fn write_mesh(
     vertices: &Bound<'_, PyAny>,
     faces: &Bound<'_, PyAny>,
 ) -> PyResult<()> {
-    let mesh = mesh_of(vertices, faces)?;
-    vcsmooth::cli::output::mesh_output(&path).map_err(to_py)?;
+    let mut mesh = mesh_of(vertices, faces)?;
+    check_output(&path)?;
+    // Lossless: double precision when a coordinate is not a float32 (smoothed float64 positions).
+    let exact = |x: f64| x as f32 as f64 == x;
+    if !mesh
+        .positions
+        .iter()
+        .all(|p| p.to_array().into_iter().all(exact))
+    {
+        mesh.source.precision = vcsmooth::mesh::Precision::Double;
+    }
     without_gil(py, false, |_| vcsmooth::io::write_mesh(&path, &mesh))
 }
 

@@ -9,7 +9,7 @@
 
 use std::path::PathBuf;
 
-use pyo3::exceptions::{PyTypeError, PyValueError};
+use pyo3::exceptions::{PyOverflowError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use vcsmooth::engine::{EngineSettings, Pins, Statistics};
@@ -110,6 +110,9 @@ impl Settings {
                 let py = value.py();
                 if e.is_instance_of::<PyTypeError>(py) {
                     PyTypeError::new_err(format!("{}: {}", arg.name, e.value(py)))
+                } else if e.is_instance_of::<PyOverflowError>(py) {
+                    // A negative count or one too large for its type: a value out of range.
+                    PyValueError::new_err(format!("{} is out of range: {}", arg.name, e.value(py)))
                 } else {
                     e
                 }
