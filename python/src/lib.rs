@@ -153,11 +153,10 @@ fn smooth<'py>(
     faces: &Bound<'py, PyAny>,
     options: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
-    let mut settings = Settings::parse("smooth", options, false)?;
     // Nobody reads the iterations' statistics: measure only the last (the positions are the same).
-    if !settings.stats_given {
-        settings.engine.statistics = Statistics::Last;
-    }
+    let mut defaults = Settings::default();
+    defaults.engine.statistics = Statistics::Last;
+    let settings = Settings::parse("smooth", options, false, defaults)?;
     Ok(smooth_arrays(py, vertices, faces, &settings)?.0)
 }
 
@@ -176,7 +175,7 @@ fn smooth_report<'py>(
     faces: &Bound<'py, PyAny>,
     options: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<Bound<'py, PyTuple>> {
-    let mut settings = Settings::parse("smooth_report", options, false)?;
+    let mut settings = Settings::parse("smooth_report", options, false, Settings::default())?;
     settings.engine.with_stats = true;
     let (positions, run) = smooth_arrays(py, vertices, faces, &settings)?;
     let memory = Path::new(IN_MEMORY);
@@ -213,7 +212,7 @@ fn smooth_file<'py>(
     output: PathBuf,
     options: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let mut settings = Settings::parse("smooth_file", options, true)?;
+    let mut settings = Settings::parse("smooth_file", options, true, Settings::default())?;
     // The checks `vcsmooth smooth` makes before reading anything.
     check_not_directory(&input)?;
     check_output(&output)?;

@@ -26,8 +26,6 @@ pub struct Settings {
     pub report: Option<PathBuf>,
     /// `smooth_file`: print one line per iteration on `sys.stderr`.
     pub progress: bool,
-    /// Whether `stats` was given (`smooth` measures only the last iteration by default).
-    pub stats_given: bool,
 }
 
 /// Which calls take a keyword argument.
@@ -65,7 +63,7 @@ const KWARGS: &[Kwarg] = &[
     Kwarg { name: "pin_property", library: "pin_property", scope: File, set: |v, s| set_pins(s, Pins::Property(v.extract()?)) },
     Kwarg { name: "threads", library: "threads", scope: Smoothing, set: |v, s| { s.engine.threads = v.extract()?; Ok(()) } },
     Kwarg { name: "patch_size", library: "patch_size", scope: Smoothing, set: |v, s| { s.engine.patch_size = patch_size(v)?; Ok(()) } },
-    Kwarg { name: "stats", library: "stats", scope: Smoothing, set: |v, s| { s.engine.statistics = stats(v)?; s.stats_given = true; Ok(()) } },
+    Kwarg { name: "stats", library: "stats", scope: Smoothing, set: |v, s| { s.engine.statistics = stats(v)?; Ok(()) } },
     Kwarg { name: "memory_budget", library: "memory_budget", scope: File, set: |v, s| { s.engine.memory_budget = memory_budget(v)?; Ok(()) } },
     Kwarg { name: "scratch", library: "scratch", scope: File, set: |v, s| { s.engine.scratch = v.extract()?; Ok(()) } },
     Kwarg { name: "report", library: "report", scope: File, set: |v, s| { s.report = v.extract()?; Ok(()) } },
@@ -73,15 +71,16 @@ const KWARGS: &[Kwarg] = &[
 ];
 
 impl Settings {
-    /// The settings `kwargs` ask of `function` (`smooth_file` takes the file-only ones too):
-    /// a `TypeError` for a keyword `function` does not take or a value of the wrong type, a
-    /// `ValueError` for a value out of range (others are checked by the engine).
+    /// `defaults` with what `kwargs` ask of `function` (`smooth_file` takes the file-only ones
+    /// too): a `TypeError` for a keyword `function` does not take or a value of the wrong type,
+    /// a `ValueError` for a value out of range (others are checked by the engine).
     pub fn parse(
         function: &str,
         kwargs: Option<&Bound<'_, PyDict>>,
         file: bool,
+        defaults: Settings,
     ) -> PyResult<Settings> {
-        let mut s = Settings::default();
+        let mut s = defaults;
         let mut pins_from: Option<&str> = None;
         for (key, value) in kwargs.into_iter().flatten() {
             let key: String = key.extract()?;
