@@ -4,7 +4,7 @@ The volume-constrained stencil smoothing of Liu, Tang, Lu, Wang and Zheng (Graph
 2002), plus Laplacian, Taubin and local energy minimisation, on NumPy arrays or mesh files::
 
     import trimesh, vcsmooth
-    mesh = trimesh.load("scan.ply")
+    mesh = trimesh.load("scan.ply", process=False)  # keep the file's vertices
     mesh.vertices = vcsmooth.smooth(mesh.vertices, mesh.faces, iterations=20)
 
 - ``smooth(vertices, faces, **options)``: the smoothed ``(n, 3)`` float64 positions.
