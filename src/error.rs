@@ -54,6 +54,10 @@ pub enum Error {
         #[source]
         source: Box<Error>,
     },
+    /// The run was stopped by its observer ([`crate::engine::Observer::interrupted`]) before it
+    /// wrote anything.
+    #[error("interrupted")]
+    Interrupted,
     /// A command line that asks for something impossible, in words the command line chose (its
     /// flags and arguments). Raised only by [`crate::cli`].
     #[error("{what}")]

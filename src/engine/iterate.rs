@@ -623,6 +623,9 @@ impl Run<'_, '_> {
         };
         if self.share.leads() {
             self.observer.iteration(&record, self.opts.iterations);
+            if self.observer.interrupted() {
+                return Err(Error::Interrupted);
+            }
         }
         self.share.iteration_end(&record, pos)?;
         if self.keep {

@@ -74,6 +74,14 @@ pub trait Observer: Send {
     /// Called after each iteration with its record and the total number of iterations (with
     /// the automatic stop, `Options::auto_stop`, the cap: the run may end sooner).
     fn iteration(&mut self, _record: &IterationRecord, _total: usize) {}
+
+    /// Asked after each iteration (once [`Observer::iteration`] has seen it): `true` ends the
+    /// run there with [`Error::Interrupted`](crate::Error::Interrupted), before anything is
+    /// written. A host that cannot end the process on a signal (the Python bindings) stops a
+    /// long run this way; the cluster engine's ranks never ask.
+    fn interrupted(&mut self) -> bool {
+        false
+    }
 }
 
 /// An observer that ignores everything.
@@ -83,6 +91,54 @@ impl Observer for Quiet {}
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::engine::EngineSettings;
+    use crate::{Error, Method, Options};
+
+    /// Stops the run once iteration `after` is done; remembers the last iteration seen.
+    struct StopAfter {
+        after: usize,
+        seen: usize,
+    }
+
+    impl Observer for StopAfter {
+        fn iteration(&mut self, record: &IterationRecord, _total: usize) {
+            self.seen = record.iteration;
+        }
+        fn interrupted(&mut self) -> bool {
+            self.seen >= self.after
+        }
+    }
+
+    #[test]
+    fn an_interrupting_observer_stops_the_run_before_anything_is_written() {
+        let mesh = crate::shapes::icosphere(2);
+        for method in [Method::Vcs, Method::Laplacian] {
+            let opts = Options {
+                method,
+                ..Options::default()
+            };
+            let mut smoothed = mesh.clone();
+            let mut stop = StopAfter { after: 2, seen: 0 };
+            let e = crate::smooth_with(&mut smoothed, &opts, &EngineSettings::default(), &mut stop);
+            assert!(matches!(e, Err(Error::Interrupted)), "{method}: {e:?}");
+            assert_eq!(stop.seen, 2);
+            assert_eq!(&smoothed.positions[..], &mesh.positions[..]);
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let (input, output) = (dir.path().join("in.ply"), dir.path().join("out.ply"));
+        crate::io::write_mesh(&input, &mesh).unwrap();
+        let mut stop = StopAfter { after: 1, seen: 0 };
+        let e = crate::engine::run_file(
+            &input,
+            &output,
+            &Options::default(),
+            &EngineSettings::default(),
+            &mut stop,
+        );
+        assert!(matches!(e, Err(Error::Interrupted)), "{e:?}");
+        let files: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+        assert_eq!(files.len(), 1, "only the input: {files:?}");
+    }
 
     #[test]
     fn unmeasured_records_survive_json() {

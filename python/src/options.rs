@@ -1,0 +1,182 @@
+//! The keyword arguments of `smooth`, `smooth_report` and `smooth_file`: the one place that maps
+//! them to the library's [`Options`] and [`EngineSettings`], and the library's parameter names
+//! back to them for errors.
+//!
+//! They mirror `vcsmooth smooth`'s flags in snake_case (`--max-deviation` → `max_deviation`;
+//! `--lambda` → `lam`, as `lambda` is a Python keyword). A keyword that is not given keeps the
+//! library's default (`Options::default()`, `EngineSettings::default()`), so a default changed
+//! in the library changes here too. A new option is one entry of [`KWARGS`].
+
+use std::path::PathBuf;
+
+use pyo3::exceptions::{PyOverflowError, PyTypeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use vcsmooth::engine::{EngineSettings, Pins, Statistics};
+use vcsmooth::{Method, Options};
+
+use crate::arrays;
+
+/// Everything the keyword arguments of a smoothing call set.
+#[derive(Debug, Clone, Default)]
+pub struct Settings {
+    pub options: Options,
+    pub engine: EngineSettings,
+    /// `smooth_file`: where to write the JSON report.
+    pub report: Option<PathBuf>,
+    /// `smooth_file`: print one line per iteration on `sys.stderr`.
+    pub progress: bool,
+}
+
+/// Which calls take a keyword argument.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Scope {
+    /// `smooth`, `smooth_report` and `smooth_file`.
+    Smoothing,
+    /// `smooth_file` only (files, the memory budget, reports, progress).
+    File,
+}
+
+/// One keyword argument: its name, the library's name of what it sets (as
+/// `vcsmooth::Error::Parameter` names it), who takes it, and how it sets it.
+struct Kwarg {
+    name: &'static str,
+    library: &'static str,
+    scope: Scope,
+    set: fn(&Bound<'_, PyAny>, &mut Settings) -> PyResult<()>,
+}
+
+use Scope::{File, Smoothing};
+
+/// Every keyword argument, in the order of `vcsmooth smooth --help`.
+#[rustfmt::skip]
+const KWARGS: &[Kwarg] = &[
+    Kwarg { name: "method", library: "method", scope: Smoothing, set: |v, s| { s.options.method = method(v)?; Ok(()) } },
+    Kwarg { name: "iterations", library: "iterations", scope: Smoothing, set: |v, s| { s.options.iterations = v.extract()?; Ok(()) } },
+    Kwarg { name: "lam", library: "lambda", scope: Smoothing, set: |v, s| { s.options.lambda = v.extract()?; Ok(()) } },
+    Kwarg { name: "mu", library: "mu", scope: Smoothing, set: |v, s| { s.options.mu = v.extract()?; Ok(()) } },
+    Kwarg { name: "reject_energy_increase", library: "reject_energy_increase", scope: Smoothing, set: |v, s| { s.options.reject_energy_increase = v.extract()?; Ok(()) } },
+    Kwarg { name: "crease_angle", library: "crease_angle", scope: Smoothing, set: |v, s| { s.options.crease_angle = v.extract()?; Ok(()) } },
+    Kwarg { name: "max_deviation", library: "max_deviation", scope: Smoothing, set: |v, s| { s.options.max_deviation = v.extract()?; Ok(()) } },
+    Kwarg { name: "pinned", library: "pins", scope: Smoothing, set: |v, s| set_pins(s, arrays::pins(v)?) },
+    Kwarg { name: "pin", library: "pin", scope: File, set: |v, s| set_pins(s, Pins::File(v.extract()?)) },
+    Kwarg { name: "pin_property", library: "pin_property", scope: File, set: |v, s| set_pins(s, Pins::Property(v.extract()?)) },
+    Kwarg { name: "threads", library: "threads", scope: Smoothing, set: |v, s| { s.engine.threads = v.extract()?; Ok(()) } },
+    Kwarg { name: "patch_size", library: "patch_size", scope: Smoothing, set: |v, s| { s.engine.patch_size = patch_size(v)?; Ok(()) } },
+    Kwarg { name: "stats", library: "stats", scope: Smoothing, set: |v, s| { s.engine.statistics = stats(v)?; Ok(()) } },
+    Kwarg { name: "memory_budget", library: "memory_budget", scope: File, set: |v, s| { s.engine.memory_budget = memory_budget(v)?; Ok(()) } },
+    Kwarg { name: "scratch", library: "scratch", scope: File, set: |v, s| { s.engine.scratch = v.extract()?; Ok(()) } },
+    Kwarg { name: "report", library: "report", scope: File, set: |v, s| { s.report = v.extract()?; Ok(()) } },
+    Kwarg { name: "progress", library: "progress", scope: File, set: |v, s| { s.progress = v.extract()?; Ok(()) } },
+];
+
+impl Settings {
+    /// `defaults` with what `kwargs` ask of `function` (`smooth_file` takes the file-only ones
+    /// too): a `TypeError` for a keyword `function` does not take or a value of the wrong type,
+    /// a `ValueError` for a value out of range (others are checked by the engine).
+    pub fn parse(
+        function: &str,
+        kwargs: Option<&Bound<'_, PyDict>>,
+        file: bool,
+        defaults: Settings,
+    ) -> PyResult<Settings> {
+        let mut s = defaults;
+        let mut pins_from: Option<&str> = None;
+        for (key, value) in kwargs.into_iter().flatten() {
+            let key: String = key.extract()?;
+            let arg = KWARGS
+                .iter()
+                .find(|k| k.name == key && (file || k.scope == Smoothing))
+                .ok_or_else(|| {
+                    PyTypeError::new_err(format!(
+                        "{function}() got an unexpected keyword argument '{key}'"
+                    ))
+                })?;
+            // `None` is "not given" for the optional keywords; pins have no default to restore.
+            if value.is_none() && arg.library.starts_with("pin") {
+                continue;
+            }
+            if arg.library.starts_with("pin") {
+                if let Some(other) = pins_from.replace(arg.name) {
+                    return Err(PyValueError::new_err(format!(
+                        "{} and {other} cannot both be given",
+                        arg.name
+                    )));
+                }
+            }
+            (arg.set)(&value, &mut s).map_err(|e| {
+                // A conversion error does not say which keyword it is about.
+                let py = value.py();
+                if e.is_instance_of::<PyTypeError>(py) {
+                    PyTypeError::new_err(format!("{}: {}", arg.name, e.value(py)))
+                } else if e.is_instance_of::<PyOverflowError>(py) {
+                    // A negative count or one too large for its type: a value out of range.
+                    PyValueError::new_err(format!("{} is out of range: {}", arg.name, e.value(py)))
+                } else {
+                    e
+                }
+            })?;
+        }
+        Ok(s)
+    }
+}
+
+/// The keyword argument that sets the library's parameter `library` (as errors name it), or
+/// `library` itself when none does.
+pub fn keyword(library: &str) -> &str {
+    KWARGS
+        .iter()
+        .find(|k| k.library == library)
+        .map_or(library, |k| k.name)
+}
+
+fn set_pins(s: &mut Settings, pins: Pins) -> PyResult<()> {
+    s.engine.pins = pins;
+    Ok(())
+}
+
+fn method(v: &Bound<'_, PyAny>) -> PyResult<Method> {
+    let name: String = v.extract()?;
+    name.parse()
+        .map_err(|e: String| PyValueError::new_err(format!("method: {e}")))
+}
+
+fn patch_size(v: &Bound<'_, PyAny>) -> PyResult<usize> {
+    let n: u64 = v.extract()?;
+    // As `--patch-size`: patch ids and local vertex ids are 32-bit.
+    if !(1..u32::MAX as u64).contains(&n) {
+        return Err(PyValueError::new_err(format!(
+            "patch_size must be in 1..{}, got {n}",
+            u32::MAX
+        )));
+    }
+    Ok(n as usize)
+}
+
+fn stats(v: &Bound<'_, PyAny>) -> PyResult<Statistics> {
+    match v.extract::<String>()?.as_str() {
+        "every" => Ok(Statistics::Every),
+        "last" => Ok(Statistics::Last),
+        other => Err(PyValueError::new_err(format!(
+            "stats must be 'every' or 'last', got '{other}'"
+        ))),
+    }
+}
+
+/// Bytes, or a size with a K/M/G/T suffix (binary units) as `--memory-budget` takes; `None`: the
+/// library's default.
+fn memory_budget(v: &Bound<'_, PyAny>) -> PyResult<Option<u64>> {
+    if v.is_none() {
+        return Ok(None);
+    }
+    let bytes = match v.extract::<u64>() {
+        Ok(b) => b,
+        Err(_) => {
+            let text: String = v.extract()?;
+            vcsmooth::engine::memory::parse_size(&text)
+                .map_err(|e| PyValueError::new_err(format!("memory_budget: {e}")))?
+        }
+    };
+    vcsmooth::engine::memory::check_budget(bytes).map_err(crate::errors::to_py)?;
+    Ok(Some(bytes))
+}

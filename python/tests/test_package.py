@@ -1,0 +1,54 @@
+"""The package's typing surface: docstrings, py.typed, and stubs whose keywords and defaults are
+the ones the functions take."""
+
+import ast
+from pathlib import Path
+
+import numpy as np
+
+import vcsmooth
+
+FUNCTIONS = {"smooth", "smooth_report", "smooth_file", "read_mesh", "write_mesh", "info"}
+
+
+def stub_functions():
+    stub = Path(vcsmooth.__file__).with_name("_vcsmooth.pyi")
+    tree = ast.parse(stub.read_text())
+    return {n.name: n for n in tree.body if isinstance(n, ast.FunctionDef)}
+
+
+def stub_defaults(fn):
+    """The keyword-only defaults a stub states (`...`: the library's, not written down)."""
+    out = {}
+    for arg, default in zip(fn.args.kwonlyargs, fn.args.kw_defaults):
+        value = ast.literal_eval(default)
+        if value is not Ellipsis:
+            out[arg.arg] = value
+    return out
+
+
+def test_docstrings_and_markers():
+    assert Path(vcsmooth.__file__).with_name("py.typed").is_file()
+    assert set(vcsmooth.__all__) >= FUNCTIONS | {"MeshError", "DEFAULT_METHOD"}
+    for name in FUNCTIONS:
+        doc = getattr(vcsmooth, name).__doc__
+        assert doc and len(doc) > 200, name
+    assert vcsmooth.DEFAULT_METHOD == "vcs"
+
+
+def test_stubs_state_the_defaults(tmp_path, kitten, kitten_path):
+    stubs = stub_functions()
+    assert set(stubs) == FUNCTIONS
+    v, f = kitten
+    # Every keyword of the stubs is taken, and its stated default is the default.
+    smooth = stub_defaults(stubs["smooth"])
+    assert np.array_equal(vcsmooth.smooth(v, f, **smooth), vcsmooth.smooth(v, f))
+    report = stub_defaults(stubs["smooth_report"])
+    a, ra = vcsmooth.smooth_report(v, f, **report)
+    b, rb = vcsmooth.smooth_report(v, f)
+    assert np.array_equal(a, b) and ra["options"] == rb["options"] and ra["engine"] == rb["engine"]
+    files = stub_defaults(stubs["smooth_file"])
+    ra = vcsmooth.smooth_file(kitten_path, tmp_path / "a.ply", **files)
+    rb = vcsmooth.smooth_file(kitten_path, tmp_path / "b.ply")
+    assert (tmp_path / "a.ply").read_bytes() == (tmp_path / "b.ply").read_bytes()
+    assert ra["options"] == rb["options"] and ra["engine"] == rb["engine"]

@@ -1,0 +1,42 @@
+"""vcsmooth: smooth triangle meshes without shrinking them.
+
+The volume-constrained stencil smoothing of Liu, Tang, Lu, Wang and Zheng (Graphical Models 64,
+2002), plus Laplacian, Taubin and local energy minimisation, on NumPy arrays or mesh files::
+
+    import trimesh, vcsmooth
+    mesh = trimesh.load("scan.ply", process=False)  # keep the file's vertices
+    mesh.vertices = vcsmooth.smooth(mesh.vertices, mesh.faces, iterations=20)
+
+- ``smooth(vertices, faces, **options)``: the smoothed ``(n, 3)`` float64 positions.
+- ``smooth_report(vertices, faces, **options)``: the positions and the run's report.
+- ``smooth_file(input, output, **options)``: file to file, as ``vcsmooth smooth`` (same bytes).
+- ``read_mesh(path)``, ``write_mesh(path, vertices, faces)``, ``info(vertices, faces)``.
+- ``MeshError``: a file that is not a readable mesh (a ``ValueError``).
+
+The options are the command line's flags in snake_case (``lam`` for ``--lambda``); see
+``help(vcsmooth.smooth)``. The native code runs without the GIL, and Ctrl-C stops it.
+"""
+
+from ._vcsmooth import (
+    DEFAULT_METHOD,
+    MeshError,
+    __version__,
+    info,
+    read_mesh,
+    smooth,
+    smooth_file,
+    smooth_report,
+    write_mesh,
+)
+
+__all__ = [
+    "DEFAULT_METHOD",
+    "MeshError",
+    "__version__",
+    "info",
+    "read_mesh",
+    "smooth",
+    "smooth_file",
+    "smooth_report",
+    "write_mesh",
+]

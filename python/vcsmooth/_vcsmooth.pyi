@@ -1,0 +1,75 @@
+# Type stubs of the native module; `vcsmooth/__init__.py` re-exports every name. The keyword
+# arguments are keyword-only (the native functions take them as **options) and mirror the
+# `vcsmooth smooth` flags; their defaults are the library's (see help(vcsmooth.smooth)).
+from os import PathLike
+from typing import Any, Dict, Literal, Optional, Tuple, Union
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+_Path = Union[str, PathLike[str]]
+_Method = Literal["vcs", "vcs-triangle", "vcs-lowpass", "lem", "laplacian", "taubin"]
+_Report = Dict[str, Any]
+
+__version__: str
+DEFAULT_METHOD: str
+
+class MeshError(ValueError): ...
+
+def smooth(
+    vertices: ArrayLike,
+    faces: ArrayLike,
+    *,
+    method: _Method = ...,
+    iterations: int = 10,
+    lam: float = 0.5,
+    mu: float = -0.53,
+    reject_energy_increase: bool = False,
+    crease_angle: Optional[float] = None,
+    max_deviation: Optional[float] = None,
+    pinned: Optional[ArrayLike] = None,
+    threads: Optional[int] = None,
+    patch_size: int = 16384,
+    stats: Literal["every", "last"] = "last",
+) -> NDArray[np.float64]: ...
+def smooth_report(
+    vertices: ArrayLike,
+    faces: ArrayLike,
+    *,
+    method: _Method = ...,
+    iterations: int = 10,
+    lam: float = 0.5,
+    mu: float = -0.53,
+    reject_energy_increase: bool = False,
+    crease_angle: Optional[float] = None,
+    max_deviation: Optional[float] = None,
+    pinned: Optional[ArrayLike] = None,
+    threads: Optional[int] = None,
+    patch_size: int = 16384,
+    stats: Literal["every", "last"] = "every",
+) -> Tuple[NDArray[np.float64], _Report]: ...
+def smooth_file(
+    input: _Path,
+    output: _Path,
+    *,
+    method: _Method = ...,
+    iterations: int = 10,
+    lam: float = 0.5,
+    mu: float = -0.53,
+    reject_energy_increase: bool = False,
+    crease_angle: Optional[float] = None,
+    max_deviation: Optional[float] = None,
+    pinned: Optional[ArrayLike] = None,
+    pin: Optional[_Path] = None,
+    pin_property: Optional[str] = None,
+    threads: Optional[int] = None,
+    patch_size: int = 16384,
+    stats: Literal["every", "last"] = "every",
+    memory_budget: Union[int, str, None] = None,
+    scratch: Optional[_Path] = None,
+    report: Optional[_Path] = None,
+    progress: bool = False,
+) -> _Report: ...
+def read_mesh(path: _Path) -> Tuple[NDArray[np.float64], NDArray[np.int64]]: ...
+def write_mesh(path: _Path, vertices: ArrayLike, faces: ArrayLike) -> None: ...
+def info(vertices: ArrayLike, faces: ArrayLike) -> Dict[str, Any]: ...
