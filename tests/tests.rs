@@ -7,6 +7,7 @@ mod util;
 
 mod batch;
 mod bench_cli;
+mod boundary;
 mod cli;
 mod cluster;
 mod controls;

@@ -9,7 +9,7 @@ use clap::{Args as ClapArgs, ValueEnum};
 
 use crate::engine::{EngineSettings, Statistics};
 use crate::error::{Error, Result};
-use crate::smooth::{Method, Options};
+use crate::smooth::{Boundary, Method, Options};
 
 /// `IN OUT` of the commands that turn one mesh file into another (`smooth`, `subdivide`, `refine`).
 #[derive(Debug, Clone, ClapArgs)]
@@ -79,6 +79,9 @@ pub struct MethodParams {
     /// No vertex ends farther than D (model units, > 0) from its input position: lem, vcs and vcs-triangle skip a stencil that would move one farther (the volume stays exact); laplacian and taubin clamp each vertex (they do not keep the volume) [default: none].
     #[arg(long, value_name = "D", value_parser = length, allow_hyphen_values = true)]
     pub max_deviation: Option<f64>,
+    /// Boundary loops of open meshes: fixed, or smooth (lem, vcs, vcs-triangle: each loop is smoothed as a curve; vcs and vcs-triangle keep each hole's vector area and the volume exactly).
+    #[arg(long, value_enum, value_name = "MODE", default_value_t = Boundary::Fixed)]
+    pub boundary: Boundary,
 }
 
 impl MethodParams {
@@ -92,6 +95,7 @@ impl MethodParams {
             reject_energy_increase: self.reject_energy_increase,
             crease_angle: self.crease_angle,
             max_deviation: self.max_deviation,
+            boundary: self.boundary,
         }
     }
 }
@@ -302,6 +306,20 @@ impl ValueEnum for Method {
             Method::VcsLowpass => {
                 "Taubin's λ|μ displacement, volume restored exactly on 2-ring stencils"
             }
+        };
+        Some(PossibleValue::new(self.name()).help(help))
+    }
+}
+
+impl ValueEnum for Boundary {
+    fn value_variants<'a>() -> &'a [Self] {
+        &Boundary::ALL
+    }
+
+    fn to_possible_value(&self) -> Option<PossibleValue> {
+        let help = match self {
+            Boundary::Fixed => "boundary vertices stay where they are",
+            Boundary::Smooth => "smooth each boundary loop, keeping its vector area",
         };
         Some(PossibleValue::new(self.name()).help(help))
     }

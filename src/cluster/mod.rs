@@ -84,6 +84,13 @@ pub fn run_file(
             "is not supported by the cluster engine yet",
         ));
     }
+    if !opts.boundary.is_fixed() {
+        // Every iteration measures each whole loop, and a loop may cross ranks.
+        return Err(Error::parameter(
+            "boundary",
+            "smooth is not supported by the cluster engine yet",
+        ));
+    }
     if opts.method == crate::smooth::Method::VcsLowpass {
         // Its ranks would need the ring colouring in the stored plan and the shares' halo
         // exchanged before each sweep: not built yet.

@@ -26,6 +26,7 @@ use crate::error::Result;
 use crate::metrics;
 use crate::partition::Patch;
 use crate::schedule::{Prefetch, SharedField};
+use crate::smooth::boundary::Loops;
 use crate::smooth::laplacian::{self, Previous, StepStats};
 use crate::smooth::lowpass;
 use crate::smooth::stencil::{self, StencilParams};
@@ -265,7 +266,9 @@ impl Run<'_, '_> {
         } = buf;
         let mesh = self.mesh;
         let owned = self.share.owned();
-        let params = stencil_params(self.opts, input);
+        // The loops of `boundary: smooth`, their normals measured at each iteration's start.
+        let mut loops = (self.opts.boundary == crate::smooth::Boundary::Smooth)
+            .then(|| Loops::find(mesh.topo, mesh.tris));
         let total = self.opts.iterations;
         let lowpass = self.opts.method == Method::VcsLowpass;
         let colours = if lowpass {
@@ -297,6 +300,10 @@ impl Run<'_, '_> {
                     crate::smooth::neighbor_sums_into(mesh.topo, pos, &mut sums[v..v + 1], v);
                 }
             }
+            if let Some(loops) = &mut loops {
+                loops.measure(pos);
+            }
+            let params = stencil_params(self.opts, input, loops.as_ref());
             let mut sweep = SweepStats::default();
             for (c, colour) in colours.iter().enumerate() {
                 if let Some(prefetch) = mesh.prefetch {
@@ -324,6 +331,10 @@ impl Run<'_, '_> {
                 });
                 sweep.add(&done);
                 self.share.colour_end(pos, sums);
+            }
+            if let Some(loops) = &mut loops {
+                let deviation = stencil_params(self.opts, input, None).deviation;
+                loops.restore(mesh.topo, mesh.tris, pos, deviation);
             }
             let seconds = start.elapsed().as_secs_f64();
             let moved = measure.then(|| {
@@ -531,6 +542,8 @@ impl Run<'_, '_> {
             stencils.skipped_degenerate,
             stencils.rejected,
             stencils.deviation_limited,
+            stencils.boundary_applied,
+            stencils.boundary_skipped,
         ];
         let mut local = vec![sum_d];
         local.extend(counts.iter().map(|&c| c as f64));
@@ -550,6 +563,8 @@ impl Run<'_, '_> {
                 skipped_degenerate: sums[3] as u64,
                 rejected: sums[4] as u64,
                 deviation_limited: sums[5] as u64,
+                boundary_applied: sums[6] as u64,
+                boundary_skipped: sums[7] as u64,
             },
             seconds: maxima[1],
         };
@@ -570,14 +585,19 @@ impl Run<'_, '_> {
 }
 
 /// The stencil kernel's parameters for `opts`; `input`: the input positions, read when
-/// `opts.max_deviation` bounds the deviation.
-fn stencil_params<'a>(opts: &Options, input: &'a [DVec3]) -> StencilParams<'a> {
+/// `opts.max_deviation` bounds the deviation; `loops`: the boundary loops when they are smoothed.
+fn stencil_params<'a>(
+    opts: &Options,
+    input: &'a [DVec3],
+    loops: Option<&'a Loops>,
+) -> StencilParams<'a> {
     StencilParams {
         volume: matches!(opts.method, Method::Vcs | Method::VcsTriangle),
         reject_energy_increase: opts.reject_energy_increase,
         deviation: opts
             .max_deviation
             .map(|limit| stencil::Deviation { input, limit }),
+        boundary: loops,
     }
 }
 
@@ -601,7 +621,14 @@ fn sweep_patches(
                 lowpass::sweep_rings(topo, tris, &mut pv, &sv, owned, params.deviation)
             } else if method == Method::VcsTriangle {
                 let faces = patch.triangles.clone();
-                stencil::sweep_triangles(topo, tris, &mut pv, &mut sv, faces, params)
+                let mut st = stencil::sweep_triangles(topo, tris, &mut pv, &mut sv, faces, params);
+                if params.boundary.is_some() {
+                    // After the patch's triangles, its boundary edges, ascending.
+                    let edges = patch.edges(topo);
+                    let b = stencil::sweep_boundary(topo, tris, &mut pv, &mut sv, edges, params);
+                    st.add(&b);
+                }
+                st
             } else {
                 let edges = patch.edges(topo);
                 stencil::sweep_edges(topo, tris, &mut pv, &mut sv, edges, params)

@@ -112,6 +112,12 @@ pub struct MultiresStats {
 
 /// Check that `opts` and `m` make a multiresolution run.
 pub fn validate(opts: &Options, m: &MultiresOptions) -> Result<()> {
+    if !opts.boundary.is_fixed() {
+        return Err(Error::parameter(
+            "boundary",
+            "smooth is not supported in multiresolution mode yet (clustering moves the loops)",
+        ));
+    }
     if opts.max_deviation.is_some() {
         return Err(Error::parameter(
             "max_deviation",
