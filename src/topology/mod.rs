@@ -1125,6 +1125,22 @@ mod tests {
     }
 
     #[test]
+    fn rim_vertices_are_loop_vertices_until_pinned() {
+        let tris: Vec<[u32; 3]> = (1..=5).map(|k| [0, k, k % 5 + 1]).collect();
+        let mut t = Topology::build(6, &tris).unwrap();
+        assert!(!t.is_loop(0) && (1..=5).all(|v| t.is_loop(v)));
+        assert_eq!(t.loop_neighbors(&tris, 1), Some([2, 5]));
+        assert_eq!(t.loop_neighbors(&tris, 0), None);
+        t.pin(|v| v == 3);
+        assert!(t.is_fixed(3) && !t.is_loop(3) && t.is_loop(2));
+        // A vertex on four boundary edges (two fans touching at 0) is no loop vertex.
+        let mut tris = tris;
+        tris.extend([[0, 6, 7], [0, 7, 8]]);
+        let t = Topology::build(9, &tris).unwrap();
+        assert!(t.is_fixed(0) && !t.is_loop(0) && t.is_loop(7));
+    }
+
+    #[test]
     fn non_manifold_edge_and_vertex_are_fixed() {
         // Three triangles on edge (0,1).
         let t = Topology::build(5, &[[0, 1, 2], [1, 0, 3], [0, 1, 4]]).unwrap();
