@@ -7,6 +7,10 @@
 //!   a colour the patches run in parallel (they touch disjoint data), each applying the stencils
 //!   it owns in ascending order: edge stencils `(i, j)`, `i < j`, by `(i, j)`; triangle stencils in
 //!   the plan's triangle order.
+//! - `boundary: smooth` (`lem`, `vcs`, `vcs-triangle`): the loops' normals are measured before the
+//!   sweep; an edge that is a boundary stencil ([`crate::smooth::boundary`]) is applied in its
+//!   place in the edge order, and a `vcs-triangle` patch applies its boundary stencils after its
+//!   triangles, ascending; after the last colour, [`Loops::restore`] walks every loop in order.
 //! - `vcs-lowpass`: first the step-1 shares of every vertex, Jacobi (a λ|μ pair from the
 //!   iteration's start, see [`lowpass::shares_into`]); then Gauss–Seidel as above over the ring
 //!   stencils (one per owned movable vertex, ascending), colour after colour of the plan's
@@ -26,7 +30,7 @@ use crate::error::Result;
 use crate::metrics;
 use crate::partition::Patch;
 use crate::schedule::{Prefetch, SharedField};
-use crate::smooth::boundary::Loops;
+use crate::smooth::boundary::{self, Loops};
 use crate::smooth::laplacian::{self, Previous, StepStats};
 use crate::smooth::lowpass;
 use crate::smooth::stencil::{self, StencilParams};
@@ -303,7 +307,7 @@ impl Run<'_, '_> {
             if let Some(loops) = &mut loops {
                 loops.measure(pos);
             }
-            let params = stencil_params(self.opts, input, loops.as_ref());
+            let params = stencil_params(self.opts, input);
             let mut sweep = SweepStats::default();
             for (c, colour) in colours.iter().enumerate() {
                 if let Some(prefetch) = mesh.prefetch {
@@ -326,15 +330,15 @@ impl Run<'_, '_> {
                 // and `sums` are not used otherwise while the views live.
                 let (pv, sv) = unsafe { (SharedField::new(pos), SharedField::new(sums)) };
                 let method = self.opts.method;
+                let loops = loops.as_ref();
                 let done = on_pool(&*self.share, || {
-                    sweep_patches(mesh, pv, sv, &mine, method, params)
+                    sweep_patches(mesh, pv, sv, &mine, method, params, loops)
                 });
                 sweep.add(&done);
                 self.share.colour_end(pos, sums);
             }
             if let Some(loops) = &mut loops {
-                let deviation = stencil_params(self.opts, input, None).deviation;
-                loops.restore(mesh.topo, mesh.tris, pos, deviation);
+                loops.restore(mesh.topo, mesh.tris, pos, params.deviation);
             }
             let seconds = start.elapsed().as_secs_f64();
             let moved = measure.then(|| {
@@ -585,24 +589,20 @@ impl Run<'_, '_> {
 }
 
 /// The stencil kernel's parameters for `opts`; `input`: the input positions, read when
-/// `opts.max_deviation` bounds the deviation; `loops`: the boundary loops when they are smoothed.
-fn stencil_params<'a>(
-    opts: &Options,
-    input: &'a [DVec3],
-    loops: Option<&'a Loops>,
-) -> StencilParams<'a> {
+/// `opts.max_deviation` bounds the deviation.
+fn stencil_params<'a>(opts: &Options, input: &'a [DVec3]) -> StencilParams<'a> {
     StencilParams {
         volume: matches!(opts.method, Method::Vcs | Method::VcsTriangle),
         reject_energy_increase: opts.reject_energy_increase,
         deviation: opts
             .max_deviation
             .map(|limit| stencil::Deviation { input, limit }),
-        boundary: loops,
     }
 }
 
 /// The stencils of `patches` (all of one colour, so they touch disjoint data), in parallel on the
-/// current rayon pool through the shared views, each patch's in ascending order.
+/// current rayon pool through the shared views, each patch's in ascending order; with `loops`
+/// (`boundary: smooth`), the boundary stencils too.
 fn sweep_patches(
     mesh: &Sweep,
     pos: SharedField,
@@ -610,6 +610,7 @@ fn sweep_patches(
     patches: &[Patch],
     method: Method,
     params: StencilParams,
+    loops: Option<&Loops>,
 ) -> SweepStats {
     let (topo, tris) = (mesh.topo, mesh.tris);
     patches
@@ -622,16 +623,22 @@ fn sweep_patches(
             } else if method == Method::VcsTriangle {
                 let faces = patch.triangles.clone();
                 let mut st = stencil::sweep_triangles(topo, tris, &mut pv, &mut sv, faces, params);
-                if params.boundary.is_some() {
+                if let Some(loops) = loops {
                     // After the patch's triangles, its boundary edges, ascending.
                     let edges = patch.edges(topo);
-                    let b = stencil::sweep_boundary(topo, tris, &mut pv, &mut sv, edges, params);
-                    st.add(&b);
+                    st.add(&boundary::sweep_boundary(
+                        topo, tris, &mut pv, &mut sv, edges, params, loops,
+                    ));
                 }
                 st
             } else {
                 let edges = patch.edges(topo);
-                stencil::sweep_edges(topo, tris, &mut pv, &mut sv, edges, params)
+                match loops {
+                    Some(loops) => {
+                        boundary::sweep_edges(topo, tris, &mut pv, &mut sv, edges, params, loops)
+                    }
+                    None => stencil::sweep_edges(topo, tris, &mut pv, &mut sv, edges, params),
+                }
             }
         })
         .reduce(SweepStats::default, |mut a, b| {

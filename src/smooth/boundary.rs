@@ -49,8 +49,8 @@
 
 use glam::DVec3;
 
-use super::stencil::{Deviation, MAX_REACH, Outcome};
-use super::{Field, Topology};
+use super::stencil::{self, Deviation, MAX_REACH, Outcome, StencilParams};
+use super::{Field, SweepStats, Topology};
 
 /// What a boundary stencil does besides step 1.
 #[derive(Debug, Clone, Copy)]
@@ -62,6 +62,70 @@ pub struct BoundaryParams<'a> {
     pub reject_energy_increase: bool,
     /// Skip a stencil that would leave a free vertex beyond this bound.
     pub deviation: Option<Deviation<'a>>,
+}
+
+/// Apply the edge stencils `edges`, in the given order, Gauss–Seidel, as
+/// [`stencil::sweep_edges`] does, except that an edge that is a boundary stencil of `loops` gets
+/// the boundary kernel ([`apply`]) instead of being skipped as fixed.
+pub fn sweep_edges<P: Field + ?Sized, S: Field + ?Sized>(
+    topo: &Topology,
+    triangles: &[[u32; 3]],
+    pos: &mut P,
+    sums: &mut S,
+    edges: impl IntoIterator<Item = [u32; 2]>,
+    params: StencilParams,
+    loops: &Loops,
+) -> SweepStats {
+    let mut stats = SweepStats::default();
+    let bp = boundary_params(params, loops);
+    for e in edges {
+        if is_boundary_stencil(topo, triangles, e) {
+            count(&mut stats, apply(topo, triangles, pos, sums, e, bp));
+        } else {
+            let outcome = stencil::apply(topo, triangles, pos, sums, e, params);
+            stencil::count(&mut stats, outcome);
+        }
+    }
+    stats
+}
+
+/// Apply the boundary stencils among `edges`, in the given order, and nothing else: the
+/// boundary part of a triangle sweep.
+pub fn sweep_boundary<P: Field + ?Sized, S: Field + ?Sized>(
+    topo: &Topology,
+    triangles: &[[u32; 3]],
+    pos: &mut P,
+    sums: &mut S,
+    edges: impl IntoIterator<Item = [u32; 2]>,
+    params: StencilParams,
+    loops: &Loops,
+) -> SweepStats {
+    let mut stats = SweepStats::default();
+    let bp = boundary_params(params, loops);
+    for e in edges {
+        if is_boundary_stencil(topo, triangles, e) {
+            count(&mut stats, apply(topo, triangles, pos, sums, e, bp));
+        }
+    }
+    stats
+}
+
+/// The boundary kernel's parameters for a sweep with `params` over `loops`.
+fn boundary_params<'a>(params: StencilParams<'a>, loops: &'a Loops) -> BoundaryParams<'a> {
+    BoundaryParams {
+        loops: Some(loops),
+        reject_energy_increase: params.reject_energy_increase,
+        deviation: params.deviation,
+    }
+}
+
+/// Tally a boundary stencil's outcome: as any stencil's, and in the boundary counts.
+fn count(stats: &mut SweepStats, outcome: Outcome) {
+    stencil::count(stats, outcome);
+    match outcome {
+        Outcome::Applied => stats.boundary_applied += 1,
+        _ => stats.boundary_skipped += 1,
+    }
 }
 
 /// Whether edge `(i, j)` is a boundary stencil: two loop vertices joined by a boundary edge.

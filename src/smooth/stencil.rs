@@ -20,10 +20,10 @@
 
 use glam::DVec3;
 
-use super::{Field, SweepStats, Topology, boundary, inv_deg};
+use super::{Field, SweepStats, Topology, inv_deg};
 
 /// What a stencil kernel does after the energy minimisation.
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StencilParams<'a> {
     /// Restore the stencil's volume (step 2): `vcs` and `vcs-triangle`; false gives `lem`.
     pub volume: bool,
@@ -31,10 +31,6 @@ pub struct StencilParams<'a> {
     pub reject_energy_increase: bool,
     /// Skip a stencil whose result would move a free vertex too far from its input position.
     pub deviation: Option<Deviation<'a>>,
-    /// Smooth the boundary loops (`boundary: smooth`), whose normals these are: an edge sweep
-    /// applies a boundary stencil ([`super::boundary`]) where an edge joins two loop vertices
-    /// along their loop, instead of skipping it as fixed.
-    pub boundary: Option<&'a boundary::Loops>,
 }
 
 /// A bound on how far a vertex may end from its input position.
@@ -504,9 +500,7 @@ pub fn count(stats: &mut SweepStats, outcome: Outcome) {
     }
 }
 
-/// Apply the edge stencils `edges`, in the given order, Gauss–Seidel (each sees the latest
-/// positions); with `params.boundary`, an edge that is a boundary stencil gets the boundary
-/// kernel ([`super::boundary::apply`]) in its place.
+/// Apply the edge stencils `edges`, in the given order, Gauss–Seidel (each sees the latest positions).
 pub fn sweep_edges<P: Field + ?Sized, S: Field + ?Sized>(
     topo: &Topology,
     triangles: &[[u32; 3]],
@@ -517,57 +511,9 @@ pub fn sweep_edges<P: Field + ?Sized, S: Field + ?Sized>(
 ) -> SweepStats {
     let mut stats = SweepStats::default();
     for e in edges {
-        if params.boundary.is_some() && boundary::is_boundary_stencil(topo, triangles, e) {
-            count_boundary(
-                &mut stats,
-                boundary::apply(topo, triangles, pos, sums, e, params.into()),
-            );
-        } else {
-            count(&mut stats, apply(topo, triangles, pos, sums, e, params));
-        }
+        count(&mut stats, apply(topo, triangles, pos, sums, e, params));
     }
     stats
-}
-
-/// Apply the boundary stencils among `edges` (see [`sweep_edges`]), in the given order, and
-/// nothing else: the boundary part of a triangle sweep.
-pub fn sweep_boundary<P: Field + ?Sized, S: Field + ?Sized>(
-    topo: &Topology,
-    triangles: &[[u32; 3]],
-    pos: &mut P,
-    sums: &mut S,
-    edges: impl IntoIterator<Item = [u32; 2]>,
-    params: StencilParams,
-) -> SweepStats {
-    let mut stats = SweepStats::default();
-    for e in edges {
-        if boundary::is_boundary_stencil(topo, triangles, e) {
-            count_boundary(
-                &mut stats,
-                boundary::apply(topo, triangles, pos, sums, e, params.into()),
-            );
-        }
-    }
-    stats
-}
-
-/// Tally a boundary stencil's outcome: as any stencil's, and in the boundary counts.
-fn count_boundary(stats: &mut SweepStats, outcome: Outcome) {
-    count(stats, outcome);
-    match outcome {
-        Outcome::Applied => stats.boundary_applied += 1,
-        _ => stats.boundary_skipped += 1,
-    }
-}
-
-impl<'a> From<StencilParams<'a>> for boundary::BoundaryParams<'a> {
-    fn from(p: StencilParams<'a>) -> Self {
-        boundary::BoundaryParams {
-            loops: p.boundary,
-            reject_energy_increase: p.reject_energy_increase,
-            deviation: p.deviation,
-        }
-    }
 }
 
 /// Apply the triangle stencils (indices into `triangles`), in the given order, Gauss–Seidel.
@@ -630,7 +576,6 @@ mod tests {
                 volume: true,
                 reject_energy_increase: false,
                 deviation: None,
-                boundary: None,
             };
             let out = apply(&topo, &tris, &mut pos[..], &mut sums[..], [0, 2], p);
             assert_eq!(out, Outcome::Applied);
@@ -654,7 +599,6 @@ mod tests {
             volume: false,
             reject_energy_increase: false,
             deviation: None,
-            boundary: None,
         };
         apply(&topo, &tris, &mut pos[..], &mut sums[..], [0, 2], p);
         let e1 = energy(&topo, &pos, &rows);
@@ -679,7 +623,6 @@ mod tests {
             volume: true,
             reject_energy_increase: false,
             deviation: None,
-            boundary: None,
         };
         let stats = sweep_triangles(&topo, &tris, &mut pos[..], &mut sums[..], 0..8, p);
         assert_eq!(stats.applied, 8);
@@ -697,7 +640,6 @@ mod tests {
             volume: true,
             reject_energy_increase: false,
             deviation: None,
-            boundary: None,
         };
         let before = pos.clone();
         let out = apply(&topo, &tris, &mut pos[..], &mut sums[..], [0, 1], p);
@@ -730,7 +672,6 @@ mod tests {
                 volume: true,
                 reject_energy_increase: false,
                 deviation: None,
-                boundary: None,
             };
             let mut pos = pos0.clone();
             let mut sums = neighbor_sums(&topo, &pos);
@@ -768,7 +709,6 @@ mod tests {
             volume: true,
             reject_energy_increase: true,
             deviation: None,
-            boundary: None,
         };
         let all: Vec<u32> = (0..6).collect();
         for _ in 0..20 {
