@@ -53,5 +53,5 @@ pub use engine::{EngineSettings, Report, smooth, smooth_with};
 pub use error::{Error, Result};
 pub use mesh::Mesh;
 
-pub use smooth::{Method, Options};
+pub use smooth::{Boundary, Method, Options};
 pub use topology::Topology;

@@ -8,6 +8,7 @@ mod util;
 mod auto;
 mod batch;
 mod bench_cli;
+mod boundary;
 mod cli;
 mod cluster;
 mod controls;

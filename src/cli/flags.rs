@@ -15,6 +15,7 @@ pub(super) const FLAGS: &[(&str, &str)] = &[
     ("mu", "--mu"),
     ("crease_angle", "--crease-angle"),
     ("max_deviation", "--max-deviation"),
+    ("boundary", "--boundary"),
     // Engine (`EngineSettings`) and cluster runs.
     ("threads", "--threads"),
     ("patch_size", "--patch-size"),

@@ -9,7 +9,7 @@ use clap::{Args as ClapArgs, ValueEnum};
 
 use crate::engine::{EngineSettings, Statistics};
 use crate::error::{Error, Result};
-use crate::smooth::{Method, Options};
+use crate::smooth::{Boundary, Method, Options};
 
 /// `IN OUT` of the commands that turn one mesh file into another (`smooth`, `subdivide`, `refine`).
 #[derive(Debug, Clone, ClapArgs)]
@@ -36,7 +36,7 @@ impl InOut {
 /// sizes, engine.
 #[derive(Debug, Clone, ClapArgs)]
 pub struct SmoothingArgs {
-    /// Smoothing method [default: vcs-lowpass; with --multires, vcs].
+    /// Smoothing method [default: vcs-lowpass; with --multires or --boundary smooth, vcs].
     #[arg(long, value_enum)]
     pub method: Option<Method>,
     /// Number of iterations (0 only converts the file's format), or 'auto': stop when the noise is gone, after at most 100 iterations. 'auto' estimates the noise from the input (the spread of the second difference of the normal Laplacian) and stops when an iteration removes more along the normals than noise explains, or when little noise is left to remove (see the README).
@@ -57,7 +57,12 @@ pub struct SmoothingArgs {
 impl SmoothingArgs {
     /// The smoothing these flags ask for.
     pub fn options(&self) -> Options {
-        let method = self.method.unwrap_or_default();
+        // The default is the best method that supports what else is asked: smoothed boundaries
+        // run with vcs (vcs-lowpass does not smooth them yet).
+        let method = self.method.unwrap_or(match self.params.boundary {
+            crate::smooth::Boundary::Smooth => Method::Vcs,
+            crate::smooth::Boundary::Fixed => Method::default(),
+        });
         match self.iterations {
             Iterations::Count(n) => self.params.options(method, n),
             Iterations::Auto => Options {
@@ -115,6 +120,9 @@ pub struct MethodParams {
     /// No vertex ends farther than D (model units, > 0) from its input position: the stencil methods skip a stencil that would move one farther (the volume stays exact); laplacian and taubin clamp each vertex (they do not keep the volume) [default: none].
     #[arg(long, value_name = "D", value_parser = length, allow_hyphen_values = true)]
     pub max_deviation: Option<f64>,
+    /// Boundary loops of open meshes: fixed, or smooth (lem, vcs, vcs-triangle: each loop is smoothed as a curve; vcs and vcs-triangle keep each hole's vector area and the volume exactly).
+    #[arg(long, value_enum, value_name = "MODE", default_value_t = Boundary::Fixed)]
+    pub boundary: Boundary,
 }
 
 impl MethodParams {
@@ -129,6 +137,7 @@ impl MethodParams {
             reject_energy_increase: self.reject_energy_increase,
             crease_angle: self.crease_angle,
             max_deviation: self.max_deviation,
+            boundary: self.boundary,
         }
     }
 }
@@ -339,6 +348,20 @@ impl ValueEnum for Method {
             Method::VcsLowpass => {
                 "Taubin's λ|μ displacement, volume restored exactly on 2-ring stencils"
             }
+        };
+        Some(PossibleValue::new(self.name()).help(help))
+    }
+}
+
+impl ValueEnum for Boundary {
+    fn value_variants<'a>() -> &'a [Self] {
+        &Boundary::ALL
+    }
+
+    fn to_possible_value(&self) -> Option<PossibleValue> {
+        let help = match self {
+            Boundary::Fixed => "boundary vertices stay where they are",
+            Boundary::Smooth => "smooth each boundary loop, keeping its vector area",
         };
         Some(PossibleValue::new(self.name()).help(help))
     }

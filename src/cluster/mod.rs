@@ -85,6 +85,13 @@ pub fn run_file(
             "is not supported by the cluster engine yet: its checkpoints do not keep the stop rule's state and its ranks do not exchange the rule's noise field",
         ));
     }
+    if !opts.boundary.is_fixed() {
+        // Every iteration measures each whole loop, and a loop may cross ranks.
+        return Err(Error::parameter(
+            "boundary",
+            "smooth is not supported by the cluster engine yet",
+        ));
+    }
     if cluster.checkpoint_every == 0 {
         return Err(Error::parameter("checkpoint_every", "must be at least 1"));
     }

@@ -7,6 +7,10 @@
 //!   a colour the patches run in parallel (they touch disjoint data), each applying the stencils
 //!   it owns in ascending order: edge stencils `(i, j)`, `i < j`, by `(i, j)`; triangle stencils in
 //!   the plan's triangle order.
+//! - `boundary: smooth` (`lem`, `vcs`, `vcs-triangle`): the loops' normals are measured before the
+//!   sweep; an edge that is a boundary stencil ([`crate::smooth::boundary`]) is applied in its
+//!   place in the edge order, and a `vcs-triangle` patch applies its boundary stencils after its
+//!   triangles, ascending; after the last colour, [`Loops::restore`] walks every loop in order.
 //! - `vcs-lowpass`: first the step-1 shares of every vertex, Jacobi (a λ|μ pair from the
 //!   iteration's start, see [`lowpass::shares_into`]); then Gauss–Seidel as above over the ring
 //!   stencils (one per owned movable vertex, ascending), colour after colour of the plan's
@@ -31,6 +35,7 @@ use crate::error::{Error, Result};
 use crate::metrics;
 use crate::partition::Patch;
 use crate::schedule::{Prefetch, SharedField};
+use crate::smooth::boundary::{self, Loops};
 use crate::smooth::laplacian::{self, Previous, StepStats};
 use crate::smooth::lowpass;
 use crate::smooth::stencil::{self, StencilParams};
@@ -297,7 +302,9 @@ impl Run<'_, '_> {
         } = buf;
         let mesh = self.mesh;
         let owned = self.share.owned();
-        let params = stencil_params(self.opts, input);
+        // The loops of `boundary: smooth`, their normals measured at each iteration's start.
+        let mut loops = (self.opts.boundary == crate::smooth::Boundary::Smooth)
+            .then(|| Loops::find(mesh.topo, mesh.tris));
         let total = self.opts.iterations;
         let lowpass = self.opts.method == Method::VcsLowpass;
         let colours = if lowpass {
@@ -332,6 +339,10 @@ impl Run<'_, '_> {
                     crate::smooth::neighbor_sums_into(mesh.topo, pos, &mut sums[v..v + 1], v);
                 }
             }
+            if let Some(loops) = &mut loops {
+                loops.measure(pos);
+            }
+            let params = stencil_params(self.opts, input);
             let mut sweep = SweepStats::default();
             for (c, colour) in colours.iter().enumerate() {
                 if let Some(prefetch) = mesh.prefetch {
@@ -354,11 +365,15 @@ impl Run<'_, '_> {
                 // and `sums` are not used otherwise while the views live.
                 let (pv, sv) = unsafe { (SharedField::new(pos), SharedField::new(sums)) };
                 let method = self.opts.method;
+                let loops = loops.as_ref();
                 let done = on_pool(&*self.share, || {
-                    sweep_patches(mesh, pv, sv, &mine, method, params)
+                    sweep_patches(mesh, pv, sv, &mine, method, params, loops)
                 });
                 sweep.add(&done);
                 self.share.colour_end(pos, sums);
+            }
+            if let Some(loops) = &mut loops {
+                loops.restore(mesh.topo, mesh.tris, pos, params.deviation);
             }
             let seconds = start.elapsed().as_secs_f64();
             let moved = measure.then(|| {
@@ -599,6 +614,8 @@ impl Run<'_, '_> {
             stencils.skipped_degenerate,
             stencils.rejected,
             stencils.deviation_limited,
+            stencils.boundary_applied,
+            stencils.boundary_skipped,
         ];
         let mut local = vec![sum_d];
         local.extend(counts.iter().map(|&c| c as f64));
@@ -618,6 +635,8 @@ impl Run<'_, '_> {
                 skipped_degenerate: sums[3] as u64,
                 rejected: sums[4] as u64,
                 deviation_limited: sums[5] as u64,
+                boundary_applied: sums[6] as u64,
+                boundary_skipped: sums[7] as u64,
             },
             seconds: maxima[1],
         };
@@ -653,7 +672,8 @@ fn stencil_params<'a>(opts: &Options, input: &'a [DVec3]) -> StencilParams<'a> {
 }
 
 /// The stencils of `patches` (all of one colour, so they touch disjoint data), in parallel on the
-/// current rayon pool through the shared views, each patch's in ascending order.
+/// current rayon pool through the shared views, each patch's in ascending order; with `loops`
+/// (`boundary: smooth`), the boundary stencils too.
 fn sweep_patches(
     mesh: &Sweep,
     pos: SharedField,
@@ -661,6 +681,7 @@ fn sweep_patches(
     patches: &[Patch],
     method: Method,
     params: StencilParams,
+    loops: Option<&Loops>,
 ) -> SweepStats {
     let (topo, tris) = (mesh.topo, mesh.tris);
     patches
@@ -672,10 +693,23 @@ fn sweep_patches(
                 lowpass::sweep_rings(topo, tris, &mut pv, &sv, owned, params.deviation)
             } else if method == Method::VcsTriangle {
                 let faces = patch.triangles.clone();
-                stencil::sweep_triangles(topo, tris, &mut pv, &mut sv, faces, params)
+                let mut st = stencil::sweep_triangles(topo, tris, &mut pv, &mut sv, faces, params);
+                if let Some(loops) = loops {
+                    // After the patch's triangles, its boundary edges, ascending.
+                    let edges = patch.edges(topo);
+                    st.add(&boundary::sweep_boundary(
+                        topo, tris, &mut pv, &mut sv, edges, params, loops,
+                    ));
+                }
+                st
             } else {
                 let edges = patch.edges(topo);
-                stencil::sweep_edges(topo, tris, &mut pv, &mut sv, edges, params)
+                match loops {
+                    Some(loops) => {
+                        boundary::sweep_edges(topo, tris, &mut pv, &mut sv, edges, params, loops)
+                    }
+                    None => stencil::sweep_edges(topo, tris, &mut pv, &mut sv, edges, params),
+                }
             }
         })
         .reduce(SweepStats::default, |mut a, b| {

@@ -118,6 +118,12 @@ pub fn validate(opts: &Options, m: &MultiresOptions) -> Result<()> {
             "is not supported in multiresolution mode yet (its levels run fixed iteration counts)",
         ));
     }
+    if !opts.boundary.is_fixed() {
+        return Err(Error::parameter(
+            "boundary",
+            "smooth is not supported in multiresolution mode yet (clustering moves the loops)",
+        ));
+    }
     if opts.max_deviation.is_some() {
         return Err(Error::parameter(
             "max_deviation",

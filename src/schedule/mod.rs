@@ -9,6 +9,11 @@
 //! number; the patches of one colour run in parallel, and because they touch disjoint data, the
 //! result equals running them one by one in ascending patch order, whatever the thread count.
 //!
+//! The boundary stencils of `boundary: smooth` ([`crate::smooth::boundary`]) write what an edge
+//! stencil writes and read positions one ring further (two steps along their loop, within 2 rings
+//! of their free vertices, so within 3 of the patch): against another patch's position writes (1
+//! ring out) that is the same 4 rings, so they share the edge colouring.
+//!
 //! `vcs-lowpass` has wider stencils and gets its own colouring ([`Schedule::ring_colours`]): the
 //! stencil of an owned vertex v writes the positions of its 2-ring `F_v` and reads the corners of
 //! the faces touching `F_v`, i.e. the 3-ring of v (its step-1 shares are computed before the sweep

@@ -18,6 +18,7 @@ use std::str::FromStr;
 
 use glam::DVec3;
 
+pub mod boundary;
 pub mod laplacian;
 pub mod lowpass;
 pub mod noise;
@@ -155,6 +156,51 @@ pub struct Options {
     /// keep the volume (they never did). `None`: no bound.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub max_deviation: Option<f64>,
+    /// What happens to the boundary loops of an open mesh (see [`Boundary`]).
+    #[serde(skip_serializing_if = "Boundary::is_fixed")]
+    pub boundary: Boundary,
+}
+
+/// What happens to the boundary loops of an open mesh.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Boundary {
+    /// Boundary vertices never move.
+    #[default]
+    Fixed,
+    /// `lem`, `vcs` and `vcs-triangle` smooth every boundary loop with boundary stencils
+    /// ([`boundary`]): `vcs` and `vcs-triangle` keep each loop's vector area (so each hole keeps
+    /// its size) and the volume of the faces touching each stencil exactly; `lem`, which keeps no
+    /// volume, keeps no area either. Interior stencils treat boundary vertices as fixed.
+    Smooth,
+}
+
+impl Boundary {
+    /// Both, in documentation order.
+    pub const ALL: [Boundary; 2] = [Boundary::Fixed, Boundary::Smooth];
+
+    /// The command-line name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Boundary::Fixed => "fixed",
+            Boundary::Smooth => "smooth",
+        }
+    }
+
+    /// Whether boundary vertices stay where they are (the default).
+    pub fn is_fixed(&self) -> bool {
+        *self == Boundary::Fixed
+    }
+}
+
+impl FromStr for Boundary {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Boundary::ALL
+            .into_iter()
+            .find(|b| b.name() == s)
+            .ok_or_else(|| format!("unknown boundary mode '{s}' (expected fixed or smooth)"))
+    }
 }
 
 impl Options {
@@ -169,6 +215,17 @@ impl Options {
                     format!("must be in (0, 180) degrees, got {a}"),
                 ));
             }
+        }
+        if self.boundary == Boundary::Smooth
+            && !matches!(self.method, Method::Lem | Method::Vcs | Method::VcsTriangle)
+        {
+            return Err(crate::Error::parameter(
+                "boundary",
+                format!(
+                    "smooth works with lem, vcs and vcs-triangle, not {}",
+                    self.method
+                ),
+            ));
         }
         if let Some(d) = self.max_deviation {
             if !(d > 0.0 && d.is_finite()) {
@@ -225,6 +282,7 @@ impl Default for Options {
             reject_energy_increase: false,
             crease_angle: None,
             max_deviation: None,
+            boundary: Boundary::Fixed,
         }
     }
 }
@@ -245,6 +303,16 @@ pub struct SweepStats {
     /// `max_deviation` from its input position.
     #[serde(default)]
     pub deviation_limited: u64,
+    /// Boundary stencils (`boundary: smooth`) among `applied`.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub boundary_applied: u64,
+    /// Boundary stencils among the skipped and rejected ones.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub boundary_skipped: u64,
+}
+
+fn is_zero(x: &u64) -> bool {
+    *x == 0
 }
 
 impl SweepStats {
@@ -255,6 +323,8 @@ impl SweepStats {
         self.skipped_degenerate += o.skipped_degenerate;
         self.rejected += o.rejected;
         self.deviation_limited += o.deviation_limited;
+        self.boundary_applied += o.boundary_applied;
+        self.boundary_skipped += o.boundary_skipped;
     }
 
     /// Stencils considered: applied + skipped + rejected.

@@ -64,7 +64,7 @@ const DEGENERATE: f64 = 1e-10;
 /// nearly singular without being caught by the relative tests, and is skipped as degenerate.
 /// Measured over 10 iterations of `lem`, `vcs` and `vcs-triangle`: at most 0.7 radii on the scans
 /// of `tests/data`, at most 4 on spheres and tori with noise of 3 mean edge lengths.
-const MAX_REACH: f64 = 16.0;
+pub(crate) const MAX_REACH: f64 = 16.0;
 
 /// Apply one stencil with free vertices `free` to `pos`, updating the neighbour-sum cache `sums`.
 /// It reads positions of F ∪ N(F) and sums of F ∪ N(F); it writes positions of F and sums of N(F).

@@ -9,6 +9,12 @@
 //!   not one cycle or one path), belongs to a degenerate triangle (a repeated index), is
 //!   unreferenced, or has more than [`MAX_FREE_DEGREE`] neighbours (a hub: see there). Degenerate
 //!   triangles take no part in the adjacency.
+//! - A **loop vertex** ([`Topology::is_loop`]) is a boundary vertex fixed for that reason alone: a
+//!   manifold vertex whose link is one path, so that exactly two of its edges are boundary edges
+//!   (its neighbours along its boundary loop, [`Topology::loop_neighbors`]). It stays fixed for
+//!   every stencil and Jacobi step; only the boundary stencils of `boundary: smooth`
+//!   ([`crate::smooth::boundary`]) move it, along its loop. Pinning it, a crease or an
+//!   orientation seam through it makes it an ordinary fixed vertex.
 //! - Orientation: an edge of two triangles is consistent when they traverse it in opposite
 //!   directions. The build counts the inconsistent ones; [`Topology::orient`] flips faces of a
 //!   copy of the triangles until every component that can be is consistent, and fixes the
@@ -122,9 +128,11 @@ pub const MAX_FREE_DEGREE: usize = 1024;
 const CHUNK: usize = 1 << 13;
 
 /// Bits of the fixed-vertex mask: any non-zero entry is a fixed vertex; [`CREASE`] also marks it
-/// as a crease vertex ([`Topology::crease`]), whose row the stencil energy leaves out.
+/// as a crease vertex ([`Topology::crease`]), whose row the stencil energy leaves out; [`LOOP`]
+/// as a loop vertex (see the module doc), which any other reason to fix it clears.
 const FIXED: u8 = 1;
 const CREASE: u8 = 2;
+const LOOP: u8 = 4;
 
 /// Reusable per-thread buffers of the per-vertex analysis.
 #[derive(Default)]
@@ -274,7 +282,12 @@ impl Topology {
                         st.high_degree_vertices += (a.degree > MAX_FREE_DEGREE) as usize;
                         st.unreferenced_vertices += (a.degree == 0) as usize;
                         if a.fixed {
-                            *fix = 1;
+                            // Degenerate triangles at v fixed it before: then not a loop vertex.
+                            *fix = if a.loop_vertex && *fix == 0 {
+                                FIXED | LOOP
+                            } else {
+                                FIXED
+                            };
                         }
                         st.fixed_vertices += (*fix != 0) as usize;
                     }
@@ -424,7 +437,41 @@ impl Topology {
         self.fixed[v as usize] != 0
     }
 
-    /// The fixed-vertex mask, one entry per vertex (non-zero = fixed; bit 2 also marks a crease vertex).
+    /// Whether `v` is a loop vertex: fixed only because it is a regular boundary vertex (see the
+    /// module doc), so boundary smoothing may move it along its loop.
+    #[inline]
+    pub fn is_loop(&self, v: u32) -> bool {
+        self.fixed[v as usize] == FIXED | LOOP
+    }
+
+    /// The two neighbours of `v` along its boundary loop (the other ends of its two boundary
+    /// edges, ascending), when `v` is on exactly two boundary edges; `None` otherwise.
+    /// `triangles` is the array the topology was built from; any orientation. Costs O(d²) in
+    /// the number d of faces of `v` (about 4 on a boundary).
+    pub fn loop_neighbors(&self, triangles: &[[u32; 3]], v: u32) -> Option<[u32; 2]> {
+        let faces = self.faces_of(v);
+        // A neighbour is across a boundary edge when exactly one face of v holds it.
+        let mut found = [0u32; 2];
+        let mut count = 0;
+        for &u in self.neighbors(v) {
+            let holding = faces
+                .iter()
+                .filter(|&&t| triangles[t as usize].contains(&u))
+                .take(2)
+                .count();
+            if holding == 1 {
+                if count == 2 {
+                    return None;
+                }
+                found[count] = u;
+                count += 1;
+            }
+        }
+        (count == 2).then_some(found)
+    }
+
+    /// The fixed-vertex mask, one entry per vertex (non-zero = fixed; bit 2 also marks a crease
+    /// vertex, bit 3 a loop vertex).
     pub fn fixed_mask(&self) -> &[u8] {
         &self.fixed
     }
@@ -587,7 +634,7 @@ impl Topology {
                     if fixed((c * CHUNK + k) as u32) {
                         all += 1;
                         newly += (*f == 0) as usize;
-                        *f |= mark;
+                        *f = (*f | mark) & !LOOP;
                     }
                 }
                 (all, newly)
@@ -697,10 +744,9 @@ impl Topology {
             }
         }
         for v in seam {
-            if self.fixed[v as usize] == 0 {
-                self.fixed[v as usize] = 1;
-                self.stats.fixed_vertices += 1;
-            }
+            let f = &mut self.fixed[v as usize];
+            self.stats.fixed_vertices += (*f == 0) as usize;
+            *f = (*f | FIXED) & !LOOP;
         }
         self.stats.non_orientable_components = non_orientable;
         self.stats.orientation_seam_edges = seams;
@@ -756,6 +802,9 @@ struct VertexAnalysis {
     inconsistent_edges: usize,
     non_manifold_vertex: bool,
     fixed: bool,
+    /// On exactly two boundary edges, manifold, link one path, degree at most
+    /// [`MAX_FREE_DEGREE`]: fixed only as a boundary vertex.
+    loop_vertex: bool,
 }
 
 /// Blocks of triangles the vertex → face build counts and scatters in parallel (a work size
@@ -893,6 +942,7 @@ fn analyse_vertex(
             inconsistent_edges: 0,
             non_manifold_vertex: false,
             fixed: false,
+            loop_vertex: false,
         };
     }
     analyse_general(v, faces, triangles, s)
@@ -924,6 +974,7 @@ fn analyse_general(
         inconsistent_edges: 0,
         non_manifold_vertex: false,
         fixed: false,
+        loop_vertex: false,
     };
     let mut ends = 0; // neighbours met once: ends of a path-shaped link
     let mut manifold = true;
@@ -960,6 +1011,7 @@ fn analyse_general(
         a.fixed = true;
         a.non_manifold_vertex =
             manifold && (ends != 2 || !link_connected(nbrs, &s.link, &mut s.parent));
+        a.loop_vertex = manifold && !a.non_manifold_vertex && a.degree <= MAX_FREE_DEGREE;
     } else if !link_connected(nbrs, &s.link, &mut s.parent) {
         a.fixed = true;
         a.non_manifold_vertex = true;
@@ -1070,6 +1122,22 @@ mod tests {
         assert!(!t.is_fixed(0));
         assert!((1..=5).all(|v| t.is_fixed(v)));
         assert_eq!(t.stats.boundary_edges, 5);
+    }
+
+    #[test]
+    fn rim_vertices_are_loop_vertices_until_pinned() {
+        let tris: Vec<[u32; 3]> = (1..=5).map(|k| [0, k, k % 5 + 1]).collect();
+        let mut t = Topology::build(6, &tris).unwrap();
+        assert!(!t.is_loop(0) && (1..=5).all(|v| t.is_loop(v)));
+        assert_eq!(t.loop_neighbors(&tris, 1), Some([2, 5]));
+        assert_eq!(t.loop_neighbors(&tris, 0), None);
+        t.pin(|v| v == 3);
+        assert!(t.is_fixed(3) && !t.is_loop(3) && t.is_loop(2));
+        // A vertex on four boundary edges (two fans touching at 0) is no loop vertex.
+        let mut tris = tris;
+        tris.extend([[0, 6, 7], [0, 7, 8]]);
+        let t = Topology::build(9, &tris).unwrap();
+        assert!(t.is_fixed(0) && !t.is_loop(0) && t.is_loop(7));
     }
 
     #[test]

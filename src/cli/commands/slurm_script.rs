@@ -155,6 +155,9 @@ pub fn run(cfg: &SlurmScriptConfig, out: &mut dyn Write) -> Result<()> {
     if let Some(d) = a.params.max_deviation {
         flags.extend(["--max-deviation".into(), d.to_string()]);
     }
+    if !a.params.boundary.is_fixed() {
+        flags.extend(["--boundary".into(), a.params.boundary.name().into()]);
+    }
     flags.extend(["--threads".into(), cpus.to_string()]);
     if let Some(p) = a.engine.patch_size {
         flags.extend(["--patch-size".into(), p.to_string()]);
