@@ -415,7 +415,16 @@ fn smooth_boundaries_without_a_method_run_vcs() {
         "--iterations",
         "2",
     ]));
-    assert!(text.contains("-> out.ply: vcs, 2 iterations"), "{text}");
-    let text = ok(vcsmooth(["smooth", &s(&input), &s(&out), "--iterations", "2"]));
-    assert!(text.contains("-> out.ply: vcs-lowpass, 2 iterations"), "{text}");
+    assert!(text.contains("out.ply: vcs, 2 iterations"), "{text}");
+    let text = ok(vcsmooth([
+        "smooth",
+        &s(&input),
+        &s(&out),
+        "--iterations",
+        "2",
+    ]));
+    assert!(
+        text.contains("out.ply: vcs-lowpass, 2 iterations"),
+        "{text}"
+    );
 }

@@ -19,7 +19,7 @@ use pyo3::types::{PyDict, PyTuple};
 use serde::Serialize;
 use vcsmooth::cli::commands::info::InfoDoc;
 use vcsmooth::cli::commands::smooth::SmoothReport;
-use vcsmooth::cli::report::{FileStats, Summary, Tool, undefined_as_nan};
+use vcsmooth::cli::report::undefined_as_nan;
 use vcsmooth::engine::{self, Statistics};
 use vcsmooth::{Mesh, Method, Topology};
 
@@ -81,24 +81,14 @@ fn report_of(
     run: &engine::Report,
     files: (&Path, &Path),
 ) -> SmoothReport {
-    let stats = |s: &Option<vcsmooth::metrics::MeshInfo>| s.clone().unwrap_or_default();
-    let output_format = vcsmooth::io::Format::from_extension(files.1);
-    SmoothReport {
-        tool: Tool::this(),
-        command: "smooth",
-        argv: vec![format!("vcsmooth.{function}")],
-        options: settings.options,
-        engine: settings.engine.clone(),
-        input: FileStats::new(files.0, run.input_format, stats(&run.input_stats)),
-        output: FileStats::new(files.1, output_format, stats(&run.output_stats)),
-        plan: run.plan.clone(),
-        memory: run.memory.clone(),
-        timings: run.timings,
-        cluster: run.cluster.clone(),
-        summary: Summary::of(&run.records),
-        iterations: run.records.clone(),
-        multires: None,
-    }
+    SmoothReport::new(
+        vec![format!("vcsmooth.{function}")],
+        settings.options,
+        settings.engine.clone(),
+        files,
+        run,
+        None,
+    )
 }
 
 /// Smooth the arrays with `settings` on the engine; the positions and the run's report.
@@ -127,12 +117,14 @@ fn smooth_arrays<'py>(
 ///
 /// - ``method``: ``"vcs"``, ``"vcs-triangle"``, ``"vcs-lowpass"``, ``"lem"``, ``"laplacian"``
 ///   or ``"taubin"``; default: the library's default method, ``vcsmooth.DEFAULT_METHOD``
-///   (currently ``"vcs"``).
-/// - ``iterations`` (10), ``lam`` (0.5, the Laplacian step λ, in (0, 1]), ``mu`` (-0.53,
+///   (currently ``"vcs-lowpass"``).
+/// - ``iterations`` (10, or ``"auto"``: stop when the noise is gone, after at most 100), ``lam`` (0.5, the Laplacian step λ, in (0, 1]), ``mu`` (-0.53,
 ///   Taubin's second step, in [-1, 0)), ``reject_energy_increase`` (False).
 /// - ``crease_angle`` (None): vertices on edges whose faces' normals differ by more than this
 ///   many degrees, in (0, 180), stay where they are.
 /// - ``max_deviation`` (None): no vertex ends farther than this from its input position.
+/// - ``boundary`` (``"fixed"``): ``"smooth"`` smooths each boundary loop keeping each hole's
+///   size (lem, vcs, vcs-triangle; name one of them as ``method``).
 /// - ``pinned`` (None): vertices that do not move: indices, or a boolean mask of length n.
 /// - ``threads`` (None: all cores), ``patch_size`` (16384: part of the result's definition).
 /// - ``stats`` (``"last"`` here): which iterations measure volume and area; the positions are

@@ -52,12 +52,13 @@ use Scope::{File, Smoothing};
 #[rustfmt::skip]
 const KWARGS: &[Kwarg] = &[
     Kwarg { name: "method", library: "method", scope: Smoothing, set: |v, s| { s.options.method = method(v)?; Ok(()) } },
-    Kwarg { name: "iterations", library: "iterations", scope: Smoothing, set: |v, s| { s.options.iterations = v.extract()?; Ok(()) } },
+    Kwarg { name: "iterations", library: "iterations", scope: Smoothing, set: iterations },
     Kwarg { name: "lam", library: "lambda", scope: Smoothing, set: |v, s| { s.options.lambda = v.extract()?; Ok(()) } },
     Kwarg { name: "mu", library: "mu", scope: Smoothing, set: |v, s| { s.options.mu = v.extract()?; Ok(()) } },
     Kwarg { name: "reject_energy_increase", library: "reject_energy_increase", scope: Smoothing, set: |v, s| { s.options.reject_energy_increase = v.extract()?; Ok(()) } },
     Kwarg { name: "crease_angle", library: "crease_angle", scope: Smoothing, set: |v, s| { s.options.crease_angle = v.extract()?; Ok(()) } },
     Kwarg { name: "max_deviation", library: "max_deviation", scope: Smoothing, set: |v, s| { s.options.max_deviation = v.extract()?; Ok(()) } },
+    Kwarg { name: "boundary", library: "boundary", scope: Smoothing, set: |v, s| { s.options.boundary = boundary(v)?; Ok(()) } },
     Kwarg { name: "pinned", library: "pins", scope: Smoothing, set: |v, s| set_pins(s, arrays::pins(v)?) },
     Kwarg { name: "pin", library: "pin", scope: File, set: |v, s| set_pins(s, Pins::File(v.extract()?)) },
     Kwarg { name: "pin_property", library: "pin_property", scope: File, set: |v, s| set_pins(s, Pins::Property(v.extract()?)) },
@@ -133,6 +134,30 @@ pub fn keyword(library: &str) -> &str {
 fn set_pins(s: &mut Settings, pins: Pins) -> PyResult<()> {
     s.engine.pins = pins;
     Ok(())
+}
+
+/// A count, or `"auto"` (`--iterations auto`: stop when the noise is gone, at most
+/// `engine::auto::DEFAULT_CAP` iterations).
+fn iterations(v: &Bound<'_, PyAny>, s: &mut Settings) -> PyResult<()> {
+    if let Ok(text) = v.extract::<String>() {
+        if text != "auto" {
+            return Err(PyValueError::new_err(format!(
+                "iterations must be a whole number or 'auto', got '{text}'"
+            )));
+        }
+        s.options.auto_stop = true;
+        s.options.iterations = vcsmooth::engine::auto::DEFAULT_CAP;
+    } else {
+        s.options.auto_stop = false;
+        s.options.iterations = v.extract()?;
+    }
+    Ok(())
+}
+
+fn boundary(v: &Bound<'_, PyAny>) -> PyResult<vcsmooth::smooth::Boundary> {
+    let name: String = v.extract()?;
+    name.parse()
+        .map_err(|e: String| PyValueError::new_err(format!("boundary: {e}")))
 }
 
 fn method(v: &Bound<'_, PyAny>) -> PyResult<Method> {

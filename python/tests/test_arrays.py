@@ -226,7 +226,8 @@ def test_wrong_keywords_and_types(kitten):
     v, f = kitten
     bad(TypeError, r"smooth\(\) got an unexpected keyword argument 'lambda'", v, f, **{"lambda": 0.5})
     bad(TypeError, r"unexpected keyword argument 'memory_budget'", v, f, memory_budget="1G")
-    bad(TypeError, r"^iterations: ", v, f, iterations="ten")
+    bad(TypeError, r"^iterations: ", v, f, iterations=2.5)
+    bad(ValueError, r"^iterations must be a whole number or 'auto', got 'ten'", v, f, iterations="ten")
     bad(TypeError, r"^method: ", v, f, method=3)
     with pytest.raises(TypeError, match=r"smooth_report\(\) got an unexpected keyword argument 'report'"):
         vcsmooth.smooth_report(v, f, report="r.json")
@@ -259,3 +260,42 @@ def test_unwritable_outputs(tmp_path, kitten):
     with pytest.raises(vcsmooth.MeshError, match="unknown output format '.xyz'"):
         vcsmooth.write_mesh(tmp_path / "mesh.xyz", v, f)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_iterations_auto_stops_when_the_noise_is_gone(kitten):
+    v, f = kitten
+    rng = np.random.default_rng(3)
+    noisy = v + rng.normal(scale=0.3, size=v.shape)
+    out, report = vcsmooth.smooth_report(noisy, f, iterations="auto")
+    ran = report["iterations_run"]
+    assert 1 <= ran < 100 and len(report["iterations"]) == ran
+    assert report["auto_stop"]["cap"] == 100
+    assert report["auto_stop"]["stopped_by"] in ("detail", "noise-removed")
+    # The same run as a count gives the same positions.
+    assert np.array_equal(out, vcsmooth.smooth(noisy, f, iterations=ran))
+    assert relative_volume_change(noisy, out, f) <= 1e-9
+
+
+def test_boundary_smooth_moves_the_rims_and_needs_a_stencil_method():
+    v, f = vcsmooth.read_mesh(DATA / "demosthenes-17k.ply")
+    edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+    unique, count = np.unique(edges, axis=0, return_counts=True)
+    rim = np.unique(unique[count == 1])
+    out = vcsmooth.smooth(v, f, method="vcs", iterations=3, boundary="smooth")
+    assert np.any(out[rim] != v[rim])
+    fixed = vcsmooth.smooth(v, f, method="vcs", iterations=3, boundary="fixed")
+    assert np.array_equal(fixed[rim], v[rim])
+    with pytest.raises(ValueError, match="boundary"):
+        vcsmooth.smooth(v, f, method="vcs-lowpass", boundary="smooth")
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(iterations="sometimes"), r"iterations must be a whole number or 'auto'"),
+        (dict(boundary="wavy"), r"boundary: unknown boundary mode 'wavy'"),
+    ],
+)
+def test_new_options_out_of_range(kitten, kwargs, match):
+    v, f = kitten
+    bad(ValueError, match, v, f, **kwargs)

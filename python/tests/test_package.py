@@ -33,7 +33,7 @@ def test_docstrings_and_markers():
     for name in FUNCTIONS:
         doc = getattr(vcsmooth, name).__doc__
         assert doc and len(doc) > 200, name
-    assert vcsmooth.DEFAULT_METHOD == "vcs"
+    assert vcsmooth.DEFAULT_METHOD == "vcs-lowpass"
 
 
 def test_stubs_state_the_defaults(tmp_path, kitten, kitten_path):

@@ -183,6 +183,39 @@ pub struct SmoothReport {
     pub multires: Option<crate::multires::MultiresStats>,
 }
 
+impl SmoothReport {
+    /// The report of `run`, made by `argv` with `options` and `engine` from `files` (input,
+    /// output); statistics the run did not measure are empty.
+    pub fn new(
+        argv: Vec<String>,
+        options: Options,
+        settings: EngineSettings,
+        files: (&std::path::Path, &std::path::Path),
+        run: &engine::Report,
+        multires: Option<crate::multires::MultiresStats>,
+    ) -> SmoothReport {
+        let stats = |s: &Option<crate::metrics::MeshInfo>| s.clone().unwrap_or_default();
+        SmoothReport {
+            tool: Tool::this(),
+            command: "smooth",
+            argv,
+            options,
+            engine: settings,
+            input: FileStats::new(files.0, run.input_format, stats(&run.input_stats)),
+            output: FileStats::new(files.1, output_format(files.1), stats(&run.output_stats)),
+            plan: run.plan.clone(),
+            memory: run.memory.clone(),
+            timings: run.timings,
+            cluster: run.cluster.clone(),
+            summary: Summary::of(&run.records),
+            iterations_run: run.iterations_run,
+            auto_stop: run.auto_stop.clone(),
+            iterations: run.records.clone(),
+            multires,
+        }
+    }
+}
+
 /// `vcsmooth smooth`.
 ///
 /// Under `mpirun`/`srun` (built with `--features mpi`) or with `--checkpoint`, the cluster engine
@@ -264,31 +297,18 @@ fn report(
 ) -> Result<()> {
     let records = &run.records;
 
-    if let (Some(path), Some(input_stats), Some(output_stats)) =
-        (&cfg.report, &run.input_stats, &run.output_stats)
+    if let Some(path) = &cfg.report
+        && run.input_stats.is_some()
+        && run.output_stats.is_some()
     {
-        let report = SmoothReport {
-            tool: Tool::this(),
-            command: "smooth",
-            argv: cfg.argv.clone(),
-            options: cfg.options,
-            engine: cfg.engine.clone(),
-            input: FileStats::new(&cfg.input, run.input_format, input_stats.clone()),
-            output: FileStats::new(
-                &cfg.output,
-                output_format(&cfg.output),
-                output_stats.clone(),
-            ),
-            plan: run.plan.clone(),
-            memory: run.memory.clone(),
-            timings: run.timings,
-            cluster: run.cluster.clone(),
-            summary: Summary::of(records),
-            iterations_run: run.iterations_run,
-            auto_stop: run.auto_stop.clone(),
-            iterations: records.clone(),
-            multires: multires.clone(),
-        };
+        let report = SmoothReport::new(
+            cfg.argv.clone(),
+            cfg.options,
+            cfg.engine.clone(),
+            (&cfg.input, &cfg.output),
+            run,
+            multires.clone(),
+        );
         write_json(path, &report)?;
     }
     if let Some(path) = &cfg.plot {
