@@ -38,6 +38,6 @@ for _ in range(rounds):
         c, t = clock(), time.perf_counter()
         fn()
         wall[name].append(time.perf_counter() - t); cpu[name].append(clock() - c)
-print(f"{len(v)} vertices, {len(f)} triangles; vcs, 10 iterations, 2 threads; {rounds} interleaved rounds; 1-min load {min(loads):.1f}-{max(loads):.1f}")
+print(f"{len(v)} vertices, {len(f)} triangles; {vcsmooth.DEFAULT_METHOD} (the default), 10 iterations, all cores; {rounds} interleaved rounds; 1-min load {min(loads):.1f}-{max(loads):.1f}")
 for name in rows:
     print(f"{name:30s} wall median {statistics.median(wall[name]):6.3f} s (min {min(wall[name]):.3f})   CPU median {statistics.median(cpu[name]):6.3f} s (min {min(cpu[name]):.3f})")
