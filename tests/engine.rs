@@ -505,3 +505,31 @@ fn vcs_lowpass_keeps_volume_is_deterministic_and_follows_the_prototype() {
     let (a, b) = (moved(&one), moved(&whole));
     assert!((a - b).abs() <= 0.02 * b, "patched moved {a}, in order {b}");
 }
+
+/// An in-memory run refuses, before any work, an iteration count whose records the memory budget
+/// cannot hold, as a file run does; the mesh is left as it was.
+#[test]
+fn in_memory_runs_refuse_more_records_than_the_budget_holds() {
+    let mut mesh = noisy_sphere(2, 0.3, 1);
+    let before = mesh.positions.clone();
+    let opts = Options {
+        method: Method::Vcs,
+        iterations: 1_000_000_000,
+        ..Options::default()
+    };
+    let settings = EngineSettings {
+        memory_budget: Some(64 << 20),
+        ..threads(1)
+    };
+    let start = std::time::Instant::now();
+    let e = engine::smooth_with(&mut mesh, &opts, &settings, &mut Quiet)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("one record per iteration"), "{e}");
+    assert!(
+        start.elapsed().as_secs() < 5,
+        "refused only after {:?}",
+        start.elapsed()
+    );
+    assert!(mesh.positions == before);
+}

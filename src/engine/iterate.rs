@@ -189,7 +189,7 @@ pub struct Buffers<'b> {
 /// at which `buf.auto` stops the run (an automatically stopped run measures the displacement of
 /// every iteration, and the volume and area of its last one whatever `when` says). Returns their
 /// records, one per iteration, which grow as the iterations run (a record the memory cannot hold
-/// is an [`Error::Resource`](crate::Error), not an abort; file runs bound them up front, see
+/// is an [`Error::Resource`](crate::Error), not an abort; every run bounds them up front, see
 /// [`memory::check_records`](super::memory)).
 #[allow(clippy::too_many_arguments)]
 pub fn iterate(

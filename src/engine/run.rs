@@ -304,6 +304,9 @@ pub(crate) fn run_mesh(
     observer: &mut dyn Observer,
 ) -> Result<Report> {
     opts.check()?;
+    // As file runs do: an iteration count whose records the memory cannot hold is refused
+    // before any work, not hours into the run.
+    memory::check_records(opts.iterations, engine.budget_and_source()?.bytes)?;
     let start = Instant::now();
     let pool = super::thread_pool(engine.threads)?;
     let storage = Storage::heap();
