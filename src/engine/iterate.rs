@@ -697,17 +697,17 @@ fn sweep_patches(
                 if let Some(loops) = loops {
                     // After the patch's triangles, its boundary edges, ascending.
                     let edges = patch.edges(topo);
-                    st.add(&boundary::sweep_boundary(
-                        topo, tris, &mut pv, &mut sv, edges, params, loops,
+                    st.add(&boundary::sweep_edges(
+                        topo, tris, &mut pv, &mut sv, edges, params, loops, false,
                     ));
                 }
                 st
             } else {
                 let edges = patch.edges(topo);
                 match loops {
-                    Some(loops) => {
-                        boundary::sweep_edges(topo, tris, &mut pv, &mut sv, edges, params, loops)
-                    }
+                    Some(loops) => boundary::sweep_edges(
+                        topo, tris, &mut pv, &mut sv, edges, params, loops, true,
+                    ),
                     None => stencil::sweep_edges(topo, tris, &mut pv, &mut sv, edges, params),
                 }
             }

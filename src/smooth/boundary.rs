@@ -64,9 +64,11 @@ pub struct BoundaryParams<'a> {
     pub deviation: Option<Deviation<'a>>,
 }
 
-/// Apply the edge stencils `edges`, in the given order, Gauss–Seidel, as
-/// [`stencil::sweep_edges`] does, except that an edge that is a boundary stencil of `loops` gets
-/// the boundary kernel ([`apply`]) instead of being skipped as fixed.
+/// Apply the boundary stencils of `loops` among `edges`, in the given order, Gauss–Seidel, with
+/// the boundary kernel ([`apply`]). With `interior`, the other edges get their edge stencil, as
+/// [`stencil::sweep_edges`] does (the edge methods' sweep); without, they are passed over (the
+/// boundary part of a triangle sweep).
+#[allow(clippy::too_many_arguments)]
 pub fn sweep_edges<P: Field + ?Sized, S: Field + ?Sized>(
     topo: &Topology,
     triangles: &[[u32; 3]],
@@ -75,36 +77,16 @@ pub fn sweep_edges<P: Field + ?Sized, S: Field + ?Sized>(
     edges: impl IntoIterator<Item = [u32; 2]>,
     params: StencilParams,
     loops: &Loops,
+    interior: bool,
 ) -> SweepStats {
     let mut stats = SweepStats::default();
     let bp = boundary_params(params, loops);
     for e in edges {
         if is_boundary_stencil(topo, triangles, e) {
             count(&mut stats, apply(topo, triangles, pos, sums, e, bp));
-        } else {
+        } else if interior {
             let outcome = stencil::apply(topo, triangles, pos, sums, e, params);
             stencil::count(&mut stats, outcome);
-        }
-    }
-    stats
-}
-
-/// Apply the boundary stencils among `edges`, in the given order, and nothing else: the
-/// boundary part of a triangle sweep.
-pub fn sweep_boundary<P: Field + ?Sized, S: Field + ?Sized>(
-    topo: &Topology,
-    triangles: &[[u32; 3]],
-    pos: &mut P,
-    sums: &mut S,
-    edges: impl IntoIterator<Item = [u32; 2]>,
-    params: StencilParams,
-    loops: &Loops,
-) -> SweepStats {
-    let mut stats = SweepStats::default();
-    let bp = boundary_params(params, loops);
-    for e in edges {
-        if is_boundary_stencil(topo, triangles, e) {
-            count(&mut stats, apply(topo, triangles, pos, sums, e, bp));
         }
     }
     stats
