@@ -7,13 +7,13 @@ use std::collections::HashMap;
 use std::path::Path;
 
 use glam::DVec3;
-use vcsmooth::engine::{self, Layout, Plan, Quiet, Statistics, thread_pool};
+use vcsmooth::engine::{self, Quiet};
 use vcsmooth::mesh::Storage;
 use vcsmooth::{Boundary, Mesh, Method, Options, io, metrics, shapes};
 
 use crate::util::{
-    cluster_settings, engine_settings, fails, noisy_sphere, ok, read_json, read_scan, run_ranks,
-    vcsmooth,
+    cluster_settings, engine_settings, fails, noisy_sphere, ok, planned_positions, read_json,
+    read_scan, run_ranks, vcsmooth,
 };
 
 /// The open scans of `tests/data`.
@@ -216,15 +216,7 @@ fn identical_for_any_thread_count_and_storage() {
             ..opts(method, Boundary::Smooth)
         };
         let run = |storage: &Storage, threads: usize| {
-            thread_pool(Some(threads)).unwrap().install(|| {
-                let mut plan =
-                    Plan::new(storage, &m.positions, &m.triangles, Layout::Patches(512)).unwrap();
-                plan.smooth(storage, &o, Statistics::Last, &mut Quiet)
-                    .unwrap();
-                let mut out = vec![DVec3::ZERO; m.positions.len()];
-                plan.positions_in_input_order(&mut out);
-                out
-            })
+            planned_positions(&m, storage, threads, 512, &o, |_| {})
         };
         let heap = run(&Storage::heap(), 1);
         assert!(

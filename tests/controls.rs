@@ -8,12 +8,13 @@ use std::collections::HashMap;
 use std::path::Path;
 
 use glam::DVec3;
-use vcsmooth::engine::{self, Layout, Plan, Quiet, Statistics, thread_pool};
+use vcsmooth::engine::{self, Quiet};
 use vcsmooth::mesh::Storage;
 use vcsmooth::{Mesh, Method, Options, io, metrics, shapes};
 
 use crate::util::{
-    cluster_settings, engine_settings, fails, noisy_sphere, ok, read_json, run_ranks, vcsmooth,
+    cluster_settings, engine_settings, fails, noisy_sphere, ok, planned_positions, read_json,
+    run_ranks, vcsmooth,
 };
 
 /// A cube of side `n` whose faces are `n × n` grids of unit squares, two outward triangles each.
@@ -191,21 +192,9 @@ fn controls_in_scratch_equal_heap() {
             ..Options::default()
         };
         let run = |storage: &Storage, threads: usize| {
-            thread_pool(Some(threads)).unwrap().install(|| {
-                let mut plan = Plan::new(
-                    storage,
-                    &cube.positions,
-                    &cube.triangles,
-                    Layout::Patches(64),
-                )
-                .unwrap();
+            planned_positions(&cube, storage, threads, 64, &opts, |plan| {
                 plan.crease(opts.crease_angle);
                 assert_eq!(plan.topology.stats.crease_edges, 12 * N as usize);
-                plan.smooth(storage, &opts, Statistics::Last, &mut Quiet)
-                    .unwrap();
-                let mut out = vec![DVec3::ZERO; cube.positions.len()];
-                plan.positions_in_input_order(&mut out);
-                out
             })
         };
         let heap = run(&Storage::heap(), 1);

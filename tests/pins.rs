@@ -5,13 +5,13 @@
 
 use std::path::{Path, PathBuf};
 
-use vcsmooth::engine::{self, EngineSettings, Layout, Pins, Plan, Quiet, Statistics, thread_pool};
+use vcsmooth::engine::{self, EngineSettings, Pins, Quiet};
 use vcsmooth::mesh::Storage;
 use vcsmooth::{Error, Method, Options, io};
 
 use crate::util::{
-    cluster_settings, engine_settings, fails, generate_sphere, noisy_sphere, ok, read_json,
-    run_ranks, vcsmooth,
+    cluster_settings, engine_settings, fails, generate_sphere, noisy_sphere, ok, planned_positions,
+    read_json, run_ranks, vcsmooth,
 };
 
 /// The vertex records of a binary PLY file whose vertex element comes first and has scalar
@@ -188,21 +188,9 @@ fn pinned_plans_in_scratch_equal_heap() {
             ..Options::default()
         };
         let run = |storage: &Storage, threads: usize| {
-            thread_pool(Some(threads)).unwrap().install(|| {
-                let mut plan = Plan::new(
-                    storage,
-                    &mesh.positions,
-                    &mesh.triangles,
-                    Layout::Patches(512),
-                )
-                .unwrap();
+            planned_positions(&mesh, storage, threads, 512, &opts, |plan| {
                 plan.pin(&pins);
                 assert_eq!(plan.topology.stats.pinned_vertices, pins.len());
-                plan.smooth(storage, &opts, Statistics::Last, &mut Quiet)
-                    .unwrap();
-                let mut out = vec![glam::DVec3::ZERO; n];
-                plan.positions_in_input_order(&mut out);
-                out
             })
         };
         let heap = run(&Storage::heap(), 1);

@@ -245,3 +245,27 @@ pub fn run_ranks(
         handles.into_iter().map(|h| h.join().unwrap()).collect()
     })
 }
+
+/// `mesh` planned in `storage` with patches of `patch_size` on `threads` threads, `prepare`d
+/// (pins, creases, checks of the plan), smoothed with `opts` (statistics of the last iteration),
+/// its positions in input order: the runs that tests compare across threads and storage.
+pub fn planned_positions(
+    mesh: &Mesh,
+    storage: &vcsmooth::mesh::Storage,
+    threads: usize,
+    patch_size: usize,
+    opts: &Options,
+    prepare: impl Fn(&mut vcsmooth::engine::Plan) + Sync,
+) -> Vec<glam::DVec3> {
+    use vcsmooth::engine::{Layout, Plan, Statistics, thread_pool};
+    thread_pool(Some(threads)).unwrap().install(|| {
+        let layout = Layout::Patches(patch_size);
+        let mut plan = Plan::new(storage, &mesh.positions, &mesh.triangles, layout).unwrap();
+        prepare(&mut plan);
+        plan.smooth(storage, opts, Statistics::Last, &mut Quiet)
+            .unwrap();
+        let mut out = vec![glam::DVec3::ZERO; mesh.positions.len()];
+        plan.positions_in_input_order(&mut out);
+        out
+    })
+}
