@@ -14,7 +14,10 @@ use vcsmooth::mesh::Storage;
 use vcsmooth::smooth::lowpass;
 use vcsmooth::{Mesh, Method, Options, Report, Topology, shapes};
 
-use crate::util::{fails, generate_sphere, noisy_sphere, ok, read_json, read_scan, scan, vcsmooth};
+use crate::util::{
+    cluster_settings, engine_settings, fails, generate_sphere, noisy_sphere, ok, read_json,
+    read_scan, run_ranks, scan, vcsmooth,
+};
 
 fn auto(method: Method) -> Options {
     Options {
@@ -390,13 +393,109 @@ fn bad_values_and_modes_that_refuse_auto_are_one_line_errors() {
         2,
         &["--iterations auto", "multiresolution"],
     );
-    let work = arg(&dir.path().join("work"));
-    fails(
-        &smooth(&["--iterations", "auto", "--checkpoint", &work]),
-        2,
-        &["--iterations auto", "cluster engine"],
-    );
     assert!(!dir.path().join("out.ply").exists());
+}
+
+/// The cluster engine stops where one process does, on any number of ranks, and a checkpointed
+/// run resumes the rule: after a lower cap it goes on to the same stop, and once stopped it
+/// stays stopped.
+#[test]
+fn the_ranks_of_the_cluster_engine_stop_where_one_process_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("noisy.ply");
+    vcsmooth::io::write_mesh(&input, &noisy_sphere(5, 0.3, 5)).unwrap();
+    for method in [Method::VcsLowpass, Method::Vcs, Method::Taubin] {
+        let opts = auto(method);
+        let single = dir.path().join(format!("{method}.ply"));
+        let plain = vcsmooth::engine::run_file(
+            &input,
+            &single,
+            &opts,
+            &engine_settings(700, 2),
+            &mut Quiet,
+        )
+        .unwrap();
+        let want = plain.auto_stop.clone().unwrap();
+        assert!(plain.iterations_run >= 2 && plain.iterations_run < DEFAULT_CAP);
+        let expected = std::fs::read(&single).unwrap();
+        for ranks in [1, 2, 3] {
+            let out = dir.path().join(format!("{method}-{ranks}.ply"));
+            let work = dir.path().join(format!("{method}-{ranks}.work"));
+            let run = run_ranks(
+                ranks,
+                &input,
+                &out,
+                &opts,
+                &engine_settings(700, 1),
+                &cluster_settings(&work, false, 1),
+            )
+            .remove(0)
+            .unwrap();
+            assert!(
+                std::fs::read(&out).unwrap() == expected,
+                "{method} on {ranks} ranks differs from one process"
+            );
+            assert_eq!(run.iterations_run, plain.iterations_run, "{method}");
+            let got = run.auto_stop.unwrap();
+            assert_eq!(got.stopped_by, want.stopped_by);
+            assert_eq!(got.noise_estimate.to_bits(), want.noise_estimate.to_bits());
+            let bits = |x: &[f64]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&got.removed), bits(&want.removed), "{method}");
+            assert_eq!(bits(&got.expected), bits(&want.expected), "{method}");
+        }
+
+        // Two iterations under a cap of 2 on 2 ranks, then the full cap on 3.
+        let work = dir.path().join(format!("{method}.ck"));
+        let out = dir.path().join(format!("{method}-resumed.ply"));
+        let capped = Options {
+            iterations: 2,
+            ..opts
+        };
+        let first = run_ranks(
+            2,
+            &input,
+            &out,
+            &capped,
+            &engine_settings(700, 1),
+            &cluster_settings(&work, true, 1),
+        )
+        .remove(0)
+        .unwrap();
+        assert_eq!(first.auto_stop.unwrap().stopped_by, StopReason::Cap);
+        let resumed = run_ranks(
+            3,
+            &input,
+            &out,
+            &opts,
+            &engine_settings(700, 1),
+            &cluster_settings(&work, true, 1),
+        )
+        .remove(0)
+        .unwrap();
+        assert_eq!(resumed.cluster.as_ref().unwrap().resumed_after, 2);
+        assert_eq!(resumed.iterations_run, plain.iterations_run, "{method}");
+        assert_eq!(resumed.auto_stop.unwrap().stopped_by, want.stopped_by);
+        assert!(std::fs::read(&out).unwrap() == expected, "{method} resumed");
+        // Stopped: the same command again runs nothing and writes the same output.
+        std::fs::remove_file(&out).unwrap();
+        let again = run_ranks(
+            2,
+            &input,
+            &out,
+            &opts,
+            &engine_settings(700, 1),
+            &cluster_settings(&work, true, 1),
+        )
+        .remove(0)
+        .unwrap();
+        assert_eq!(
+            again.cluster.unwrap().resumed_after,
+            plain.iterations_run,
+            "{method}"
+        );
+        assert_eq!(again.iterations_run, plain.iterations_run);
+        assert!(std::fs::read(&out).unwrap() == expected, "{method} again");
+    }
 }
 
 #[test]

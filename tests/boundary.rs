@@ -332,26 +332,73 @@ fn bad_values_and_unsupported_modes_are_one_line_errors() {
     assert!(!out.exists());
 }
 
-/// The cluster engine refuses `smooth` (a loop may cross ranks, and every iteration measures
-/// whole loops) with an error naming the option.
+/// The cluster engine's ranks walk the loops as one process does: the same bytes on 1–3 ranks
+/// (the bunny's five loops cross ranks), also with the automatic stop and a deviation bound,
+/// and a checkpointed run resumes to them.
 #[test]
-fn the_cluster_engine_refuses_smooth_boundaries() {
+fn the_ranks_of_the_cluster_engine_smooth_boundaries_as_one_process() {
     let dir = tempfile::tempdir().unwrap();
-    let input = dir.path().join("demo.ply");
-    io::write_mesh(&input, &read_scan("demosthenes-17k.ply")).unwrap();
-    let o = opts(Method::Vcs, Boundary::Smooth);
-    let results = run_ranks(
-        2,
-        &input,
-        &dir.path().join("out.ply"),
-        &o,
-        &engine_settings(1024, 1),
-        &cluster_settings(&dir.path().join("work"), false, 1),
-    );
-    for r in results {
-        let e = r.unwrap_err().to_string();
-        assert!(e.contains("boundary"), "{e}");
+    let input = dir.path().join("bunny.ply");
+    io::write_mesh(&input, &noisy_scan("stanford-bunny.ply", 0.3)).unwrap();
+    let with = |method, iterations, auto_stop, max_deviation| Options {
+        iterations,
+        auto_stop,
+        max_deviation,
+        ..opts(method, Boundary::Smooth)
+    };
+    for (what, o) in [
+        ("vcs", with(Method::Vcs, 3, false, None)),
+        ("vcs-triangle", with(Method::VcsTriangle, 2, false, None)),
+        ("vcs auto, bounded", with(Method::Vcs, 30, true, Some(0.05))),
+    ] {
+        let single = dir.path().join("single.ply");
+        let plain =
+            engine::run_file(&input, &single, &o, &engine_settings(1024, 2), &mut Quiet).unwrap();
+        assert!(
+            plain.records.last().unwrap().stencils.boundary_applied > 0,
+            "{what}"
+        );
+        let expected = std::fs::read(&single).unwrap();
+        for ranks in [1, 2, 3] {
+            let out = dir.path().join(format!("out-{ranks}.ply"));
+            let run = run_ranks(
+                ranks,
+                &input,
+                &out,
+                &o,
+                &engine_settings(1024, 1),
+                &cluster_settings(&dir.path().join(format!("work-{ranks}")), false, 1),
+            )
+            .remove(0)
+            .unwrap();
+            assert!(
+                std::fs::read(&out).unwrap() == expected,
+                "{what} on {ranks} ranks differs from one process"
+            );
+            assert_eq!(run.iterations_run, plain.iterations_run, "{what}");
+            let (a, b) = (run.records.last().unwrap(), plain.records.last().unwrap());
+            assert_eq!(a.stencils, b.stencils, "{what}");
+        }
     }
+    // Two iterations on 2 ranks, kept; then three on 3 ranks: the uninterrupted bytes.
+    let o = with(Method::Vcs, 3, false, None);
+    let single = dir.path().join("single.ply");
+    engine::run_file(&input, &single, &o, &engine_settings(1024, 2), &mut Quiet).unwrap();
+    let (work, out) = (dir.path().join("ck"), dir.path().join("resumed.ply"));
+    for (ranks, iterations) in [(2, 2), (3, 3)] {
+        let o = Options { iterations, ..o };
+        run_ranks(
+            ranks,
+            &input,
+            &out,
+            &o,
+            &engine_settings(1024, 1),
+            &cluster_settings(&work, true, 1),
+        )
+        .remove(0)
+        .unwrap();
+    }
+    assert!(std::fs::read(&out).unwrap() == std::fs::read(&single).unwrap());
 }
 
 /// `batch` certifies the mode (a run with another mode redoes the mesh) and `slurm-script`

@@ -22,6 +22,18 @@ pub trait Comm {
         self.reduce(x, 0.0, |a, b| a + b)
     }
 
+    /// Element-wise wrapping integer sums over all ranks (exact, in any order).
+    fn sum_counts(&self, x: &[u64]) -> Vec<u64> {
+        let got = self.exchange(vec![x.to_vec(); self.size()]);
+        let mut out = vec![0u64; x.len()];
+        for part in &got {
+            for (o, c) in out.iter_mut().zip(part) {
+                *o = o.wrapping_add(*c);
+            }
+        }
+        out
+    }
+
     /// Element-wise maxima over all ranks.
     fn max(&self, x: &[f64]) -> Vec<f64> {
         self.reduce(x, f64::NEG_INFINITY, f64::max)
@@ -199,15 +211,17 @@ mod tests {
                         let got = c.exchange((0..3).map(|to| vec![10 * r + to]).collect());
                         let again = c.exchange((0..3).map(|_| vec![r; r as usize]).collect());
                         let sum = c.sum(&[r as f64, 1.0]);
+                        let counts = c.sum_counts(&[r, u64::MAX]);
                         let max = c.max(&[r as f64]);
                         let all = c.all(r != 1);
-                        (got, again, sum, max, all)
+                        (got, again, sum, max, all, counts)
                     })
                 })
                 .collect();
             handles.into_iter().map(|h| h.join().unwrap()).collect()
         });
-        for (r, (got, again, sum, max, all)) in results.into_iter().enumerate() {
+        for (r, (got, again, sum, max, all, counts)) in results.into_iter().enumerate() {
+            assert_eq!(counts, vec![3, u64::MAX - 2]);
             let r = r as u64;
             assert_eq!(got, vec![vec![r], vec![10 + r], vec![20 + r]]);
             assert_eq!(again, vec![vec![], vec![1], vec![2, 2]]);

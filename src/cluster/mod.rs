@@ -40,6 +40,7 @@ pub use comm::{Comm, Local, Single};
 use glam::DVec3;
 use store::{PlanKey, StateDoc, StoredPlan, WorkDir};
 
+use crate::engine::auto::AutoStop;
 use crate::engine::iterate::{Buffers, Reference, Share, Sweep, iterate};
 use crate::engine::{
     self, ClusterStats, EngineSettings, IterationRecord, Layout, MemoryStats, Observer,
@@ -49,6 +50,7 @@ use crate::error::{Error, Result};
 use crate::mesh::Buf;
 use crate::partition::Patch;
 use crate::smooth::Options;
+use crate::smooth::boundary::{self, Loops};
 use crate::{io, metrics};
 
 /// Rings of the region around a rank's owned vertices (see the module doc).
@@ -77,21 +79,6 @@ pub fn run_file(
     observer: &mut dyn Observer,
 ) -> Result<Report> {
     opts.check()?;
-    if opts.auto_stop {
-        // A resumed run would need the rule's state (its noise field, the energies so far) in
-        // the checkpoint, and the ranks the field's halo exchanged after every step.
-        return Err(Error::parameter(
-            "auto_stop",
-            "is not supported by the cluster engine yet: its checkpoints do not keep the stop rule's state and its ranks do not exchange the rule's noise field",
-        ));
-    }
-    if !opts.boundary.is_fixed() {
-        // Every iteration measures each whole loop, and a loop may cross ranks.
-        return Err(Error::parameter(
-            "boundary",
-            "smooth is not supported by the cluster engine yet",
-        ));
-    }
     if cluster.checkpoint_every == 0 {
         return Err(Error::parameter("checkpoint_every", "must be at least 1"));
     }
@@ -153,14 +140,13 @@ pub fn run_file(
         work: &work,
         state,
         checkpoint_every: cluster.checkpoint_every,
-        last: opts.iterations,
         halo: part.rings[..2].concat(),
         before: Vec::new(),
         traffic: Traffic::default(),
     };
     let arrays = agree(comm, rank.load(), "another rank could not load its part")?;
     let smoothed = rank.iterate(arrays, opts, engine.statistics, observer);
-    let (state, traffic) = agree(comm, smoothed, "another rank failed while smoothing")?;
+    let (state, traffic, auto_stop) = agree(comm, smoothed, "another rank failed while smoothing")?;
     t.smoothing = clock.elapsed().as_secs_f64();
     let smoothing_peak = smoothing_sampler.peak() as f64;
     drop(smoothing_sampler);
@@ -191,7 +177,7 @@ pub fn run_file(
         vertices: doc.vertices,
         triangles: doc.triangles,
         iterations_run: state.records.len(),
-        auto_stop: None,
+        auto_stop,
         records: state.records,
         input_stats: engine.with_stats.then(|| doc.input_stats.clone()).flatten(),
         output_stats,
@@ -291,7 +277,15 @@ fn ensure_plan(
     // Measured always: a resumed run may ask for a report that the first run did not.
     let input_stats = Some(new_plan.info(&mesh.source));
     drop(mesh);
-    work.write_plan(&new_plan, key, input_stats, opts.max_deviation.is_some())
+    // The ranks find the loops of `boundary: smooth` here rather than each reading every face.
+    let loops = match opts.boundary {
+        crate::smooth::Boundary::Smooth => {
+            boundary::boundary_edges(&new_plan.topology, &new_plan.reordered.triangles)
+        }
+        crate::smooth::Boundary::Fixed => Vec::new(),
+    };
+    let keep_input = opts.max_deviation.is_some() || opts.auto_stop;
+    work.write_plan(&new_plan, key, input_stats, keep_input, &loops)
 }
 
 /// Rank 0: the input with the final positions, written atomically; output statistics if asked.
@@ -513,8 +507,6 @@ struct RankRun<'a> {
     work: &'a WorkDir,
     state: StateDoc,
     checkpoint_every: usize,
-    /// The last iteration (always checkpointed).
-    last: usize,
     /// Rings 1 and 2: the vertices outside the owned range whose neighbour sums the stencils read.
     halo: Vec<u32>,
     /// The shared vertices' positions and sums before the current colour (see [`snapshot`]).
@@ -538,20 +530,33 @@ impl<'a> RankRun<'a> {
         Ok([pos, Buf::sparse(n)?, Buf::sparse(n)?])
     }
 
-    /// Iterations `done + 1 ..= opts.iterations` through the engine's loop, with checkpoints;
-    /// returns the final state.
+    /// Iterations `done + 1 ..= opts.iterations` through the engine's loop, with checkpoints
+    /// (until the automatic stop ends the run, when the options ask for it); returns the final
+    /// state, and what the automatic stop measured.
     fn iterate(
         mut self,
         arrays: [Buf<DVec3>; 3],
         opts: &Options,
         when: Statistics,
         observer: &mut dyn Observer,
-    ) -> Result<(StateDoc, Traffic)> {
+    ) -> Result<(StateDoc, Traffic, Option<engine::AutoStopStats>)> {
         let [mut pos, mut scratch, mut prev] = arrays;
+        let n = self.plan.doc.vertices;
         // Only the region's pages of the input are ever read (the free vertices' entries).
-        let input = match opts.max_deviation {
-            Some(_) => Some(self.work.map_input(self.plan.doc.vertices)?),
-            None => None,
+        let input = match opts.max_deviation.is_some() || (opts.auto_stop && self.state.done > 0) {
+            true => Some(self.work.map_input(n)?),
+            false => None,
+        };
+        let loops = match opts.boundary {
+            crate::smooth::Boundary::Smooth => {
+                let edges = self.work.read_loops(&self.plan.doc)?;
+                Some(Loops::from_edges(
+                    &self.plan.topology,
+                    &self.plan.triangles,
+                    edges,
+                ))
+            }
+            crate::smooth::Boundary::Fixed => None,
         };
         let patches: Vec<Patch> = (0..self.plan.doc.patches.len())
             .map(|p| self.plan.doc.patch(p))
@@ -565,6 +570,7 @@ impl<'a> RankRun<'a> {
             ring_colours: &plan.doc.ring_colours,
             prefetch: None,
             tiles: false,
+            loops: loops.as_ref(),
         };
         let reference = match self.state.reference {
             Some(r) => r,
@@ -574,18 +580,34 @@ impl<'a> RankRun<'a> {
                 r
             }
         };
+        let mut auto = match opts.auto_stop {
+            true => Some(AutoStop::sparse(n, opts)?),
+            false => None,
+        };
+        if let (Some(auto), Some(input)) = (&mut auto, &input)
+            && self.state.done > 0
+        {
+            // Measure the input again and replay the rule up to the checkpoint.
+            let origin = DVec3::from_array(reference.origin);
+            let (removed, stopped) = (self.state.auto_removed.clone(), self.state.auto_stopped);
+            auto.start(mesh.topo, mesh.tris, input, origin, &mut self);
+            auto.resume(mesh.topo, &removed, stopped, &mut self);
+        }
         let first = self.state.done + 1;
         let buffers = Buffers {
             pos: &mut pos,
             scratch: &mut scratch,
             prev: &mut prev,
-            input: input.as_deref().unwrap_or(&[]),
-            auto: None,
+            input: input
+                .as_deref()
+                .filter(|_| opts.max_deviation.is_some())
+                .unwrap_or(&[]),
+            auto: auto.as_mut(),
         };
         iterate(
             &mesh, buffers, opts, first, when, &reference, &mut self, observer,
         )?;
-        Ok((self.state, self.traffic))
+        Ok((self.state, self.traffic, auto.map(|a| a.stats())))
     }
 
     /// Write the owned positions of iteration `it` into the free slot; once all ranks have,
@@ -650,6 +672,33 @@ impl Share for RankRun<'_> {
         send_owned(self.comm, self.part, field, &mut self.traffic);
     }
 
+    fn step_end_scalar(&mut self, field: &mut [f64]) {
+        send_owned(self.comm, self.part, field, &mut self.traffic);
+    }
+
+    fn gather(&mut self, pos: &mut [DVec3], vertices: &[u32]) {
+        let owned = self.owned();
+        let mine: Vec<u64> = vertices
+            .iter()
+            .filter(|&&v| owned.contains(&(v as usize)))
+            .flat_map(|&v| {
+                std::iter::once(v as u64).chain(pos[v as usize].to_array().map(f64::to_bits))
+            })
+            .collect();
+        let r = self.comm.rank();
+        let send = (0..self.comm.size())
+            .map(|s| if s == r { Vec::new() } else { mine.clone() })
+            .collect();
+        self.traffic.values += (mine.len() / 4 * (self.comm.size() - 1)) as u64;
+        self.traffic.bytes += (8 * mine.len() * (self.comm.size() - 1)) as u64;
+        for msg in self.comm.exchange(send) {
+            assert!(msg.len() % 4 == 0, "malformed loop message");
+            for e in msg.chunks_exact(4) {
+                pos[e[0] as usize] = DVec3::from_array([1, 2, 3].map(|k| f64::from_bits(e[k])));
+            }
+        }
+    }
+
     fn sum(&self, local: &[f64]) -> Vec<f64> {
         self.comm.sum(local)
     }
@@ -658,10 +707,24 @@ impl Share for RankRun<'_> {
         self.comm.max(local)
     }
 
-    fn iteration_end(&mut self, record: &IterationRecord, pos: &[DVec3]) -> Result<()> {
+    fn sum_counts(&self, local: Vec<u64>) -> Vec<u64> {
+        self.comm.sum_counts(&local)
+    }
+
+    fn iteration_end(
+        &mut self,
+        record: &IterationRecord,
+        pos: &[DVec3],
+        last: bool,
+        auto: Option<&engine::AutoStopStats>,
+    ) -> Result<()> {
         self.state.records.push(*record);
+        if let Some(auto) = auto {
+            self.state.auto_removed = auto.removed.clone();
+            self.state.auto_stopped = last.then_some(auto.stopped_by);
+        }
         let it = record.iteration;
-        if it % self.checkpoint_every == 0 || it == self.last {
+        if it % self.checkpoint_every == 0 || last {
             self.checkpoint(it, pos)?;
         }
         Ok(())
@@ -727,22 +790,49 @@ fn send_changes(
     }
 }
 
+/// A value of a per-vertex field as it travels: a fixed number of u64 words.
+trait Words: Copy {
+    const WORDS: usize;
+    fn put(self, out: &mut Vec<u64>);
+    fn get(words: &[u64]) -> Self;
+}
+
+impl Words for DVec3 {
+    const WORDS: usize = 3;
+    fn put(self, out: &mut Vec<u64>) {
+        out.extend(self.to_array().map(f64::to_bits));
+    }
+    fn get(w: &[u64]) -> Self {
+        DVec3::new(
+            f64::from_bits(w[0]),
+            f64::from_bits(w[1]),
+            f64::from_bits(w[2]),
+        )
+    }
+}
+
+impl Words for f64 {
+    const WORDS: usize = 1;
+    fn put(self, out: &mut Vec<u64>) {
+        out.push(self.to_bits());
+    }
+    fn get(w: &[u64]) -> Self {
+        f64::from_bits(w[0])
+    }
+}
+
 /// After a Jacobi step: send each linked rank the owned vertices it holds (vertex, value).
-fn send_owned(comm: &dyn Comm, part: &Part, field: &mut [DVec3], traffic: &mut Traffic) {
-    let got = exchange_values(comm, part, traffic, 4, |k, msg| {
+fn send_owned<T: Words>(comm: &dyn Comm, part: &Part, field: &mut [T], traffic: &mut Traffic) {
+    let got = exchange_values(comm, part, traffic, 1 + T::WORDS, |k, msg| {
         let v = part.shared[k];
         if part.owned.contains(&v) {
             msg.push(v as u64);
-            msg.extend(field[v as usize].to_array().map(f64::to_bits));
+            field[v as usize].put(msg);
         }
     });
     for msg in got {
-        for e in msg.chunks_exact(4) {
-            field[e[0] as usize] = DVec3::new(
-                f64::from_bits(e[1]),
-                f64::from_bits(e[2]),
-                f64::from_bits(e[3]),
-            );
+        for e in msg.chunks_exact(1 + T::WORDS) {
+            field[e[0] as usize] = T::get(&e[1..]);
         }
     }
 }

@@ -33,6 +33,7 @@ const FORMAT: u32 = 1;
 const PLAN: &str = "plan.json";
 const STATE: &str = "state.json";
 const INPUT: &str = "input.f64";
+const LOOPS: &str = "loops.u32";
 
 /// What a plan was made from; a plan is reused only when all of it matches.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -79,6 +80,14 @@ impl PlanKey {
         if let Some(d) = opts.max_deviation {
             options["max_deviation"] = d.into();
         }
+        // The automatic stop needs the stored input positions, smoothed boundaries the stored
+        // loops, and a checkpoint of either is another run's.
+        if opts.auto_stop {
+            options["auto_stop"] = true.into();
+        }
+        if !opts.boundary.is_fixed() {
+            options["boundary"] = opts.boundary.name().into();
+        }
         Ok(PlanKey {
             format: FORMAT,
             input_name: input
@@ -110,6 +119,9 @@ pub struct PlanDoc {
     pub ring_colours: Vec<Vec<u32>>,
     #[serde(default)]
     pub ring_halo: Vec<u32>,
+    /// Directed boundary edges stored in `loops.u32` (`boundary: smooth`; 0 otherwise).
+    #[serde(default)]
+    pub boundary_edges: usize,
     pub crossing_edge_stencils: u64,
     pub topology: TopologyStats,
     /// Input statistics, when the run that made the plan measured them.
@@ -137,6 +149,12 @@ pub struct StateDoc {
     pub slot: u8,
     pub reference: Option<Reference>,
     pub records: Vec<IterationRecord>,
+    /// The automatic stop's `O_k` of the iterations done, and why it ended the run if it has
+    /// (see [`crate::engine::auto::AutoStop::resume`]); empty and `None` without it.
+    #[serde(default)]
+    pub auto_removed: Vec<f64>,
+    #[serde(default)]
+    pub auto_stopped: Option<engine::StopReason>,
 }
 
 /// A plan mapped from the work directory.
@@ -186,13 +204,15 @@ impl WorkDir {
     }
 
     /// Store `made` (fresh from [`engine::Plan::new`]) as the plan, replacing whatever plan was
-    /// there; with `keep_input`, also its positions as `input.f64` (read by a deviation bound).
+    /// there; with `keep_input`, also its positions as `input.f64` (read by a deviation bound and
+    /// by a resumed automatic stop); `loops`: the directed boundary edges of `boundary: smooth`.
     pub fn write_plan(
         &self,
         made: &engine::Plan,
         key: PlanKey,
         input_stats: Option<MeshInfo>,
         keep_input: bool,
+        loops: &[[u32; 2]],
     ) -> Result<()> {
         fs::create_dir_all(&self.dir).map_err(|e| Error::io(&self.dir, e))?;
         // The plan's marker goes first and comes back last: a half-written plan is never used.
@@ -219,6 +239,9 @@ impl WorkDir {
         if keep_input {
             self.write_array(INPUT, &made.reordered.positions)?;
         }
+        if !loops.is_empty() {
+            self.write_array(LOOPS, loops)?;
+        }
         self.write_state(&StateDoc::default())?;
         // The crossing edge stencils do not depend on the method.
         let stats = made.stats(crate::Method::Vcs);
@@ -242,6 +265,7 @@ impl WorkDir {
             halo: made.schedule.halo.clone(),
             ring_colours: made.schedule.ring_colours.clone(),
             ring_halo: made.schedule.ring_halo.clone(),
+            boundary_edges: loops.len(),
             crossing_edge_stencils: stats.crossing_edge_stencils,
             topology: made.topology.stats,
             input_stats,
@@ -303,6 +327,22 @@ impl WorkDir {
         Buf::map_file(&self.path(INPUT), n)
     }
 
+    /// The stored directed boundary edges (checked: every vertex in range).
+    pub fn read_loops(&self, doc: &PlanDoc) -> Result<Vec<[u32; 2]>> {
+        if doc.boundary_edges == 0 {
+            return Ok(Vec::new());
+        }
+        let path = self.path(LOOPS);
+        let edges: Buf<[u32; 2]> = Buf::map_file(&path, doc.boundary_edges)?;
+        if edges.iter().flatten().any(|&v| v as usize >= doc.vertices) {
+            return Err(Error::invalid(
+                &path,
+                "a boundary edge names a vertex out of range",
+            ));
+        }
+        Ok(edges.to_vec())
+    }
+
     /// Map the positions of `slot` (read-only use; private mapping).
     pub fn map_positions(&self, slot: u8, n: usize) -> Result<Buf<DVec3>> {
         Buf::map_file(&self.positions(slot), n)
@@ -338,6 +378,7 @@ impl WorkDir {
             "positions-0.f64",
             "positions-1.f64",
             INPUT,
+            LOOPS,
         ] {
             let _ = fs::remove_file(self.path(name));
         }

@@ -25,14 +25,19 @@
 //! - Always at [`Options::iterations`] at the latest (the cap), and before the first iteration
 //!   when σ̂ is 0 (nothing movable, or no measurable noise).
 //!
-//! Every sum and median runs over [`reduce`]'s fixed chunks, and the white noise is a function of
-//! the vertex (recomputed, not stored), so the stop iteration is the same for any thread count
-//! and storage. Memory: four arrays of the plan's size in its storage (normals, their offsets,
+//! Every process (a cluster rank, or the one process that owns everything) measures its owned
+//! vertices and exchanges the fields' halos through its [`Share`]. The medians count (exact), the
+//! sums are fixed-point integers ([`Fixed`]), so they have the same bits for any split over
+//! threads, chunks and ranks; the white noise is a function of the vertex (recomputed, not
+//! stored). So the stop iteration is the same for any thread count, storage and number of ranks.
+//! Memory: four arrays of the plan's size in its storage (normals, their offsets,
 //! the scalar field and its second buffer), [`super::memory::AUTO_BYTES_PER_TRIANGLE`].
 
 use glam::DVec3;
 
-use super::reduce;
+pub use super::observer::{AutoStopStats, StopReason};
+use super::reduce::{self, Fixed};
+use super::share::{Share, on_pool};
 use crate::error::Result;
 use crate::mesh::{Buf, Storage};
 use crate::smooth::{Method, Options, noise};
@@ -60,50 +65,6 @@ pub const SETTLED: f64 = 0.05;
 /// connectivity), so the cap only bounds the unusual.
 pub const DEFAULT_CAP: usize = 100;
 
-/// Why an automatically stopped run ended.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum StopReason {
-    /// σ̂ is 0: no iteration ran.
-    NoNoise,
-    /// `R_k >` [`DETAIL_RATIO`] (the stencil methods: `O_k >` [`REMOVED_ENOUGH`]): the last
-    /// iteration removed shape as well as noise.
-    Detail,
-    /// `E_k − E_{k−1} <` [`NOISE_GONE`]: the filter has removed what it can of the noise.
-    NoiseRemoved,
-    /// The mean displacement fell below [`SETTLED`] × σ̂ (the stencil methods).
-    Settled,
-    /// The cap ([`Options::iterations`]).
-    Cap,
-}
-
-impl StopReason {
-    /// How the command line says it.
-    pub fn describe(self) -> &'static str {
-        match self {
-            StopReason::NoNoise => "no noise measured",
-            StopReason::Detail => "the last iteration removed detail, not only noise",
-            StopReason::NoiseRemoved => "the noise the filter can remove is gone",
-            StopReason::Settled => "the vertices stopped moving",
-            StopReason::Cap => "the cap was reached",
-        }
-    }
-}
-
-/// What the automatic stop measured, for the report.
-#[derive(Debug, Clone, serde::Serialize)]
-pub struct AutoStopStats {
-    /// The cap ([`Options::iterations`]).
-    pub cap: usize,
-    pub stopped_by: StopReason,
-    /// σ̂, in model units (along the normals).
-    pub noise_estimate: f64,
-    /// `O_k` of each iteration run.
-    pub removed: Vec<f64>,
-    /// `E_k` of each iteration run (`null` for the stencil methods, which have none).
-    pub expected: Vec<f64>,
-}
-
 /// The state of the automatic stop over one run (see the module doc).
 #[derive(Debug)]
 pub struct AutoStop {
@@ -122,6 +83,7 @@ pub struct AutoStop {
     factors: Vec<f64>,
     removed: Vec<f64>,
     expected: Vec<f64>,
+    started: bool,
     stopped_by: Option<StopReason>,
     cap: usize,
 }
@@ -129,16 +91,46 @@ pub struct AutoStop {
 impl AutoStop {
     /// The arrays of a mesh of `vertices` vertices in `storage`, for `opts` (method, cap).
     pub fn new(storage: &Storage, vertices: usize, opts: &Options) -> Result<AutoStop> {
+        Ok(Self::with_arrays(
+            [storage.zeroed(vertices)?],
+            [
+                storage.zeroed(vertices)?,
+                storage.zeroed(vertices)?,
+                storage.zeroed(vertices)?,
+            ],
+            opts,
+        ))
+    }
+
+    /// The same with arrays of which only the touched pages cost memory (a cluster rank's, which
+    /// touches its region only).
+    pub fn sparse(vertices: usize, opts: &Options) -> Result<AutoStop> {
+        Ok(Self::with_arrays(
+            [Buf::sparse(vertices)?],
+            [
+                Buf::sparse(vertices)?,
+                Buf::sparse(vertices)?,
+                Buf::sparse(vertices)?,
+            ],
+            opts,
+        ))
+    }
+
+    fn with_arrays(
+        [normals]: [Buf<DVec3>; 1],
+        [base, field, spare]: [Buf<f64>; 3],
+        opts: &Options,
+    ) -> AutoStop {
         let factors = match opts.method {
             Method::Laplacian => vec![opts.lambda],
             Method::Taubin | Method::VcsLowpass => vec![opts.lambda, opts.mu],
             Method::Lem | Method::Vcs | Method::VcsTriangle => Vec::new(),
         };
-        Ok(AutoStop {
-            normals: storage.zeroed(vertices)?,
-            base: storage.zeroed(vertices)?,
-            field: storage.zeroed(vertices)?,
-            spare: storage.zeroed(vertices)?,
+        AutoStop {
+            normals,
+            base,
+            field,
+            spare,
             origin: DVec3::ZERO,
             movable: 0.0,
             noise_energy: 0.0,
@@ -146,69 +138,80 @@ impl AutoStop {
             factors,
             removed: Vec::new(),
             expected: Vec::new(),
+            started: false,
             stopped_by: None,
             cap: opts.iterations,
-        })
+        }
     }
 
-    /// Measure the input `pos` (σ̂, normals, the noise sample), on the current pool; `origin`
-    /// is a point near the mesh (the offsets are taken from it). `Some` when no iteration is to
-    /// run: σ̂ is 0, or the cap is.
+    /// Measure the input `pos` (σ̂, normals, the noise sample) over the vertices `share` owns,
+    /// on its threads; `origin` is a point near the mesh (the offsets are taken from it), the
+    /// same in every process. `Some` when no iteration is to run: σ̂ is 0, or the cap is.
     pub fn start(
         &mut self,
         topo: &Topology,
         tris: &[[u32; 3]],
         pos: &[DVec3],
         origin: DVec3,
+        share: &mut dyn Share,
     ) -> Option<StopReason> {
-        let AutoStop {
-            normals,
-            field,
-            spare,
-            ..
-        } = self;
-        reduce::for_chunks_mut(normals, |at, out| {
-            noise::unit_normals_into(topo, tris, pos, out, at)
+        let owned = share.owned();
+        let first = owned.start;
+        let normals = &mut self.normals;
+        on_pool(share, || {
+            reduce::for_chunks_mut(&mut normals[owned.clone()], |at, out| {
+                noise::unit_normals_into(topo, tris, pos, out, first + at)
+            })
         });
+        share.step_end(normals);
         let normals: &[DVec3] = normals;
-        reduce::for_chunks_mut(spare, |at, out| {
-            noise::normal_laplacian_into(topo, pos, normals, out, at)
+        let spare = &mut self.spare;
+        on_pool(share, || {
+            reduce::for_chunks_mut(&mut spare[owned.clone()], |at, out| {
+                noise::normal_laplacian_into(topo, pos, normals, out, first + at)
+            })
         });
-        let input = mad_of_second_difference(topo, spare, field);
-        reduce::for_chunks_mut(field, |at, out| {
-            noise::white_noise_into(topo, SEED, out, at)
+        share.step_end_scalar(spare);
+        let input = mad_of_second_difference(topo, spare, &mut self.field, share);
+        white_noise(topo, &mut self.field, share);
+        let (eps, spare) = (&self.field, &mut self.spare);
+        on_pool(share, || {
+            reduce::for_chunks_mut(&mut spare[owned.clone()], |at, out| {
+                noise::scalar_laplacian_into(topo, eps, out, first + at)
+            })
         });
-        let eps: &[f64] = field;
-        reduce::for_chunks_mut(spare, |at, out| {
-            noise::scalar_laplacian_into(topo, eps, out, at)
-        });
-        let calibration = mad_of_second_difference(topo, spare, field);
+        share.step_end_scalar(spare);
+        let calibration = mad_of_second_difference(topo, spare, &mut self.field, share);
         self.sigma = if calibration > 0.0 {
             input / calibration
         } else {
             0.0
         };
-        reduce::for_chunks_mut(&mut self.field, |at, out| {
-            noise::white_noise_into(topo, SEED, out, at)
-        });
-        self.noise_energy = reduce::map_fold(
-            &self.field,
-            |_, c| c.iter().map(|x| x * x).sum::<f64>(),
-            0.0,
-            |a, b| a + b,
-        );
-        reduce::for_chunks_mut(&mut self.base, |at, out| {
-            for (k, b) in out.iter_mut().enumerate() {
-                *b = (pos[at + k] - origin).dot(normals[at + k]);
-            }
+        white_noise(topo, &mut self.field, share);
+        let eps = &self.field[owned.clone()];
+        let energy = on_pool(share, || reduce::fixed_sum(eps, |_, e| e * e));
+        self.noise_energy = total(share, energy);
+        let base = &mut self.base;
+        on_pool(share, || {
+            reduce::for_chunks_mut(&mut base[owned.clone()], |at, out| {
+                for (k, b) in out.iter_mut().enumerate() {
+                    let v = first + at + k;
+                    *b = (pos[v] - origin).dot(normals[v]);
+                }
+            })
         });
         self.origin = origin;
-        self.movable = reduce::map_fold(
-            topo.fixed_mask(),
-            |_, c| c.iter().filter(|&&f| f == 0).count() as u64,
-            0,
-            |a, b| a + b,
-        ) as f64;
+        let fixed = &topo.fixed_mask()[owned.clone()];
+        let movable = on_pool(share, || {
+            reduce::map_fold(
+                fixed,
+                |_, c| c.iter().filter(|&&f| f == 0).count() as u64,
+                0,
+                |a, b| a + b,
+            )
+        });
+        self.movable = share.sum_counts(vec![movable])[0] as f64;
+        self.started = true;
         self.stopped_by = if self.sigma == 0.0 || !self.sigma.is_finite() {
             Some(StopReason::NoNoise)
         } else if self.cap == 0 {
@@ -219,37 +222,74 @@ impl AutoStop {
         self.stopped_by
     }
 
+    /// Whether [`AutoStop::start`] has measured the input.
+    pub fn started(&self) -> bool {
+        self.started
+    }
+
     /// σ̂ (model units; 0 before [`AutoStop::start`]).
     pub fn sigma(&self) -> f64 {
         self.sigma
     }
 
-    /// After the next iteration, whose result is `pos` and whose mean displacement over the
-    /// movable vertices is `mean_displacement` (read by the stencil methods' rule): `Some` when
-    /// the run ends with it. On the current pool.
+    /// Whether the run has ended, and why.
+    pub fn stopped_by(&self) -> Option<StopReason> {
+        self.stopped_by
+    }
+
+    /// What a checkpoint keeps to go on after iteration `removed().len()`: `O_k` of every
+    /// iteration run (the rest is measured again from the input by [`AutoStop::start`], and the
+    /// noise sample's steps replayed by [`AutoStop::resume`]).
+    pub fn removed(&self) -> &[f64] {
+        &self.removed
+    }
+
+    /// After [`AutoStop::start`] on the input: take up a run whose iterations so far removed
+    /// `removed` and which ended by `stopped` (from a checkpoint), replaying the noise sample's
+    /// steps. A run that stopped at its cap goes on when the cap is now higher.
+    pub fn resume(
+        &mut self,
+        topo: &Topology,
+        removed: &[f64],
+        stopped: Option<StopReason>,
+        share: &mut dyn Share,
+    ) {
+        for &o in removed {
+            let expected = if self.factors.is_empty() {
+                f64::NAN
+            } else {
+                self.expected_after_step(topo, share)
+            };
+            self.expected.push(expected);
+            self.removed.push(o);
+        }
+        if self.stopped_by.is_none() {
+            self.stopped_by =
+                stopped.filter(|&r| r != StopReason::Cap || removed.len() >= self.cap);
+        }
+    }
+
+    /// After the next iteration, whose result is `pos` and whose previous positions are `prev`
+    /// (the stencil methods' rule reads the displacement; the filter methods pass `None`): `Some`
+    /// when the run ends with it. Every process calls it and gets the same answer.
     pub fn after(
         &mut self,
         topo: &Topology,
         pos: &[DVec3],
-        mean_displacement: f64,
+        prev: Option<&[DVec3]>,
+        share: &mut dyn Share,
     ) -> Option<StopReason> {
         let k = self.removed.len() + 1;
-        let (normals, base, origin) = (&*self.normals, &*self.base, self.origin);
-        let sum = reduce::map_fold(
-            pos,
-            |first, c| {
-                c.iter()
-                    .enumerate()
-                    .map(|(i, p)| {
-                        let v = first + i;
-                        ((*p - origin).dot(normals[v]) - base[v]).powi(2)
-                    })
-                    .sum::<f64>()
-            },
-            0.0,
-            |a, b| a + b,
-        );
-        let removed = sum / self.movable.max(1.0) / (self.sigma * self.sigma);
+        let owned = share.owned();
+        let (normals, base, origin, sigma) = (&*self.normals, &*self.base, self.origin, self.sigma);
+        let now = &pos[owned.clone()];
+        let sum = on_pool(share, || {
+            reduce::fixed_sum(now, |i, p| {
+                let v = owned.start + i;
+                (((*p - origin).dot(normals[v]) - base[v]) / sigma).powi(2)
+            })
+        });
+        let removed = total(share, sum) / self.movable.max(1.0);
         let before = (
             self.removed.last().copied().unwrap_or(0.0),
             self.expected.last().copied().unwrap_or(0.0),
@@ -257,15 +297,23 @@ impl AutoStop {
         self.removed.push(removed);
         let stop = if self.factors.is_empty() {
             self.expected.push(f64::NAN);
+            // The mean displacement in units of σ̂.
+            let moved = prev.map_or(f64::NAN, |prev| {
+                let prev = &prev[owned.clone()];
+                let sum = on_pool(share, || {
+                    reduce::fixed_sum(now, |i, p| p.distance(prev[i]) / sigma)
+                });
+                total(share, sum) / self.movable.max(1.0)
+            });
             if removed > REMOVED_ENOUGH {
                 Some(StopReason::Detail)
-            } else if mean_displacement < SETTLED * self.sigma {
+            } else if moved < SETTLED {
                 Some(StopReason::Settled)
             } else {
                 None
             }
         } else {
-            let expected = self.expected_after_step(topo);
+            let expected = self.expected_after_step(topo, share);
             self.expected.push(expected);
             let gain = expected - before.1;
             let ratio = if gain > 0.0 {
@@ -286,27 +334,30 @@ impl AutoStop {
     }
 
     /// One iteration of the scalar analogue on the field, and `E_k`.
-    fn expected_after_step(&mut self, topo: &Topology) -> f64 {
+    fn expected_after_step(&mut self, topo: &Topology, share: &mut dyn Share) -> f64 {
+        let owned = share.owned();
         for &factor in &self.factors {
-            let src: &[f64] = &self.field;
-            reduce::for_chunks_mut(&mut self.spare, |at, out| {
-                noise::scalar_step_into(topo, src, out, at, factor)
+            let (src, out) = (&self.field, &mut self.spare);
+            on_pool(share, || {
+                reduce::for_chunks_mut(&mut out[owned.clone()], |at, out| {
+                    noise::scalar_step_into(topo, src, out, owned.start + at, factor)
+                })
             });
+            share.step_end_scalar(out);
             std::mem::swap(&mut self.field, &mut self.spare);
         }
-        let sum = reduce::map_fold(
-            &self.field,
-            |first, c| {
-                c.iter()
-                    .enumerate()
-                    .filter(|&(i, _)| !topo.is_fixed((first + i) as u32))
-                    .map(|(i, e)| (e - noise::gaussian(SEED, (first + i) as u64)).powi(2))
-                    .sum::<f64>()
-            },
-            0.0,
-            |a, b| a + b,
-        );
-        sum / self.noise_energy
+        let field = &self.field[owned.clone()];
+        let sum = on_pool(share, || {
+            reduce::fixed_sum(field, |i, e| {
+                let v = owned.start + i;
+                if topo.is_fixed(v as u32) {
+                    0.0
+                } else {
+                    (e - noise::gaussian(SEED, v as u64)).powi(2)
+                }
+            })
+        });
+        total(share, sum) / self.noise_energy
     }
 
     /// What the rule measured and why the run ended (the cap if it has not ended).
@@ -321,14 +372,45 @@ impl AutoStop {
     }
 }
 
-/// The median absolute deviation of the second difference of `x` over the movable vertices;
-/// `out` is scratch space.
-fn mad_of_second_difference(topo: &Topology, x: &[f64], out: &mut [f64]) -> f64 {
-    reduce::for_chunks_mut(out, |at, o| noise::second_difference_into(topo, x, o, at));
-    let median = reduce::median(out);
-    // NaN (a fixed vertex) stays NaN, and the median skips it.
-    reduce::for_chunks_mut(out, |_, o| {
-        o.iter_mut().for_each(|y| *y = (*y - median).abs())
+/// The white-noise sample ε into `field` (owned entries, then the others' copies).
+fn white_noise(topo: &Topology, field: &mut [f64], share: &mut dyn Share) {
+    let owned = share.owned();
+    on_pool(share, || {
+        reduce::for_chunks_mut(&mut field[owned.clone()], |at, out| {
+            noise::white_noise_into(topo, SEED, out, owned.start + at)
+        })
     });
-    reduce::median(out)
+    share.step_end_scalar(field);
+}
+
+/// A [`Fixed`] sum over all processes, as an f64.
+fn total(share: &dyn Share, local: Fixed) -> f64 {
+    Fixed::from_limbs(&share.sum_counts(local.limbs().to_vec())).value()
+}
+
+/// The median absolute deviation of the second difference of `x` over the movable vertices of
+/// all processes (`x` valid on this one's owned vertices and their neighbours); `out` is scratch
+/// space.
+fn mad_of_second_difference(
+    topo: &Topology,
+    x: &[f64],
+    out: &mut [f64],
+    share: &mut dyn Share,
+) -> f64 {
+    let owned = share.owned();
+    let out = &mut out[owned.clone()];
+    on_pool(share, || {
+        reduce::for_chunks_mut(out, |at, o| {
+            noise::second_difference_into(topo, x, o, owned.start + at)
+        })
+    });
+    let share: &dyn Share = share;
+    let median = reduce::median_over(out, share.pool(), |c| share.sum_counts(c));
+    // NaN (a fixed vertex) stays NaN, and the median skips it.
+    on_pool(share, || {
+        reduce::for_chunks_mut(out, |_, o| {
+            o.iter_mut().for_each(|y| *y = (*y - median).abs())
+        })
+    });
+    reduce::median_over(out, share.pool(), |c| share.sum_counts(c))
 }

@@ -29,8 +29,10 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use super::auto::AutoStop;
-use super::observer::{IterationRecord, Observer, Statistics};
+use super::observer::{AutoStopStats, IterationRecord, Observer, Statistics};
 use super::reduce;
+use super::share::on_pool;
+pub use super::share::{Alone, Share};
 use crate::error::{Error, Result};
 use crate::metrics;
 use crate::partition::Patch;
@@ -42,83 +44,6 @@ use crate::smooth::stencil::{self, StencilParams};
 use crate::smooth::tiled::{Measure, TilePlan};
 use crate::smooth::{Method, Options, SweepStats};
 use crate::topology::Topology;
-
-/// A process's share of the work and its link to the processes holding the rest. A single process
-/// owns everything and shares nothing ([`Alone`]); a rank of the cluster engine owns a block of
-/// patches and brings the copies other ranks hold up to date after every colour and step.
-pub trait Share {
-    /// The vertices this process updates.
-    fn owned(&self) -> Range<usize>;
-    /// The triangles whose volume and area this process sums.
-    fn triangles(&self) -> Range<usize>;
-    /// Whether this process applies the stencils of patch `p`.
-    fn runs_patch(&self, p: usize) -> bool;
-    /// Vertices outside [`Share::owned`] whose neighbour sums its stencils read.
-    fn halo_sums(&self) -> &[u32];
-    /// Before the patches of a colour run.
-    fn colour_start(&mut self, pos: &[DVec3], sums: &[DVec3]);
-    /// After the patches of a colour ran: exchange what changed.
-    fn colour_end(&mut self, pos: &mut [DVec3], sums: &mut [DVec3]);
-    /// After a Jacobi step wrote the owned entries of `field`: exchange them.
-    fn step_end(&mut self, field: &mut [DVec3]);
-    /// Element-wise sums and maxima over all processes.
-    fn sum(&self, local: &[f64]) -> Vec<f64>;
-    fn max(&self, local: &[f64]) -> Vec<f64>;
-    /// After iteration `record.iteration`, whose positions are in `pos` (checkpoints go here).
-    fn iteration_end(&mut self, record: &IterationRecord, pos: &[DVec3]) -> Result<()>;
-    /// Whether this process reports to the observer.
-    fn leads(&self) -> bool;
-    /// The threads of the parallel work, when the loop itself runs outside them (a rank keeps its
-    /// communicator on the calling thread); `None`: the current pool.
-    fn pool(&self) -> Option<&rayon::ThreadPool>;
-}
-
-/// `f` on the share's threads.
-fn on_pool<R: Send>(share: &dyn Share, f: impl FnOnce() -> R + Send) -> R {
-    match share.pool() {
-        Some(pool) => pool.install(f),
-        None => f(),
-    }
-}
-
-/// The single process: owns all vertices and triangles.
-pub struct Alone {
-    pub vertices: usize,
-    pub triangles: usize,
-}
-
-impl Share for Alone {
-    fn owned(&self) -> Range<usize> {
-        0..self.vertices
-    }
-    fn triangles(&self) -> Range<usize> {
-        0..self.triangles
-    }
-    fn runs_patch(&self, _: usize) -> bool {
-        true
-    }
-    fn halo_sums(&self) -> &[u32] {
-        &[]
-    }
-    fn colour_start(&mut self, _: &[DVec3], _: &[DVec3]) {}
-    fn colour_end(&mut self, _: &mut [DVec3], _: &mut [DVec3]) {}
-    fn step_end(&mut self, _: &mut [DVec3]) {}
-    fn sum(&self, local: &[f64]) -> Vec<f64> {
-        local.to_vec()
-    }
-    fn max(&self, local: &[f64]) -> Vec<f64> {
-        local.to_vec()
-    }
-    fn iteration_end(&mut self, _: &IterationRecord, _: &[DVec3]) -> Result<()> {
-        Ok(())
-    }
-    fn leads(&self) -> bool {
-        true
-    }
-    fn pool(&self) -> Option<&rayon::ThreadPool> {
-        None
-    }
-}
 
 /// What the percentages of the records are relative to: the input's centroid (a fixed point, so
 /// that the volume of an open mesh is followed consistently), volume and area.
@@ -165,6 +90,9 @@ pub struct Sweep<'a> {
     pub prefetch: Option<&'a Prefetch>,
     /// Whether `laplacian` and `taubin` may hold a [`TilePlan`] on the heap (the mesh is in memory).
     pub tiles: bool,
+    /// The boundary loops of `boundary: smooth` when found beforehand (a cluster rank's, from
+    /// the stored plan); `None`: found from the mesh when the options ask for them.
+    pub loops: Option<&'a Loops>,
 }
 
 /// The arrays the loop works in, one entry per vertex each (a rank touches only its region).
@@ -179,8 +107,8 @@ pub struct Buffers<'b> {
     /// The input positions, read when the options bound the deviation (`max_deviation`);
     /// empty otherwise.
     pub input: &'b [DVec3],
-    /// The automatic stop's state, required when the options ask for it (`auto_stop`), which a
-    /// single process alone can: it reads and sums every vertex.
+    /// The automatic stop's state, required when the options ask for it (`auto_stop`); a run
+    /// that resumes after iteration 1 passes it started and resumed.
     pub auto: Option<&'b mut AutoStop>,
 }
 
@@ -249,21 +177,22 @@ impl<'r, 'a> Run<'r, 'a> {
     fn all(mut self, mut buf: Buffers, first: usize) -> Result<Vec<IterationRecord>> {
         if !self.opts.auto_stop {
             buf.auto = None;
-        } else if buf.auto.is_none()
-            || first != 1
-            || self.share.owned().len() != self.mesh.topo.len()
+        } else if buf
+            .auto
+            .as_ref()
+            .is_none_or(|a| (first == 1) == a.started())
         {
             return Err(Error::parameter(
                 "auto_stop",
-                "needs a single process smoothing from the first iteration, with the stop's buffers",
+                "needs the stop's buffers, started when (and only when) the run resumes",
             ));
         }
         if let Some(auto) = buf.auto.as_deref_mut() {
-            let (mesh, pos, origin) = (self.mesh, &*buf.pos, self.origin);
-            let stop = on_pool(&*self.share, || {
-                auto.start(mesh.topo, mesh.tris, pos, origin)
-            });
-            if stop.is_some() {
+            if first == 1 {
+                let (mesh, pos, origin) = (self.mesh, &*buf.pos, self.origin);
+                auto.start(mesh.topo, mesh.tris, pos, origin, &mut *self.share);
+            }
+            if auto.stopped_by().is_some() {
                 return Ok(self.records);
             }
         }
@@ -303,8 +232,11 @@ impl Run<'_, '_> {
         let mesh = self.mesh;
         let owned = self.share.owned();
         // The loops of `boundary: smooth`, their normals measured at each iteration's start.
-        let mut loops = (self.opts.boundary == crate::smooth::Boundary::Smooth)
-            .then(|| Loops::find(mesh.topo, mesh.tris));
+        let mut loops = (self.opts.boundary == crate::smooth::Boundary::Smooth).then(|| {
+            mesh.loops
+                .cloned()
+                .unwrap_or_else(|| Loops::find(mesh.topo, mesh.tris))
+        });
         let total = self.opts.iterations;
         let lowpass = self.opts.method == Method::VcsLowpass;
         let colours = if lowpass {
@@ -340,6 +272,7 @@ impl Run<'_, '_> {
                 }
             }
             if let Some(loops) = &mut loops {
+                self.share.gather(pos, loops.vertices());
                 loops.measure(pos);
             }
             let params = stencil_params(self.opts, input);
@@ -373,6 +306,9 @@ impl Run<'_, '_> {
                 self.share.colour_end(pos, sums);
             }
             if let Some(loops) = &mut loops {
+                // Every process walks every loop whole, from the same positions, so each holds
+                // the same result for every loop vertex.
+                self.share.gather(pos, loops.vertices());
                 loops.restore(mesh.topo, mesh.tris, pos, params.deviation);
             }
             let seconds = start.elapsed().as_secs_f64();
@@ -380,8 +316,15 @@ impl Run<'_, '_> {
                 let (now, before) = (&pos[owned.clone()], &prev[owned.clone()]);
                 on_pool(&*self.share, || reduce::displacement(now, before))
             });
-            let stop = self.stop_after(auto.as_deref_mut(), pos, moved);
-            self.record(it, pos, moved, wanted || stop, sweep, seconds)?;
+            let stop = self.stop_after(auto.as_deref_mut(), pos, Some(prev));
+            let last = stop || it == total;
+            let record = self.record(it, pos, moved, wanted || stop, sweep, seconds)?;
+            self.keep(
+                &record,
+                pos,
+                last,
+                auto.as_deref().map(AutoStop::stats).as_ref(),
+            )?;
             if stop {
                 break;
             }
@@ -390,19 +333,18 @@ impl Run<'_, '_> {
     }
 
     /// Whether the automatic stop (when there is one) ends the run after the iteration that left
-    /// `pos` and moved the vertices by `moved`.
+    /// `pos`; `prev`: the positions before it (read by the stencil methods' rule).
     fn stop_after(
-        &self,
+        &mut self,
         auto: Option<&mut AutoStop>,
         pos: &[DVec3],
-        moved: Option<StepStats>,
+        prev: Option<&[DVec3]>,
     ) -> bool {
         let Some(auto) = auto else {
             return false;
         };
-        let mean = moved.map_or(f64::NAN, |m| m.sum_displacement / self.movable as f64);
-        let topo = self.mesh.topo;
-        on_pool(&*self.share, || auto.after(topo, pos, mean)).is_some()
+        auto.after(self.mesh.topo, pos, prev, &mut *self.share)
+            .is_some()
     }
 
     /// `vcs-lowpass`'s step-1 shares into `shares` (see [`lowpass::shares_into`]): a λ|μ pair
@@ -526,11 +468,14 @@ impl Run<'_, '_> {
             };
             let seconds = start.elapsed().as_secs_f64() / (last - first + 1) as f64;
             let current: &[DVec3] = if in_scratch { scratch } else { pos };
-            let stop = self.stop_after(auto.as_deref_mut(), current, moved);
+            let stop = self.stop_after(auto.as_deref_mut(), current, None);
             for it in first..=last {
                 let moved = if it == last { moved } else { None };
                 let volume = it == last && (wanted || stop);
-                self.record(it, current, moved, volume, sweep, seconds)?;
+                let ends = it == last && (stop || it == total);
+                let record = self.record(it, current, moved, volume, sweep, seconds)?;
+                let stats = auto.as_deref().map(AutoStop::stats);
+                self.keep(&record, current, ends, stats.as_ref())?;
             }
             if stop {
                 break;
@@ -589,8 +534,9 @@ impl Run<'_, '_> {
         moved
     }
 
-    /// Record iteration `it`, which ended at `pos`; `moved` is its displacement when it is
-    /// measured, `None` otherwise; `measure_volume`: measure its volume and area.
+    /// The record of iteration `it`, which ended at `pos`, shown to the observer; `moved` is its
+    /// displacement when it is measured, `None` otherwise; `measure_volume`: measure its volume
+    /// and area.
     fn record(
         &mut self,
         it: usize,
@@ -599,7 +545,7 @@ impl Run<'_, '_> {
         measure_volume: bool,
         stencils: SweepStats,
         seconds: f64,
-    ) -> Result<()> {
+    ) -> Result<IterationRecord> {
         let (volume, area) = if measure_volume {
             volume_area(self.mesh, pos, self.origin, &*self.share)
         } else {
@@ -646,14 +592,26 @@ impl Run<'_, '_> {
                 return Err(Error::Interrupted);
             }
         }
-        self.share.iteration_end(&record, pos)?;
+        Ok(record)
+    }
+
+    /// After [`Run::record`]: the share's end of the iteration (a checkpoint), then the record
+    /// kept; `last`: the run ends with this iteration.
+    fn keep(
+        &mut self,
+        record: &IterationRecord,
+        pos: &[DVec3],
+        last: bool,
+        auto: Option<&AutoStopStats>,
+    ) -> Result<()> {
+        self.share.iteration_end(record, pos, last, auto)?;
         if self.keep {
             self.records.try_reserve(1).map_err(|_| {
                 let bytes = (self.records.len() as u64 + 1)
                     .saturating_mul(std::mem::size_of::<IterationRecord>() as u64);
                 super::memory::not_enough("the iteration records", bytes, None)
             })?;
-            self.records.push(record);
+            self.records.push(*record);
         }
         Ok(())
     }

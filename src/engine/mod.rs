@@ -5,7 +5,8 @@
 //! - [`auto`]: the automatic stop (`Options::auto_stop`): when the noise is gone.
 //! - [`iterate`]: the one iteration loop: Jacobi rounds for `laplacian` and `taubin`, colour by
 //!   colour Gauss–Seidel sweeps for the stencil methods, statistics when asked. The cluster
-//!   engine's ranks run the same loop, exchanging halos through its [`iterate::Share`] hook.
+//!   engine's ranks run the same loop, exchanging halos through its [`share::Share`] hook.
+//! - [`share`]: how the loop and the automatic stop see the processes that run them.
 //! - [`reduce`]: deterministic parallel sums (volume, area, centroid, displacement, neighbour
 //!   sums) over fixed-size chunks, so results do not depend on the thread count.
 //! - [`observer`]: per-iteration records and the [`Observer`] that receives them.
@@ -21,6 +22,7 @@ pub mod pins;
 pub mod plan;
 pub mod reduce;
 pub mod run;
+pub mod share;
 
 use glam::DVec3;
 
@@ -165,6 +167,7 @@ impl Plan {
                 colours: &schedule.colours,
                 ring_colours: &schedule.ring_colours,
                 prefetch: (!*in_memory).then_some(prefetch),
+                loops: None,
                 tiles: *in_memory,
             };
             let reference = Reference::measure(&mesh, pos, &alone);

@@ -69,6 +69,50 @@ impl Statistics {
     }
 }
 
+/// Why an automatically stopped run ended (the rule and its constants: `engine::auto`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum StopReason {
+    /// σ̂ is 0: no iteration ran.
+    NoNoise,
+    /// `R_k >` `DETAIL_RATIO` (the stencil methods: `O_k >` `REMOVED_ENOUGH`): the last
+    /// iteration removed shape as well as noise.
+    Detail,
+    /// `E_k − E_{k−1} <` `NOISE_GONE`: the filter has removed what it can of the noise.
+    NoiseRemoved,
+    /// The mean displacement fell below `SETTLED` × σ̂ (the stencil methods).
+    Settled,
+    /// The cap (`Options::iterations`).
+    Cap,
+}
+
+impl StopReason {
+    /// How the command line says it.
+    pub fn describe(self) -> &'static str {
+        match self {
+            StopReason::NoNoise => "no noise measured",
+            StopReason::Detail => "the last iteration removed detail, not only noise",
+            StopReason::NoiseRemoved => "the noise the filter can remove is gone",
+            StopReason::Settled => "the vertices stopped moving",
+            StopReason::Cap => "the cap was reached",
+        }
+    }
+}
+
+/// What the automatic stop measured, for the report.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct AutoStopStats {
+    /// The cap (`Options::iterations`).
+    pub cap: usize,
+    pub stopped_by: StopReason,
+    /// σ̂, in model units (along the normals).
+    pub noise_estimate: f64,
+    /// `O_k` of each iteration run.
+    pub removed: Vec<f64>,
+    /// `E_k` of each iteration run (`null` for the stencil methods, which have none).
+    pub expected: Vec<f64>,
+}
+
 /// Receives progress from long runs.
 pub trait Observer: Send {
     /// Called after each iteration with its record and the total number of iterations (with

@@ -158,17 +158,37 @@ pub fn neighbor_sums(topo: &Topology, pos: &[DVec3], sums: &mut [DVec3], range: 
 /// over chunks, so the result is exact and the same for any thread count, and no copy of the
 /// values is made (they may be a memory-mapped scratch array).
 pub fn median(values: &[f64]) -> f64 {
+    median_over(values, None, |counts| counts)
+}
+
+/// [`median`] of the values of several processes, each calling it with its own `values`:
+/// `total` turns this process's counts into the sums over all of them (integer sums, so the
+/// result is exact and the same for any split of the values). The counting runs on `pool` (the
+/// current one when `None`), `total` on the calling thread (where a cluster rank keeps its
+/// communicator).
+pub fn median_over(
+    values: &[f64],
+    pool: Option<&rayon::ThreadPool>,
+    mut total: impl FnMut(Vec<u64>) -> Vec<u64>,
+) -> f64 {
+    let on = |f: &(dyn Fn() -> Vec<u64> + Sync)| match pool {
+        Some(p) => p.install(f),
+        None => f(),
+    };
     // Ascending values map to ascending keys (negative numbers have their bits inverted).
     let key = |x: f64| {
         let b = x.to_bits();
         if b >> 63 == 1 { !b } else { b | 1 << 63 }
     };
-    let count = map_fold(
-        values,
-        |_, c| c.iter().filter(|x| !x.is_nan()).count() as u64,
-        0,
-        |a, b| a + b,
-    );
+    let local = on(&|| {
+        vec![map_fold(
+            values,
+            |_, c| c.iter().filter(|x| !x.is_nan()).count() as u64,
+            0,
+            |a, b| a + b,
+        )]
+    });
+    let count = total(local)[0];
     if count == 0 {
         return 0.0;
     }
@@ -177,23 +197,26 @@ pub fn median(values: &[f64]) -> f64 {
     for shift in (0..64).step_by(8).rev() {
         // The keys that agree with `prefix` above bit `shift + 8`, counted by their byte at `shift`.
         let high = |k: u64| k.checked_shr(shift + 8).unwrap_or(0);
-        let bins = map_fold(
-            values,
-            |_, c| {
-                let mut bins = [0u64; 256];
-                for k in c.iter().filter(|x| !x.is_nan()).map(|&x| key(x)) {
-                    if high(k) == high(prefix) {
-                        bins[((k >> shift) & 0xff) as usize] += 1;
+        let bins = on(&|| {
+            map_fold(
+                values,
+                |_, c| {
+                    let mut bins = vec![0u64; 256];
+                    for k in c.iter().filter(|x| !x.is_nan()).map(|&x| key(x)) {
+                        if high(k) == high(prefix) {
+                            bins[((k >> shift) & 0xff) as usize] += 1;
+                        }
                     }
-                }
-                bins
-            },
-            [0u64; 256],
-            |mut a, b| {
-                a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
-                a
-            },
-        );
+                    bins
+                },
+                vec![0u64; 256],
+                |mut a, b| {
+                    a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+                    a
+                },
+            )
+        });
+        let bins = total(bins);
         let mut byte = 0;
         while rank >= bins[byte] {
             rank -= bins[byte];
@@ -207,6 +230,69 @@ pub fn median(values: &[f64]) -> f64 {
         !prefix
     };
     f64::from_bits(bits)
+}
+
+/// Fractional bits of [`Fixed`].
+const FRACTION_BITS: i32 = 40;
+/// The largest term a [`Fixed`] sum takes (larger ones count as this): 2⁴⁸, so that 2³⁴ terms
+/// (far more vertices than a mesh indexed by u32 has) cannot overflow 128 bits.
+const FIXED_TERM_MAX: f64 = (1u64 << 48) as f64;
+
+/// A sum of non-negative terms in fixed point (40 fractional bits, each term truncated to that
+/// grid and capped at 2⁴⁸). Integer additions are associative, so the sum has the same bits for
+/// any split of its terms, over threads, chunks or processes alike; the automatic stop's sums use
+/// it so that a run stops at the same iteration on any number of cluster ranks.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Fixed(pub u128);
+
+impl std::ops::Add for Fixed {
+    type Output = Fixed;
+    fn add(self, other: Fixed) -> Fixed {
+        Fixed(self.0 + other.0)
+    }
+}
+
+impl Fixed {
+    /// The term `x` (NaN and negative values count as 0).
+    pub fn of(x: f64) -> Fixed {
+        let x = if x > 0.0 { x.min(FIXED_TERM_MAX) } else { 0.0 };
+        // Exact: a power-of-two scale, then truncation toward zero.
+        Fixed((x * 2f64.powi(FRACTION_BITS)) as u128)
+    }
+
+    /// The nearest f64.
+    pub fn value(self) -> f64 {
+        self.0 as f64 * 2f64.powi(-FRACTION_BITS)
+    }
+
+    /// As four 32-bit limbs, so that ranks can add them as u64s without overflow (up to 2³²
+    /// ranks), then [`Fixed::from_limbs`].
+    pub fn limbs(self) -> [u64; 4] {
+        [0, 1, 2, 3].map(|k| ((self.0 >> (32 * k)) & 0xffff_ffff) as u64)
+    }
+
+    pub fn from_limbs(limbs: &[u64]) -> Fixed {
+        Fixed(
+            limbs
+                .iter()
+                .enumerate()
+                .fold(0u128, |s, (k, &l)| s.wrapping_add((l as u128) << (32 * k))),
+        )
+    }
+}
+
+/// `Σ term(i, item)` over `items` (`i`: the item's index in `items`) as a [`Fixed`] sum.
+pub fn fixed_sum<T: Sync>(items: &[T], term: impl Fn(usize, &T) -> f64 + Sync) -> Fixed {
+    map_fold(
+        items,
+        |first, c| {
+            c.iter().enumerate().fold(Fixed::default(), |s, (k, x)| {
+                s + Fixed::of(term(first + k, x))
+            })
+        },
+        Fixed::default(),
+        |a, b| a + b,
+    )
 }
 
 #[cfg(test)]
@@ -240,5 +326,41 @@ mod tests {
         assert_eq!(median(&[-2.5]), -2.5);
         assert_eq!(median(&[f64::NAN]), 0.0);
         assert_eq!(median(&[]), 0.0);
+
+        // Split over two "processes" that add their counts: the same element.
+        let (a, b) = values.split_at(CHUNK + 77);
+        let barrier = std::sync::Barrier::new(2);
+        let slots = std::sync::Mutex::new([Vec::new(), Vec::new()]);
+        let run = |me: usize, part: &[f64]| {
+            median_over(part, None, |mine| {
+                slots.lock().unwrap()[me] = mine;
+                barrier.wait();
+                let both = slots.lock().unwrap().clone();
+                barrier.wait();
+                both[0].iter().zip(&both[1]).map(|(x, y)| x + y).collect()
+            })
+        };
+        let (x, y) = std::thread::scope(|s| {
+            let h = s.spawn(|| run(1, b));
+            (run(0, a), h.join().unwrap())
+        });
+        assert_eq!((x.to_bits(), y.to_bits()), (want.to_bits(), want.to_bits()));
+    }
+
+    #[test]
+    fn fixed_sums_are_the_same_for_any_split() {
+        let terms: Vec<f64> = (0..3 * CHUNK + 11)
+            .map(|i| (i as f64 * 0.37).sin().powi(2) * 1e3 / (1.0 + i as f64))
+            .collect();
+        let whole = fixed_sum(&terms, |_, &x| x);
+        let (a, b) = terms.split_at(CHUNK / 3 + 5);
+        assert_eq!(whole, fixed_sum(a, |_, &x| x) + fixed_sum(b, |_, &x| x));
+        let plain: f64 = terms.iter().sum();
+        assert!((whole.value() - plain).abs() <= 1e-9 * plain);
+        let twice: Vec<u64> = whole.limbs().iter().map(|l| 2 * l).collect();
+        assert_eq!(Fixed::from_limbs(&twice), whole + whole);
+        assert_eq!(Fixed::of(f64::NAN), Fixed::default());
+        assert_eq!(Fixed::of(-1.0), Fixed::default());
+        assert_eq!(Fixed::of(f64::INFINITY), Fixed::of(FIXED_TERM_MAX));
     }
 }

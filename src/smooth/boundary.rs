@@ -278,29 +278,49 @@ pub struct Loops {
     targets: Vec<Option<(DVec3, f64)>>,
 }
 
+/// The directed boundary edges of `triangles`: an edge a → b of a face is one when no other
+/// face holds both ends (only fixed vertices can be on one). Linear in the faces.
+pub fn boundary_edges(topo: &Topology, triangles: &[[u32; 3]]) -> Vec<[u32; 2]> {
+    let mut directed = Vec::new();
+    for t in triangles {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            if a == b || !topo.is_fixed(a) || !topo.is_fixed(b) {
+                continue;
+            }
+            let holding = topo
+                .faces_of(a)
+                .iter()
+                .filter(|&&f| triangles[f as usize].contains(&b))
+                .take(2)
+                .count();
+            if holding == 1 {
+                directed.push([a, b]);
+            }
+        }
+    }
+    directed
+}
+
 impl Loops {
     /// Find the boundary loops of `triangles` (the topology's, oriented). Linear in the faces.
     pub fn find(topo: &Topology, triangles: &[[u32; 3]]) -> Loops {
-        // An edge a → b of a face is a boundary edge when no other face holds both ends; only
-        // fixed vertices can be on one.
-        let mut directed: Vec<[u32; 2]> = Vec::new();
-        for t in triangles {
-            for k in 0..3 {
-                let (a, b) = (t[k], t[(k + 1) % 3]);
-                if a == b || !topo.is_fixed(a) || !topo.is_fixed(b) {
-                    continue;
-                }
-                let holding = topo
-                    .faces_of(a)
-                    .iter()
-                    .filter(|&&f| triangles[f as usize].contains(&b))
-                    .take(2)
-                    .count();
-                if holding == 1 {
-                    directed.push([a, b]);
-                }
-            }
-        }
+        Loops::from_edges(topo, triangles, boundary_edges(topo, triangles))
+    }
+
+    /// The directed boundary edges of the loops, in loop order (what [`Loops::from_edges`]
+    /// takes back: a cluster plan stores them, so that no rank reads every face).
+    pub fn edges(&self) -> &[[u32; 2]] {
+        &self.edges
+    }
+
+    /// The loops of the directed boundary edges `directed` of `triangles` (as
+    /// [`boundary_edges`] finds them, in any order). Reads the faces of boundary vertices only.
+    pub fn from_edges(
+        topo: &Topology,
+        triangles: &[[u32; 3]],
+        mut directed: Vec<[u32; 2]>,
+    ) -> Loops {
         let mut vertices: Vec<u32> = directed.iter().flatten().copied().collect();
         vertices.sort_unstable();
         vertices.dedup();
@@ -353,6 +373,11 @@ impl Loops {
             reference: Vec::new(),
             targets: vec![None; count as usize],
         }
+    }
+
+    /// The vertices on boundary edges, ascending.
+    pub fn vertices(&self) -> &[u32] {
+        &self.vertices
     }
 
     /// Number of loops.

@@ -134,7 +134,7 @@ pub struct Options {
     pub iterations: usize,
     /// Stop early, after the iteration at which the noise is gone by the rule of
     /// [`crate::engine::auto`] (data-driven, from the input alone); the report says how many
-    /// ran and why they stopped. Not in the cluster engine or the multiresolution mode.
+    /// ran and why they stopped. Not in the multiresolution mode.
     /// Absent from JSON when false (reports and batch settings keys as before).
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub auto_stop: bool,

@@ -106,12 +106,6 @@ impl SmoothConfig {
             options.method = crate::Method::Vcs;
         }
         let multires = a.multires.resolve(&options)?;
-        if options.auto_stop && a.cluster.checkpoint.is_some() {
-            return Err(flags::parameter(
-                "auto_stop",
-                "cannot be combined with --checkpoint: the cluster engine does not keep the stop rule's state yet",
-            ));
-        }
         if multires.is_some() && a.cluster.checkpoint.is_some() {
             return Err(flags::parameter(
                 "multires",
