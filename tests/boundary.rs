@@ -120,7 +120,12 @@ fn s(p: &Path) -> String {
 }
 
 /// The stencil methods that smooth boundaries.
-const METHODS: [Method; 3] = [Method::Vcs, Method::VcsTriangle, Method::Lem];
+const METHODS: [Method; 4] = [
+    Method::Vcs,
+    Method::VcsTriangle,
+    Method::VcsLowpass,
+    Method::Lem,
+];
 
 /// On both open scans with noise, every method keeps each loop's vector-area magnitude (the
 /// hole's size) to 1e-9 while the loop's curve energy falls at least threefold, and counts its
@@ -196,12 +201,12 @@ fn the_volume_of_an_open_scan_stays_put() {
     };
     let fixed = change(Method::Vcs, Boundary::Fixed);
     assert!(fixed <= 1e-9, "{fixed:e}");
-    let smooth = change(Method::Vcs, Boundary::Smooth);
-    assert!(smooth <= 1e-4, "{smooth:e}");
-    assert!(
-        smooth * 10.0 < change(Method::Lem, Boundary::Smooth),
-        "{smooth:e}"
-    );
+    let lem = change(Method::Lem, Boundary::Smooth);
+    for method in [Method::Vcs, Method::VcsLowpass] {
+        let smooth = change(method, Boundary::Smooth);
+        assert!(smooth <= 1e-4, "{method}: {smooth:e}");
+        assert!(smooth * 10.0 < lem, "{method}: {smooth:e} vs lem {lem:e}");
+    }
 }
 
 /// The same bits for 1, 2 and 3 threads, on the heap and in scratch files.
@@ -306,7 +311,7 @@ fn bad_values_and_unsupported_modes_are_one_line_errors() {
         let o = vcsmooth(["smooth", &s(&input), &s(&out), "--boundary", value]);
         fails(&o, 2, &["--boundary"]);
     }
-    for method in ["laplacian", "taubin", "vcs-lowpass"] {
+    for method in ["laplacian", "taubin"] {
         let o = vcsmooth([
             "smooth",
             &s(&input),
@@ -349,6 +354,7 @@ fn the_ranks_of_the_cluster_engine_smooth_boundaries_as_one_process() {
     for (what, o) in [
         ("vcs", with(Method::Vcs, 3, false, None)),
         ("vcs-triangle", with(Method::VcsTriangle, 2, false, None)),
+        ("vcs-lowpass", with(Method::VcsLowpass, 2, false, None)),
         ("vcs auto, bounded", with(Method::Vcs, 30, true, Some(0.05))),
     ] {
         let single = dir.path().join("single.ply");
@@ -437,10 +443,9 @@ fn batch_certifies_the_mode_and_slurm_script_repeats_it() {
     assert!(!script.contains("--boundary"), "{script}");
 }
 
-/// Without `--method`, `--boundary smooth` runs vcs (the default vcs-lowpass does not smooth
-/// boundaries yet), and says so; with `fixed` the default stays vcs-lowpass.
+/// Without `--method`, `--boundary smooth` runs the default method, vcs-lowpass, and says so.
 #[test]
-fn smooth_boundaries_without_a_method_run_vcs() {
+fn smooth_boundaries_without_a_method_run_the_default_method() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("demo.ply");
     io::write_mesh(&input, &read_scan("demosthenes-17k.ply")).unwrap();
@@ -451,14 +456,6 @@ fn smooth_boundaries_without_a_method_run_vcs() {
         &s(&out),
         "--boundary",
         "smooth",
-        "--iterations",
-        "2",
-    ]));
-    assert!(text.contains("out.ply: vcs, 2 iterations"), "{text}");
-    let text = ok(vcsmooth([
-        "smooth",
-        &s(&input),
-        &s(&out),
         "--iterations",
         "2",
     ]));

@@ -438,7 +438,7 @@ fn help_lists_commands_and_defaults() {
     }
     let smooth = ok(vcsmooth(["smooth", "--help"]));
     for s in [
-        "[default: vcs-lowpass; with --multires or --boundary smooth, vcs]",
+        "[default: vcs-lowpass; with --multires, vcs]",
         "[default: 10]",
         "[default: 0.5]",
         "[default: -0.53]",

@@ -124,7 +124,7 @@ fn smooth_arrays<'py>(
 ///   many degrees, in (0, 180), stay where they are.
 /// - ``max_deviation`` (None): no vertex ends farther than this from its input position.
 /// - ``boundary`` (``"fixed"``): ``"smooth"`` smooths each boundary loop keeping each hole's
-///   size (lem, vcs, vcs-triangle; name one of them as ``method``).
+///   size (every method but laplacian and taubin).
 /// - ``pinned`` (None): vertices that do not move: indices, or a boolean mask of length n.
 /// - ``threads`` (None: all cores), ``patch_size`` (16384: part of the result's definition).
 /// - ``stats`` (``"last"`` here): which iterations measure volume and area; the positions are

@@ -276,7 +276,7 @@ def test_iterations_auto_stops_when_the_noise_is_gone(kitten):
     assert relative_volume_change(noisy, out, f) <= 1e-9
 
 
-def test_boundary_smooth_moves_the_rims_and_needs_a_stencil_method():
+def test_boundary_smooth_moves_the_rims_and_refuses_the_jacobi_methods():
     v, f = vcsmooth.read_mesh(DATA / "demosthenes-17k.ply")
     edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
     unique, count = np.unique(edges, axis=0, return_counts=True)
@@ -285,8 +285,10 @@ def test_boundary_smooth_moves_the_rims_and_needs_a_stencil_method():
     assert np.any(out[rim] != v[rim])
     fixed = vcsmooth.smooth(v, f, method="vcs", iterations=3, boundary="fixed")
     assert np.array_equal(fixed[rim], v[rim])
+    default = vcsmooth.smooth(v, f, iterations=3, boundary="smooth")
+    assert np.any(default[rim] != v[rim])
     with pytest.raises(ValueError, match="boundary"):
-        vcsmooth.smooth(v, f, method="vcs-lowpass", boundary="smooth")
+        vcsmooth.smooth(v, f, method="taubin", boundary="smooth")
 
 
 @pytest.mark.parametrize(

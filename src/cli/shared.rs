@@ -36,7 +36,7 @@ impl InOut {
 /// sizes, engine.
 #[derive(Debug, Clone, ClapArgs)]
 pub struct SmoothingArgs {
-    /// Smoothing method [default: vcs-lowpass; with --multires or --boundary smooth, vcs].
+    /// Smoothing method [default: vcs-lowpass; with --multires, vcs].
     #[arg(long, value_enum)]
     pub method: Option<Method>,
     /// Number of iterations (0 only converts the file's format), or 'auto': stop when the noise is gone, after at most 100 iterations. 'auto' estimates the noise from the input (the spread of the second difference of the normal Laplacian) and stops when an iteration removes more along the normals than noise explains, or when little noise is left to remove (see the README).
@@ -57,12 +57,7 @@ pub struct SmoothingArgs {
 impl SmoothingArgs {
     /// The smoothing these flags ask for.
     pub fn options(&self) -> Options {
-        // The default is the best method that supports what else is asked: smoothed boundaries
-        // run with vcs (vcs-lowpass does not smooth them yet).
-        let method = self.method.unwrap_or(match self.params.boundary {
-            crate::smooth::Boundary::Smooth => Method::Vcs,
-            crate::smooth::Boundary::Fixed => Method::default(),
-        });
+        let method = self.method.unwrap_or_default();
         match self.iterations {
             Iterations::Count(n) => self.params.options(method, n),
             Iterations::Auto => Options {
@@ -120,7 +115,7 @@ pub struct MethodParams {
     /// No vertex ends farther than D (model units, > 0) from its input position: the stencil methods skip a stencil that would move one farther (the volume stays exact); laplacian and taubin clamp each vertex (they do not keep the volume) [default: none].
     #[arg(long, value_name = "D", value_parser = length, allow_hyphen_values = true)]
     pub max_deviation: Option<f64>,
-    /// Boundary loops of open meshes: fixed, or smooth (lem, vcs, vcs-triangle: each loop is smoothed as a curve; vcs and vcs-triangle keep each hole's vector area and the volume exactly).
+    /// Boundary loops of open meshes: fixed, or smooth (every method but laplacian and taubin: each loop is smoothed as a curve; all but lem keep each hole's size exactly).
     #[arg(long, value_enum, value_name = "MODE", default_value_t = Boundary::Fixed)]
     pub boundary: Boundary,
 }

@@ -7,10 +7,12 @@
 //!   a colour the patches run in parallel (they touch disjoint data), each applying the stencils
 //!   it owns in ascending order: edge stencils `(i, j)`, `i < j`, by `(i, j)`; triangle stencils in
 //!   the plan's triangle order.
-//! - `boundary: smooth` (`lem`, `vcs`, `vcs-triangle`): the loops' normals are measured before the
-//!   sweep; an edge that is a boundary stencil ([`crate::smooth::boundary`]) is applied in its
-//!   place in the edge order, and a `vcs-triangle` patch applies its boundary stencils after its
-//!   triangles, ascending; after the last colour, [`Loops::restore`] walks every loop in order.
+//! - `boundary: smooth` (the stencil methods): the loops' normals are measured before the sweep;
+//!   an edge that is a boundary stencil ([`crate::smooth::boundary`]) is applied in its place in
+//!   the edge order, a `vcs-triangle` patch applies its boundary stencils after its triangles,
+//!   ascending, and `vcs-lowpass` applies them after its ring stencils in a pass of their own over
+//!   the edge colouring, each patch's ascending; after the last colour, [`Loops::restore`] walks
+//!   every loop in order.
 //! - `vcs-lowpass`: first the step-1 shares of every vertex, Jacobi (a λ|μ pair from the
 //!   iteration's start, see [`lowpass::shares_into`]); then Gauss–Seidel as above over the ring
 //!   stencils (one per owned movable vertex, ascending), colour after colour of the plan's
@@ -277,33 +279,26 @@ impl Run<'_, '_> {
             }
             let params = stencil_params(self.opts, input);
             let mut sweep = SweepStats::default();
-            for (c, colour) in colours.iter().enumerate() {
-                if let Some(prefetch) = mesh.prefetch {
-                    // Read ahead the next colour (at the end, the first: the next iteration's).
-                    let next = &colours[(c + 1) % colours.len()];
-                    for &p in next {
-                        prefetch.hint(mesh.patches[p as usize].vertices.clone());
-                    }
-                }
-                let mine: Vec<Patch> = colour
-                    .iter()
-                    .map(|&p| p as usize)
-                    .filter(|&p| self.share.runs_patch(p))
-                    .map(|p| mesh.patches[p].clone())
-                    .collect();
-                self.share.colour_start(pos, sums);
-                // SAFETY: the views are used only by the patches of this colour, which touch
-                // disjoint positions and sums (the colouring invariant of `schedule`; for
-                // `vcs-lowpass`, `sums` holds the shares, which every patch only reads); `pos`
-                // and `sums` are not used otherwise while the views live.
-                let (pv, sv) = unsafe { (SharedField::new(pos), SharedField::new(sums)) };
-                let method = self.opts.method;
-                let loops = loops.as_ref();
-                let done = on_pool(&*self.share, || {
-                    sweep_patches(mesh, pv, sv, &mine, method, params, loops)
-                });
-                sweep.add(&done);
-                self.share.colour_end(pos, sums);
+            let method = self.opts.method;
+            sweep.add(&self.sweep_colours(
+                colours,
+                Pass::Stencils(method),
+                pos,
+                sums,
+                params,
+                loops.as_ref(),
+            ));
+            if lowpass && let Some(loops) = &loops {
+                // The boundary stencils of `vcs-lowpass` run after its ring stencils, in the edge
+                // colouring (they are edge stencils); the shares they write are not read again.
+                sweep.add(&self.sweep_colours(
+                    mesh.colours,
+                    Pass::Boundaries,
+                    pos,
+                    sums,
+                    params,
+                    Some(loops),
+                ));
             }
             if let Some(loops) = &mut loops {
                 // Every process walks every loop whole, from the same positions, so each holds
@@ -330,6 +325,48 @@ impl Run<'_, '_> {
             }
         }
         Ok(())
+    }
+
+    /// One Gauss–Seidel pass of `pass` over `colours`, colour after colour, each colour's patches
+    /// in parallel, the changes exchanged after each colour.
+    fn sweep_colours(
+        &mut self,
+        colours: &[Vec<u32>],
+        pass: Pass,
+        pos: &mut [DVec3],
+        sums: &mut [DVec3],
+        params: StencilParams,
+        loops: Option<&Loops>,
+    ) -> SweepStats {
+        let mesh = self.mesh;
+        let mut sweep = SweepStats::default();
+        for (c, colour) in colours.iter().enumerate() {
+            if let Some(prefetch) = mesh.prefetch {
+                // Read ahead the next colour (at the end, the first: the next iteration's).
+                let next = &colours[(c + 1) % colours.len()];
+                for &p in next {
+                    prefetch.hint(mesh.patches[p as usize].vertices.clone());
+                }
+            }
+            let mine: Vec<Patch> = colour
+                .iter()
+                .map(|&p| p as usize)
+                .filter(|&p| self.share.runs_patch(p))
+                .map(|p| mesh.patches[p].clone())
+                .collect();
+            self.share.colour_start(pos, sums);
+            // SAFETY: the views are used only by the patches of this colour, which touch
+            // disjoint positions and sums (the colouring invariant of `schedule`; for
+            // `vcs-lowpass`'s ring stencils, `sums` holds the shares, which every patch only
+            // reads); `pos` and `sums` are not used otherwise while the views live.
+            let (pv, sv) = unsafe { (SharedField::new(pos), SharedField::new(sums)) };
+            let done = on_pool(&*self.share, || {
+                sweep_patches(mesh, pv, sv, &mine, pass, params, loops)
+            });
+            sweep.add(&done);
+            self.share.colour_end(pos, sums);
+        }
+        sweep
     }
 
     /// Whether the automatic stop (when there is one) ends the run after the iteration that left
@@ -637,7 +674,7 @@ fn sweep_patches(
     pos: SharedField,
     sums: SharedField,
     patches: &[Patch],
-    method: Method,
+    pass: Pass,
     params: StencilParams,
     loops: Option<&Loops>,
 ) -> SweepStats {
@@ -646,34 +683,52 @@ fn sweep_patches(
         .par_iter()
         .map(|patch| {
             let (mut pv, mut sv) = (pos, sums);
-            if method == Method::VcsLowpass {
-                let owned = patch.vertices.clone();
-                lowpass::sweep_rings(topo, tris, &mut pv, &sv, owned, params.deviation)
-            } else if method == Method::VcsTriangle {
-                let faces = patch.triangles.clone();
-                let mut st = stencil::sweep_triangles(topo, tris, &mut pv, &mut sv, faces, params);
-                if let Some(loops) = loops {
-                    // After the patch's triangles, its boundary edges, ascending.
+            match (pass, loops) {
+                (Pass::Stencils(Method::VcsLowpass), _) => {
+                    let owned = patch.vertices.clone();
+                    lowpass::sweep_rings(topo, tris, &mut pv, &sv, owned, params.deviation)
+                }
+                (Pass::Stencils(Method::VcsTriangle), _) => {
+                    let faces = patch.triangles.clone();
+                    let mut st =
+                        stencil::sweep_triangles(topo, tris, &mut pv, &mut sv, faces, params);
+                    if let Some(loops) = loops {
+                        // After the patch's triangles, its boundary edges, ascending.
+                        let edges = patch.edges(topo);
+                        st.add(&boundary::sweep_edges(
+                            topo, tris, &mut pv, &mut sv, edges, params, loops, false,
+                        ));
+                    }
+                    st
+                }
+                (Pass::Stencils(_), Some(loops)) => {
                     let edges = patch.edges(topo);
-                    st.add(&boundary::sweep_edges(
-                        topo, tris, &mut pv, &mut sv, edges, params, loops, false,
-                    ));
+                    boundary::sweep_edges(topo, tris, &mut pv, &mut sv, edges, params, loops, true)
                 }
-                st
-            } else {
-                let edges = patch.edges(topo);
-                match loops {
-                    Some(loops) => boundary::sweep_edges(
-                        topo, tris, &mut pv, &mut sv, edges, params, loops, true,
-                    ),
-                    None => stencil::sweep_edges(topo, tris, &mut pv, &mut sv, edges, params),
+                (Pass::Stencils(_), None) => {
+                    let edges = patch.edges(topo);
+                    stencil::sweep_edges(topo, tris, &mut pv, &mut sv, edges, params)
                 }
+                (Pass::Boundaries, Some(loops)) => {
+                    let edges = patch.edges(topo);
+                    boundary::sweep_edges(topo, tris, &mut pv, &mut sv, edges, params, loops, false)
+                }
+                (Pass::Boundaries, None) => SweepStats::default(),
             }
         })
         .reduce(SweepStats::default, |mut a, b| {
             a.add(&b);
             a
         })
+}
+
+/// What a sweep over patches applies: the method's stencils (with its boundary stencils in
+/// place when the loops are smoothed), or the boundary stencils alone (`vcs-lowpass`'s pass
+/// after its ring stencils).
+#[derive(Clone, Copy)]
+enum Pass {
+    Stencils(Method),
+    Boundaries,
 }
 
 // A tile holds whole chunks, so that a round sums the displacement chunk by chunk as plain steps do.

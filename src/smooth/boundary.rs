@@ -37,7 +37,8 @@
 //! input's centroid by 3e-5 (1e-9 with `boundary: fixed`; `lem` 6e-3).
 //!
 //! `lem` uses the same stencils (its holes keep their size too, though its surface shrinks);
-//! `laplacian`, `taubin` and `vcs-lowpass` refuse `smooth` ([`crate::Options::check`]).
+//! `vcs-lowpass` runs them in a pass of their own after its ring stencils (in the edge colouring);
+//! `laplacian` and `taubin` refuse `smooth` ([`crate::Options::check`]).
 //!
 //! What a stencil reads and writes, for the schedule: positions of i, j, their neighbours and
 //! a₂, b₂ (two loop steps from i and j, so within 2 rings of the free vertices) and the loop

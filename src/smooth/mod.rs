@@ -168,10 +168,10 @@ pub enum Boundary {
     /// Boundary vertices never move.
     #[default]
     Fixed,
-    /// `lem`, `vcs` and `vcs-triangle` smooth every boundary loop with boundary stencils
-    /// ([`boundary`]): `vcs` and `vcs-triangle` keep each loop's vector area (so each hole keeps
-    /// its size) and the volume of the faces touching each stencil exactly; `lem`, which keeps no
-    /// volume, keeps no area either. Interior stencils treat boundary vertices as fixed.
+    /// `lem`, `vcs`, `vcs-triangle` and `vcs-lowpass` smooth every boundary loop with boundary
+    /// stencils ([`boundary`]): all but `lem` keep each loop's vector area along its normal (so
+    /// each hole keeps its size); `lem`, which keeps no volume, keeps no area either. Interior
+    /// stencils treat boundary vertices as fixed.
     Smooth,
 }
 
@@ -216,13 +216,11 @@ impl Options {
                 ));
             }
         }
-        if self.boundary == Boundary::Smooth
-            && !matches!(self.method, Method::Lem | Method::Vcs | Method::VcsTriangle)
-        {
+        if self.boundary == Boundary::Smooth && self.method.is_jacobi() {
             return Err(crate::Error::parameter(
                 "boundary",
                 format!(
-                    "smooth works with lem, vcs and vcs-triangle, not {}",
+                    "smooth works with lem, vcs, vcs-triangle and vcs-lowpass, not {}",
                     self.method
                 ),
             ));
