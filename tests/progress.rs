@@ -24,17 +24,28 @@ struct Seen {
     end: (u64, u64),
 }
 
+/// The phase under way: its meter, and the thread sampling it until told to stop.
+struct Running {
+    phase: Phase,
+    meter: Arc<Meter>,
+    stop: Arc<AtomicBool>,
+    sampler: JoinHandle<Vec<(u64, u64)>>,
+}
+
 /// Records the phases and samples each meter from its own thread while the phase runs.
 #[derive(Default)]
 struct Recorder {
     seen: Vec<Seen>,
-    running: Option<(Phase, Arc<Meter>, Arc<AtomicBool>, JoinHandle<Vec<(u64, u64)>>)>,
+    running: Option<Running>,
     iterations: Vec<usize>,
 }
 
 impl Observer for Recorder {
     fn phase_start(&mut self, phase: Phase, meter: &Arc<Meter>) {
-        assert!(self.running.is_none(), "{phase:?} began inside another phase");
+        assert!(
+            self.running.is_none(),
+            "{phase:?} began inside another phase"
+        );
         let stop = Arc::new(AtomicBool::new(false));
         let sampler = {
             let (meter, stop) = (Arc::clone(meter), Arc::clone(&stop));
@@ -48,7 +59,12 @@ impl Observer for Recorder {
             })
         };
         let start = (meter.done(), meter.total());
-        self.running = Some((phase, Arc::clone(meter), stop, sampler));
+        self.running = Some(Running {
+            phase,
+            meter: Arc::clone(meter),
+            stop,
+            sampler,
+        });
         self.seen.push(Seen {
             phase,
             start,
@@ -58,7 +74,12 @@ impl Observer for Recorder {
     }
 
     fn phase_end(&mut self, phase: Phase) {
-        let (began, meter, stop, sampler) = self.running.take().expect("a phase ended unbegun");
+        let Running {
+            phase: began,
+            meter,
+            stop,
+            sampler,
+        } = self.running.take().expect("a phase ended unbegun");
         assert_eq!(began, phase, "phase_end names another phase");
         stop.store(true, Ordering::Release);
         let seen = self.seen.last_mut().unwrap();
@@ -67,8 +88,12 @@ impl Observer for Recorder {
     }
 
     fn iteration(&mut self, record: &IterationRecord, _total: usize) {
-        let phase = self.running.as_ref().map(|r| r.0);
-        assert_eq!(phase, Some(Phase::Smooth), "an iteration outside the smoothing phase");
+        let phase = self.running.as_ref().map(|r| r.phase);
+        assert_eq!(
+            phase,
+            Some(Phase::Smooth),
+            "an iteration outside the smoothing phase"
+        );
         self.iterations.push(record.iteration);
     }
 }
@@ -91,7 +116,11 @@ impl Recorder {
                 done = d;
             }
             assert!(s.end.0 >= done, "{p:?}: ended below a count seen");
-            assert_eq!(s.end.0, s.end.1, "{p:?}: ended at {} of {}", s.end.0, s.end.1);
+            assert_eq!(
+                s.end.0, s.end.1,
+                "{p:?}: ended at {} of {}",
+                s.end.0, s.end.1
+            );
             assert!(s.end.1 > 0, "{p:?}: nothing to count");
         }
         self.seen.iter().map(|s| s.phase).collect()
@@ -110,7 +139,10 @@ fn run_file(
 ) -> (Recorder, engine::Report) {
     let mut recorder = Recorder::default();
     let report = engine::run_file(input, output, opts, settings, &mut recorder).unwrap();
-    assert_eq!(recorder.iterations, (1..=report.iterations_run).collect::<Vec<_>>());
+    assert_eq!(
+        recorder.iterations,
+        (1..=report.iterations_run).collect::<Vec<_>>()
+    );
     (recorder, report)
 }
 
@@ -147,7 +179,12 @@ fn a_file_run_reports_each_phase_to_its_end() {
         let output = dir.path().join(format!("{name}.ply"));
         let (seen, report) = run_file(&input, &output, &opts, settings);
         assert_eq!(report.memory.storage, name);
-        let mut want = vec![Phase::Read, Phase::Reorder, Phase::Topology, Phase::Schedule];
+        let mut want = vec![
+            Phase::Read,
+            Phase::Reorder,
+            Phase::Topology,
+            Phase::Schedule,
+        ];
         if settings.with_stats {
             want.push(Phase::Statistics);
         }

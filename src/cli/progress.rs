@@ -132,7 +132,14 @@ impl Progress {
 
     /// Draw the iteration bar asked for last.
     fn draw_iterations(&self) {
-        let (Some(bar), Some(it)) = (&self.bar, &self.iterations) else {
+        if let Some(it) = &self.iterations {
+            self.draw(it);
+        }
+    }
+
+    /// Draw an iteration bar.
+    fn draw(&self, it: &Iterations) {
+        let Some(bar) = &self.bar else {
             return;
         };
         let style = if it.auto_stop {
@@ -147,12 +154,14 @@ impl Progress {
             .unwrap_or_else(|_| ProgressStyle::default_bar())
             .progress_chars("=> ")
         };
+        // The new style and label first, so that no frame shows the previous one's at zero.
         bar.disable_steady_tick();
-        bar.set_message("");
-        bar.reset();
         bar.set_style(style);
         bar.set_prefix(it.label.clone());
+        bar.set_message("");
+        bar.set_position(0);
         bar.set_length(it.total as u64);
+        bar.reset();
     }
 
     /// Show a phase of the library as a bar of its meter, with its percentage, the time it has
@@ -161,8 +170,7 @@ impl Progress {
         let Some(bar) = &self.bar else {
             return;
         };
-        bar.set_message("");
-        bar.reset();
+        // The new style and label first, so that no frame shows the previous one's.
         bar.set_style(
             ProgressStyle::with_template(
                 "{prefix} [{bar:24}] {percent:>3}% [{elapsed}, eta {eta}]",
@@ -171,7 +179,11 @@ impl Progress {
             .progress_chars("=> "),
         );
         bar.set_prefix(phase.name());
+        bar.set_message("");
+        bar.set_position(0);
         bar.set_length(meter.total());
+        // A new start for the elapsed time and the estimate of the time left.
+        bar.reset();
         bar.set_position(meter.done());
         // Redrawn even while the meter stands still (a sort), so that the time keeps going.
         bar.enable_steady_tick(Duration::from_millis(120));
@@ -205,15 +217,16 @@ impl Observer for Progress {
         if phase != Phase::Smooth {
             return self.draw_phase(phase, meter);
         }
-        // The iterations report themselves (`iteration`), with the run's own bar.
-        if self.iterations.is_none() {
-            self.iterations = Some(Iterations {
+        // The iterations report themselves (`iteration`), on the bar the command asked for, or
+        // on a plain one.
+        match &self.iterations {
+            Some(it) => self.draw(it),
+            None => self.draw(&Iterations {
                 label: phase.name().to_string(),
                 total: meter.total() as usize,
                 auto_stop: false,
-            });
+            }),
         }
-        self.draw_iterations();
     }
 
     fn phase_end(&mut self, _phase: Phase) {

@@ -109,11 +109,12 @@ impl Plan {
             Layout::Patches(0) => {
                 return Err(Error::parameter("patch_size", "must be at least 1"));
             }
-            Layout::Patches(_) => {
-                metered(observer, Phase::Reorder, partition::REORDER_PASSES.items(n, t), |m| {
-                    partition::reorder_metered(storage, positions, triangles, m)
-                })?
-            }
+            Layout::Patches(_) => metered(
+                observer,
+                Phase::Reorder,
+                partition::REORDER_PASSES.items(n, t),
+                |m| partition::reorder_metered(storage, positions, triangles, m),
+            )?,
             Layout::Whole => Reordered {
                 order: {
                     let mut order = storage.zeroed::<u32>(positions.len())?;

@@ -78,16 +78,14 @@ pub fn reorder_metered(
 
     // Element-wise passes, cut into chunks only to count them: each item is computed as before.
     let mut keys: Buf<[u64; 2]> = storage.zeroed(n)?;
-    keys.par_chunks_mut(STEP)
-        .enumerate()
-        .for_each(|(c, keys)| {
-            for (k, key) in keys.iter_mut().enumerate() {
-                let v = c * STEP + k;
-                let q = ((positions[v] - lo) * scale).as_u64vec3();
-                *key = [morton3(q.x, q.y, q.z), v as u64];
-            }
-            meter.add(keys.len() as u64);
-        });
+    keys.par_chunks_mut(STEP).enumerate().for_each(|(c, keys)| {
+        for (k, key) in keys.iter_mut().enumerate() {
+            let v = c * STEP + k;
+            let q = ((positions[v] - lo) * scale).as_u64vec3();
+            *key = [morton3(q.x, q.y, q.z), v as u64];
+        }
+        meter.add(keys.len() as u64);
+    });
     keys.par_sort_unstable();
     meter.add(n as u64);
 

@@ -1010,7 +1010,15 @@ impl Decoded<'_> {
         } else if let Some(face) = roles.face.filter(|f| f.element == e) {
             let mut faces =
                 FaceBuilder::in_storage(self.storage, el.count).map_err(ReadError::Storage)?;
-            let len = decode_faces(&data, el, face, roles.vertices, origin, &mut faces, self.meter)?;
+            let len = decode_faces(
+                &data,
+                el,
+                face,
+                roles.vertices,
+                origin,
+                &mut faces,
+                self.meter,
+            )?;
             self.faces = Some(faces);
             len
         } else {
