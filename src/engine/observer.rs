@@ -181,7 +181,7 @@ pub(crate) fn metered<T>(
 }
 
 /// The smoothing step's observer: counts the iterations into the [`Phase::Smooth`] meter and
-/// passes everything on to the run's observer.
+/// passes them and `interrupted` on to the run's observer (no phase: phases do not nest).
 pub(crate) struct Iterations<'a> {
     pub inner: &'a mut dyn Observer,
     pub meter: &'a Meter,
