@@ -247,3 +247,20 @@ fn an_in_memory_run_reports_its_planning_and_smoothing() {
     );
     assert_eq!(recorder.total(Phase::Smooth), opts.iterations as u64);
 }
+
+/// In a pipe (a batch log) nothing is drawn: stderr stays empty.
+#[test]
+fn nothing_is_drawn_in_a_pipe() {
+    let dir = tempfile::tempdir().unwrap();
+    let (input, output) = (dir.path().join("in.ply"), dir.path().join("out.ply"));
+    vcsmooth::io::write_mesh(&input, &noisy_sphere(4, 0.3, 1)).unwrap();
+    let o = crate::util::vcsmooth([
+        "smooth".as_ref(),
+        input.as_os_str(),
+        output.as_os_str(),
+        "--report".as_ref(),
+        dir.path().join("r.json").as_os_str(),
+    ]);
+    crate::util::ok(o.clone());
+    assert!(o.stderr.is_empty(), "{}", crate::util::stderr(&o));
+}

@@ -131,17 +131,14 @@ impl Progress {
     }
 
     /// Draw the iteration bar asked for last.
-    fn draw_iterations(&self) {
-        if let Some(it) = &self.iterations {
-            self.draw(it);
+    fn draw_iterations(&mut self) {
+        if let Some(it) = self.iterations.clone() {
+            self.draw(&it);
         }
     }
 
     /// Draw an iteration bar.
-    fn draw(&self, it: &Iterations) {
-        let Some(bar) = &self.bar else {
-            return;
-        };
+    fn draw(&mut self, it: &Iterations) {
         let style = if it.auto_stop {
             ProgressStyle::with_template(
                 "{prefix}: iteration {pos} (stops when the noise is gone, at most {len}) {msg} [{elapsed}]",
@@ -154,40 +151,44 @@ impl Progress {
             .unwrap_or_else(|_| ProgressStyle::default_bar())
             .progress_chars("=> ")
         };
-        // The new style and label first, so that no frame shows the previous one's at zero.
-        bar.disable_steady_tick();
-        bar.set_style(style);
-        bar.set_prefix(it.label.clone());
-        bar.set_message("");
-        bar.set_position(0);
-        bar.set_length(it.total as u64);
-        bar.reset();
+        if let Some(bar) = self.replace_bar(style, it.label.clone(), it.total as u64) {
+            bar.tick();
+        }
     }
 
     /// Show a phase of the library as a bar of its meter, with its percentage, the time it has
     /// taken and the time left.
     fn draw_phase(&mut self, phase: Phase, meter: &Arc<Meter>) {
-        let Some(bar) = &self.bar else {
+        let style = ProgressStyle::with_template(
+            "{prefix} [{bar:24}] {percent:>3}% [{elapsed}, eta {eta}]",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar())
+        .progress_chars("=> ");
+        let Some(bar) = self.replace_bar(style, phase.name().to_string(), meter.total()) else {
             return;
         };
-        // The new style and label first, so that no frame shows the previous one's.
-        bar.set_style(
-            ProgressStyle::with_template(
-                "{prefix} [{bar:24}] {percent:>3}% [{elapsed}, eta {eta}]",
-            )
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
-        );
-        bar.set_prefix(phase.name());
-        bar.set_message("");
-        bar.set_position(0);
-        bar.set_length(meter.total());
-        // A new start for the elapsed time and the estimate of the time left.
-        bar.reset();
         bar.set_position(meter.done());
         // Redrawn even while the meter stands still (a sort), so that the time keeps going.
         bar.enable_steady_tick(Duration::from_millis(120));
-        self.ticker = Some(Ticker::start(bar.clone(), Arc::clone(meter)));
+        self.ticker = Some(Ticker::start(bar, Arc::clone(meter)));
+    }
+
+    /// Put a new bar in the place of the current one (if the display is visible): set up before
+    /// it draws, so that no frame mixes the old bar's label, position or time with the new one's,
+    /// and its elapsed time and time left start from zero.
+    fn replace_bar(
+        &mut self,
+        style: ProgressStyle,
+        label: String,
+        len: u64,
+    ) -> Option<ProgressBar> {
+        let old = self.bar.as_ref()?;
+        let bar = ProgressBar::with_draw_target(Some(len), ProgressDrawTarget::stderr())
+            .with_style(style)
+            .with_prefix(label);
+        old.finish_and_clear();
+        self.bar = Some(bar.clone());
+        Some(bar)
     }
 
     fn stop_ticker(&mut self) {
@@ -219,14 +220,12 @@ impl Observer for Progress {
         }
         // The iterations report themselves (`iteration`), on the bar the command asked for, or
         // on a plain one.
-        match &self.iterations {
-            Some(it) => self.draw(it),
-            None => self.draw(&Iterations {
-                label: phase.name().to_string(),
-                total: meter.total() as usize,
-                auto_stop: false,
-            }),
-        }
+        let it = self.iterations.clone().unwrap_or_else(|| Iterations {
+            label: phase.name().to_string(),
+            total: meter.total() as usize,
+            auto_stop: false,
+        });
+        self.draw(&it);
     }
 
     fn phase_end(&mut self, _phase: Phase) {
