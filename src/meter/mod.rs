@@ -87,7 +87,7 @@ impl Passes {
 /// A [`std::io::Write`] that counts the bytes through it into a meter, once per [`BYTES`] (the
 /// writers make many small writes: the count is kept here and handed on in large steps). The bytes
 /// are passed on unchanged.
-pub struct Counted<'m, W> {
+pub(crate) struct Counted<'m, W> {
     inner: W,
     meter: &'m Meter,
     pending: u64,
