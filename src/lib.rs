@@ -14,6 +14,7 @@
 //! - [`error`]: the [`Error`] kinds (invalid input, topology, parameter, I/O, resource).
 //! - [`signals`]: temporary files registered while they exist, removed on SIGINT, SIGTERM and
 //!   SIGHUP.
+//! - [`meter`]: how far a long phase is, counted from its loops ([`meter::Meter`]).
 //! - [`mesh`]: [`Mesh`] (positions and triangles in flat arrays, on the heap or in memory-mapped
 //!   scratch files) and what a file carried besides them.
 //! - [`topology`]: CSR adjacency, boundary and non-manifold masks ([`Topology`]).
@@ -38,6 +39,7 @@ pub mod engine;
 pub mod error;
 pub mod io;
 pub mod mesh;
+pub mod meter;
 pub mod metrics;
 pub mod modes;
 pub mod multires;

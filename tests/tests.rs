@@ -20,4 +20,5 @@ mod layout;
 mod multires;
 mod patches;
 mod pins;
+mod progress;
 mod refine;

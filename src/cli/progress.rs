@@ -2,17 +2,70 @@
 //! terminal, nothing otherwise (batch jobs and pipes get clean logs).
 
 use std::io::IsTerminal;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::thread::JoinHandle;
 use std::time::Duration;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
-use crate::engine::{IterationRecord, Observer};
+use crate::engine::{IterationRecord, Meter, Observer, Phase};
 use crate::smooth::Options;
 
-/// Progress display for one command: a spinner for phases (reading, building topology, writing),
-/// a bar for iterations.
+/// Progress display for one command: a spinner for steps that report no progress, a bar with
+/// percentage and time left for the library's phases (reading, reordering, topology, colouring,
+/// statistics, writing), a bar for iterations.
 pub struct Progress {
     bar: Option<ProgressBar>,
+    /// The iteration bar that [`Progress::smoothing`] or [`Progress::iterations`] asked for, drawn
+    /// again when a run's smoothing phase begins (the phases before it take the bar over).
+    iterations: Option<Iterations>,
+    /// Copies the current phase's meter into the bar.
+    ticker: Option<Ticker>,
+}
+
+/// An iteration bar: its label, its length, whether the run stops by itself before it.
+#[derive(Clone)]
+struct Iterations {
+    label: String,
+    total: usize,
+    auto_stop: bool,
+}
+
+/// How often a phase's bar reads its meter.
+const TICK: Duration = Duration::from_millis(100);
+
+/// A thread that copies a phase's meter into the bar every [`TICK`]: the library's loops only bump
+/// the meter's counters, and the drawing stays here.
+struct Ticker {
+    stop: Arc<AtomicBool>,
+    thread: JoinHandle<()>,
+}
+
+impl Ticker {
+    fn start(bar: ProgressBar, meter: Arc<Meter>) -> Ticker {
+        let stop = Arc::new(AtomicBool::new(false));
+        let stopped = Arc::clone(&stop);
+        let thread = std::thread::spawn(move || {
+            loop {
+                // Checked before the copy, so that the last copy shows the phase's end.
+                let last = stopped.load(Ordering::Acquire);
+                bar.set_length(meter.total());
+                bar.set_position(meter.done());
+                if last {
+                    break;
+                }
+                std::thread::park_timeout(TICK);
+            }
+        });
+        Ticker { stop, thread }
+    }
+
+    fn stop(self) {
+        self.stop.store(true, Ordering::Release);
+        self.thread.thread().unpark();
+        let _ = self.thread.join();
+    }
 }
 
 impl Progress {
@@ -27,12 +80,20 @@ impl Progress {
 
     /// A display that draws nothing.
     pub fn hidden() -> Self {
-        Progress { bar: None }
+        Progress {
+            bar: None,
+            iterations: None,
+            ticker: None,
+        }
     }
 
     fn visible() -> Self {
         let bar = ProgressBar::with_draw_target(None, ProgressDrawTarget::stderr());
-        Progress { bar: Some(bar) }
+        Progress {
+            bar: Some(bar),
+            iterations: None,
+            ticker: None,
+        }
     }
 
     /// Show that a phase (e.g. "reading in.ply") is under way.
@@ -49,41 +110,90 @@ impl Progress {
     }
 
     /// Start a bar of `total` iterations labelled `label` (e.g. the method's name).
-    pub fn iterations(&self, label: &str, total: usize) {
-        if let Some(bar) = &self.bar {
-            bar.disable_steady_tick();
-            bar.set_message("");
-            bar.reset();
-            bar.set_style(
-                ProgressStyle::with_template(
-                    "{prefix} [{bar:24}] {pos}/{len} {msg} [{elapsed}, eta {eta}]",
-                )
-                .unwrap_or_else(|_| ProgressStyle::default_bar())
-                .progress_chars("=> "),
-            );
-            bar.set_prefix(label.to_string());
-            bar.set_length(total as u64);
-        }
+    pub fn iterations(&mut self, label: &str, total: usize) {
+        self.iterations = Some(Iterations {
+            label: label.to_string(),
+            total,
+            auto_stop: false,
+        });
+        self.draw_iterations();
     }
 
     /// Start the display of a run of `opts`: a bar of its iterations, or, when it stops
     /// automatically, a counter that shows the cap as a cap (the run may end long before it).
-    pub fn smoothing(&self, opts: &Options) {
-        if !opts.auto_stop {
-            return self.iterations(opts.method.name(), opts.iterations);
+    pub fn smoothing(&mut self, opts: &Options) {
+        self.iterations = Some(Iterations {
+            label: opts.method.name().to_string(),
+            total: opts.iterations,
+            auto_stop: opts.auto_stop,
+        });
+        self.draw_iterations();
+    }
+
+    /// Draw the iteration bar asked for last.
+    fn draw_iterations(&mut self) {
+        if let Some(it) = self.iterations.clone() {
+            self.draw(&it);
         }
-        if let Some(bar) = &self.bar {
-            bar.disable_steady_tick();
-            bar.set_message("");
-            bar.reset();
-            bar.set_style(
-                ProgressStyle::with_template(
-                    "{prefix}: iteration {pos} (stops when the noise is gone, at most {len}) {msg} [{elapsed}]",
-                )
-                .unwrap_or_else(|_| ProgressStyle::default_bar()),
-            );
-            bar.set_prefix(opts.method.name());
-            bar.set_length(opts.iterations as u64);
+    }
+
+    /// Draw an iteration bar.
+    fn draw(&mut self, it: &Iterations) {
+        let style = if it.auto_stop {
+            ProgressStyle::with_template(
+                "{prefix}: iteration {pos} (stops when the noise is gone, at most {len}) {msg} [{elapsed}]",
+            )
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+        } else {
+            ProgressStyle::with_template(
+                "{prefix} [{bar:24}] {pos}/{len} {msg} [{elapsed}, eta {eta}]",
+            )
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> ")
+        };
+        if let Some(bar) = self.replace_bar(style, it.label.clone(), it.total as u64) {
+            bar.tick();
+        }
+    }
+
+    /// Show a phase of the library as a bar of its meter, with its percentage, the time it has
+    /// taken and the time left.
+    fn draw_phase(&mut self, phase: Phase, meter: &Arc<Meter>) {
+        let style = ProgressStyle::with_template(
+            "{prefix} [{bar:24}] {percent:>3}% [{elapsed}, eta {eta}]",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar())
+        .progress_chars("=> ");
+        let Some(bar) = self.replace_bar(style, phase.name().to_string(), meter.total()) else {
+            return;
+        };
+        bar.set_position(meter.done());
+        // Redrawn even while the meter stands still (a sort), so that the time keeps going.
+        bar.enable_steady_tick(Duration::from_millis(120));
+        self.ticker = Some(Ticker::start(bar, Arc::clone(meter)));
+    }
+
+    /// Put a new bar in the place of the current one (if the display is visible): set up before
+    /// it draws, so that no frame mixes the old bar's label, position or time with the new one's,
+    /// and its elapsed time and time left start from zero.
+    fn replace_bar(
+        &mut self,
+        style: ProgressStyle,
+        label: String,
+        len: u64,
+    ) -> Option<ProgressBar> {
+        let old = self.bar.as_ref()?;
+        let bar = ProgressBar::with_draw_target(Some(len), ProgressDrawTarget::stderr())
+            .with_style(style)
+            .with_prefix(label);
+        old.finish_and_clear();
+        self.bar = Some(bar.clone());
+        Some(bar)
+    }
+
+    fn stop_ticker(&mut self) {
+        if let Some(ticker) = self.ticker.take() {
+            ticker.stop();
         }
     }
 
@@ -97,11 +207,31 @@ impl Progress {
 
 impl Drop for Progress {
     fn drop(&mut self) {
+        self.stop_ticker();
         self.finish();
     }
 }
 
 impl Observer for Progress {
+    fn phase_start(&mut self, phase: Phase, meter: &Arc<Meter>) {
+        self.stop_ticker();
+        if phase != Phase::Smooth {
+            return self.draw_phase(phase, meter);
+        }
+        // The iterations report themselves (`iteration`), on the bar the command asked for, or
+        // on a plain one.
+        let it = self.iterations.clone().unwrap_or_else(|| Iterations {
+            label: phase.name().to_string(),
+            total: meter.total() as usize,
+            auto_stop: false,
+        });
+        self.draw(&it);
+    }
+
+    fn phase_end(&mut self, _phase: Phase) {
+        self.stop_ticker();
+    }
+
     fn iteration(&mut self, record: &IterationRecord, _total: usize) {
         if let Some(bar) = &self.bar {
             bar.set_position(record.iteration as u64);

@@ -1,7 +1,75 @@
-//! What a run tells while it goes: one [`IterationRecord`] per iteration, handed to an
-//! [`Observer`] (the CLI draws a progress bar from it) and returned in the run's result.
+//! What a run tells while it goes: each long [`Phase`] with a [`Meter`] of its work, and one
+//! [`IterationRecord`] per iteration, handed to an [`Observer`] (the CLI draws progress bars from
+//! them); the records are also returned in the run's result.
 
+use std::sync::Arc;
+
+pub use crate::meter::Meter;
 use crate::smooth::SweepStats;
+
+/// A long phase of a run, in the order a file run goes through them ([`Observer::phase_start`]).
+/// An in-memory run ([`crate::smooth_with`]) has no `Read` and `Write`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[non_exhaustive]
+pub enum Phase {
+    /// Reading and decoding the input, in bytes of the file. The binary PLY decoders count as
+    /// they go; other readers count the file when they are done with it.
+    Read,
+    /// The Morton reorder of vertices and triangles, in items (vertices and triangles of each of
+    /// its passes; the two sorts count when they end).
+    Reorder,
+    /// The topology (vertex-face and vertex-vertex adjacency, fixed vertices), in items (triangles
+    /// and vertices of each of its passes); the orientation of the faces counts when it ends.
+    Topology,
+    /// Cutting the patches and colouring them, in items (patches whose neighbourhood is found;
+    /// each of the two colourings counts as many when it ends).
+    Schedule,
+    /// The input's statistics (only when asked for, `EngineSettings::with_stats`), in steps: the
+    /// connectivity figures, then the geometry.
+    Statistics,
+    /// The iterations (their cap with the automatic stop, which counts the rest as done when it
+    /// stops). [`Observer::iteration`] tells more about each.
+    Smooth,
+    /// Writing the output, in bytes of the file. The total is the expected size (the input's size
+    /// for an output of the input's format, else an estimate), set to the size written at the end.
+    Write,
+}
+
+impl Phase {
+    /// What a display shows: "reading", "reordering", …
+    pub fn name(self) -> &'static str {
+        match self {
+            Phase::Read => "reading",
+            Phase::Reorder => "reordering",
+            Phase::Topology => "building topology",
+            Phase::Schedule => "colouring patches",
+            Phase::Statistics => "measuring",
+            Phase::Smooth => "smoothing",
+            Phase::Write => "writing",
+        }
+    }
+
+    /// The unit its meter counts.
+    pub fn unit(self) -> Unit {
+        match self {
+            Phase::Read | Phase::Write => Unit::Bytes,
+            Phase::Reorder | Phase::Topology | Phase::Schedule => Unit::Items,
+            Phase::Statistics => Unit::Steps,
+            Phase::Smooth => Unit::Iterations,
+        }
+    }
+}
+
+/// What a [`Phase`]'s meter counts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum Unit {
+    Bytes,
+    /// Vertices, triangles or patches handled, summed over the phase's passes.
+    Items,
+    Steps,
+    Iterations,
+}
 
 /// Statistics of one iteration, relative to the input where a percentage is given. The figures of
 /// an iteration that was not measured (see [`Statistics`]) are NaN, `null` in JSON.
@@ -119,6 +187,15 @@ pub trait Observer: Send {
     /// the automatic stop, `Options::auto_stop`, the cap: the run may end sooner).
     fn iteration(&mut self, _record: &IterationRecord, _total: usize) {}
 
+    /// A long phase begins. `meter` counts its work in [`Phase::unit`] from the threads doing it:
+    /// keep a clone and read it from any thread (a display's timer) until
+    /// [`Observer::phase_end`]; its count only grows. Phases do not nest.
+    fn phase_start(&mut self, _phase: Phase, _meter: &Arc<Meter>) {}
+
+    /// The phase that began last has ended: when it succeeded, its meter reads `done == total`.
+    /// Called on failure too, before the error is returned.
+    fn phase_end(&mut self, _phase: Phase) {}
+
     /// Asked after each iteration (once [`Observer::iteration`] has seen it): `true` ends the
     /// run there with [`Error::Interrupted`](crate::Error::Interrupted), before anything is
     /// written. A host that cannot end the process on a signal (the Python bindings) stops a
@@ -131,6 +208,39 @@ pub trait Observer: Send {
 /// An observer that ignores everything.
 pub struct Quiet;
 impl Observer for Quiet {}
+
+/// `work` as `phase` of `total` units: `observer` is told when it starts (with the meter that
+/// `work` counts into) and when it ends, whether it succeeded or not.
+pub(crate) fn metered<T>(
+    observer: &mut dyn Observer,
+    phase: Phase,
+    total: u64,
+    work: impl FnOnce(&Meter) -> T,
+) -> T {
+    let meter = Arc::new(Meter::new(total));
+    observer.phase_start(phase, &meter);
+    let out = work(&meter);
+    observer.phase_end(phase);
+    out
+}
+
+/// The smoothing step's observer: counts the iterations into the [`Phase::Smooth`] meter and
+/// passes them and `interrupted` on to the run's observer (no phase: phases do not nest).
+pub(crate) struct Iterations<'a> {
+    pub inner: &'a mut dyn Observer,
+    pub meter: &'a Meter,
+}
+
+impl Observer for Iterations<'_> {
+    fn iteration(&mut self, record: &IterationRecord, total: usize) {
+        self.meter.reach(record.iteration as u64);
+        self.inner.iteration(record, total);
+    }
+
+    fn interrupted(&mut self) -> bool {
+        self.inner.interrupted()
+    }
+}
 
 #[cfg(test)]
 mod tests {

@@ -8,6 +8,7 @@ use glam::DVec3;
 
 use rayon::prelude::*;
 
+use super::observer::{Meter, Observer, Phase, Quiet, metered};
 use super::reduce;
 use crate::Method;
 use crate::error::{Error, Result};
@@ -90,12 +91,30 @@ impl Plan {
         triangles: &[[u32; 3]],
         layout: Layout,
     ) -> Result<Plan> {
-        let t = Instant::now();
+        Plan::new_observed(storage, positions, triangles, layout, &mut Quiet)
+    }
+
+    /// [`Plan::new`], telling `observer` how far each phase is ([`Phase::Reorder`],
+    /// [`Phase::Topology`], [`Phase::Schedule`]). The same plan whatever the observer.
+    pub fn new_observed(
+        storage: &Storage,
+        positions: &[DVec3],
+        triangles: &[[u32; 3]],
+        layout: Layout,
+        observer: &mut dyn Observer,
+    ) -> Result<Plan> {
+        let (n, t) = (positions.len() as u64, triangles.len() as u64);
+        let clock = Instant::now();
         let mut reordered = match layout {
             Layout::Patches(0) => {
                 return Err(Error::parameter("patch_size", "must be at least 1"));
             }
-            Layout::Patches(_) => partition::reorder(storage, positions, triangles)?,
+            Layout::Patches(_) => metered(
+                observer,
+                Phase::Reorder,
+                partition::REORDER_PASSES.items(n, t),
+                |m| partition::reorder_metered(storage, positions, triangles, m),
+            )?,
             Layout::Whole => Reordered {
                 order: {
                     let mut order = storage.zeroed::<u32>(positions.len())?;
@@ -106,18 +125,31 @@ impl Plan {
                 triangles: storage.copy_of(triangles)?,
             },
         };
-        let reorder = t.elapsed().as_secs_f64();
-        let t = Instant::now();
-        let mut topology = Topology::build_in(storage, positions.len(), &reordered.triangles)?;
-        // The plan's copy of the faces is what the stencils' volumes read; the output keeps the
-        // input's faces.
-        topology.orient(&mut reordered.triangles, &reordered.positions);
-        let topology_s = t.elapsed().as_secs_f64();
-        let t = Instant::now();
+        let reorder = clock.elapsed().as_secs_f64();
+        let clock = Instant::now();
+        let topology = metered(
+            observer,
+            Phase::Topology,
+            Topology::BUILD_PASSES.items(n, t) + t,
+            |m| -> Result<Topology> {
+                let mut topology =
+                    Topology::build_metered(storage, positions.len(), &reordered.triangles, m)?;
+                // The plan's copy of the faces is what the stencils' volumes read; the output
+                // keeps the input's faces.
+                topology.orient(&mut reordered.triangles, &reordered.positions);
+                m.add(t);
+                Ok(topology)
+            },
+        )?;
+        let topology_s = clock.elapsed().as_secs_f64();
+        let clock = Instant::now();
         let (patches, schedule) = match layout {
             Layout::Patches(size) => {
                 let patches = partition::patches(positions.len(), &reordered.triangles, size);
-                let schedule = schedule::schedule(&topology, &patches);
+                let total = schedule::SCHEDULE_PASSES * patches.len() as u64;
+                let schedule = metered(observer, Phase::Schedule, total, |m| {
+                    schedule::schedule_metered(&topology, &patches, m)
+                });
                 (patches, schedule)
             }
             Layout::Whole => (
@@ -138,7 +170,7 @@ impl Plan {
             timings: PrepTimings {
                 reorder,
                 topology: topology_s,
-                partition: t.elapsed().as_secs_f64(),
+                partition: clock.elapsed().as_secs_f64(),
             },
         })
     }
@@ -177,13 +209,25 @@ impl Plan {
 
     /// Statistics of the current positions (see [`reduce::geometry`] for the order of the sums).
     pub fn info(&self, source: &crate::mesh::Source) -> crate::metrics::MeshInfo {
+        self.info_metered(source, &Meter::default())
+    }
+
+    /// [`Plan::info`], counting its two steps (the connectivity figures, the geometry) into
+    /// `meter`.
+    pub fn info_metered(
+        &self,
+        source: &crate::mesh::Source,
+        meter: &Meter,
+    ) -> crate::metrics::MeshInfo {
         let mut info = crate::metrics::connectivity(
             self.len(),
             self.reordered.triangles.len(),
             source,
             &self.topology,
         );
+        meter.add(1);
         info.set_geometry(self.geometry());
+        meter.add(1);
         info
     }
 

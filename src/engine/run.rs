@@ -1,11 +1,12 @@
 //! A run from file to file: read, plan, smooth, write, with the figures of every phase.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::Instant;
 
 use super::auto::AutoStopStats;
 use super::memory::{self, Budget, BudgetSource, PeakSampler};
-use super::observer::{IterationRecord, Observer, Statistics};
+use super::observer::{IterationRecord, Iterations, Meter, Observer, Phase, Statistics, metered};
 use super::pins::Pins;
 use super::plan::{DEFAULT_PATCH_SIZE, Layout, Plan, PlanStats, PrepTimings};
 use super::reduce;
@@ -206,7 +207,9 @@ pub(crate) fn run_file_with(
     let storage = storage_for(input, output, engine, mesh_budget, opts)?;
 
     let clock = Instant::now();
-    let mut mesh = io::read_mesh_in(input, &storage)?;
+    let mut mesh = metered(observer, Phase::Read, bytes_read, |m| {
+        io::read_mesh_metered(input, &storage, m)
+    })?;
     t.ingest = clock.elapsed().as_secs_f64();
     if mesh.triangles.is_empty() && opts.iterations > 0 {
         return Err(Error::invalid(
@@ -218,17 +221,25 @@ pub(crate) fn run_file_with(
     let pins = engine.pins.resolve(&mesh, Some(input))?;
 
     let (plan, mut smoothed) = pool.install(|| -> Result<_> {
-        let mut plan = Plan::new(&storage, &mesh.positions, &mesh.triangles, engine.layout())
-            .map_err(|e| e.in_file(input))?;
+        let layout = engine.layout();
+        let mut plan =
+            Plan::new_observed(&storage, &mesh.positions, &mesh.triangles, layout, observer)
+                .map_err(|e| e.in_file(input))?;
         plan.pin(&pins.unwrap_or_default());
         plan.crease(opts.crease_angle);
         // The plan holds its own (reordered) copy: the input-order positions are not needed until
         // the write, so their memory is given back while smoothing (the peak of an in-core run).
         let n = mesh.positions.len();
         mesh.positions = Buf::default();
-        let smoothed = smooth_planned(&mut plan, opts, engine, &mesh.source, &mut t, |plan| {
-            smooth(plan, &storage, observer)
-        })?;
+        let smoothed = smooth_planned(
+            &mut plan,
+            opts,
+            engine,
+            &mesh.source,
+            &mut t,
+            observer,
+            |plan, obs| smooth(plan, &storage, obs),
+        )?;
         mesh.positions = storage.zeroed(n)?;
         plan.positions_in_input_order(&mut mesh.positions);
         Ok((plan, smoothed))
@@ -237,11 +248,15 @@ pub(crate) fn run_file_with(
     // The plan is kept past the write only to measure the output as written, which runs beside
     // the (sequential) write.
     let plan = engine.with_stats.then_some(plan);
+    let expected = expected_output_bytes(bytes_read, output, &mesh);
+    let meter = Arc::new(Meter::new(expected));
+    observer.phase_start(Phase::Write, &meter);
     let (written, output_stats) = pool.install(|| {
         rayon::join(
             || {
                 let clock = Instant::now();
-                io::write_mesh(output, &mesh).map(|()| clock.elapsed().as_secs_f64())
+                io::write_mesh_metered(output, &mesh, &meter)
+                    .map(|()| clock.elapsed().as_secs_f64())
             },
             || {
                 let clock = Instant::now();
@@ -250,6 +265,8 @@ pub(crate) fn run_file_with(
             },
         )
     });
+    // The output's statistics run beside the write, inside its phase.
+    observer.phase_end(Phase::Write);
     t.write = written?;
     if let (Some(stats), seconds) = output_stats {
         smoothed.output_stats = stats;
@@ -313,12 +330,19 @@ pub(crate) fn run_mesh(
     let mut t = PhaseTimings::default();
     let pins = engine.pins.resolve(mesh, None)?.unwrap_or_default();
     let smoothed = pool.install(|| -> Result<_> {
-        let mut plan = Plan::new(&storage, &mesh.positions, &mesh.triangles, layout)?;
+        let mut plan =
+            Plan::new_observed(&storage, &mesh.positions, &mesh.triangles, layout, observer)?;
         plan.pin(&pins);
         plan.crease(opts.crease_angle);
-        let mut smoothed = smooth_planned(&mut plan, opts, engine, &mesh.source, &mut t, |plan| {
-            plan.smooth_stopped(&storage, opts, engine.statistics, observer)
-        })?;
+        let mut smoothed = smooth_planned(
+            &mut plan,
+            opts,
+            engine,
+            &mesh.source,
+            &mut t,
+            observer,
+            |plan, obs| plan.smooth_stopped(&storage, opts, engine.statistics, obs),
+        )?;
         let clock = Instant::now();
         smoothed.output_stats = smoothed.input_stats.clone().map(|mut info| {
             info.set_geometry(plan.geometry());
@@ -345,24 +369,41 @@ struct Smoothed {
     plan: PlanStats,
 }
 
-/// The phase both runs share, on the current pool: the input's statistics (when asked) and
-/// `smooth` (the output's statistics are each run's own); the plan's preparation and these phases
-/// timed into `t`.
+/// The phases both runs share, on the current pool: the input's statistics (when asked) and
+/// `smooth(plan, observer)` (the output's statistics are each run's own); the plan's preparation
+/// and these phases timed into `t`, and told to `observer`.
 fn smooth_planned(
     plan: &mut Plan,
     opts: &Options,
     engine: &EngineSettings,
     source: &crate::mesh::Source,
     t: &mut PhaseTimings,
-    smooth: impl FnOnce(&mut Plan) -> Result<Stopped>,
+    observer: &mut dyn Observer,
+    smooth: impl FnOnce(&mut Plan, &mut dyn Observer) -> Result<Stopped>,
 ) -> Result<Smoothed> {
     t.add_preparation(&plan.timings);
     let clock = Instant::now();
-    let input_stats = engine.with_stats.then(|| plan.info(source));
+    let input_stats = engine.with_stats.then(|| {
+        metered(observer, Phase::Statistics, 2, |m| {
+            plan.info_metered(source, m)
+        })
+    });
     t.metrics += clock.elapsed().as_secs_f64();
 
     let clock = Instant::now();
-    let (records, auto_stop) = smooth(plan)?;
+    let meter = Arc::new(Meter::new(opts.iterations as u64));
+    observer.phase_start(Phase::Smooth, &meter);
+    let counted = &mut Iterations {
+        inner: &mut *observer,
+        meter: &meter,
+    };
+    let stopped = smooth(plan, counted);
+    if stopped.is_ok() {
+        // The automatic stop may end before the cap: the rest is not to be done.
+        meter.complete();
+    }
+    observer.phase_end(Phase::Smooth);
+    let (records, auto_stop) = stopped?;
     t.smoothing = clock.elapsed().as_secs_f64();
 
     Ok(Smoothed {
@@ -399,6 +440,23 @@ impl Smoothed {
             timings,
             cluster: None,
         }
+    }
+}
+
+/// What the output of `mesh` at `output` should weigh, for the write's meter: the input's size
+/// when it is written in the input's format (the same layout and counts: exact for binary files,
+/// close for text), else a rough size per vertex and triangle of the output's format. The write
+/// corrects it once done.
+fn expected_output_bytes(input_bytes: u64, output: &Path, mesh: &Mesh) -> u64 {
+    let format = io::Format::from_extension(output);
+    if format.is_some() && format == mesh.source.format {
+        return input_bytes;
+    }
+    let (v, t) = (mesh.positions.len() as u64, mesh.triangles.len() as u64);
+    match format {
+        Some(io::Format::Stl) => 84 + 50 * t,
+        Some(io::Format::Obj | io::Format::Off) => 30 * v + 20 * t,
+        _ => 12 * v + 13 * t,
     }
 }
 

@@ -121,6 +121,7 @@ pub use stream::{PlyStream, write_ply_streamed};
 
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
+use crate::meter::{Counted, Meter};
 
 /// Read a mesh file onto the heap.
 pub fn read_mesh(path: &Path) -> Result<Mesh> {
@@ -131,7 +132,20 @@ pub fn read_mesh(path: &Path) -> Result<Mesh> {
 /// memory-mapped scratch files for inputs larger than memory). Other formats, and big-endian
 /// bodies (byte-swapped through memory), are read onto the heap.
 pub fn read_mesh_in(path: &Path, storage: &crate::mesh::Storage) -> Result<Mesh> {
-    read_mesh_observed(path, storage, |_| ())
+    read_mesh_metered(path, storage, &Meter::default())
+}
+
+/// [`read_mesh_in`], counting the file's bytes into `meter`, whose total the caller sets to the
+/// file's size: the binary PLY decoders count as they go, once per chunk of records; the other
+/// readers count the whole file when they are done. The same mesh.
+pub fn read_mesh_metered(
+    path: &Path,
+    storage: &crate::mesh::Storage,
+    meter: &Meter,
+) -> Result<Mesh> {
+    let mesh = read_mesh_observed(path, storage, meter, |_| ())?;
+    meter.complete();
+    Ok(mesh)
 }
 
 /// Decode a mesh from bytes already in memory, choosing the reader as [`read_mesh`] does (by
@@ -152,6 +166,7 @@ pub fn read_format_bytes(bytes: &[u8], format: Format, name: &Path) -> Result<Me
 fn read_mesh_observed(
     path: &Path,
     storage: &crate::mesh::Storage,
+    meter: &Meter,
     decoded: impl FnOnce(&Path),
 ) -> Result<Mesh> {
     // The type before opening: opening a named pipe blocks until a writer comes.
@@ -166,7 +181,7 @@ fn read_mesh_observed(
     if kind == detect::Kind::Stream {
         return read_stream(&mut file, path);
     }
-    let mesh = read_open(&mut file, before.len(), path, storage);
+    let mesh = read_open(&mut file, before.len(), path, storage, meter);
     decoded(path);
     // A file rewritten under us decodes into a mix of old and new bytes, or into an error about
     // bytes that are no longer there: compare the size and modification time seen before and
@@ -191,6 +206,22 @@ fn read_mesh_observed(
 
 /// Write `mesh` to `path`, choosing the format from the extension, atomically.
 pub fn write_mesh(path: &Path, mesh: &Mesh) -> Result<()> {
+    write_mesh_metered(path, mesh, &Meter::default())
+}
+
+/// [`write_mesh`], counting the bytes written into `meter` once per MiB (glTF: when it is
+/// done). The caller's total is an estimate (a text file's size is known once written): it is
+/// set to the bytes written when the write succeeds. The same file.
+pub fn write_mesh_metered(path: &Path, mesh: &Mesh, meter: &Meter) -> Result<()> {
+    write_mesh_counted(path, mesh, meter)?;
+    match meter.done() {
+        0 => meter.complete(),
+        written => meter.set_total(written),
+    }
+    Ok(())
+}
+
+fn write_mesh_counted(path: &Path, mesh: &Mesh, meter: &Meter) -> Result<()> {
     let format = Format::from_extension(path).ok_or_else(|| {
         Error::invalid(
             path,
@@ -217,15 +248,24 @@ pub fn write_mesh(path: &Path, mesh: &Mesh) -> Result<()> {
             Format::Gltf | Format::Glb => gltf::check_writable(mesh, format),
         })
         .map_err(|what| Error::invalid(path, format!("cannot write: {what}")))?;
-    let write: fn(&mut std::io::BufWriter<File>, &Mesh) -> std::io::Result<()> = match format {
-        Format::Ply => ply::write,
-        Format::Obj => obj::write,
-        Format::Off => off::write,
-        Format::Stl => stl::write,
+    if let Format::Gltf | Format::Glb = format {
         // Also writes buffer files beside the output, each atomically.
-        Format::Gltf | Format::Glb => return gltf::write(path, mesh),
-    };
-    atomic::write_atomically(path, |out| write(out, mesh))
+        return gltf::write(path, mesh);
+    }
+    atomic::write_atomically(path, |out| {
+        write_as(format, &mut Counted::new(out, meter), mesh)
+    })
+}
+
+/// `mesh` into `out` as `format` says (not glTF, which writes its own files).
+fn write_as(format: Format, out: &mut impl Write, mesh: &Mesh) -> std::io::Result<()> {
+    match format {
+        Format::Ply => ply::write(out, mesh),
+        Format::Obj => obj::write(out, mesh),
+        Format::Off => off::write(out, mesh),
+        Format::Stl => stl::write(out, mesh),
+        Format::Gltf | Format::Glb => Err(std::io::Error::other("glTF is written by gltf::write")),
+    }
 }
 
 /// How the coordinates of a mesh read back from the file that [`write_mesh`] makes of it, so that
@@ -298,6 +338,7 @@ fn read_open(
     len: u64,
     path: &Path,
     storage: &crate::mesh::Storage,
+    meter: &Meter,
 ) -> Result<Mesh> {
     let mut head = Vec::with_capacity(detect::HEAD.min(usize::try_from(len).unwrap_or(0)));
     Read::take(&mut *file, detect::HEAD as u64)
@@ -306,7 +347,7 @@ fn read_open(
     let format = detect::detect(&head, len, path).map_err(|what| Error::invalid(path, what))?;
     let contents = Contents::load(file, head, len).map_err(|e| Error::io(path, e))?;
     match format {
-        Format::Ply => ply::read_in(&contents, storage).map_err(|e| match e {
+        Format::Ply => ply::read_metered(&contents, storage, meter).map_err(|e| match e {
             ply::ReadError::Invalid(what) => Error::invalid(path, what),
             ply::ReadError::Storage(e) => e,
         }),

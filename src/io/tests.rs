@@ -873,7 +873,7 @@ fn a_file_changed_while_it_is_read_is_reported() {
     let (good, _) = triangle_ply();
     let heap = crate::mesh::Storage::heap();
     let read = |change: &dyn Fn(&Path)| {
-        read_mesh_observed(&path, &heap, change)
+        read_mesh_observed(&path, &heap, &Meter::default(), change)
             .map(|_| ())
             .map_err(|e| e.to_string())
     };

@@ -17,6 +17,7 @@ use rayon::prelude::*;
 
 use crate::error::Result;
 use crate::mesh::{Buf, Storage};
+use crate::meter::{Meter, Passes, STEP};
 use crate::topology::Topology;
 
 /// A mesh renumbered along the Morton curve.
@@ -38,6 +39,24 @@ pub fn reorder(
     positions: &[DVec3],
     triangles: &[[u32; 3]],
 ) -> Result<Reordered> {
+    reorder_metered(storage, positions, triangles, &Meter::default())
+}
+
+/// The passes [`reorder_metered`] counts: the curve keys, their sort, the permutation and its
+/// inverse, the positions; the triangles renumbered, their sort.
+pub const REORDER_PASSES: Passes = Passes {
+    vertices: 4,
+    triangles: 2,
+};
+
+/// [`reorder`], counting its work into `meter` ([`REORDER_PASSES`] over the mesh; the sorts
+/// count when they end). The same result.
+pub fn reorder_metered(
+    storage: &Storage,
+    positions: &[DVec3],
+    triangles: &[[u32; 3]],
+    meter: &Meter,
+) -> Result<Reordered> {
     let n = positions.len();
     // Minima and maxima do not depend on the order they are taken in.
     let (lo, hi) = positions
@@ -57,12 +76,18 @@ pub fn reorder(
         0.0
     };
 
+    // Element-wise passes, cut into chunks only to count them: each item is computed as before.
     let mut keys: Buf<[u64; 2]> = storage.zeroed(n)?;
-    keys.par_iter_mut().enumerate().for_each(|(v, k)| {
-        let q = ((positions[v] - lo) * scale).as_u64vec3();
-        *k = [morton3(q.x, q.y, q.z), v as u64];
+    keys.par_chunks_mut(STEP).enumerate().for_each(|(c, keys)| {
+        for (k, key) in keys.iter_mut().enumerate() {
+            let v = c * STEP + k;
+            let q = ((positions[v] - lo) * scale).as_u64vec3();
+            *key = [morton3(q.x, q.y, q.z), v as u64];
+        }
+        meter.add(keys.len() as u64);
     });
     keys.par_sort_unstable();
+    meter.add(n as u64);
 
     let mut order: Buf<u32> = storage.zeroed(n)?;
     order
@@ -72,22 +97,32 @@ pub fn reorder(
     drop(keys);
     let mut rank: Buf<u32> = storage.zeroed(n)?;
     scatter(&mut rank, &order, |new| new as u32);
+    meter.add(n as u64);
 
     let mut new_pos: Buf<DVec3> = storage.zeroed(n)?;
     new_pos
-        .par_iter_mut()
-        .zip(order.par_iter())
-        .for_each(|(p, &old)| *p = positions[old as usize]);
+        .par_chunks_mut(STEP)
+        .zip(order.par_chunks(STEP))
+        .for_each(|(p, old)| {
+            for (p, &old) in p.iter_mut().zip(old) {
+                *p = positions[old as usize];
+            }
+            meter.add(p.len() as u64);
+        });
 
     let mut tris: Buf<[u32; 3]> = storage.zeroed(triangles.len())?;
-    tris.par_iter_mut()
-        .zip(triangles.par_iter())
+    tris.par_chunks_mut(STEP)
+        .zip(triangles.par_chunks(STEP))
         .for_each(|(t, old)| {
-            let r = old.map(|v| rank[v as usize]);
-            let first = (0..3).min_by_key(|&k| r[k]).unwrap_or(0);
-            *t = [r[first], r[(first + 1) % 3], r[(first + 2) % 3]];
+            for (t, old) in t.iter_mut().zip(old) {
+                let r = old.map(|v| rank[v as usize]);
+                let first = (0..3).min_by_key(|&k| r[k]).unwrap_or(0);
+                *t = [r[first], r[(first + 1) % 3], r[(first + 2) % 3]];
+            }
+            meter.add(t.len() as u64);
         });
     tris.par_sort_unstable();
+    meter.add(triangles.len() as u64);
     Ok(Reordered {
         order,
         positions: new_pos,

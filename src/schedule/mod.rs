@@ -31,6 +31,7 @@ use glam::DVec3;
 use petgraph::graph::UnGraph;
 use rayon::prelude::*;
 
+use crate::meter::Meter;
 use crate::partition::Patch;
 use crate::smooth::Field;
 use crate::topology::Topology;
@@ -78,6 +79,16 @@ struct Near {
 /// Colour the conflict graph of `patches` on `topo` (runs on the current rayon pool; the result
 /// does not depend on the thread count).
 pub fn schedule(topo: &Topology, patches: &[Patch]) -> Schedule {
+    schedule_metered(topo, patches, &Meter::default())
+}
+
+/// Patches [`schedule_metered`] counts per patch: its neighbourhood, then each of the two
+/// colourings (counted whole when it ends).
+pub const SCHEDULE_PASSES: u64 = 3;
+
+/// [`schedule`], counting its work into `meter` ([`SCHEDULE_PASSES`] per patch). The same
+/// schedule.
+pub fn schedule_metered(topo: &Topology, patches: &[Patch], meter: &Meter) -> Schedule {
     let patch_size = patches.first().map_or(1, |p| p.vertices.len().max(1)) as u32;
     let owner = |v: u32| v / patch_size;
     let near: Vec<[Near; 2]> = patches
@@ -98,14 +109,18 @@ pub fn schedule(topo: &Topology, patches: &[Patch]) -> Schedule {
                 others.retain(|&b| b as usize > a);
                 Near { others, halo }
             };
-            [
+            let near = [
                 within(CONFLICT_RINGS, HALO_RINGS),
                 within(RING_CONFLICT_RINGS, RING_HALO_RINGS),
-            ]
+            ];
+            meter.add(1);
+            near
         })
         .collect();
     let (colours, halo) = colour(near.iter().map(|n| &n[0]));
+    meter.add(patches.len() as u64);
     let (ring_colours, ring_halo) = colour(near.iter().map(|n| &n[1]));
+    meter.add(patches.len() as u64);
     Schedule {
         colours,
         halo,

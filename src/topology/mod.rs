@@ -29,6 +29,7 @@ use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 use crate::mesh::{Buf, Storage};
+use crate::meter::{Meter, Passes};
 
 /// CSR adjacency and fixed-vertex mask of a triangle mesh.
 #[derive(Debug, Clone, Default)]
@@ -164,6 +165,24 @@ impl Topology {
         n_vertices: usize,
         triangles: &[[u32; 3]],
     ) -> Result<Topology> {
+        Topology::build_metered(storage, n_vertices, triangles, &Meter::default())
+    }
+
+    /// The passes [`Topology::build_metered`] counts: the corners counted and their faces placed
+    /// (triangles), the vertices analysed and their neighbours listed (vertices).
+    pub const BUILD_PASSES: Passes = Passes {
+        vertices: 2,
+        triangles: 2,
+    };
+
+    /// [`Topology::build_in`], counting its work into `meter` ([`Topology::BUILD_PASSES`] over
+    /// the mesh, once per block of triangles or chunk of vertices). The same topology.
+    pub fn build_metered(
+        storage: &Storage,
+        n_vertices: usize,
+        triangles: &[[u32; 3]],
+        meter: &Meter,
+    ) -> Result<Topology> {
         if n_vertices > u32::MAX as usize || triangles.len() > u32::MAX as usize {
             return Err(Error::topology(format!(
                 "{n_vertices} vertices / {} triangles exceed the 2^32 limit",
@@ -186,7 +205,11 @@ impl Topology {
         let counted: Vec<BlockCount> = triangles
             .par_chunks(block_len)
             .enumerate()
-            .map(|(b, block)| count_block(b * block_len, block, n_vertices, chunks))
+            .map(|(b, block)| {
+                let count = count_block(b * block_len, block, n_vertices, chunks);
+                meter.add(block.len() as u64);
+                count
+            })
             .collect();
         if let Some(t) = counted.iter().find_map(|c| c.out_of_range) {
             return Err(Error::topology(format!(
@@ -241,6 +264,7 @@ impl Topology {
                         *piece = tail;
                     }
                 }
+                meter.add(block.len() as u64);
             });
 
         // Pass 1, chunk by chunk: sort the region by vertex into `vf` and its offsets, then per
@@ -291,6 +315,7 @@ impl Topology {
                         }
                         st.fixed_vertices += (*fix != 0) as usize;
                     }
+                    meter.add(degs.len() as u64);
                     st
                 },
             )
@@ -313,6 +338,7 @@ impl Topology {
         pieces
             .into_par_iter()
             .for_each_init(VertexScratch::default, |scratch, (range, out)| {
+                let range_len = range.len() as u64;
                 let mut at = 0;
                 for v in range {
                     let faces = &vf[vf_offsets[v]..vf_offsets[v + 1]];
@@ -320,6 +346,7 @@ impl Topology {
                     write_neighbors(v as u32, faces, triangles, scratch, &mut out[at..at + deg]);
                     at += deg;
                 }
+                meter.add(range_len);
             });
         Ok(Topology {
             vv_offsets,

@@ -15,6 +15,7 @@ use std::borrow::Cow;
 use std::fmt;
 
 use crate::mesh::{Buf, Storage};
+use crate::meter::Meter;
 use std::io::{self, Write};
 use std::sync::Arc;
 
@@ -855,7 +856,18 @@ pub(crate) fn read(bytes: &[u8]) -> Fallible<Mesh> {
 
 /// Reads a PLY file's bytes, decoding positions and triangles into arrays from `storage`.
 pub(crate) fn read_in(bytes: &[u8], storage: &Storage) -> Result<Mesh, ReadError> {
+    read_metered(bytes, storage, &Meter::default())
+}
+
+/// [`read_in`], counting into `meter` where it stands in `bytes`: the header, each element as it
+/// ends, and the vertices and triangles of a binary body chunk by chunk as they are decoded.
+pub(crate) fn read_metered(
+    bytes: &[u8],
+    storage: &Storage,
+    meter: &Meter,
+) -> Result<Mesh, ReadError> {
     let header = parse_header(bytes)?;
+    meter.reach(header.body as u64);
     let body = &bytes[header.body..];
     if header.encoding != PlyEncoding::Ascii {
         check_counts(&header, body.len())?;
@@ -864,6 +876,7 @@ pub(crate) fn read_in(bytes: &[u8], storage: &Storage) -> Result<Mesh, ReadError
     let mut elements = header.elements;
     let mut mesh = Decoded {
         storage,
+        meter,
         positions: Buf::default(),
         faces: None,
     };
@@ -906,6 +919,7 @@ pub(crate) fn read_in(bytes: &[u8], storage: &Storage) -> Result<Mesh, ReadError
                     Cow::Borrowed(rest)
                 };
                 pos += mesh.take(&roles, e, el, data, origin)?;
+                meter.reach((header.body + pos) as u64);
             }
             let trailing = &body[pos..];
             if let Some(k) = trailing.iter().position(|b| !b.is_ascii_whitespace()) {
@@ -971,6 +985,8 @@ fn check_counts(header: &Header, body: usize) -> Fallible<()> {
 /// What the elements decode into.
 struct Decoded<'s> {
     storage: &'s Storage,
+    /// Counts the bytes of the vertices and faces as the binary decoders go.
+    meter: &'s Meter,
     positions: Buf<DVec3>,
     faces: Option<FaceBuilder>,
 }
@@ -988,13 +1004,21 @@ impl Decoded<'_> {
     ) -> Result<usize, ReadError> {
         let len = if e == roles.vertex {
             let mut positions = self.storage.zeroed(el.count).map_err(ReadError::Storage)?;
-            let len = decode_positions(&data, el, roles.xyz, origin, &mut positions)?;
+            let len = decode_positions(&data, el, roles.xyz, origin, &mut positions, self.meter)?;
             self.positions = positions;
             len
         } else if let Some(face) = roles.face.filter(|f| f.element == e) {
             let mut faces =
                 FaceBuilder::in_storage(self.storage, el.count).map_err(ReadError::Storage)?;
-            let len = decode_faces(&data, el, face, roles.vertices, origin, &mut faces)?;
+            let len = decode_faces(
+                &data,
+                el,
+                face,
+                roles.vertices,
+                origin,
+                &mut faces,
+                self.meter,
+            )?;
             self.faces = Some(faces);
             len
         } else {
@@ -1085,6 +1109,7 @@ fn decode_positions(
     xyz: [usize; 3],
     origin: Origin,
     positions: &mut [DVec3],
+    meter: &Meter,
 ) -> Fallible<usize> {
     let types = xyz.map(|k| el.scalar(k));
     let not_finite = |i: usize, offset: usize, p: DVec3| {
@@ -1110,9 +1135,10 @@ fn decode_positions(
                 at,
                 |b: [u8; 4]| f32::from_le_bytes(b).into(),
                 positions,
+                meter,
             ),
             [Scalar::F64, Scalar::F64, Scalar::F64] => {
-                decode_fixed(records, stride, at, f64::from_le_bytes, positions)
+                decode_fixed(records, stride, at, f64::from_le_bytes, positions, meter)
             }
             _ => decode_any(records, stride, at, types, positions),
         };
@@ -1149,6 +1175,7 @@ fn decode_fixed<const N: usize>(
     at: [usize; 3],
     value: impl Fn([u8; N]) -> f64 + Sync,
     positions: &mut [DVec3],
+    meter: &Meter,
 ) -> Result<(), (usize, DVec3)> {
     let failures: Vec<(usize, DVec3)> = positions
         .par_chunks_mut(DECODE_CHUNK)
@@ -1166,6 +1193,7 @@ fn decode_fixed<const N: usize>(
                 }
                 *out = p;
             }
+            meter.add(records.len() as u64);
             None
         })
         .collect();
@@ -1208,14 +1236,19 @@ fn decode_faces(
     vertices: u32,
     origin: Origin,
     faces: &mut FaceBuilder,
+    meter: &Meter,
 ) -> Fallible<usize> {
     match (el.props.len(), face.count, face.index) {
-        (1, Scalar::U8, Scalar::I32) => faces_u8_32(data, el, vertices, origin, faces, |b| {
-            i32::from_le_bytes(b).into()
-        }),
-        (1, Scalar::U8, Scalar::U32) => faces_u8_32(data, el, vertices, origin, faces, |b| {
-            u32::from_le_bytes(b).into()
-        }),
+        (1, Scalar::U8, Scalar::I32) => {
+            faces_u8_32(data, el, vertices, origin, faces, meter, |b| {
+                i32::from_le_bytes(b).into()
+            })
+        }
+        (1, Scalar::U8, Scalar::U32) => {
+            faces_u8_32(data, el, vertices, origin, faces, meter, |b| {
+                u32::from_le_bytes(b).into()
+            })
+        }
         _ => faces_any(data, el, face, vertices, origin, faces),
     }
 }
@@ -1233,6 +1266,7 @@ fn faces_u8_32(
     vertices: u32,
     origin: Origin,
     faces: &mut FaceBuilder,
+    meter: &Meter,
     index: impl Fn([u8; 4]) -> i64 + Sync,
 ) -> Fallible<usize> {
     let valid = |v: i64| (0..i64::from(vertices)).contains(&v);
@@ -1245,11 +1279,14 @@ fn faces_u8_32(
             out.par_chunks_mut(DECODE_CHUNK)
                 .zip(body.par_chunks(DECODE_CHUNK * 13))
                 .all(|(out, records)| {
-                    records.chunks_exact(13).zip(out).all(|(r, t)| {
+                    let fine = records.chunks_exact(13).zip(out).all(|(r, t)| {
                         let v = [1, 5, 9].map(|at| index(bytes_at(r, at)));
                         *t = v.map(|v| v as u32);
                         r[0] == 3 && v.iter().all(|&v| valid(v))
-                    })
+                    });
+                    // At most the element's bytes: the caller's count at its end only reaches.
+                    meter.add(records.len() as u64);
+                    fine
                 })
         });
         if parallel {
@@ -1394,6 +1431,7 @@ pub(crate) fn check_writable(mesh: &Mesh) -> Fallible<()> {
             roles.vertices,
             Origin::Byte(0),
             &mut faces,
+            &Meter::default(),
         )
         .is_ok_and(|_| faces.triangles() == &mesh.triangles[..]);
         if !same {
