@@ -42,20 +42,38 @@ fn single_process(dir: &Path, input: &Path, args: &[&str]) -> PathBuf {
 fn mpi_ranks_1_2_3_are_bit_identical_to_one_process() {
     let tmp = tempfile::tempdir().unwrap();
     let armadillo = scan("armadillo-86k.ply");
+    let bunny = tmp.path().join("bunny.ply");
+    let source = scan("stanford-bunny.ply");
+    ok(command()
+        .args(["generate", "mesh", bunny.to_str().unwrap(), "--from"])
+        .args([
+            source.to_str().unwrap(),
+            "--subdivide",
+            "0",
+            "--noise",
+            "0.3",
+        ])
+        .output()
+        .unwrap());
     let sphere = generate(tmp.path(), 6);
-    for (input, method) in [
-        (&armadillo, "vcs"),
-        (&sphere, "taubin"),
-        (&sphere, "vcs-triangle"),
+    let three = |method| {
+        ["--method", method, "--iterations", "3"]
+            .map(String::from)
+            .to_vec()
+    };
+    // The automatic stop and smoothed boundaries (loops crossing ranks) with the default method.
+    let auto: Vec<String> = ["--iterations", "auto", "--boundary", "smooth"]
+        .map(String::from)
+        .to_vec();
+    for (input, args) in [
+        (&armadillo, three("vcs")),
+        (&sphere, three("taubin")),
+        (&sphere, three("vcs-triangle")),
+        (&bunny, auto),
     ] {
-        let common = [
-            "--method",
-            method,
-            "--iterations",
-            "3",
-            "--patch-size",
-            "2048",
-        ];
+        let method = args.join(" ");
+        let mut common: Vec<&str> = args.iter().map(String::as_str).collect();
+        common.extend(["--patch-size", "2048"]);
         let plain = single_process(tmp.path(), input, &common);
         for ranks in [1, 2, 3] {
             let out = tmp.path().join(format!("mpi{ranks}.ply"));
@@ -63,7 +81,7 @@ fn mpi_ranks_1_2_3_are_bit_identical_to_one_process() {
                 ranks,
                 &["smooth", input.to_str().unwrap(), out.to_str().unwrap()],
             )
-            .args(common)
+            .args(&common)
             .args(["--threads", "1"])
             .output()
             .unwrap());
