@@ -404,6 +404,20 @@ fn the_ranks_of_the_cluster_engine_stop_where_one_process_does() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("noisy.ply");
     vcsmooth::io::write_mesh(&input, &noisy_sphere(5, 0.3, 5)).unwrap();
+    // Rank 0's report of a run on `ranks` ranks (the work directory kept with `keep`).
+    let on = |ranks, opts: &Options, out: &Path, work: &Path, keep| {
+        let settings = cluster_settings(work, keep, 1);
+        run_ranks(
+            ranks,
+            &input,
+            out,
+            opts,
+            &engine_settings(700, 1),
+            &settings,
+        )
+        .remove(0)
+        .unwrap()
+    };
     for method in [Method::VcsLowpass, Method::Vcs, Method::Taubin] {
         let opts = auto(method);
         let single = dir.path().join(format!("{method}.ply"));
@@ -421,16 +435,7 @@ fn the_ranks_of_the_cluster_engine_stop_where_one_process_does() {
         for ranks in [1, 2, 3] {
             let out = dir.path().join(format!("{method}-{ranks}.ply"));
             let work = dir.path().join(format!("{method}-{ranks}.work"));
-            let run = run_ranks(
-                ranks,
-                &input,
-                &out,
-                &opts,
-                &engine_settings(700, 1),
-                &cluster_settings(&work, false, 1),
-            )
-            .remove(0)
-            .unwrap();
+            let run = on(ranks, &opts, &out, &work, false);
             assert!(
                 std::fs::read(&out).unwrap() == expected,
                 "{method} on {ranks} ranks differs from one process"
@@ -451,43 +456,16 @@ fn the_ranks_of_the_cluster_engine_stop_where_one_process_does() {
             iterations: 2,
             ..opts
         };
-        let first = run_ranks(
-            2,
-            &input,
-            &out,
-            &capped,
-            &engine_settings(700, 1),
-            &cluster_settings(&work, true, 1),
-        )
-        .remove(0)
-        .unwrap();
+        let first = on(2, &capped, &out, &work, true);
         assert_eq!(first.auto_stop.unwrap().stopped_by, StopReason::Cap);
-        let resumed = run_ranks(
-            3,
-            &input,
-            &out,
-            &opts,
-            &engine_settings(700, 1),
-            &cluster_settings(&work, true, 1),
-        )
-        .remove(0)
-        .unwrap();
+        let resumed = on(3, &opts, &out, &work, true);
         assert_eq!(resumed.cluster.as_ref().unwrap().resumed_after, 2);
         assert_eq!(resumed.iterations_run, plain.iterations_run, "{method}");
         assert_eq!(resumed.auto_stop.unwrap().stopped_by, want.stopped_by);
         assert!(std::fs::read(&out).unwrap() == expected, "{method} resumed");
         // Stopped: the same command again runs nothing and writes the same output.
         std::fs::remove_file(&out).unwrap();
-        let again = run_ranks(
-            2,
-            &input,
-            &out,
-            &opts,
-            &engine_settings(700, 1),
-            &cluster_settings(&work, true, 1),
-        )
-        .remove(0)
-        .unwrap();
+        let again = on(2, &opts, &out, &work, true);
         assert_eq!(
             again.cluster.unwrap().resumed_after,
             plain.iterations_run,
