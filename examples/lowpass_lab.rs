@@ -8,6 +8,10 @@
 //!           lpv         per-vertex-normalised: like lp, but each free vertex's λ|μ step is divided
 //!                       by the number of eligible stencils containing it (≈ one λ|μ per iteration)
 //!   keys: lambda=0.5 mu=-0.53 s=1.0
+//!   lpr (vertex + r-ring stencils, docs/quality-research.md §4) also: r=1, fuji=1, proj=1, and
+//!   the feature-aware step-1 variants of §11.2: bil=c (bilateral umbrella weights, scale c·σ̂),
+//!   nf=K [sr=σ_r nv=1] (normal filtering then vertex update instead of λ|μ), cot=1 (cotangent
+//!   weights)
 //! Output: OUTPREFIX.K.bin (n×3 little-endian f64) for K = 1..=ITERS; per-iteration JSON lines on
 //! stdout (volume, mean/max displacement, roughness).
 // The lab's tests are written NaN-aware (`!(x > t)` is true for NaN) and index by vertex, as the
@@ -81,6 +85,35 @@ fn lap(p: &[DVec3], t: &Topo, v: usize) -> DVec3 {
         s += p[u as usize];
     }
     s / ns.len() as f64 - p[v]
+}
+
+/// Normalised cotangent Laplacian (weights (cot α + cot β)/2 clamped at 0, divided by their sum);
+/// the umbrella where the weights vanish.
+fn lap_cot(p: &[DVec3], tris: &[[u32; 3]], t: &Topo, v: usize) -> DVec3 {
+    let mut ws: Vec<(usize, f64)> = Vec::new();
+    let mut add = |u: usize, w: f64| match ws.iter_mut().find(|x| x.0 == u) {
+        Some(x) => x.1 += w,
+        None => ws.push((u, w)),
+    };
+    let cotan = |at: DVec3, x: DVec3, y: DVec3| {
+        let (a, b) = (x - at, y - at);
+        let c = a.cross(b).length();
+        if c > 0.0 { a.dot(b) / c } else { 0.0 }
+    };
+    for &f in &t.vf[t.vf_off[v]..t.vf_off[v + 1]] {
+        let tr = tris[f as usize];
+        let k = tr.iter().position(|&x| x as usize == v).unwrap();
+        let (a, b) = (tr[(k + 1) % 3] as usize, tr[(k + 2) % 3] as usize);
+        add(a, 0.5 * cotan(p[b], p[v], p[a]));
+        add(b, 0.5 * cotan(p[a], p[v], p[b]));
+    }
+    let (mut s, mut wsum) = (DVec3::ZERO, 0.0);
+    for &(u, w) in &ws {
+        let w = w.max(0.0);
+        s += (p[u] - p[v]) * w;
+        wsum += w;
+    }
+    if wsum > 0.0 { s / wsum } else { lap(p, t, v) }
 }
 
 /// Scale-dependent umbrella (Fujiwara): neighbours weighted by 1 / edge length.
@@ -406,16 +439,97 @@ fn main() {
                 let r = g("r", 1.0) as usize;
                 let mut q = p.clone();
                 let fuji = g("fuji", 0.0) != 0.0;
+                // bil=c: bilateral umbrella weights exp(-h²/(2 (c σ̂)²)), h = n_v · (p_u − p_v)
+                // with the vertex normals of the iteration's start (feature-aware step 1)
+                let bil = g("bil", 0.0);
+                // cot=1: normalised cotangent weights (clamped at 0) instead of the umbrella
+                let cot = g("cot", 0.0) != 0.0;
+                let nb = if bil > 0.0 {
+                    vertex_normals(&p, &tris, &t)
+                } else {
+                    Vec::new()
+                };
                 for step in [lambda, mu] {
                     let old = q.clone();
                     for v in 0..n {
                         if !t.fixed[v] {
                             let l = if fuji {
                                 lap_fuji(&old, &t, v)
+                            } else if cot {
+                                lap_cot(&old, &tris, &t, v)
+                            } else if bil > 0.0 {
+                                let s2 = 2.0 * (bil * sigma).powi(2);
+                                let (mut acc, mut wsum) = (DVec3::ZERO, 0.0);
+                                for &u in &t.nb[t.nb_off[v]..t.nb_off[v + 1]] {
+                                    let d = old[u as usize] - old[v];
+                                    let h = nb[v].dot(d);
+                                    let w = (-h * h / s2).exp();
+                                    acc += d * w;
+                                    wsum += w;
+                                }
+                                if wsum > 0.0 { acc / wsum } else { DVec3::ZERO }
                             } else {
                                 lap(&old, &t, v)
                             };
                             q[v] = old[v] + step * s * l;
+                        }
+                    }
+                }
+                // nf=K: step 1 = normal filtering instead of λ|μ (Sun et al. 2007 / Zheng et al.
+                // 2011): K passes of area-weighted averaging of the face normals over the faces
+                // sharing a vertex (sr=σ_r > 0: bilateral range weight exp(-|n_f − n_g|²/2σ_r²)),
+                // then nv=N vertex updates p_v += mean_{f∋v} m_f (m_f · (c_f − p_v))
+                let kn = g("nf", 0.0) as usize;
+                if kn > 0 {
+                    let sr = g("sr", 0.0);
+                    let nvu = g("nv", 1.0) as usize;
+                    let nfc = tris.len();
+                    let mut fm = vec![DVec3::ZERO; nfc];
+                    let mut fa = vec![0.0; nfc];
+                    for (i, tr) in tris.iter().enumerate() {
+                        let (a, b, c) = (p[tr[0] as usize], p[tr[1] as usize], p[tr[2] as usize]);
+                        let cr = (b - a).cross(c - a);
+                        fa[i] = 0.5 * cr.length();
+                        fm[i] = cr.normalize_or_zero();
+                    }
+                    for _ in 0..kn {
+                        let old = fm.clone();
+                        for (i, tr) in tris.iter().enumerate() {
+                            let mut acc = DVec3::ZERO;
+                            for &v in tr {
+                                for &gf in &t.vf[t.vf_off[v as usize]..t.vf_off[v as usize + 1]] {
+                                    let gf = gf as usize;
+                                    let mut w = fa[gf];
+                                    if sr > 0.0 {
+                                        w *= (-(old[i] - old[gf]).length_squared()
+                                            / (2.0 * sr * sr))
+                                            .exp();
+                                    }
+                                    acc += old[gf] * w;
+                                }
+                            }
+                            fm[i] = acc.normalize_or_zero();
+                        }
+                    }
+                    q = p.clone();
+                    for _ in 0..nvu {
+                        let old = q.clone();
+                        for v in 0..n {
+                            if t.fixed[v] {
+                                continue;
+                            }
+                            let fs = &t.vf[t.vf_off[v]..t.vf_off[v + 1]];
+                            let mut acc = DVec3::ZERO;
+                            for &f in fs {
+                                let tr = tris[f as usize];
+                                let c = (old[tr[0] as usize]
+                                    + old[tr[1] as usize]
+                                    + old[tr[2] as usize])
+                                    / 3.0;
+                                let m = fm[f as usize];
+                                acc += m * m.dot(c - old[v]);
+                            }
+                            q[v] = old[v] + s * acc / fs.len() as f64;
                         }
                     }
                 }
