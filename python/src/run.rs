@@ -6,11 +6,11 @@
 //! thread, and only when some code asks, so a call that kept the GIL or never asked would not see
 //! Ctrl-C until it ended. When a handler raises (`KeyboardInterrupt`), the work is asked to stop
 //! through its observer ([`vcsmooth::engine::Observer::interrupted`], asked after each
-//! iteration, before anything is written) and the exception is raised once the work has ended,
-//! so that no file is being written behind the caller's back: an interrupted file run leaves
-//! the previous output (or none) and no temporary file. The phases before and after the
-//! iterations (reading, planning, writing) are not interrupted; they take a fraction of a
-//! second per million triangles.
+//! iteration and after each phase before the write: reading, reordering, the topology, the
+//! schedule, the statistics) and the exception is raised once the work has ended, so that no
+//! file is being written behind the caller's back: an interrupted file run leaves the previous
+//! output (or none) and no temporary file. A phase itself is not cut short (each takes a
+//! fraction of a second per million triangles), nor is the write.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;

@@ -196,9 +196,10 @@ pub trait Observer: Send {
     /// Called on failure too, before the error is returned.
     fn phase_end(&mut self, _phase: Phase) {}
 
-    /// Asked after each iteration (once [`Observer::iteration`] has seen it): `true` ends the
-    /// run there with [`Error::Interrupted`](crate::Error::Interrupted), before anything is
-    /// written. A host that cannot end the process on a signal (the Python bindings) stops a
+    /// Asked after each iteration (once [`Observer::iteration`] has seen it) and after each
+    /// phase before the write (reading, reordering, the topology, the schedule, the statistics):
+    /// `true` ends the run there with [`Error::Interrupted`](crate::Error::Interrupted), before
+    /// anything is written. A host that cannot end the process on a signal (the Python bindings) stops a
     /// long run this way; the cluster engine's ranks never ask.
     fn interrupted(&mut self) -> bool {
         false
@@ -210,17 +211,22 @@ pub struct Quiet;
 impl Observer for Quiet {}
 
 /// `work` as `phase` of `total` units: `observer` is told when it starts (with the meter that
-/// `work` counts into) and when it ends, whether it succeeded or not.
+/// `work` counts into) and when it ends, whether it succeeded or not; then, if it succeeded, asked
+/// whether the run is [interrupted](Observer::interrupted), so that a host without signals (the
+/// Python bindings) stops a long preparation at the next phase, not only between iterations.
 pub(crate) fn metered<T>(
     observer: &mut dyn Observer,
     phase: Phase,
     total: u64,
-    work: impl FnOnce(&Meter) -> T,
-) -> T {
+    work: impl FnOnce(&Meter) -> crate::Result<T>,
+) -> crate::Result<T> {
     let meter = Arc::new(Meter::new(total));
     observer.phase_start(phase, &meter);
     let out = work(&meter);
     observer.phase_end(phase);
+    if out.is_ok() && observer.interrupted() {
+        return Err(crate::Error::Interrupted);
+    }
     out
 }
 
@@ -292,6 +298,68 @@ mod tests {
         assert!(matches!(e, Err(Error::Interrupted)), "{e:?}");
         let files: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
         assert_eq!(files.len(), 1, "only the input: {files:?}");
+    }
+
+    /// Interrupts once phase `after` has ended; remembers the phases that ended and whether an
+    /// iteration was seen.
+    struct StopAfterPhase {
+        after: Phase,
+        ended: Vec<Phase>,
+        iterations: usize,
+    }
+
+    impl Observer for StopAfterPhase {
+        fn phase_end(&mut self, phase: Phase) {
+            self.ended.push(phase);
+        }
+        fn iteration(&mut self, _: &IterationRecord, _: usize) {
+            self.iterations += 1;
+        }
+        fn interrupted(&mut self) -> bool {
+            self.ended.contains(&self.after)
+        }
+    }
+
+    #[test]
+    fn an_interrupted_preparation_ends_at_the_next_phase() {
+        let mesh = crate::shapes::icosphere(3);
+        let dir = tempfile::tempdir().unwrap();
+        let (input, output) = (dir.path().join("in.ply"), dir.path().join("out.ply"));
+        crate::io::write_mesh(&input, &mesh).unwrap();
+        let engine = EngineSettings {
+            with_stats: true,
+            ..EngineSettings::default()
+        };
+        for after in [
+            Phase::Read,
+            Phase::Reorder,
+            Phase::Topology,
+            Phase::Schedule,
+            Phase::Statistics,
+        ] {
+            let mut stop = StopAfterPhase {
+                after,
+                ended: Vec::new(),
+                iterations: 0,
+            };
+            let e =
+                crate::engine::run_file(&input, &output, &Options::default(), &engine, &mut stop);
+            assert!(matches!(e, Err(Error::Interrupted)), "{after:?}: {e:?}");
+            assert_eq!(stop.ended.last(), Some(&after), "{:?}", stop.ended);
+            assert_eq!(stop.iterations, 0, "{after:?}");
+            assert!(!output.exists(), "{after:?}");
+        }
+        // In memory: the plan's phases are asked too.
+        let mut smoothed = mesh.clone();
+        let mut stop = StopAfterPhase {
+            after: Phase::Topology,
+            ended: Vec::new(),
+            iterations: 0,
+        };
+        let e = crate::smooth_with(&mut smoothed, &Options::default(), &engine, &mut stop);
+        assert!(matches!(e, Err(Error::Interrupted)), "{e:?}");
+        assert_eq!(stop.iterations, 0);
+        assert_eq!(&smoothed.positions[..], &mesh.positions[..]);
     }
 
     #[test]

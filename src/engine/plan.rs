@@ -148,8 +148,8 @@ impl Plan {
                 let patches = partition::patches(positions.len(), &reordered.triangles, size);
                 let total = schedule::SCHEDULE_PASSES * patches.len() as u64;
                 let schedule = metered(observer, Phase::Schedule, total, |m| {
-                    schedule::schedule_metered(&topology, &patches, m)
-                });
+                    Ok(schedule::schedule_metered(&topology, &patches, m))
+                })?;
                 (patches, schedule)
             }
             Layout::Whole => (

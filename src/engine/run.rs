@@ -383,11 +383,12 @@ fn smooth_planned(
 ) -> Result<Smoothed> {
     t.add_preparation(&plan.timings);
     let clock = Instant::now();
-    let input_stats = engine.with_stats.then(|| {
-        metered(observer, Phase::Statistics, 2, |m| {
-            plan.info_metered(source, m)
-        })
-    });
+    let input_stats = match engine.with_stats {
+        true => Some(metered(observer, Phase::Statistics, 2, |m| {
+            Ok(plan.info_metered(source, m))
+        })?),
+        false => None,
+    };
     t.metrics += clock.elapsed().as_secs_f64();
 
     let clock = Instant::now();
