@@ -678,23 +678,21 @@ impl Share for RankRun<'_> {
 
     fn gather(&mut self, pos: &mut [DVec3], vertices: &[u32]) {
         let owned = self.owned();
-        let mine: Vec<u64> = vertices
-            .iter()
-            .filter(|&&v| owned.contains(&(v as usize)))
-            .flat_map(|&v| {
-                std::iter::once(v as u64).chain(pos[v as usize].to_array().map(f64::to_bits))
-            })
-            .collect();
-        let r = self.comm.rank();
+        let mut mine = Vec::new();
+        for &v in vertices.iter().filter(|&&v| owned.contains(&(v as usize))) {
+            mine.push(v as u64);
+            pos[v as usize].put(&mut mine);
+        }
+        let (r, others) = (self.comm.rank(), self.comm.size() - 1);
         let send = (0..self.comm.size())
             .map(|s| if s == r { Vec::new() } else { mine.clone() })
             .collect();
-        self.traffic.values += (mine.len() / 4 * (self.comm.size() - 1)) as u64;
-        self.traffic.bytes += (8 * mine.len() * (self.comm.size() - 1)) as u64;
+        self.traffic.values += (mine.len() / 4 * others) as u64;
+        self.traffic.bytes += (8 * mine.len() * others) as u64;
         for msg in self.comm.exchange(send) {
             assert!(msg.len() % 4 == 0, "malformed loop message");
             for e in msg.chunks_exact(4) {
-                pos[e[0] as usize] = DVec3::from_array([1, 2, 3].map(|k| f64::from_bits(e[k])));
+                pos[e[0] as usize] = DVec3::get(&e[1..]);
             }
         }
     }

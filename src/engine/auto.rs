@@ -237,13 +237,6 @@ impl AutoStop {
         self.stopped_by
     }
 
-    /// What a checkpoint keeps to go on after iteration `removed().len()`: `O_k` of every
-    /// iteration run (the rest is measured again from the input by [`AutoStop::start`], and the
-    /// noise sample's steps replayed by [`AutoStop::resume`]).
-    pub fn removed(&self) -> &[f64] {
-        &self.removed
-    }
-
     /// After [`AutoStop::start`] on the input: take up a run whose iterations so far removed
     /// `removed` and which ended by `stopped` (from a checkpoint), replaying the noise sample's
     /// steps. A run that stopped at its cap goes on when the cap is now higher.

@@ -246,6 +246,11 @@ impl Run<'_, '_> {
         } else {
             mesh.colours
         };
+        if let Some(loops) = &loops {
+            // Each process holds every loop vertex from here on: the restoring pass that ends
+            // each iteration leaves them the same in all.
+            self.share.gather(pos, loops.vertices());
+        }
         for it in first..=total {
             let wanted = self.when.wanted(it, total);
             // An automatically stopped run measures every displacement (the rule of lem, vcs and
@@ -274,7 +279,6 @@ impl Run<'_, '_> {
                 }
             }
             if let Some(loops) = &mut loops {
-                self.share.gather(pos, loops.vertices());
                 loops.measure(pos);
             }
             let params = stencil_params(self.opts, input);
