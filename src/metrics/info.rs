@@ -305,55 +305,53 @@ impl std::ops::Add for EdgeSums {
 /// [`EdgeSums`] of the edges `(i, j)`, `i < j`, with `i` in `vertices`, in ascending order: one
 /// walk over them for both figures.
 ///
-/// The faces of `i` are gathered once per vertex, their normals computed when first needed, so
-/// that a triangle is read and its normal computed at most once per corner rather than once per
-/// edge. An edge's two faces are looked for among the faces of the endpoint with fewer (`i` when
-/// it has few), so that the edges of a vertex of degree d cost O(d) together, not O(d²).
+/// Each face of `i` with a corner above `i` has its normal computed once there and handed to the
+/// edges `(i, j)` it holds, so a face is measured at most twice in all and an edge's faces need
+/// no search.
 pub fn edge_sums(
     pos: &[DVec3],
     triangles: &[[u32; 3]],
     topo: &Topology,
     vertices: Range<u32>,
 ) -> EdgeSums {
-    // Up to this many faces, scanning the faces of `i` costs less than asking how many `j` has.
-    const FEW: usize = 16;
-    let normal = |t: &[u32; 3]| {
-        let [a, b, c] = t.map(|v| pos[v as usize]);
-        let n = (b - a).cross(c - a);
-        (n.length_squared() > 0.0 && n.is_finite()).then_some(n)
-    };
     let mut sums = EdgeSums::default();
-    // The faces of `i`: corners, and the normal once computed (`None` until then).
-    let mut around: Vec<([u32; 3], Option<Option<DVec3>>)> = Vec::new();
+    let mut edges: Vec<EdgeFaces> = Vec::new();
     for i in vertices {
         let above = topo.neighbors(i);
         let above = &above[above.partition_point(|&j| j <= i)..];
         if above.is_empty() {
             continue;
         }
-        around.clear();
-        around.extend(
-            topo.faces_of(i)
-                .iter()
-                .map(|&t| (triangles[t as usize], None)),
-        );
-        for &j in above {
-            sums.length.0 += pos[i as usize].distance(pos[j as usize]);
+        edges.clear();
+        edges.resize(above.len(), EdgeFaces::default());
+        for &t in topo.faces_of(i) {
+            let tri = triangles[t as usize];
+            if tri.iter().all(|&v| v <= i) {
+                continue;
+            }
+            let [a, b, c] = tri.map(|v| pos[v as usize]);
+            let n = (b - a).cross(c - a);
+            let usable = n.length_squared() > 0.0 && n.is_finite();
+            for v in tri {
+                if v > i {
+                    // Every corner of a face of `i` is a neighbour of `i`.
+                    let k = if above.len() <= 16 {
+                        above.iter().position(|&j| j == v)
+                    } else {
+                        above.binary_search(&v).ok()
+                    };
+                    if let Some(k) = k {
+                        edges[k].add(n, usable);
+                    }
+                }
+            }
+        }
+        let p = pos[i as usize];
+        for (&j, e) in above.iter().zip(&edges) {
+            sums.length.0 += p.distance(pos[j as usize]);
             sums.length.1 += 1;
-            let pair = if around.len() <= FEW || around.len() <= topo.faces_of(j).len() {
-                two_with(around.iter().map(|(t, _)| t), j).map(|pair| {
-                    pair.map(|k| {
-                        let (t, n) = &mut around[k];
-                        *n.get_or_insert_with(|| normal(t))
-                    })
-                })
-            } else {
-                let faces = topo.faces_of(j);
-                two_with(faces.iter().map(|&t| &triangles[t as usize]), i)
-                    .map(|pair| pair.map(|k| normal(&triangles[faces[k] as usize])))
-            };
-            if let Some([Some(n1), Some(n2)]) = pair {
-                sums.angle.0 += angle_deg(n1, n2);
+            if e.count == 2 && e.usable == 0b11 {
+                sums.angle.0 += angle_deg(e.normals[0], e.normals[1]);
                 sums.angle.1 += 1;
             }
         }
@@ -361,20 +359,24 @@ pub fn edge_sums(
     sums
 }
 
-/// The positions in `faces` of the two faces that use `v`, if exactly two do.
-#[inline]
-fn two_with<'a>(faces: impl Iterator<Item = &'a [u32; 3]>, v: u32) -> Option<[usize; 2]> {
-    let (mut found, mut n) = ([0; 2], 0);
-    for (k, t) in faces.enumerate() {
-        if t[0] == v || t[1] == v || t[2] == v {
-            if n == 2 {
-                return None;
-            }
-            found[n] = k;
-            n += 1;
+/// The faces of one edge as [`edge_sums`] finds them: how many, and the first two's normals,
+/// with a bit each saying whether it is usable (non-zero and finite).
+#[derive(Clone, Copy, Default)]
+struct EdgeFaces {
+    normals: [DVec3; 2],
+    count: u32,
+    usable: u32,
+}
+
+impl EdgeFaces {
+    #[inline]
+    fn add(&mut self, n: DVec3, usable: bool) {
+        if let Some(slot) = self.normals.get_mut(self.count as usize) {
+            *slot = n;
+            self.usable |= (usable as u32) << self.count;
         }
+        self.count += 1;
     }
-    (n == 2).then_some(found)
 }
 
 /// The angle between two non-zero vectors, in degrees.
@@ -532,5 +534,79 @@ mod tests {
         // Only edge 0-1 counts.
         assert_eq!(edge_sums(&m.positions, &m.triangles, &t, 0..1).angle.1, 1);
         assert_eq!(edge_sums(&m.positions, &m.triangles, &t, 1..5).angle.1, 0);
+    }
+
+    /// [`edge_sums`] against the plain definition: each edge `(i, j)`, `i < j`, in ascending
+    /// order; its faces looked for among all faces of `i`; an angle when there are exactly two,
+    /// both with a usable normal. Bit for bit, on a mesh with every special case: a hub above the
+    /// small-degree search, a non-manifold fin, a boundary, a zero-area face, flipped faces.
+    #[test]
+    fn edge_sums_match_the_definition_bit_for_bit() {
+        let mut m = icosphere(3);
+        add_normal_noise(&mut m, 0.2, 7);
+        // A hole (a boundary) and a duplicate face (non-manifold edges).
+        m.triangles[0] = m.triangles[1];
+        let n = m.positions.len() as u32;
+        // A hub: a fan of 40 faces around vertex 0 over other vertices of the sphere, so that
+        // it has more than 16 neighbours above it.
+        let ring: Vec<u32> = (100..141).map(|k| 3 * k + k % 5).collect();
+        for w in ring.windows(2) {
+            m.triangles.push([0, w[0], w[1]]);
+        }
+        // A fin on an edge (non-manifold), a zero-area face, flipped faces.
+        m.positions.push(DVec3::new(2.0, 2.0, 2.0));
+        let [a, b, _] = m.triangles[5];
+        m.triangles.push([a, b, n]);
+        m.positions.push(m.positions[0]);
+        m.triangles.push([0, 1, n + 1]);
+        for t in m.triangles.iter_mut().step_by(17) {
+            t.swap(0, 1);
+        }
+        let t = topo(&m);
+        let pos = &m.positions;
+        let definition = |vertices: Range<u32>| {
+            let mut expected = EdgeSums::default();
+            for i in vertices {
+                for &j in t.neighbors(i).iter().filter(|&&j| j > i) {
+                    expected.length.0 += pos[i as usize].distance(pos[j as usize]);
+                    expected.length.1 += 1;
+                    let normals: Vec<DVec3> = t
+                        .faces_of(i)
+                        .iter()
+                        .map(|&f| m.triangles[f as usize])
+                        .filter(|tri| tri.contains(&j))
+                        .map(|[a, b, c]| {
+                            let [a, b, c] = [a, b, c].map(|v| pos[v as usize]);
+                            (b - a).cross(c - a)
+                        })
+                        .collect();
+                    let usable = |n: &DVec3| n.length_squared() > 0.0 && n.is_finite();
+                    if normals.len() == 2 && normals.iter().all(usable) {
+                        expected.angle.0 += angle_deg(normals[0], normals[1]);
+                        expected.angle.1 += 1;
+                    }
+                }
+            }
+            expected
+        };
+        assert!(t.neighbors(0).len() > 17, "the hub takes the binary search");
+        assert!(t.stats.non_manifold_edges > 0 && t.stats.boundary_edges > 0);
+        let bits = |s: EdgeSums| {
+            (
+                s.length.0.to_bits(),
+                s.length.1,
+                s.angle.0.to_bits(),
+                s.angle.1,
+            )
+        };
+        let n = t.len() as u32;
+        // Vertex by vertex too, so that an angle given to another edge of its vertex is caught.
+        for range in (0..n).map(|i| i..i + 1).chain([0..n]) {
+            let (got, expected) = (
+                edge_sums(pos, &m.triangles, &t, range.clone()),
+                definition(range.clone()),
+            );
+            assert_eq!(bits(got), bits(expected), "vertices {range:?}");
+        }
     }
 }
