@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::process::Stdio;
 
 use vcsmooth::cluster::{Comm, Local};
-use vcsmooth::engine::{self, EngineSettings, Quiet, Statistics};
+use vcsmooth::engine::{self, EngineSettings, Quiet, Report, Statistics};
 use vcsmooth::{Method, Options, io, shapes};
 
 use crate::util::{
@@ -42,7 +42,10 @@ fn any_number_of_ranks_gives_the_single_process_output_bit_for_bit() {
             &input,
             &reference,
             &opts,
-            &engine_settings(2048, 2),
+            &EngineSettings {
+                with_stats: true,
+                ..engine_settings(2048, 2)
+            },
             &mut Quiet,
         )
         .unwrap();
@@ -55,7 +58,10 @@ fn any_number_of_ranks_gives_the_single_process_output_bit_for_bit() {
                 &input,
                 &out,
                 &opts,
-                &engine_settings(2048, 1),
+                &EngineSettings {
+                    with_stats: true,
+                    ..engine_settings(2048, 1)
+                },
                 &cluster_settings(&work, false, 1),
             )
             .remove(0)
@@ -68,7 +74,7 @@ fn any_number_of_ranks_gives_the_single_process_output_bit_for_bit() {
                 !work.exists(),
                 "the work directory is removed without --checkpoint"
             );
-            let stats = run.cluster.unwrap();
+            let stats = run.cluster.clone().unwrap();
             assert_eq!(stats.ranks, ranks);
             if ranks > 1 {
                 assert!(
@@ -85,6 +91,14 @@ fn any_number_of_ranks_gives_the_single_process_output_bit_for_bit() {
                 b.volume_pct
             );
             assert_eq!(a.stencils, b.stencils);
+            // The statistics of the input and of the output as stored, bit for bit.
+            let stats = |r: &Report| serde_json::to_string(&(&r.input_stats, &r.output_stats));
+            assert!(plain.output_stats.is_some());
+            assert_eq!(
+                stats(&run).unwrap(),
+                stats(&plain).unwrap(),
+                "{method}, {ranks} ranks"
+            );
         }
     }
 }

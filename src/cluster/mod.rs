@@ -44,7 +44,7 @@ use crate::engine::auto::AutoStop;
 use crate::engine::iterate::{Buffers, Reference, Share, Sweep, iterate};
 use crate::engine::{
     self, ClusterStats, EngineSettings, IterationRecord, Layout, MemoryStats, Observer,
-    PhaseTimings, PlanStats, Report, Statistics, memory,
+    PhaseTimings, PlanStats, Report, Statistics, memory, reduce,
 };
 use crate::error::{Error, Result};
 use crate::mesh::Buf;
@@ -154,7 +154,7 @@ pub fn run_file(
     // 4. Rank 0 writes the output in the input's order.
     let clock = Instant::now();
     let written = if comm.rank() == 0 {
-        write_output(&work, &plan, &state, input, output, engine, budget)
+        pool.install(|| write_output(&work, &plan, &state, input, output, engine, budget))
     } else {
         Ok(None)
     };
@@ -311,11 +311,43 @@ fn write_output(
     for (new, &old) in plan.order.iter().enumerate() {
         mesh.positions[old as usize] = last[new];
     }
-    let stats = engine
-        .with_stats
-        .then(|| metrics::info_of(&last, &plan.triangles, &mesh.source, &plan.topology));
+    let stats = match engine.with_stats {
+        true => output_stats(plan, &storage, output, &mesh, &last)?,
+        false => None,
+    };
     io::write_mesh(output, &mesh)?;
     Ok(stats)
+}
+
+/// The statistics of the output as stored, as a single-process run gives them: the final
+/// positions (`last`, in plan order) rounded as [`io::Stored`] says the write stores `mesh`,
+/// measured over the plan's triangles in parallel; the counts are the input's.
+fn output_stats(
+    plan: &StoredPlan,
+    storage: &crate::mesh::Storage,
+    output: &Path,
+    mesh: &crate::Mesh,
+    last: &[DVec3],
+) -> Result<Option<metrics::MeshInfo>> {
+    let (Some(mut info), Some(stored)) =
+        (plan.doc.input_stats.clone(), io::Stored::of(output, mesh))
+    else {
+        // An output that write_mesh refuses has no statistics; its error is the write's.
+        return Ok(None);
+    };
+    let geometry = if stored.is_exact() {
+        reduce::geometry(last, &plan.triangles, &plan.topology)
+    } else {
+        let mut rounded: Buf<DVec3> = storage.zeroed(last.len())?;
+        reduce::for_chunks_mut(&mut rounded, |first, chunk| {
+            for (p, &q) in chunk.iter_mut().zip(&last[first..]) {
+                *p = stored.round(q);
+            }
+        });
+        reduce::geometry(&rounded, &plan.triangles, &plan.topology)
+    };
+    info.set_geometry(geometry);
+    Ok(Some(info))
 }
 
 /// A rank's share of the plan and what it exchanges with whom.
