@@ -138,16 +138,22 @@ const LOOP: u8 = 4;
 /// Reusable per-thread buffers of the per-vertex analysis.
 #[derive(Default)]
 struct VertexScratch {
-    link: Vec<(u32, u32)>,
     /// Pass 1: `u << 1 | direction` for each corner u of a face at v (0: the face runs v → u,
     /// 1: u → v); pass 2: the corners alone.
     keys: Vec<u64>,
     corners: Vec<u32>,
     parent: Vec<usize>,
-    /// A chunk's region of the vertex → face array, and each entry's vertex, while it is sorted
-    /// by vertex.
+}
+
+/// Reusable per-thread buffers of a chunk of vertices in pass 1: a copy of its region of the
+/// vertex → face array while that is sorted by vertex, and the link edge `(b[i], c[i])` of
+/// each entry of the sorted region (its face runs v → b → c), so that the analysis reads no
+/// triangle again.
+#[derive(Default)]
+struct ChunkScratch {
     faces: Vec<u32>,
-    local: Vec<u16>,
+    b: Vec<u32>,
+    c: Vec<u32>,
 }
 
 impl Topology {
@@ -268,36 +274,35 @@ impl Topology {
             });
 
         // Pass 1, chunk by chunk: sort the region by vertex into `vf` and its offsets, then per
-        // vertex the number of distinct neighbours, edge counts and the fixed flag.
+        // vertex the number of distinct neighbours, edge counts and the fixed flag. The
+        // neighbours go to `vv` laid out as `vf`, which is their final place when every vertex
+        // has as many neighbours as faces (a closed manifold: no pass 2 then).
         let mut vf_offsets: Buf<usize> = storage.zeroed(n_vertices + 1)?;
         let mut vv_offsets: Buf<usize> = storage.zeroed(n_vertices + 1)?;
-        let mut regions = Vec::with_capacity(chunks);
-        let mut rest: &mut [u32] = &mut vf;
-        for c in 0..chunks {
-            let (region, tail) =
-                std::mem::take(&mut rest).split_at_mut(region_start[c + 1] - region_start[c]);
-            regions.push(region);
-            rest = tail;
-        }
-        let found = regions
+        let mut vv: Buf<u32> = storage.zeroed(total)?;
+        let region_lens: Vec<usize> = region_start.windows(2).map(|w| w[1] - w[0]).collect();
+        let (found, misfits) = split_lens(&mut vf, &region_lens)
             .into_par_iter()
+            .zip(split_lens(&mut vv, &region_lens))
             .zip(vf_offsets[1..].par_chunks_mut(CHUNK))
             .zip(vv_offsets[1..].par_chunks_mut(CHUNK))
             .zip(fixed.par_chunks_mut(CHUNK))
             .enumerate()
             .map_init(
-                VertexScratch::default,
-                |scratch, (c, (((region, ends), degs), fixed))| {
+                <(ChunkScratch, VertexScratch)>::default,
+                |(link, scratch), (c, ((((region, nbrs), ends), degs), fixed))| {
                     let lo = (c * CHUNK) as u32;
-                    sort_region(lo, region, region_start[c], ends, triangles, scratch);
+                    sort_region(lo, region, region_start[c], ends, triangles, link);
                     let mut st = TopologyStats::default();
+                    let mut misfits = 0;
                     let mut start = 0;
                     for (k, (deg, fix)) in degs.iter_mut().zip(fixed.iter_mut()).enumerate() {
                         let end = ends[k] - region_start[c];
-                        let a =
-                            analyse_vertex(lo + k as u32, &region[start..end], triangles, scratch);
+                        let (b, c) = (&link.b[start..end], &link.c[start..end]);
+                        let a = analyse_vertex(lo + k as u32, b, c, scratch, &mut nbrs[start..end]);
                         start = end;
                         *deg = a.degree;
+                        misfits += (a.degree != b.len()) as usize;
                         st.edges += a.edges;
                         st.boundary_edges += a.boundary_edges;
                         st.non_manifold_edges += a.non_manifold_edges;
@@ -316,28 +321,44 @@ impl Topology {
                         st.fixed_vertices += (*fix != 0) as usize;
                     }
                     meter.add(degs.len() as u64);
-                    st
+                    (st, misfits)
                 },
             )
-            .reduce(TopologyStats::default, TopologyStats::add);
+            .reduce(
+                || (TopologyStats::default(), 0),
+                |a, b| (a.0.add(b.0), a.1 + b.1),
+            );
         stats = stats.add(found);
         for v in 0..n_vertices {
             vv_offsets[v + 1] += vv_offsets[v];
         }
+        if misfits == 0 {
+            // The skipped pass 2, for the meter.
+            meter.add(n_vertices as u64);
+            return Ok(Topology {
+                vv_offsets,
+                vv,
+                vf_offsets,
+                vf,
+                fixed,
+                stats,
+            });
+        }
 
         // Pass 2: fill the neighbour lists, each chunk of vertices into its own slice.
+        drop(vv);
         let mut vv: Buf<u32> = storage.zeroed(vv_offsets[n_vertices])?;
-        let mut pieces = Vec::with_capacity(n_vertices.div_ceil(CHUNK));
-        let mut rest: &mut [u32] = &mut vv;
-        for c in 0..n_vertices.div_ceil(CHUNK) {
-            let (lo, hi) = (c * CHUNK, ((c + 1) * CHUNK).min(n_vertices));
-            let (piece, tail) = rest.split_at_mut(vv_offsets[hi] - vv_offsets[lo]);
-            pieces.push((lo..hi, piece));
-            rest = tail;
-        }
-        pieces
+        let chunk_lens: Vec<usize> = (0..chunks)
+            .map(|c| {
+                let (lo, hi) = (c * CHUNK, ((c + 1) * CHUNK).min(n_vertices));
+                vv_offsets[hi] - vv_offsets[lo]
+            })
+            .collect();
+        split_lens(&mut vv, &chunk_lens)
             .into_par_iter()
-            .for_each_init(VertexScratch::default, |scratch, (range, out)| {
+            .enumerate()
+            .for_each_init(VertexScratch::default, |scratch, (c, out)| {
+                let range = c * CHUNK..((c + 1) * CHUNK).min(n_vertices);
                 let range_len = range.len() as u64;
                 let mut at = 0;
                 for v in range {
@@ -848,6 +869,17 @@ struct BlockCount {
     out_of_range: Option<usize>,
 }
 
+/// `data` cut into consecutive slices of `lens` (which sum to at most its length).
+fn split_lens<'a>(mut data: &'a mut [u32], lens: &[usize]) -> Vec<&'a mut [u32]> {
+    lens.iter()
+        .map(|&n| {
+            let (head, tail) = std::mem::take(&mut data).split_at_mut(n);
+            data = tail;
+            head
+        })
+        .collect()
+}
+
 /// Count the corners of `block` (triangles `first..`) per chunk of vertices.
 fn count_block(first: usize, block: &[[u32; 3]], n_vertices: usize, chunks: usize) -> BlockCount {
     let mut count = BlockCount {
@@ -873,33 +905,40 @@ fn count_block(first: usize, block: &[[u32; 3]], n_vertices: usize, chunks: usiz
 
 /// Sort the region of `vf` of the chunk of vertices from `lo`, which holds the ids of the faces
 /// at its vertices ascending (a face once per corner in the chunk, in a row), by vertex, keeping
-/// each vertex's faces ascending; `ends[k]` gets where vertex `lo + k`'s faces end in `vf` (the
-/// region starts at `start`).
+/// each vertex's faces ascending, and the link edge of each sorted entry into `s.b`, `s.c`;
+/// `ends[k]` gets where vertex `lo + k`'s faces end in `vf` (the region starts at `start`).
 fn sort_region(
     lo: u32,
     region: &mut [u32],
     start: usize,
     ends: &mut [usize],
     triangles: &[[u32; 3]],
-    s: &mut VertexScratch,
+    s: &mut ChunkScratch,
 ) {
-    const { assert!(CHUNK <= 1 << 16, "local vertex ids are u16") };
+    let n = ends.len() as u32;
     s.faces.clear();
     s.faces.extend_from_slice(region);
-    // Each entry's vertex (local id): a face's entries are its corners in the chunk, in order.
-    s.local.clear();
-    let hi = lo + ends.len() as u32;
-    while let Some(&t) = s.faces.get(s.local.len()) {
-        for v in triangles[t as usize] {
-            if v >= lo && v < hi {
-                s.local.push((v - lo) as u16);
+    // A counting sort in two sweeps over the region's faces, each taken once for all its
+    // corners in the chunk; the second reads the triangles again rather than keep each
+    // entry's vertex from the first.
+    ends.fill(0);
+    let mut i = 0;
+    while let Some(&t) = s.faces.get(i) {
+        let k = triangles[t as usize].map(|u| u.wrapping_sub(lo));
+        if k.iter().all(|&k| k < n) {
+            // The common case, a face inside the chunk, without a branch per corner.
+            for k in k {
+                ends[k as usize] += 1;
+            }
+            i += 3;
+            continue;
+        }
+        for k in k {
+            if k < n {
+                ends[k as usize] += 1;
+                i += 1;
             }
         }
-    }
-    debug_assert_eq!(s.local.len(), s.faces.len());
-    ends.fill(0);
-    for &k in &s.local {
-        ends[k as usize] += 1;
     }
     // `ends` as starts within the region, then advanced past each placed face to the ends.
     let mut at = 0;
@@ -908,61 +947,72 @@ fn sort_region(
         *e = at;
         at += n;
     }
-    for (&k, &t) in s.local.iter().zip(&s.faces) {
-        region[ends[k as usize]] = t;
-        ends[k as usize] += 1;
+    s.b.resize(region.len(), 0);
+    s.c.resize(region.len(), 0);
+    let mut i = 0;
+    while let Some(&t) = s.faces.get(i) {
+        let [x, y, z] = triangles[t as usize];
+        let inside = [x, y, z].map(|u| u.wrapping_sub(lo) < n);
+        for ((u, b, c), inside) in [(x, y, z), (y, z, x), (z, x, y)].into_iter().zip(inside) {
+            if inside {
+                let e = &mut ends[(u - lo) as usize];
+                region[*e] = t;
+                s.b[*e] = b;
+                s.c[*e] = c;
+                *e += 1;
+                i += 1;
+            }
+        }
     }
     ends.iter_mut().for_each(|e| *e += start);
 }
 
-/// Most faces of a vertex that [`closed_fan`] tries: its tests cost d², the general analysis
-/// d log d. Surface meshes have degrees near 6.
+/// Most faces of a vertex that [`closed_fan`] tries: its walk costs up to d², the general
+/// analysis d log d. Surface meshes have degrees near 6.
 const FAN_LIMIT: usize = 16;
 
-/// The link edges `(b, c)` of the faces of `v` (each face runs v → b → c) when they form one
-/// consistently oriented cycle through distinct neighbours: the interior vertex of a manifold,
-/// which is nearly every vertex of a scan. Then the b's are exactly the neighbours, each shared
-/// by two faces that traverse their edge in opposite directions, and the link is connected; so
-/// [`analyse_vertex`] and [`write_neighbors`] can skip their sort and union-find.
+/// The link edges `(b[i], c[i])` of the faces of `v` (each face runs v → b → c) when they form
+/// one consistently oriented cycle through distinct neighbours: the interior vertex of a
+/// manifold, which is nearly every vertex of a scan. Then the b's are exactly the neighbours,
+/// each shared by two faces that traverse their edge in opposite directions, and the link is
+/// connected; so [`analyse_vertex`] can skip its sort and union-find.
 /// Returns the number of neighbours above `v` (its edges, each counted at its lower end); `None`
 /// for anything else (or more than [`FAN_LIMIT`] faces), which the general path handles.
 #[inline]
-fn closed_fan(v: u32, faces: &[u32], triangles: &[[u32; 3]]) -> Option<usize> {
-    let d = faces.len();
+fn closed_fan(v: u32, b: &[u32], c: &[u32]) -> Option<usize> {
+    let d = b.len();
     if !(3..=FAN_LIMIT).contains(&d) {
         return None;
     }
-    let (mut b, mut c) = ([0u32; FAN_LIMIT], [0u32; FAN_LIMIT]);
-    for (k, &t) in faces.iter().enumerate() {
-        (b[k], c[k]) = opposite_edge(&triangles[t as usize], v);
+    // Walk d steps from face 0: the face after face i is the first whose b is i's c. Seeing
+    // every face and ending at face 0 visits each once, each as the first face with its b: so
+    // the b's are distinct and the c's are the b's permuted, which also makes the c's met on
+    // the way the neighbours.
+    let (mut at, mut seen, mut above) = (0, 0u32, 0);
+    for _ in 0..d {
+        let want = c[at];
+        above += (want > v) as usize;
+        at = b.iter().position(|&x| x == want)?;
+        seen |= 1 << at;
     }
-    for i in 1..d {
-        if b[..i].contains(&b[i]) {
-            return None;
-        }
-    }
-    // Walk the cycle from face 0: the face after face i is the one whose b is i's c. Coming back
-    // to face 0 first at step d visits every face once, so the c's are the b's permuted.
-    let mut at = 0;
-    for step in 1..=d {
-        at = b[..d].iter().position(|&x| x == c[at])?;
-        if (at == 0) != (step == d) {
-            return None;
-        }
-    }
-    Some(b[..d].iter().filter(|&&u| u > v).count())
+    (at == 0 && seen == (1 << d) - 1).then_some(above)
 }
 
-/// Classify vertex `v` from its (non-degenerate) faces. O(d log d) in the degree d.
+/// Classify vertex `v` from the link edges `(b[i], c[i])` of its (non-degenerate) faces; when
+/// it has as many neighbours as faces (`out.len()`), write them into `out`, ascending.
+/// O(d log d) in the degree d.
 fn analyse_vertex(
     v: u32,
-    faces: &[u32],
-    triangles: &[[u32; 3]],
+    b: &[u32],
+    c: &[u32],
     s: &mut VertexScratch,
+    out: &mut [u32],
 ) -> VertexAnalysis {
-    if let Some(edges) = closed_fan(v, faces, triangles) {
+    if let Some(edges) = closed_fan(v, b, c) {
+        // The b's are the neighbours (see `closed_fan`).
+        sort_small(b, out);
         return VertexAnalysis {
-            degree: faces.len(),
+            degree: b.len(),
             edges,
             boundary_edges: 0,
             non_manifold_edges: 0,
@@ -972,22 +1022,18 @@ fn analyse_vertex(
             loop_vertex: false,
         };
     }
-    analyse_general(v, faces, triangles, s)
+    let a = analyse_general(v, b, c, s);
+    if a.degree == out.len() {
+        out.copy_from_slice(&s.corners);
+    }
+    a
 }
 
 /// [`analyse_vertex`] for any vertex, without the shortcut.
-fn analyse_general(
-    v: u32,
-    faces: &[u32],
-    triangles: &[[u32; 3]],
-    s: &mut VertexScratch,
-) -> VertexAnalysis {
-    s.link.clear();
+fn analyse_general(v: u32, b: &[u32], c: &[u32], s: &mut VertexScratch) -> VertexAnalysis {
     s.keys.clear();
     s.corners.clear();
-    for &t in faces {
-        let (b, c) = opposite_edge(&triangles[t as usize], v);
-        s.link.push((b, c));
+    for (&b, &c) in b.iter().zip(c) {
         // The face runs v → b → c → v.
         s.keys.push((b as u64) << 1);
         s.keys.push((c as u64) << 1 | 1);
@@ -1037,9 +1083,9 @@ fn analyse_general(
         // Boundary or non-manifold edge at v.
         a.fixed = true;
         a.non_manifold_vertex =
-            manifold && (ends != 2 || !link_connected(nbrs, &s.link, &mut s.parent));
+            manifold && (ends != 2 || !link_connected(nbrs, b, c, &mut s.parent));
         a.loop_vertex = manifold && !a.non_manifold_vertex && a.degree <= MAX_FREE_DEGREE;
-    } else if !link_connected(nbrs, &s.link, &mut s.parent) {
+    } else if !link_connected(nbrs, b, c, &mut s.parent) {
         a.fixed = true;
         a.non_manifold_vertex = true;
     }
@@ -1060,10 +1106,11 @@ fn write_neighbors(
     if out.len() == faces.len() && faces.len() <= FAN_LIMIT {
         // The interior vertex of a manifold (see `closed_fan`): its faces' b corners are distinct
         // and as many as its neighbours, so they are the neighbours.
-        for (o, &t) in out.iter_mut().zip(faces) {
-            *o = opposite_edge(&triangles[t as usize], v).0;
+        let mut b = [0; FAN_LIMIT];
+        for (x, &t) in b.iter_mut().zip(faces) {
+            *x = corner_after(&triangles[t as usize], v);
         }
-        out.sort_unstable();
+        sort_small(&b[..faces.len()], out);
         if out.windows(2).all(|w| w[0] < w[1]) {
             return;
         }
@@ -1083,6 +1130,68 @@ fn is_degenerate(t: &[u32; 3]) -> bool {
     t[0] == t[1] || t[1] == t[2] || t[0] == t[2]
 }
 
+/// The corner after `v` in triangle `t` (which has `v` once), without a branch to mispredict.
+#[inline]
+fn corner_after(t: &[u32; 3], v: u32) -> u32 {
+    let k = (t[1] == v) as usize + 2 * (t[2] == v) as usize;
+    t[[1, 2, 0][k]]
+}
+
+/// `x` into `out` (of the same length), ascending. Up to 8 entries (a vertex's neighbours, as a
+/// rule) through a sorting network: its comparisons, branch-free, cost less than the
+/// mispredicted branches of an insertion sort on ids that come in no useful order.
+#[inline]
+fn sort_small(x: &[u32], out: &mut [u32]) {
+    if x.len() > 8 {
+        out.copy_from_slice(x);
+        insertion_sort(out);
+        return;
+    }
+    // Padded with the largest id, which sorts last.
+    let mut a: [u32; 8] = std::array::from_fn(|k| x.get(k).copied().unwrap_or(u32::MAX));
+    sort8(&mut a);
+    out.copy_from_slice(&a[..x.len()]);
+}
+
+/// Sort 8 entries through a sorting network: the fewest comparators (19), branch-free.
+#[inline]
+fn sort8(a: &mut [u32; 8]) {
+    let mut exchange = |i: usize, j: usize| (a[i], a[j]) = (a[i].min(a[j]), a[i].max(a[j]));
+    exchange(0, 2);
+    exchange(1, 3);
+    exchange(4, 6);
+    exchange(5, 7);
+    exchange(0, 4);
+    exchange(1, 5);
+    exchange(2, 6);
+    exchange(3, 7);
+    exchange(0, 1);
+    exchange(2, 3);
+    exchange(4, 5);
+    exchange(6, 7);
+    exchange(2, 4);
+    exchange(3, 5);
+    exchange(1, 4);
+    exchange(3, 6);
+    exchange(1, 2);
+    exchange(3, 4);
+    exchange(5, 6);
+}
+
+/// Sort a short slice ascending.
+#[inline]
+fn insertion_sort(x: &mut [u32]) {
+    for i in 1..x.len() {
+        let y = x[i];
+        let mut j = i;
+        while j > 0 && x[j - 1] > y {
+            x[j] = x[j - 1];
+            j -= 1;
+        }
+        x[j] = y;
+    }
+}
+
 /// The two other corners of triangle `t` around `v`, in the triangle's cyclic order.
 #[inline]
 fn opposite_edge(t: &[u32; 3], v: u32) -> (u32, u32) {
@@ -1096,7 +1205,7 @@ fn opposite_edge(t: &[u32; 3], v: u32) -> (u32, u32) {
 }
 
 /// Whether the link edges of a vertex connect all its neighbours (one component).
-fn link_connected(nbrs: &[u32], link: &[(u32, u32)], parent: &mut Vec<usize>) -> bool {
+fn link_connected(nbrs: &[u32], b: &[u32], c: &[u32], parent: &mut Vec<usize>) -> bool {
     parent.clear();
     parent.extend(0..nbrs.len());
     fn find(parent: &mut [usize], mut x: usize) -> usize {
@@ -1107,7 +1216,7 @@ fn link_connected(nbrs: &[u32], link: &[(u32, u32)], parent: &mut Vec<usize>) ->
         x
     }
     let mut components = nbrs.len();
-    for &(b, c) in link {
+    for (&b, &c) in b.iter().zip(c) {
         // Neighbours are sorted, so local ids come from a binary search.
         let (Ok(lb), Ok(lc)) = (nbrs.binary_search(&b), nbrs.binary_search(&c)) else {
             return false;
@@ -1361,7 +1470,8 @@ mod tests {
         // vertex repeated (two cycles through 0, a pinch), and a double cover of the rim.
         let ring = |d: u32| -> Vec<[u32; 3]> { (1..=d).map(|k| [0, k, k % d + 1]).collect() };
         let mut cases: Vec<Vec<[u32; 3]>> = Vec::new();
-        for d in [3, 4, 6, 16, 17] {
+        let limit = FAN_LIMIT as u32;
+        for d in [3, 4, 6, limit, limit + 1] {
             cases.push(ring(d));
             let mut open = ring(d);
             open.pop();
@@ -1398,14 +1508,18 @@ mod tests {
             let topo = Topology::build(n as usize, tris).unwrap();
             for v in 0..n {
                 let faces = topo.faces_of(v);
-                if closed_fan(v, faces, tris).is_some() {
+                let (b, c): (Vec<u32>, Vec<u32>) = faces
+                    .iter()
+                    .map(|&t| opposite_edge(&tris[t as usize], v))
+                    .unzip();
+                let mut out = vec![0; faces.len()];
+                let a = analyse_vertex(v, &b, &c, &mut s, &mut out);
+                if closed_fan(v, &b, &c).is_some() {
                     shortcuts += 1;
-                    let fast = analyse_vertex(v, faces, tris, &mut s);
-                    assert_eq!(
-                        fast,
-                        analyse_general(v, faces, tris, &mut s),
-                        "{tris:?} at {v}"
-                    );
+                    assert_eq!(a, analyse_general(v, &b, &c, &mut s), "{tris:?} at {v}");
+                }
+                if a.degree == faces.len() {
+                    assert_eq!(out, topo.neighbors(v), "{tris:?} at {v}");
                 }
                 let mut want: Vec<u32> = faces
                     .iter()
@@ -1417,63 +1531,75 @@ mod tests {
                 assert_eq!(topo.neighbors(v), &want[..], "{tris:?} at {v}");
             }
         }
-        // The closed rings' centres (d <= 16) take the shortcut; nothing else in these cases.
+        // The closed rings' centres (d <= FAN_LIMIT) take the shortcut; nothing else here.
         assert_eq!(shortcuts, 4);
     }
 
     #[test]
     fn the_parallel_build_gives_the_plain_adjacency_for_any_thread_count() {
         // Over several chunks and blocks, in a shuffled vertex order (faces of a vertex scattered
-        // over the blocks), with degenerate triangles and unreferenced vertices.
+        // over the blocks), with degenerate triangles and unreferenced vertices; closed (the
+        // neighbours placed in pass 1) and with holes (placed by pass 2).
         let mesh = crate::shapes::icosphere(6);
         let n = mesh.positions.len() + 5;
         let perm = crate::shapes::permutation(n, 0x2545_f491_4f6c_dd1du64);
-        let mut tris: Vec<[u32; 3]> = mesh
+        let mut closed: Vec<[u32; 3]> = mesh
             .triangles
             .iter()
             .map(|t| t.map(|v| perm[v as usize]))
             .collect();
         for k in [0, 17, 5000, 40_000] {
-            tris.insert(k, [perm[k], perm[k], perm[k + 1]]);
+            closed.insert(k, [perm[k], perm[k], perm[k + 1]]);
         }
-        assert!(n > 4 * CHUNK && tris.len() > 4 * BLOCKS);
-        let mut faces_of: Vec<Vec<u32>> = vec![Vec::new(); n];
-        let mut nbrs: Vec<Vec<u32>> = vec![Vec::new(); n];
-        for (t, tri) in tris.iter().enumerate() {
-            if is_degenerate(tri) {
-                continue;
-            }
-            for &v in tri {
-                faces_of[v as usize].push(t as u32);
-                nbrs[v as usize].extend(tri.iter().filter(|&&u| u != v));
-            }
+        let mut open = closed.clone();
+        for k in [70_000, 30_000, 30_001, 9] {
+            open.remove(k);
         }
-        nbrs.iter_mut().for_each(|l| {
-            l.sort_unstable();
-            l.dedup();
-        });
-        let mut first = None;
-        for threads in [1, 2, 3] {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap();
-            let topo = pool.install(|| Topology::build(n, &tris)).unwrap();
-            for v in 0..n as u32 {
-                assert_eq!(topo.faces_of(v), &faces_of[v as usize][..], "faces of {v}");
-                assert_eq!(
-                    topo.neighbors(v),
-                    &nbrs[v as usize][..],
-                    "neighbours of {v}"
-                );
+        for tris in [closed, open] {
+            assert!(n > 4 * CHUNK && tris.len() > 4 * BLOCKS);
+            let mut faces_of: Vec<Vec<u32>> = vec![Vec::new(); n];
+            let mut nbrs: Vec<Vec<u32>> = vec![Vec::new(); n];
+            for (t, tri) in tris.iter().enumerate() {
+                if is_degenerate(tri) {
+                    continue;
+                }
+                for &v in tri {
+                    faces_of[v as usize].push(t as u32);
+                    nbrs[v as usize].extend(tri.iter().filter(|&&u| u != v));
+                }
             }
-            assert_eq!(topo.stats.degenerate_triangles, 4);
-            assert_eq!(topo.stats.unreferenced_vertices, 5);
-            let fixed = topo.fixed_mask().to_vec();
-            match &first {
-                None => first = Some((topo.stats, fixed)),
-                Some((stats, mask)) => assert!(*stats == topo.stats && *mask == fixed),
+            nbrs.iter_mut().for_each(|l| {
+                l.sort_unstable();
+                l.dedup();
+            });
+            let mut first = None;
+            for threads in [1, 2, 3] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                let topo = pool.install(|| Topology::build(n, &tris)).unwrap();
+                for v in 0..n as u32 {
+                    assert_eq!(topo.faces_of(v), &faces_of[v as usize][..], "faces of {v}");
+                    assert_eq!(
+                        topo.neighbors(v),
+                        &nbrs[v as usize][..],
+                        "neighbours of {v}"
+                    );
+                }
+                assert_eq!(topo.stats.degenerate_triangles, 4);
+                assert_eq!(topo.stats.unreferenced_vertices, 5);
+                let fixed = topo.fixed_mask().to_vec();
+                match &first {
+                    None => first = Some((topo.stats, fixed)),
+                    Some((stats, mask)) => assert!(*stats == topo.stats && *mask == fixed),
+                }
             }
+            let (stats, _) = first.unwrap();
+            assert_eq!(
+                stats.boundary_edges > 0,
+                tris.len() < mesh.triangles.len() + 4
+            );
         }
     }
 }
