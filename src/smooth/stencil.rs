@@ -284,8 +284,11 @@ fn apply_in<const N: usize, P: Field + ?Sized, S: Field + ?Sized>(
 #[inline]
 fn within_reach<const N: usize>(d: &[DVec3; N], radius2: f64) -> bool {
     let reach2 = MAX_REACH * MAX_REACH * radius2;
-    d.iter()
-        .all(|x| x.is_finite() && x.length_squared() <= reach2)
+    // Within a finite reach, the squared length is finite and not NaN, so every component is
+    // finite: only an infinite reach needs the components tested.
+    d.iter().all(|x| {
+        x.length_squared() <= reach2 && (reach2 < f64::INFINITY || x.is_finite())
+    })
 }
 
 /// Call `row(v, mask)` for every vertex v of the union of the ascending lists, in ascending order,
