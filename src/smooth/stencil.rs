@@ -21,6 +21,7 @@
 use glam::DVec3;
 
 use super::{Field, SweepStats, Topology, inv_deg};
+use crate::topology::TopologyParts;
 
 /// What a stencil kernel does after the energy minimisation.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -95,14 +96,63 @@ pub fn apply<const N: usize, P: Field + ?Sized, S: Field + ?Sized>(
     free: [u32; N],
     params: StencilParams,
 ) -> Outcome {
+    apply_in(topo, &Adjacency::of(topo), triangles, pos, sums, free, params)
+}
+
+/// The arrays of a [`Topology`] as plain slices, taken once per sweep: its accessors ask at
+/// every call whether an array is on the heap or mapped.
+struct Adjacency<'a>(TopologyParts<'a>);
+
+impl<'a> Adjacency<'a> {
+    fn of(topo: &'a Topology) -> Adjacency<'a> {
+        Adjacency(topo.parts())
+    }
+
+    #[inline(always)]
+    fn neighbors(&self, v: u32) -> &'a [u32] {
+        let (offsets, v) = (self.0.vv_offsets, v as usize);
+        &self.0.vv[offsets[v]..offsets[v + 1]]
+    }
+
+    #[inline(always)]
+    fn deg(&self, v: u32) -> usize {
+        let (offsets, v) = (self.0.vv_offsets, v as usize);
+        offsets[v + 1] - offsets[v]
+    }
+
+    #[inline(always)]
+    fn faces_of(&self, v: u32) -> &'a [u32] {
+        let (offsets, v) = (self.0.vf_offsets, v as usize);
+        &self.0.vf[offsets[v]..offsets[v + 1]]
+    }
+
+    #[inline(always)]
+    fn is_fixed(&self, v: u32) -> bool {
+        self.0.fixed[v as usize] != 0
+    }
+}
+
+/// [`apply`] with the topology's arrays already taken.
+fn apply_in<const N: usize, P: Field + ?Sized, S: Field + ?Sized>(
+    topo: &Topology,
+    adj: &Adjacency,
+    triangles: &[[u32; 3]],
+    pos: &mut P,
+    sums: &mut S,
+    free: [u32; N],
+    params: StencilParams,
+) -> Outcome {
     const { assert!(N >= 1 && N <= 8, "masks are u8") };
-    if free.iter().any(|&f| topo.is_fixed(f)) {
+    if free.iter().any(|&f| adj.is_fixed(f)) {
         return Outcome::SkippedFixed;
     }
 
     // Rows F ∪ N(F) = the merge of the free vertices' sorted neighbour lists (each free vertex is
     // in the others' lists); `mask` says which lists hold the row.
-    let lists: [&[u32]; N] = free.map(|f| topo.neighbors(f));
+    let mut lists: [&[u32]; N] = [&[]; N];
+    for (l, &f) in lists.iter_mut().zip(&free) {
+        *l = adj.neighbors(f);
+    }
     let centre = free.iter().fold(DVec3::ZERO, |s, &f| s + pos.get(f)) * (1.0 / N as f64);
     let mut sq = [0.0f64; N]; // Σ_{v∈N(f)} w_v²
     let mut cross = [[0.0f64; N]; N]; // Σ_{v∈N(f)∩N(g)} w_v², f < g
@@ -121,7 +171,7 @@ pub fn apply<const N: usize, P: Field + ?Sized, S: Field + ?Sized>(
                 // Never a free vertex (those are not fixed), so only a row is left out.
                 return;
             }
-            let w = inv_deg(topo.deg(v));
+            let w = inv_deg(adj.deg(v));
             let p = pos.get(v);
             let lap = sums.get(v) * w - p;
             for f in 0..N {
@@ -134,7 +184,6 @@ pub fn apply<const N: usize, P: Field + ?Sized, S: Field + ?Sized>(
                         }
                     }
                 } else if v == free[f] {
-                    lap_free[f] = lap;
                     free_mask[f] = mask;
                 }
             }
@@ -149,8 +198,15 @@ pub fn apply<const N: usize, P: Field + ?Sized, S: Field + ?Sized>(
         return Outcome::SkippedDegenerate;
     }
 
-    // Normal equations (KᵀK) d = −Kᵀ L.
-    let w_free: [f64; N] = std::array::from_fn(|f| inv_deg(lists[f].len()));
+    // Normal equations (KᵀK) d = −Kᵀ L. A free vertex's Laplacian is taken here rather than at
+    // its row, the same arithmetic, so that the rows need not carry it.
+    let mut w_free = [0.0f64; N];
+    for (w, l) in w_free.iter_mut().zip(&lists) {
+        *w = inv_deg(l.len());
+    }
+    for f in 0..N {
+        lap_free[f] = sums.get(free[f]) * w_free[f] - pos.get(free[f]);
+    }
     let mut m = [[0.0f64; N]; N];
     for f in 0..N {
         m[f][f] = 1.0 + sq[f];
@@ -160,13 +216,16 @@ pub fn apply<const N: usize, P: Field + ?Sized, S: Field + ?Sized>(
             m[g][f] = x;
         }
     }
-    let rhs: [DVec3; N] = std::array::from_fn(|f| lap_free[f] - weighted[f]);
+    let mut rhs = [DVec3::ZERO; N];
+    for f in 0..N {
+        rhs[f] = lap_free[f] - weighted[f];
+    }
     let Some(mut d) = solve_spd(m, rhs) else {
         return Outcome::SkippedDegenerate;
     };
 
     if params.volume {
-        match volume_translation(topo, triangles, pos, &free, centre, &d) {
+        match volume_translation(adj, triangles, pos, &free, centre, &d) {
             Some(w) => d.iter_mut().for_each(|x| *x += w),
             None => return Outcome::SkippedDegenerate,
         }
@@ -225,8 +284,11 @@ pub fn apply<const N: usize, P: Field + ?Sized, S: Field + ?Sized>(
 #[inline]
 fn within_reach<const N: usize>(d: &[DVec3; N], radius2: f64) -> bool {
     let reach2 = MAX_REACH * MAX_REACH * radius2;
-    d.iter()
-        .all(|x| x.is_finite() && x.length_squared() <= reach2)
+    // Within a finite reach, the squared length is finite and not NaN, so every component is
+    // finite: only an infinite reach needs the components tested.
+    d.iter().all(|x| {
+        x.length_squared() <= reach2 && (reach2 < f64::INFINITY || x.is_finite())
+    })
 }
 
 /// Call `row(v, mask)` for every vertex v of the union of the ascending lists, in ascending order,
@@ -295,7 +357,7 @@ pub(crate) fn after(tri: [u32; 3], v: u32) -> (u32, u32) {
 /// (a triangle stencil on a closed tetrahedron shrinks it to a point) cannot shrink the yardstick
 /// along with the gradient it measures.
 fn volume_translation<const N: usize, P: Field + ?Sized>(
-    topo: &Topology,
+    adj: &Adjacency,
     triangles: &[[u32; 3]],
     pos: &P,
     free: &[u32; N],
@@ -311,7 +373,7 @@ fn volume_translation<const N: usize, P: Field + ?Sized>(
         for fi in 0..2 {
             let (f, g) = (free[fi], free[1 - fi]);
             let mut single = DVec3::ZERO;
-            for &t in topo.faces_of(f) {
+            for &t in adj.faces_of(f) {
                 let (b, c) = after(triangles[t as usize], f);
                 let (b_free, c_free) = (b == g, c == g);
                 if !(b_free | c_free) {
@@ -328,11 +390,17 @@ fn volume_translation<const N: usize, P: Field + ?Sized>(
                     pos.get(b) - origin,
                     pos.get(c) - origin,
                 );
-                let db = if b_free { d[1] } else { DVec3::ZERO };
-                let dc = if c_free { d[1] } else { DVec3::ZERO };
-                shared_face(
-                    p, q, r, d[0], db, dc, b_free, c_free, &mut dv, &mut n, &mut scale,
-                );
+                // One call per case, so that each is compiled for its own free corners.
+                let (z, acc) = (DVec3::ZERO, (&mut dv, &mut n, &mut scale));
+                match (b_free, c_free) {
+                    (true, false) => {
+                        shared_face(p, q, r, d[0], d[1], z, true, false, acc.0, acc.1, acc.2)
+                    }
+                    (false, true) => {
+                        shared_face(p, q, r, d[0], z, d[1], false, true, acc.0, acc.1, acc.2)
+                    }
+                    _ => shared_face(p, q, r, d[0], d[1], d[1], true, true, acc.0, acc.1, acc.2),
+                }
             }
             dv += d[fi].dot(single);
             n += single;
@@ -343,7 +411,7 @@ fn volume_translation<const N: usize, P: Field + ?Sized>(
         // Faces where f is the only free corner (most of them): n_t = p_b × p_c does not depend
         // on f, and ΔV_t = d_f · n_t, so their n_t are summed first and dotted with d_f once.
         let mut single = DVec3::ZERO;
-        for &t in topo.faces_of(f) {
+        for &t in adj.faces_of(f) {
             let tri = triangles[t as usize];
             let (b, c) = after(tri, f);
             // Which other free vertices are corners of this face.
@@ -453,13 +521,10 @@ fn solve_spd<const N: usize>(m: [[f64; N]; N], b: [DVec3; N]) -> Option<[DVec3; 
             return None;
         }
         let inv = 1.0 / det;
-        return Some(std::array::from_fn(|i| {
-            if i == 0 {
-                (c * b[0] - o * b[1]) * inv
-            } else {
-                (a * b[1] - o * b[0]) * inv
-            }
-        }));
+        let mut x = [DVec3::ZERO; N];
+        x[0] = (c * b[0] - o * b[1]) * inv;
+        x[1] = (a * b[1] - o * b[0]) * inv;
+        return Some(x);
     }
     let mut l = [[0.0f64; N]; N];
     let mut inv_diag = [0.0f64; N];
@@ -509,9 +574,9 @@ pub fn sweep_edges<P: Field + ?Sized, S: Field + ?Sized>(
     edges: impl IntoIterator<Item = [u32; 2]>,
     params: StencilParams,
 ) -> SweepStats {
-    let mut stats = SweepStats::default();
+    let (adj, mut stats) = (Adjacency::of(topo), SweepStats::default());
     for e in edges {
-        count(&mut stats, apply(topo, triangles, pos, sums, e, params));
+        count(&mut stats, apply_in(topo, &adj, triangles, pos, sums, e, params));
     }
     stats
 }
@@ -526,10 +591,10 @@ pub fn sweep_triangles<P: Field + ?Sized, S: Field + ?Sized>(
     faces: impl IntoIterator<Item = u32>,
     params: StencilParams,
 ) -> SweepStats {
-    let mut stats = SweepStats::default();
+    let (adj, mut stats) = (Adjacency::of(topo), SweepStats::default());
     for t in faces {
         let free = triangles[t as usize];
-        count(&mut stats, apply(topo, triangles, pos, sums, free, params));
+        count(&mut stats, apply_in(topo, &adj, triangles, pos, sums, free, params));
     }
     stats
 }
