@@ -601,7 +601,7 @@ mod tests {
         };
         let n = t.len() as u32;
         // Vertex by vertex too, so that an angle given to another edge of its vertex is caught.
-        for range in (0..n).map(|i| i..i + 1).chain([0..n]) {
+        for range in (0..n).map(|i| i..i + 1).chain(std::iter::once(0..n)) {
             let (got, expected) = (
                 edge_sums(pos, &m.triangles, &t, range.clone()),
                 definition(range.clone()),
