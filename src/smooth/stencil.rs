@@ -96,7 +96,15 @@ pub fn apply<const N: usize, P: Field + ?Sized, S: Field + ?Sized>(
     free: [u32; N],
     params: StencilParams,
 ) -> Outcome {
-    apply_in(topo, &Adjacency::of(topo), triangles, pos, sums, free, params)
+    apply_in(
+        topo,
+        &Adjacency::of(topo),
+        triangles,
+        pos,
+        sums,
+        free,
+        params,
+    )
 }
 
 /// The arrays of a [`Topology`] as plain slices, taken once per sweep: its accessors ask at
@@ -286,9 +294,8 @@ fn within_reach<const N: usize>(d: &[DVec3; N], radius2: f64) -> bool {
     let reach2 = MAX_REACH * MAX_REACH * radius2;
     // Within a finite reach, the squared length is finite and not NaN, so every component is
     // finite: only an infinite reach needs the components tested.
-    d.iter().all(|x| {
-        x.length_squared() <= reach2 && (reach2 < f64::INFINITY || x.is_finite())
-    })
+    d.iter()
+        .all(|x| x.length_squared() <= reach2 && (reach2 < f64::INFINITY || x.is_finite()))
 }
 
 /// Call `row(v, mask)` for every vertex v of the union of the ascending lists, in ascending order,
@@ -576,7 +583,10 @@ pub fn sweep_edges<P: Field + ?Sized, S: Field + ?Sized>(
 ) -> SweepStats {
     let (adj, mut stats) = (Adjacency::of(topo), SweepStats::default());
     for e in edges {
-        count(&mut stats, apply_in(topo, &adj, triangles, pos, sums, e, params));
+        count(
+            &mut stats,
+            apply_in(topo, &adj, triangles, pos, sums, e, params),
+        );
     }
     stats
 }
@@ -594,7 +604,10 @@ pub fn sweep_triangles<P: Field + ?Sized, S: Field + ?Sized>(
     let (adj, mut stats) = (Adjacency::of(topo), SweepStats::default());
     for t in faces {
         let free = triangles[t as usize];
-        count(&mut stats, apply_in(topo, &adj, triangles, pos, sums, free, params));
+        count(
+            &mut stats,
+            apply_in(topo, &adj, triangles, pos, sums, free, params),
+        );
     }
     stats
 }

@@ -135,6 +135,43 @@ const FIXED: u8 = 1;
 const CREASE: u8 = 2;
 const LOOP: u8 = 4;
 
+/// Pass 2 of the build, for a mesh whose vertices do not all have as many neighbours as faces:
+/// the neighbour lists laid out by `vv_offsets`, each chunk of vertices into its own slice.
+fn pass_2(
+    storage: &Storage,
+    vv_offsets: &[usize],
+    vf_offsets: &[usize],
+    vf: &[u32],
+    triangles: &[[u32; 3]],
+    meter: &Meter,
+) -> Result<Buf<u32>> {
+    let n_vertices = vv_offsets.len() - 1;
+    let chunks = n_vertices.div_ceil(CHUNK);
+    let mut vv: Buf<u32> = storage.zeroed(vv_offsets[n_vertices])?;
+    let chunk_lens: Vec<usize> = (0..chunks)
+        .map(|c| {
+            let (lo, hi) = (c * CHUNK, ((c + 1) * CHUNK).min(n_vertices));
+            vv_offsets[hi] - vv_offsets[lo]
+        })
+        .collect();
+    split_lens(&mut vv, &chunk_lens)
+        .into_par_iter()
+        .enumerate()
+        .for_each_init(VertexScratch::default, |scratch, (c, out)| {
+            let range = c * CHUNK..((c + 1) * CHUNK).min(n_vertices);
+            let range_len = range.len() as u64;
+            let mut at = 0;
+            for v in range {
+                let faces = &vf[vf_offsets[v]..vf_offsets[v + 1]];
+                let deg = vv_offsets[v + 1] - vv_offsets[v];
+                write_neighbors(v as u32, faces, triangles, scratch, &mut out[at..at + deg]);
+                at += deg;
+            }
+            meter.add(range_len);
+        });
+    Ok(vv)
+}
+
 /// Reusable per-thread buffers of the per-vertex analysis.
 #[derive(Default)]
 struct VertexScratch {
@@ -335,40 +372,11 @@ impl Topology {
         if misfits == 0 {
             // The skipped pass 2, for the meter.
             meter.add(n_vertices as u64);
-            return Ok(Topology {
-                vv_offsets,
-                vv,
-                vf_offsets,
-                vf,
-                fixed,
-                stats,
-            });
+        } else {
+            // Pass 1's array goes before pass 2's is made, so the two are never held at once.
+            drop(std::mem::take(&mut vv));
+            vv = pass_2(storage, &vv_offsets, &vf_offsets, &vf, triangles, meter)?;
         }
-
-        // Pass 2: fill the neighbour lists, each chunk of vertices into its own slice.
-        drop(vv);
-        let mut vv: Buf<u32> = storage.zeroed(vv_offsets[n_vertices])?;
-        let chunk_lens: Vec<usize> = (0..chunks)
-            .map(|c| {
-                let (lo, hi) = (c * CHUNK, ((c + 1) * CHUNK).min(n_vertices));
-                vv_offsets[hi] - vv_offsets[lo]
-            })
-            .collect();
-        split_lens(&mut vv, &chunk_lens)
-            .into_par_iter()
-            .enumerate()
-            .for_each_init(VertexScratch::default, |scratch, (c, out)| {
-                let range = c * CHUNK..((c + 1) * CHUNK).min(n_vertices);
-                let range_len = range.len() as u64;
-                let mut at = 0;
-                for v in range {
-                    let faces = &vf[vf_offsets[v]..vf_offsets[v + 1]];
-                    let deg = vv_offsets[v + 1] - vv_offsets[v];
-                    write_neighbors(v as u32, faces, triangles, scratch, &mut out[at..at + deg]);
-                    at += deg;
-                }
-                meter.add(range_len);
-            });
         Ok(Topology {
             vv_offsets,
             vv,
