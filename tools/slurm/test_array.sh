@@ -29,7 +29,7 @@ in=$WORK/in
 out=$WORK/out
 mkdir -p "$in"
 n=10
-timeout_s=${TIMEOUT:-150}
+timeout_s=${TIMEOUT:-420}
 start=$(date +%s)
 
 fail() { echo "test_array: FAIL: $*" >&2; echo "test_array: files kept in $WORK" >&2; exit 1; }
@@ -52,9 +52,10 @@ for k in $(seq 0 $((n - 1))); do
 done
 say "generated $n meshes in $in"
 
-# 1000 iterations: a task runs for seconds, so that the kill below lands while task 4 runs even on
-# a loaded machine (at 300 it could finish both of its inputs first).
-"$bin" slurm-script "$in" "$out" --iterations 1000 --cpus 1 --max-array-size 5 \
+# 3000 iterations: a task runs for tens of seconds, so that the kill below lands while task 4 runs
+# even on a loaded machine, where Slurm may report a task RUNNING 15 s late (at 1000, under the
+# other MPI tests, task 4 once finished both of its inputs before the kill).
+"$bin" slurm-script "$in" "$out" --iterations 3000 --cpus 1 --max-array-size 5 \
     --job-name vcs-test > "$WORK/submit.sh"
 grep -q -- '--array=0-4' "$WORK/submit.sh" || fail "expected --array=0-4 in $WORK/submit.sh"
 submitted=$(bash "$WORK/submit.sh")
