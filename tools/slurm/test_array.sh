@@ -112,7 +112,7 @@ n = int(sys.argv[2])
 assert len(s["meshes"]) == n, len(s["meshes"])
 assert s["inputs"] == n and s["missing"] == [] and s["unreadable"] == [], s
 for m in s["meshes"]:
-    assert m["iterations"] == 1000 and m["triangles"] == 5120, m
+    assert m["iterations"] == 3000 and m["triangles"] == 5120, m
     assert abs(m["volume_pct"] - 100) < 1e-6, m
     assert m["slurm"] and m["slurm"]["array_job_id"], m
 EOF
