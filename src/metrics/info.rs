@@ -8,7 +8,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::mesh::Mesh;
-use crate::topology::Topology;
+use crate::topology::{Topology, corners_after};
 
 /// Everything `vcsmooth info` reports about a mesh.
 #[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
@@ -326,23 +326,25 @@ pub fn edge_sums(
         edges.resize(above.len(), EdgeFaces::default());
         for &t in topo.faces_of(i) {
             let tri = triangles[t as usize];
-            if tri.iter().all(|&v| v <= i) {
+            // Every corner of a face of `i` is a neighbour of `i`; those above it own the edges.
+            let (b, c) = corners_after(tri, i);
+            let (b_above, c_above) = (b > i, c > i);
+            if !(b_above | c_above) {
                 continue;
             }
-            let [a, b, c] = tri.map(|v| pos[v as usize]);
-            let n = (b - a).cross(c - a);
+            let [pa, pb, pc] = tri.map(|v| pos[v as usize]);
+            let n = (pb - pa).cross(pc - pa);
             let usable = n.length_squared() > 0.0 && n.is_finite();
-            for v in tri {
-                if v > i {
-                    // Every corner of a face of `i` is a neighbour of `i`.
-                    let k = if above.len() <= 16 {
-                        above.iter().position(|&j| j == v)
-                    } else {
-                        above.binary_search(&v).ok()
-                    };
-                    if let Some(k) = k {
-                        edges[k].add(n, usable);
-                    }
+            let slot = |v: u32| {
+                if above.len() <= 16 {
+                    above.iter().position(|&j| j == v)
+                } else {
+                    above.binary_search(&v).ok()
+                }
+            };
+            for (v, is_above) in [(b, b_above), (c, c_above)] {
+                if is_above && let Some(k) = slot(v) {
+                    edges[k].add(n, usable);
                 }
             }
         }

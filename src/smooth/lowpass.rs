@@ -29,7 +29,7 @@ use glam::DVec3;
 
 use super::stencil::{self, Outcome};
 use super::{Field, SweepStats};
-use crate::topology::Topology;
+use crate::topology::{Topology, corners_after};
 
 /// Graph radius of the restoring stencils (1 fails the quality target, 2 meets it).
 pub const RING_RADIUS: usize = 2;
@@ -205,7 +205,7 @@ pub fn apply_ring<P: Field + ?Sized, D: Field + ?Sized>(
     let (mut dv, mut n, mut scale) = (0.0, DVec3::ZERO, 0.0);
     for &a in &ring.members {
         for &t in topo.faces_of(a) {
-            let (b, c) = stencil::after(triangles[t as usize], a);
+            let (b, c) = corners_after(triangles[t as usize], a);
             let (b_free, c_free) = (free(b), free(c));
             // Each face once: at its smallest free corner.
             if (b_free && b < a) || (c_free && c < a) {

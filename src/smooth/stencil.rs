@@ -21,7 +21,7 @@
 use glam::DVec3;
 
 use super::{Field, SweepStats, Topology, inv_deg};
-use crate::topology::TopologyParts;
+use crate::topology::{TopologyParts, corners_after};
 
 /// What a stencil kernel does after the energy minimisation.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -345,18 +345,6 @@ fn merge_rows<const N: usize>(lists: [&[u32]; N], mut row: impl FnMut(u32, u8)) 
     }
 }
 
-/// The two corners of `tri` after `v`, in the face's cyclic order (`v` must be a corner).
-#[inline]
-pub(crate) fn after(tri: [u32; 3], v: u32) -> (u32, u32) {
-    if tri[0] == v {
-        (tri[1], tri[2])
-    } else if tri[1] == v {
-        (tri[2], tri[0])
-    } else {
-        (tri[0], tri[1])
-    }
-}
-
 /// Step 2: the common translation w of the free vertices (`pos`, to be displaced by `d`) that
 /// restores the volume of the faces touching them, computed about `origin` (the free vertices'
 /// centroid). `None` when the volume gradient is degenerate: `|n|²` tiny against `Σ|n_t|²`, each
@@ -381,7 +369,7 @@ fn volume_translation<const N: usize, P: Field + ?Sized>(
             let (f, g) = (free[fi], free[1 - fi]);
             let mut single = DVec3::ZERO;
             for &t in adj.faces_of(f) {
-                let (b, c) = after(triangles[t as usize], f);
+                let (b, c) = corners_after(triangles[t as usize], f);
                 let (b_free, c_free) = (b == g, c == g);
                 if !(b_free | c_free) {
                     let nt = (pos.get(b) - origin).cross(pos.get(c) - origin);
@@ -420,7 +408,7 @@ fn volume_translation<const N: usize, P: Field + ?Sized>(
         let mut single = DVec3::ZERO;
         for &t in adj.faces_of(f) {
             let tri = triangles[t as usize];
-            let (b, c) = after(tri, f);
+            let (b, c) = corners_after(tri, f);
             // Which other free vertices are corners of this face.
             let mut others = 0u8;
             for (g, &fg) in free.iter().enumerate() {

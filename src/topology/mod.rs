@@ -1125,7 +1125,7 @@ fn write_neighbors(
     }
     s.corners.clear();
     for &t in faces {
-        let (b, c) = opposite_edge(&triangles[t as usize], v);
+        let (b, c) = corners_after(triangles[t as usize], v);
         s.corners.push(b);
         s.corners.push(c);
     }
@@ -1200,9 +1200,10 @@ fn insertion_sort(x: &mut [u32]) {
     }
 }
 
-/// The two other corners of triangle `t` around `v`, in the triangle's cyclic order.
+/// The two other corners of triangle `t` after `v`, in the triangle's cyclic order (`v` must be
+/// a corner): the edge opposite `v`, oriented as the face runs.
 #[inline]
-fn opposite_edge(t: &[u32; 3], v: u32) -> (u32, u32) {
+pub fn corners_after(t: [u32; 3], v: u32) -> (u32, u32) {
     if t[0] == v {
         (t[1], t[2])
     } else if t[1] == v {
@@ -1518,7 +1519,7 @@ mod tests {
                 let faces = topo.faces_of(v);
                 let (b, c): (Vec<u32>, Vec<u32>) = faces
                     .iter()
-                    .map(|&t| opposite_edge(&tris[t as usize], v))
+                    .map(|&t| corners_after(tris[t as usize], v))
                     .unzip();
                 let mut out = vec![0; faces.len()];
                 let a = analyse_vertex(v, &b, &c, &mut s, &mut out);
