@@ -311,6 +311,8 @@ impl Stored {
     /// an integer type, finite in `f32`).
     pub fn round(&self, p: glam::DVec3) -> glam::DVec3 {
         let axis = |a: Axis, x: f64| match a {
+            // The common case, without the round trip through bytes (the same value).
+            Axis::Binary(ply::Scalar::F32) => f64::from(x as f32),
             Axis::Binary(t) => {
                 let mut bytes = [0u8; 8];
                 t.put(x, &mut bytes);
