@@ -155,7 +155,8 @@ fn a_file_run_reports_each_phase_to_its_end() {
     let input = dir.path().join("in.ply");
     // Level 8 (1.3M triangles) is the smallest sphere whose in-core estimate exceeds the 64M
     // minimum budget; many chunks of every loop.
-    vcsmooth::io::write_mesh(&input, &noisy_sphere(8, 0.3, 5)).unwrap();
+    let mesh = noisy_sphere(8, 0.3, 5);
+    vcsmooth::io::write_mesh(&input, &mesh).unwrap();
     let opts = Options {
         method: Method::Laplacian,
         iterations: 2,
@@ -188,11 +189,16 @@ fn a_file_run_reports_each_phase_to_its_end() {
         if settings.with_stats {
             want.push(Phase::Statistics);
         }
-        want.extend([Phase::Smooth, Phase::Write]);
+        want.extend([Phase::Smooth, Phase::Restore, Phase::Write]);
         assert_eq!(seen.phases(), want, "{name}");
         assert_eq!(seen.total(Phase::Read), size(&input), "{name}");
         assert_eq!(seen.total(Phase::Write), size(&output), "{name}");
         assert_eq!(seen.total(Phase::Smooth), 2, "{name}");
+        assert_eq!(
+            seen.total(Phase::Restore),
+            mesh.positions.len() as u64,
+            "{name}"
+        );
         assert!(
             std::fs::read(&output).unwrap() == std::fs::read(&quiet).unwrap(),
             "{name}: the output differs from an unobserved run's"
@@ -224,7 +230,7 @@ fn a_write_in_another_format_ends_at_its_size_and_an_automatic_stop_at_its_cap()
     assert_eq!(seen.total(Phase::Smooth), 200);
 }
 
-/// An in-memory run has no read and no write.
+/// An in-memory run has no read and no write; it puts the positions back in the caller's order.
 #[test]
 fn an_in_memory_run_reports_its_planning_and_smoothing() {
     let mut mesh = noisy_sphere(6, 0.3, 3);
@@ -242,10 +248,12 @@ fn an_in_memory_run_reports_its_planning_and_smoothing() {
             Phase::Topology,
             Phase::Schedule,
             Phase::Statistics,
-            Phase::Smooth
+            Phase::Smooth,
+            Phase::Restore
         ]
     );
     assert_eq!(recorder.total(Phase::Smooth), opts.iterations as u64);
+    assert_eq!(recorder.total(Phase::Restore), mesh.positions.len() as u64);
 }
 
 /// In a pipe (a batch log) nothing is drawn: stderr stays empty.

@@ -14,7 +14,7 @@ use crate::smooth::Options;
 
 /// Progress display for one command: a spinner for steps that report no progress, a bar with
 /// percentage and time left for the library's phases (reading, reordering, topology, colouring,
-/// statistics, writing), a bar for iterations.
+/// statistics, restoring the input order, writing), a bar for iterations.
 pub struct Progress {
     bar: Option<ProgressBar>,
     /// The iteration bar that [`Progress::smoothing`] or [`Progress::iterations`] asked for, drawn

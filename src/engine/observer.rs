@@ -30,6 +30,9 @@ pub enum Phase {
     /// The iterations (their cap with the automatic stop, which counts the rest as done when it
     /// stops). [`Observer::iteration`] tells more about each.
     Smooth,
+    /// Putting the smoothed positions back in the input's vertex order for the output, in items
+    /// (vertices placed).
+    Restore,
     /// Writing the output, in bytes of the file. The total is the expected size (the input's size
     /// for an output of the input's format, else an estimate), set to the size written at the end.
     Write,
@@ -45,6 +48,7 @@ impl Phase {
             Phase::Schedule => "colouring patches",
             Phase::Statistics => "measuring",
             Phase::Smooth => "smoothing",
+            Phase::Restore => "restoring input order",
             Phase::Write => "writing",
         }
     }
@@ -53,7 +57,7 @@ impl Phase {
     pub fn unit(self) -> Unit {
         match self {
             Phase::Read | Phase::Write => Unit::Bytes,
-            Phase::Reorder | Phase::Topology | Phase::Schedule => Unit::Items,
+            Phase::Reorder | Phase::Topology | Phase::Schedule | Phase::Restore => Unit::Items,
             Phase::Statistics => Unit::Steps,
             Phase::Smooth => Unit::Iterations,
         }
@@ -197,7 +201,8 @@ pub trait Observer: Send {
     fn phase_end(&mut self, _phase: Phase) {}
 
     /// Asked after each iteration (once [`Observer::iteration`] has seen it) and after each
-    /// phase before the write (reading, reordering, the topology, the schedule, the statistics):
+    /// phase before the write (reading, reordering, the topology, the schedule, the statistics,
+    /// restoring the input order):
     /// `true` ends the run there with [`Error::Interrupted`](crate::Error::Interrupted), before
     /// anything is written. A host that cannot end the process on a signal (the Python bindings) stops a
     /// long run this way; the cluster engine's ranks never ask.
@@ -336,6 +341,7 @@ mod tests {
             Phase::Topology,
             Phase::Schedule,
             Phase::Statistics,
+            Phase::Restore,
         ] {
             let mut stop = StopAfterPhase {
                 after,
@@ -346,7 +352,8 @@ mod tests {
                 crate::engine::run_file(&input, &output, &Options::default(), &engine, &mut stop);
             assert!(matches!(e, Err(Error::Interrupted)), "{after:?}: {e:?}");
             assert_eq!(stop.ended.last(), Some(&after), "{:?}", stop.ended);
-            assert_eq!(stop.iterations, 0, "{after:?}");
+            // Restoring the order comes after the iterations.
+            assert_eq!(stop.iterations == 0, after != Phase::Restore, "{after:?}");
             assert!(!output.exists(), "{after:?}");
         }
         // In memory: the plan's phases are asked too.

@@ -188,10 +188,16 @@ impl Plan {
     /// Copy the plan's (smoothed) positions into `out` in the input's vertex order, on the
     /// current pool.
     pub fn positions_in_input_order(&self, out: &mut [DVec3]) {
+        self.positions_in_input_order_metered(out, &Meter::default());
+    }
+
+    /// [`Plan::positions_in_input_order`], counting its work into `meter` (see
+    /// [`partition::scatter_metered`]).
+    pub fn positions_in_input_order_metered(&self, out: &mut [DVec3], meter: &Meter) {
         let Reordered {
             order, positions, ..
         } = &self.reordered;
-        partition::scatter(out, order, |new| positions[new]);
+        partition::scatter_metered(out, order, |new| positions[new], meter);
     }
 
     /// Set the plan's positions from `input`, given in the input's vertex order (to smooth the

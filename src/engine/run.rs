@@ -240,8 +240,11 @@ pub(crate) fn run_file_with(
             observer,
             |plan, obs| smooth(plan, &storage, obs),
         )?;
-        mesh.positions = storage.zeroed(n)?;
-        plan.positions_in_input_order(&mut mesh.positions);
+        mesh.positions = metered(observer, Phase::Restore, n as u64, |m| {
+            let mut positions = storage.zeroed(n)?;
+            plan.positions_in_input_order_metered(&mut positions, m);
+            Ok(positions)
+        })?;
         Ok((plan, smoothed))
     })?;
 
@@ -349,7 +352,11 @@ pub(crate) fn run_mesh(
             info
         });
         t.metrics += clock.elapsed().as_secs_f64();
-        plan.positions_in_input_order(&mut mesh.positions);
+        // Not `metered`: the caller's mesh is smoothed by now, so there is nothing left to stop.
+        let meter = Arc::new(Meter::new(mesh.positions.len() as u64));
+        observer.phase_start(Phase::Restore, &meter);
+        plan.positions_in_input_order_metered(&mut mesh.positions, &meter);
+        observer.phase_end(Phase::Restore);
         Ok(smoothed)
     })?;
     t.total = start.elapsed().as_secs_f64();

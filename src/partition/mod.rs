@@ -136,14 +136,30 @@ pub fn reorder_metered(
 /// cheaper than the scattered writes it shares out, and no unsafe code. The ranges are at most
 /// [`SCATTER_RANGES`], so that the reading does not grow with the thread count of a large node.
 pub fn scatter<T: Send>(out: &mut [T], index: &[u32], value: impl Fn(usize) -> T + Sync) {
+    scatter_metered(out, index, value, &Meter::default());
+}
+
+/// [`scatter`], counting into `meter` the slots of `out` written (all of them when `index` is a
+/// permutation), once per [`STEP`] of `index` that each range scans.
+pub fn scatter_metered<T: Send>(
+    out: &mut [T],
+    index: &[u32],
+    value: impl Fn(usize) -> T + Sync,
+    meter: &Meter,
+) {
     let ranges = rayon::current_num_threads().clamp(1, SCATTER_RANGES);
     let part = out.len().div_ceil(ranges).max(1);
     out.par_chunks_mut(part).enumerate().for_each(|(c, out)| {
         let lo = c * part;
-        for (k, &i) in index.iter().enumerate() {
-            if let Some(slot) = (i as usize).checked_sub(lo).and_then(|i| out.get_mut(i)) {
-                *slot = value(k);
+        for (s, step) in index.chunks(STEP).enumerate() {
+            let mut written = 0;
+            for (k, &i) in step.iter().enumerate() {
+                if let Some(slot) = (i as usize).checked_sub(lo).and_then(|i| out.get_mut(i)) {
+                    *slot = value(s * STEP + k);
+                    written += 1;
+                }
             }
+            meter.add(written);
         }
     });
 }
