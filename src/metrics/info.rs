@@ -316,22 +316,15 @@ pub fn edge_sums(
 ) -> EdgeSums {
     let mut sums = EdgeSums::default();
     let mut edges: Vec<EdgeFaces> = Vec::new();
-    // The arrays as plain slices, taken once: the accessors ask at every call whether an array is
-    // on the heap or mapped.
-    let parts = topo.parts();
-    let (vv, vf) = (
-        |v: usize| &parts.vv[parts.vv_offsets[v]..parts.vv_offsets[v + 1]],
-        |v: usize| &parts.vf[parts.vf_offsets[v]..parts.vf_offsets[v + 1]],
-    );
     for i in vertices {
-        let above = vv(i as usize);
+        let above = topo.neighbors(i);
         let above = &above[above.partition_point(|&j| j <= i)..];
         if above.is_empty() {
             continue;
         }
         edges.clear();
         edges.resize(above.len(), EdgeFaces::default());
-        for &t in vf(i as usize) {
+        for &t in topo.faces_of(i) {
             let tri = triangles[t as usize];
             // Every corner of a face of `i` is a neighbour of `i`; those above it own the edges.
             let (b, c) = corners_after(tri, i);
