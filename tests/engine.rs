@@ -393,7 +393,7 @@ fn statistics_describe_the_output_as_written_for_any_thread_count() {
             engine::Plan::new(&storage, &read.positions, &read.triangles, engine.layout()).unwrap();
         plan.set_positions_from_input(&io::read_mesh(output).unwrap().positions);
         assert_eq!(
-            serde_json::to_string(&plan.info(&read.source)).unwrap(),
+            serde_json::to_string(&plan.info(&read.source, &storage).unwrap()).unwrap(),
             serde_json::to_string(&report.output_stats).unwrap(),
             "{ext}: the output as read back"
         );

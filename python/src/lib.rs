@@ -289,7 +289,7 @@ fn info<'py>(
         Ok(InfoDoc {
             path: IN_MEMORY.to_string(),
             format: None,
-            info: undefined_as_nan(&vcsmooth::metrics::info(&mesh, &topo)),
+            info: undefined_as_nan(&vcsmooth::metrics::info(&mesh, &topo)?),
             carries: Default::default(),
         })
     })?;

@@ -199,6 +199,7 @@ pub fn run_file(
             budget_source,
             storage: "cluster",
             scratch_bytes: 0,
+            scratch_peak_bytes: 0,
             peak_anon: maxima[4] as u64,
             bytes_read: std::fs::metadata(input).map_or(0, |m| m.len()),
             bytes_written: std::fs::metadata(output).map_or(0, |m| m.len()),
@@ -275,7 +276,7 @@ fn ensure_plan(
     new_plan.crease(opts.crease_angle);
     t.add_preparation(&new_plan.timings);
     // Measured always: a resumed run may ask for a report that the first run did not.
-    let input_stats = Some(new_plan.info(&mesh.source));
+    let input_stats = Some(new_plan.info(&mesh.source, &storage)?);
     drop(mesh);
     // The ranks find the loops of `boundary: smooth` here rather than each reading every face.
     let loops = match opts.boundary {

@@ -213,9 +213,14 @@ impl Plan {
         });
     }
 
-    /// Statistics of the current positions (see [`reduce::geometry`] for the order of the sums).
-    pub fn info(&self, source: &crate::mesh::Source) -> crate::metrics::MeshInfo {
-        self.info_metered(source, &Meter::default())
+    /// Statistics of the current positions (see [`reduce::geometry`] for the order of the sums);
+    /// the working array of the component count is placed as `storage` says.
+    pub fn info(
+        &self,
+        source: &crate::mesh::Source,
+        storage: &Storage,
+    ) -> Result<crate::metrics::MeshInfo> {
+        self.info_metered(source, storage, &Meter::default())
     }
 
     /// [`Plan::info`], counting its two steps (the connectivity figures, the geometry) into
@@ -223,18 +228,20 @@ impl Plan {
     pub fn info_metered(
         &self,
         source: &crate::mesh::Source,
+        storage: &Storage,
         meter: &Meter,
-    ) -> crate::metrics::MeshInfo {
+    ) -> Result<crate::metrics::MeshInfo> {
         let mut info = crate::metrics::connectivity(
             self.len(),
             self.reordered.triangles.len(),
             source,
             &self.topology,
-        );
+            storage,
+        )?;
         meter.add(1);
         info.set_geometry(self.geometry());
         meter.add(1);
-        info
+        Ok(info)
     }
 
     /// The figures of [`Plan::info`] that depend on the positions, of the current positions.

@@ -127,7 +127,11 @@ pub struct MemoryStats {
     /// "heap" when the mesh fits the budget, else "scratch" (memory-mapped files); "cluster" for
     /// the ranks of the cluster engine.
     pub storage: &'static str,
+    /// Bytes of all the scratch files the run made, one after another.
     pub scratch_bytes: u64,
+    /// The most bytes of scratch files alive at one time: the free space the scratch directory
+    /// needed.
+    pub scratch_peak_bytes: u64,
     /// Peak anonymous resident memory (RssAnon), file-backed pages excluded; 0 if unknown.
     pub peak_anon: u64,
     pub bytes_read: u64,
@@ -233,6 +237,7 @@ pub(crate) fn run_file_with(
         mesh.positions = Buf::default();
         let smoothed = smooth_planned(
             &mut plan,
+            &storage,
             opts,
             engine,
             &mesh.source,
@@ -285,6 +290,7 @@ pub(crate) fn run_file_with(
             "heap"
         },
         scratch_bytes: storage.mapped_bytes(),
+        scratch_peak_bytes: storage.peak_mapped_bytes(),
         peak_anon: sampler.peak(),
         bytes_read,
         bytes_written: std::fs::metadata(output).map(|m| m.len()).unwrap_or(0),
@@ -339,6 +345,7 @@ pub(crate) fn run_mesh(
         plan.crease(opts.crease_angle);
         let mut smoothed = smooth_planned(
             &mut plan,
+            &storage,
             opts,
             engine,
             &mesh.source,
@@ -381,6 +388,7 @@ struct Smoothed {
 /// and these phases timed into `t`, and told to `observer`.
 fn smooth_planned(
     plan: &mut Plan,
+    storage: &Storage,
     opts: &Options,
     engine: &EngineSettings,
     source: &crate::mesh::Source,
@@ -392,7 +400,7 @@ fn smooth_planned(
     let clock = Instant::now();
     let input_stats = match engine.with_stats {
         true => Some(metered(observer, Phase::Statistics, 2, |m| {
-            Ok(plan.info_metered(source, m))
+            plan.info_metered(source, storage, m)
         })?),
         false => None,
     };

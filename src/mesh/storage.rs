@@ -46,7 +46,39 @@ pub struct Storage {
     budget: Option<u64>,
     /// Bytes of arrays placed in scratch files so far (for reports).
     mapped_bytes: AtomicU64,
+    /// Bytes of scratch files alive now, and the most at any time (the disk they need).
+    held: Arc<Held>,
     counter: AtomicUsize,
+}
+
+/// Scratch bytes alive and their high-water mark, shared with the arrays that hold them.
+#[derive(Debug, Default)]
+struct Held {
+    now: AtomicU64,
+    peak: AtomicU64,
+}
+
+/// One scratch file's share of [`Held`], given back when its array is dropped.
+struct Holding {
+    held: Arc<Held>,
+    bytes: u64,
+}
+
+impl Holding {
+    fn new(held: &Arc<Held>, bytes: u64) -> Holding {
+        let now = held.now.fetch_add(bytes, Ordering::Relaxed) + bytes;
+        held.peak.fetch_max(now, Ordering::Relaxed);
+        Holding {
+            held: held.clone(),
+            bytes,
+        }
+    }
+}
+
+impl Drop for Holding {
+    fn drop(&mut self) {
+        self.held.now.fetch_sub(self.bytes, Ordering::Relaxed);
+    }
 }
 
 impl Storage {
@@ -56,6 +88,7 @@ impl Storage {
             scratch: None,
             budget: None,
             mapped_bytes: AtomicU64::new(0),
+            held: Arc::default(),
             counter: AtomicUsize::new(0),
         }
     }
@@ -76,6 +109,7 @@ impl Storage {
             scratch: Some(dir.to_path_buf()),
             budget: None,
             mapped_bytes: AtomicU64::new(0),
+            held: Arc::default(),
             counter: AtomicUsize::new(0),
         })
     }
@@ -97,6 +131,11 @@ impl Storage {
     /// Total bytes placed in scratch files.
     pub fn mapped_bytes(&self) -> u64 {
         self.mapped_bytes.load(Ordering::Relaxed)
+    }
+
+    /// The most bytes of scratch files alive at one time: the disk space the run needed.
+    pub fn peak_mapped_bytes(&self) -> u64 {
+        self.held.peak.load(Ordering::Relaxed)
     }
 
     /// A zero-filled array of `len` elements. On the heap, an allocation the system refuses is an
@@ -141,8 +180,9 @@ impl Storage {
         // read-ahead advice (`Advisor`); its bytes are never read through it.
         let advice = unsafe { Mmap::map(&file) }.map_err(|e| Error::io(&path, e))?;
         self.mapped_bytes.fetch_add(bytes as u64, Ordering::Relaxed);
+        let holding = Holding::new(&self.held, bytes as u64);
         Ok(Buf {
-            inner: Inner::Map(map, Some(Arc::new(advice))),
+            inner: Inner::Map(map, Some(Arc::new(advice)), Some(holding)),
             len,
             _t: PhantomData,
         })
@@ -223,7 +263,7 @@ impl<T: Pod> Buf<T> {
         // SAFETY: as above; a read-only view for read-ahead advice only.
         let advice = unsafe { Mmap::map(&file) }.map_err(|e| Error::io(path, e))?;
         Ok(Buf {
-            inner: Inner::Map(map, Some(Arc::new(advice))),
+            inner: Inner::Map(map, Some(Arc::new(advice)), None),
             len,
             _t: PhantomData,
         })
@@ -253,7 +293,7 @@ impl<T: Pod> Buf<T> {
             })?;
         // Anonymous memory has no file to read ahead: no advice mapping.
         Ok(Buf {
-            inner: Inner::Map(map, None),
+            inner: Inner::Map(map, None, None),
             len,
             _t: PhantomData,
         })
@@ -319,7 +359,14 @@ fn reserve(file: &std::fs::File, bytes: u64) -> std::io::Result<()> {
 
 enum Inner<T> {
     Heap(Vec<T>),
-    Map(MmapMut, Option<Arc<Mmap>>),
+    /// The mapping, its read-ahead twin, and for a scratch file its share of the storage's
+    /// scratch bytes.
+    Map(
+        MmapMut,
+        Option<Arc<Mmap>>,
+        #[allow(dead_code, reason = "held for its drop, which gives the bytes back")]
+        Option<Holding>,
+    ),
 }
 
 /// Read-ahead advice for a mapped array, usable from another thread while the array itself is
@@ -383,7 +430,7 @@ impl<T: Pod> Buf<T> {
     pub fn advisor(&self) -> Option<Advisor> {
         match &self.inner {
             Inner::Heap(_) => None,
-            Inner::Map(_, advice) => advice.as_ref().map(|map| Advisor {
+            Inner::Map(_, advice, _) => advice.as_ref().map(|map| Advisor {
                 map: map.clone(),
                 elem: std::mem::size_of::<T>(),
             }),
@@ -472,7 +519,7 @@ impl<T: Pod> Deref for Buf<T> {
             Inner::Heap(v) => v,
             // SAFETY: the mapping is page-aligned (so aligned for any T), holds exactly
             // `len * size_of::<T>()` bytes, and `Pod` makes every bit pattern a valid T.
-            Inner::Map(m, _) => unsafe {
+            Inner::Map(m, ..) => unsafe {
                 std::slice::from_raw_parts(m.as_ptr().cast::<T>(), self.len)
             },
         }
@@ -484,7 +531,7 @@ impl<T: Pod> DerefMut for Buf<T> {
         match &mut self.inner {
             Inner::Heap(v) => v,
             // SAFETY: as in `deref`; `&mut self` makes the access exclusive.
-            Inner::Map(m, _) => unsafe {
+            Inner::Map(m, ..) => unsafe {
                 std::slice::from_raw_parts_mut(m.as_mut_ptr().cast::<T>(), self.len)
             },
         }
@@ -599,6 +646,25 @@ mod tests {
         );
         let h: Buf<u32> = Storage::heap().zeroed(5).unwrap();
         assert!(!h.is_mapped() && h.len() == 5);
+    }
+
+    #[test]
+    fn the_scratch_peak_counts_the_files_alive_at_once() {
+        let dir = tempfile::tempdir().unwrap();
+        let s = Storage::scratch(dir.path()).unwrap();
+        let a: Buf<u32> = s.zeroed(1000).unwrap();
+        let b: Buf<u32> = s.zeroed(3000).unwrap();
+        drop(a);
+        let c: Buf<u32> = s.zeroed(500).unwrap();
+        assert_eq!(s.peak_mapped_bytes(), 4 * 4000, "a and b together");
+        drop((b, c));
+        let d: Buf<u32> = s.zeroed(4500).unwrap();
+        assert_eq!(s.peak_mapped_bytes(), 4 * 4500, "d alone is more");
+        assert_eq!(s.mapped_bytes(), 4 * 9000);
+        let heap = Storage::heap();
+        let _e: Buf<u32> = heap.zeroed(1000).unwrap();
+        assert_eq!(heap.peak_mapped_bytes(), 0);
+        drop(d);
     }
 
     #[test]

@@ -7,7 +7,8 @@ use std::sync::atomic::Ordering::Relaxed;
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::mesh::Mesh;
+use crate::error::Result;
+use crate::mesh::{Mesh, Storage};
 use crate::topology::{Topology, corners_after};
 
 /// Everything `vcsmooth info` reports about a mesh.
@@ -76,7 +77,7 @@ pub struct MeshInfo {
 /// Measure `mesh` with its topology (`topo` built from `mesh.triangles` over `mesh.positions`).
 /// Faces that are not consistently oriented are measured as the smoothing sees them: oriented
 /// ([`Topology::orient`]) in a copy.
-pub fn info(mesh: &Mesh, topo: &Topology) -> MeshInfo {
+pub fn info(mesh: &Mesh, topo: &Topology) -> Result<MeshInfo> {
     if topo.stats.inconsistent_orientation_edges == 0 {
         return info_of(&mesh.positions, &mesh.triangles, &mesh.source, topo);
     }
@@ -94,10 +95,10 @@ pub fn info_of(
     triangles: &[[u32; 3]],
     source: &crate::mesh::Source,
     topo: &Topology,
-) -> MeshInfo {
-    let mut info = connectivity(pos.len(), triangles.len(), source, topo);
+) -> Result<MeshInfo> {
+    let mut info = connectivity(pos.len(), triangles.len(), source, topo, &Storage::heap())?;
     info.set_geometry(geometry(pos, triangles, topo));
-    info
+    Ok(info)
 }
 
 /// The counts of [`MeshInfo`] (everything but the [`Geometry`], left at zero) of a mesh of
@@ -108,14 +109,15 @@ pub fn connectivity(
     triangles: usize,
     source: &crate::mesh::Source,
     topo: &Topology,
-) -> MeshInfo {
+    storage: &Storage,
+) -> Result<MeshInfo> {
     debug_assert_eq!(
         topo.len(),
         vertices,
         "topology built for another vertex count"
     );
     let s = &topo.stats;
-    MeshInfo {
+    Ok(MeshInfo {
         vertices,
         triangles,
         input_faces: source.input_faces,
@@ -133,11 +135,11 @@ pub fn connectivity(
         pinned_vertices: s.pinned_vertices,
         crease_edges: s.crease_edges,
         crease_vertices: s.crease_vertices,
-        components: components(topo),
+        components: components(topo, storage)?,
         unreferenced_vertices: s.unreferenced_vertices,
         closed: s.boundary_edges == 0 && s.non_manifold_edges == 0 && triangles > 0,
         ..MeshInfo::default()
-    }
+    })
 }
 
 /// What [`MeshInfo`] reports of the positions, as sums and extremes so that parts of a mesh can
@@ -213,15 +215,28 @@ fn bounding((lo, hi): (DVec3, DVec3)) -> (DVec3, DVec3) {
 
 /// Connected components over the adjacency, counting only vertices with a neighbour: a
 /// union–find over the edges, in parallel on the current pool (a count, the same for any order
-/// of the unions).
-fn components(topo: &Topology) -> usize {
+/// of the unions). Its forest, one entry per vertex, is placed as `storage` says (a scratch file
+/// for a mesh larger than the memory budget).
+fn components(topo: &Topology, storage: &Storage) -> Result<usize> {
     // Vertices per work item: enough to make scheduling negligible.
     const GRAIN: usize = 1 << 14;
     let n = topo.len();
+    let mut forest = storage.zeroed::<u32>(n)?;
+    forest
+        .par_chunks_mut(GRAIN)
+        .enumerate()
+        .for_each(|(c, chunk)| {
+            for (k, p) in chunk.iter_mut().enumerate() {
+                *p = (c * GRAIN + k) as u32;
+            }
+        });
+    // SAFETY: `AtomicU32` has the size, alignment and bit validity of `u32`, and the exclusive
+    // borrow of `forest` keeps every other access out while this view lives.
+    let parent: &[AtomicU32] =
+        unsafe { std::slice::from_raw_parts(forest.as_mut_ptr().cast::<AtomicU32>(), n) };
     // parent[v] ≤ v always: a root is linked under a smaller root, so no cycle can form whatever
     // the interleaving. Relaxed is enough: each compare-exchange sees the latest value of its
     // slot, and a stale read only makes a find or a link retry; rayon's join orders the passes.
-    let parent: Vec<AtomicU32> = (0..n as u32).map(AtomicU32::new).collect();
     let find = |mut v: u32| loop {
         let p = parent[v as usize].load(Relaxed);
         if p == v {
@@ -255,11 +270,11 @@ fn components(topo: &Topology) -> usize {
                 }
             }
         });
-    (0..n as u32)
+    Ok((0..n as u32)
         .into_par_iter()
         .with_min_len(GRAIN)
         .filter(|&v| topo.deg(v) > 0 && parent[v as usize].load(Relaxed) == v)
-        .count()
+        .count())
 }
 
 /// Mean length over the undirected edges (0 for none), summed in ascending `(i, j)` order.
@@ -422,7 +437,7 @@ mod tests {
             .map(|k| DVec3::new(k as f64, (k * k) as f64, 0.0))
             .collect();
         let m = Mesh::new(pos, (1..=4).map(|k| [0, k, k + 1]).collect());
-        let i = info(&m, &topo(&m));
+        let i = info(&m, &topo(&m)).unwrap();
         assert_eq!(i.vertices, 6);
         assert_eq!(i.triangles, 4);
         assert_eq!(i.edges, 9);
@@ -444,7 +459,7 @@ mod tests {
         let mut tris = a.triangles.to_vec();
         tris.extend(a.triangles.iter().map(|t| t.map(|v| v + n)));
         let m = Mesh::new(pos, tris);
-        let i = info(&m, &topo(&m));
+        let i = info(&m, &topo(&m)).unwrap();
         assert_eq!(i.components, 2);
         assert_eq!(i.unreferenced_vertices, 1);
         assert!(i.closed);
@@ -457,7 +472,7 @@ mod tests {
     #[test]
     fn empty_mesh_is_all_zeros() {
         let m = Mesh::default();
-        let i = info(&m, &topo(&m));
+        let i = info(&m, &topo(&m)).unwrap();
         assert_eq!(i.components, 0);
         assert!(!i.closed);
         assert_eq!(
@@ -474,7 +489,7 @@ mod tests {
     fn sphere_info() {
         let m = icosphere(2);
         let t = topo(&m);
-        let i = info(&m, &t);
+        let i = info(&m, &t).unwrap();
         assert!(i.closed);
         assert_eq!(
             (i.vertices, i.triangles, i.edges, i.input_faces),

@@ -604,7 +604,7 @@ mod tests {
         let m = sub.to_mesh();
         assert_eq!(m.positions.len() as u64, sub.vertices());
         assert_eq!(m.triangles.len() as u64, sub.triangles());
-        let i = info(&m, &topo(&m));
+        let i = info(&m, &topo(&m)).unwrap();
         assert!(i.closed && i.components == 1 && i.non_manifold_vertices == 0);
         assert_eq!(i.vertices as i64 - i.edges as i64 + i.triangles as i64, 2);
         // The base vertices come first and unmoved; every new vertex lies on the base surface.
@@ -680,7 +680,7 @@ mod tests {
                 2,
                 "genus 0 at k = {k}"
             );
-            let i = info(&m, &t);
+            let i = info(&m, &t).unwrap();
             assert!(i.closed, "closed at k = {k}");
             assert_eq!(i.components, 1);
             assert_eq!(i.non_manifold_vertices, 0);
@@ -720,7 +720,7 @@ mod tests {
     fn torus_is_closed_genus_one_outward() {
         let m = torus(2);
         let t = topo(&m);
-        let i = info(&m, &t);
+        let i = info(&m, &t).unwrap();
         assert_eq!(m.positions.len(), 64 * 32);
         assert_eq!(m.triangles.len(), 2 * 64 * 32);
         assert!(i.closed);

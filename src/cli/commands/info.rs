@@ -67,7 +67,7 @@ pub fn run(cfg: &InfoConfig, progress: &mut Progress, out: &mut dyn Write) -> Re
     let doc = InfoDoc {
         path: cfg.input.display().to_string(),
         format: mesh.source.format.map(format_name),
-        info: undefined_as_nan(&metrics::info(&mesh, &topo)),
+        info: undefined_as_nan(&metrics::info(&mesh, &topo).map_err(|e| e.in_file(&cfg.input))?),
         carries: mesh
             .source
             .layout

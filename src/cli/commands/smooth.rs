@@ -348,6 +348,15 @@ fn report(
         crate::engine::memory::format_size(m.peak_anon)
     )
     .map_err(stdout_error)?;
+    if m.scratch_peak_bytes > 0 {
+        writeln!(
+            out,
+            "scratch: at most {} on disk at once ({} in all)",
+            crate::engine::memory::format_size(m.scratch_peak_bytes),
+            crate::engine::memory::format_size(m.scratch_bytes)
+        )
+        .map_err(stdout_error)?;
+    }
     if let Some(c) = &run.cluster {
         writeln!(
             out,
