@@ -385,7 +385,9 @@ struct Smoothed {
 
 /// The phases both runs share, on the current pool: the input's statistics (when asked) and
 /// `smooth(plan, observer)` (the output's statistics are each run's own); the plan's preparation
-/// and these phases timed into `t`, and told to `observer`.
+/// and these phases timed into `t`, and told to `observer`. `storage` places the statistics'
+/// working arrays as it placed the plan's.
+#[allow(clippy::too_many_arguments)]
 fn smooth_planned(
     plan: &mut Plan,
     storage: &Storage,
