@@ -430,6 +430,27 @@ mod tests {
     }
 
     #[test]
+    fn the_component_forest_goes_where_the_storage_puts_it() {
+        // Two spheres apart: two components, counted the same from a scratch file.
+        let a = icosphere(3);
+        let mut tris = a.triangles.to_vec();
+        let n = a.positions.len() as u32;
+        tris.extend(a.triangles.iter().map(|t| t.map(|v| v + n)));
+        let t = Topology::build(2 * n as usize, &tris).unwrap();
+        let source = crate::mesh::Source::default();
+        let heap = connectivity(2 * n as usize, tris.len(), &source, &t, &Storage::heap()).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let scratch = Storage::scratch(dir.path()).unwrap();
+        let mapped = connectivity(2 * n as usize, tris.len(), &source, &t, &scratch).unwrap();
+        assert_eq!((heap.components, mapped.components), (2, 2));
+        assert_eq!(
+            scratch.mapped_bytes(),
+            4 * 2 * n as u64,
+            "one u32 per vertex, mapped"
+        );
+    }
+
+    #[test]
     fn open_fan_has_boundary_and_one_component() {
         // Centre 0, rim 1..=5, four triangles not closing the fan: spokes 0-1 and 0-5 and the
         // four rim edges are boundary.

@@ -98,15 +98,16 @@ pub fn schedule_metered(topo: &Topology, patches: &[Patch], meter: &Meter) -> Sc
             let rings = rings_outside(topo, p, RING_CONFLICT_RINGS);
             let within = |conflict: usize, halo: usize| {
                 let halo = rings.iter().take(halo).map(|r| r.len() as u32).sum();
-                let mut others: Vec<u32> = rings
-                    .iter()
-                    .take(conflict)
-                    .flatten()
-                    .map(|&v| owner(v))
-                    .collect();
+                // A patch has a handful of near patches: gathered as found, so that what each
+                // patch keeps is that handful, not one entry per vertex of its rings.
+                let mut others: Vec<u32> = Vec::new();
+                for &v in rings.iter().take(conflict).flatten() {
+                    let b = owner(v);
+                    if b as usize > a && !others.contains(&b) {
+                        others.push(b);
+                    }
+                }
                 others.sort_unstable();
-                others.dedup();
-                others.retain(|&b| b as usize > a);
                 Near { others, halo }
             };
             let near = [
