@@ -21,15 +21,9 @@ level="${2:-7}"
 budget="${3:-1G}"
 iterations="${4:-2}"
 source="${5:-$here/../shared/meshes/stanford-bunny.ply}"
-mkdir -p "$work"
-cargo build --release --manifest-path "$here/Cargo.toml" >&2
-bin="$here/target/release/vcsmooth"
-name="$(basename "${source%.*}")"
-input="$work/$name-x4^$level.ply"
-if [ ! -f "$input" ]; then
-  echo "generating $input (not timed)" >&2
-  "$bin" generate mesh "$input" --from "$source" --subdivide "$level" --noise 0.3
-fi
+# shellcheck source=tools/subdivided_input.sh
+. "$here/tools/subdivided_input.sh"
+subdivided_input "$work" "$level" "$source"
 triangles=$(python3 -c "
 import re, sys
 head = open(sys.argv[1], 'rb').read(4096).split(b'end_header')[0].decode('ascii', 'replace')

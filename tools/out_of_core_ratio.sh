@@ -8,7 +8,8 @@
 # Defaults: /tmp/vcsmooth-large, level 6 of ../shared/meshes/kitten-25k.ply (103,407,616
 # triangles: the mesh of tools/large_run.sh), 3 rounds, 2 iterations. The in-core run needs about
 # 95 bytes per triangle of memory (9.2 GiB at level 6); the out-of-core one about as much free
-# disk in WORK_DIR, beside 2 × 19 bytes per triangle for the input and output.
+# disk in WORK_DIR, beside 2 × 19 bytes per triangle for the input and output. BUDGET (default
+# 1G) is the out-of-core runs' --memory-budget; the mesh must be larger than it.
 set -euo pipefail
 here="$(cd "$(dirname "$0")/.." && pwd)"
 work="${1:-/tmp/vcsmooth-large}"
@@ -16,20 +17,15 @@ level="${2:-6}"
 rounds="${3:-3}"
 iterations="${4:-2}"
 source="${5:-$here/../shared/meshes/kitten-25k.ply}"
-mkdir -p "$work"
-cargo build --release --manifest-path "$here/Cargo.toml" >&2
-bin="$here/target/release/vcsmooth"
-input="$work/$(basename "${source%.*}")-x4^$level.ply"
-if [ ! -f "$input" ]; then
-  echo "generating $input (not timed)" >&2
-  "$bin" generate mesh "$input" --from "$source" --subdivide "$level" --noise 0.3
-fi
+# shellcheck source=tools/subdivided_input.sh
+. "$here/tools/subdivided_input.sh"
+subdivided_input "$work" "$level" "$source"
 trap 'rm -f "$work/ratio-out.ply"' EXIT
 reports=()
 for r in $(seq 1 "$rounds"); do
   for mode in in-core out-of-core; do
     extra=()
-    [ "$mode" = out-of-core ] && extra=(--memory-budget 1G --scratch "$work")
+    [ "$mode" = out-of-core ] && extra=(--memory-budget "${BUDGET:-1G}" --scratch "$work")
     sync
     "$bin" smooth "$input" "$work/ratio-out.ply" --method vcs --iterations "$iterations" \
       "${extra[@]}" --report "$work/ratio-$mode-$r.json" > /dev/null
@@ -53,6 +49,9 @@ for path in sys.argv[1:]:
           + f" s, {rate:.2f} M edge stencils/s; total {t['total']:.1f} s, "
           f"peak anonymous {r['memory']['peak_anon'] / 2**30:.2f} GiB, "
           f"scratch at most {r['memory']['scratch_peak_bytes'] / 2**30:.2f} GiB")
+if not rates["scratch"]:
+    sys.exit("out_of_core_ratio: the mesh fits the budget, so no run went out of core; "
+             "take a higher level or a lower BUDGET")
 a, b = statistics.median(rates["heap"]), statistics.median(rates["scratch"])
 print(f"median: in core {a:.2f}, out of core {b:.2f} M edge stencils/s: out of core = {b / a:.2f}x in core")
 PY
