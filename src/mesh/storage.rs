@@ -44,16 +44,15 @@ pub struct Storage {
     scratch: Option<PathBuf>,
     /// The run's memory budget, named when a heap array cannot be allocated.
     budget: Option<u64>,
-    /// Bytes of arrays placed in scratch files so far (for reports).
-    mapped_bytes: AtomicU64,
-    /// Bytes of scratch files alive now, and the most at any time (the disk they need).
+    /// Bytes of scratch files: made so far, alive now, the most at any time (for reports).
     held: Arc<Held>,
     counter: AtomicUsize,
 }
 
-/// Scratch bytes alive and their high-water mark, shared with the arrays that hold them.
+/// Scratch bytes made in all, alive now and at most, shared with the arrays that hold them.
 #[derive(Debug, Default)]
 struct Held {
+    total: AtomicU64,
     now: AtomicU64,
     peak: AtomicU64,
 }
@@ -66,6 +65,7 @@ struct Holding {
 
 impl Holding {
     fn new(held: &Arc<Held>, bytes: u64) -> Holding {
+        held.total.fetch_add(bytes, Ordering::Relaxed);
         let now = held.now.fetch_add(bytes, Ordering::Relaxed) + bytes;
         held.peak.fetch_max(now, Ordering::Relaxed);
         Holding {
@@ -87,7 +87,6 @@ impl Storage {
         Storage {
             scratch: None,
             budget: None,
-            mapped_bytes: AtomicU64::new(0),
             held: Arc::default(),
             counter: AtomicUsize::new(0),
         }
@@ -108,7 +107,6 @@ impl Storage {
         Ok(Storage {
             scratch: Some(dir.to_path_buf()),
             budget: None,
-            mapped_bytes: AtomicU64::new(0),
             held: Arc::default(),
             counter: AtomicUsize::new(0),
         })
@@ -130,7 +128,7 @@ impl Storage {
 
     /// Total bytes placed in scratch files.
     pub fn mapped_bytes(&self) -> u64 {
-        self.mapped_bytes.load(Ordering::Relaxed)
+        self.held.total.load(Ordering::Relaxed)
     }
 
     /// The most bytes of scratch files alive at one time: the disk space the run needed.
@@ -179,7 +177,6 @@ impl Storage {
         // SAFETY: a second, read-only view of the same file, used only to give the kernel
         // read-ahead advice (`Advisor`); its bytes are never read through it.
         let advice = unsafe { Mmap::map(&file) }.map_err(|e| Error::io(&path, e))?;
-        self.mapped_bytes.fetch_add(bytes as u64, Ordering::Relaxed);
         let holding = Holding::new(&self.held, bytes as u64);
         Ok(Buf {
             inner: Inner::Map(map, Some(Arc::new(advice)), Some(holding)),
