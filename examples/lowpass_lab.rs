@@ -182,6 +182,34 @@ fn local_vol_by(
     (v / 6.0, n / 6.0)
 }
 
+/// As [`local_vol_by`], the gradient for the translation field `weight(u) · t` (0: not free).
+fn local_vol_weighted(
+    p: &[DVec3],
+    tris: &[[u32; 3]],
+    faces: &[u32],
+    weight: impl Fn(usize) -> f64,
+    o: DVec3,
+) -> (f64, DVec3) {
+    let mut v = 0.0;
+    let mut n = DVec3::ZERO;
+    for &f in faces {
+        let tr = tris[f as usize];
+        let q = [
+            p[tr[0] as usize] - o,
+            p[tr[1] as usize] - o,
+            p[tr[2] as usize] - o,
+        ];
+        v += q[0].dot(q[1].cross(q[2]));
+        for k in 0..3 {
+            let w = weight(tr[k] as usize);
+            if w != 0.0 {
+                n += q[(k + 1) % 3].cross(q[(k + 2) % 3]) * w;
+            }
+        }
+    }
+    (v / 6.0, n / 6.0)
+}
+
 fn vertex_normals(p: &[DVec3], tris: &[[u32; 3]], t: &Topo) -> Vec<DVec3> {
     let mut nrm = vec![DVec3::ZERO; p.len()];
     for tr in tris {
@@ -347,6 +375,8 @@ fn main() {
     let mut rings: Vec<Vec<usize>> = Vec::new();
     let mut rcnt = vec![0u32; n];
     let mut stamp = vec![0u32; n];
+    let mut ringd: Vec<Vec<u8>> = Vec::new();
+    let mut weight = vec![0.0f64; n];
     let mut rows: Vec<usize> = Vec::new();
     for it in 1..=iters {
         let before = p.clone();
@@ -543,16 +573,19 @@ fn main() {
                 if rings.is_empty() {
                     for v in 0..n {
                         let mut set = vec![];
+                        let mut dist = vec![];
                         if !t.fixed[v] {
                             set.push(v);
+                            dist.push(0u8);
                             let mut frontier = vec![v];
-                            for _ in 0..r {
+                            for d in 0..r {
                                 let mut next = vec![];
                                 for &u in &frontier {
                                     for &w in &t.nb[t.nb_off[u]..t.nb_off[u + 1]] {
                                         let w = w as usize;
                                         if !t.fixed[w] && !set.contains(&w) {
                                             set.push(w);
+                                            dist.push(d as u8 + 1);
                                             next.push(w);
                                         }
                                     }
@@ -564,8 +597,13 @@ fn main() {
                             rcnt[u] += 1;
                         }
                         rings.push(set);
+                        ringd.push(dist);
                     }
                 }
+                // w1=, w2=, w3=: the step-2 translation tapered by graph distance from the stencil's
+                // centre (weight 1 at the centre); all displacements stay parallel, so the volume
+                // is still linear in the step and restored exactly
+                let taper = [1.0, g("w1", 1.0), g("w2", 1.0), g("w3", 1.0)];
                 let d: Vec<DVec3> = (0..n)
                     .map(|v| {
                         if rcnt[v] > 0 {
@@ -581,16 +619,18 @@ fn main() {
                         continue;
                     }
                     stencil_faces(&t, free, &mut faces);
-                    for &u in free {
+                    for (&u, &du) in free.iter().zip(&ringd[v]) {
                         stamp[u] = v as u32 + 1;
+                        weight[u] = taper[du as usize];
                     }
                     let o = p[v];
                     let mark = |u: usize| stamp[u] == v as u32 + 1;
+                    let wt = |u: usize| if mark(u) { weight[u] } else { 0.0 };
                     let (vol0, _) = local_vol_by(&p, &tris, &faces, mark, o);
                     for &u in free {
                         p[u] += d[u];
                     }
-                    let (vol1, nv) = local_vol_by(&p, &tris, &faces, mark, o);
+                    let (vol1, nv) = local_vol_weighted(&p, &tris, &faces, wt, o);
                     let nn = nv.length_squared();
                     if !(nn > 0.0) || !nn.is_finite() {
                         skipped += 1;
@@ -598,7 +638,7 @@ fn main() {
                     }
                     let w = nv * ((vol0 - vol1) / nn);
                     for &u in free {
-                        p[u] += w;
+                        p[u] += w * weight[u];
                     }
                 }
             }

@@ -627,10 +627,15 @@ impl<'a> RankRun<'a> {
             auto.resume(mesh.topo, &removed, stopped, &mut self);
         }
         let first = self.state.done + 1;
+        let mut counts: Buf<u8> = match opts.method {
+            crate::smooth::Method::VcsLowpass => Buf::sparse(n)?,
+            _ => Buf::default(),
+        };
         let buffers = Buffers {
             pos: &mut pos,
             scratch: &mut scratch,
             prev: &mut prev,
+            counts: &mut counts,
             input: input
                 .as_deref()
                 .filter(|_| opts.max_deviation.is_some())

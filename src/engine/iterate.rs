@@ -106,6 +106,9 @@ pub struct Buffers<'b> {
     pub scratch: &'b mut [DVec3],
     /// The stencil methods' copy before a measured sweep (may be empty for Jacobi methods).
     pub prev: &'b mut [DVec3],
+    /// `vcs-lowpass`'s stencil sizes (see [`lowpass::counts_into`]), counted by the loop before
+    /// its first iteration; empty for the other methods.
+    pub counts: &'b mut [u8],
     /// The input positions, read when the options bound the deviation (`max_deviation`);
     /// empty otherwise.
     pub input: &'b [DVec3],
@@ -228,6 +231,7 @@ impl Run<'_, '_> {
             pos,
             scratch: sums,
             prev,
+            counts,
             input,
             mut auto,
         } = buf;
@@ -251,6 +255,15 @@ impl Run<'_, '_> {
             // each iteration leaves them the same in all.
             self.share.gather(pos, loops.vertices());
         }
+        if lowpass {
+            let topo = mesh.topo;
+            let first = owned.start;
+            on_pool(&*self.share, || {
+                reduce::for_chunks_mut(&mut counts[owned.clone()], |at, out| {
+                    lowpass::counts_into(topo, out, first + at)
+                })
+            });
+        }
         for it in first..=total {
             let wanted = self.when.wanted(it, total);
             // An automatically stopped run measures every displacement (the rule of lem, vcs and
@@ -259,7 +272,7 @@ impl Run<'_, '_> {
             let start = Instant::now();
             if lowpass {
                 // `prev` holds the λ|μ pair's result until the shares are taken from it.
-                self.lowpass_shares(pos, sums, prev);
+                self.lowpass_shares(pos, sums, prev, counts);
             }
             if measure {
                 let now = &pos[owned.clone()];
@@ -391,7 +404,13 @@ impl Run<'_, '_> {
     /// `vcs-lowpass`'s step-1 shares into `shares` (see [`lowpass::shares_into`]): a λ|μ pair
     /// from `pos` through `shares` into `pair`, each step exchanged, then the shares from `pos`
     /// and `pair`. Every entry depends only on `pos`, so any split gives the same bits.
-    fn lowpass_shares(&mut self, pos: &[DVec3], shares: &mut [DVec3], pair: &mut [DVec3]) {
+    fn lowpass_shares(
+        &mut self,
+        pos: &[DVec3],
+        shares: &mut [DVec3],
+        pair: &mut [DVec3],
+        counts: &[u8],
+    ) {
         let topo = self.mesh.topo;
         let owned = self.share.owned();
         let (lambda, mu) = (self.opts.lambda, self.opts.mu);
@@ -412,7 +431,8 @@ impl Run<'_, '_> {
         let pair: &[DVec3] = pair;
         on_pool(&*self.share, || {
             reduce::for_chunks_mut(&mut shares[owned.clone()], |at, out| {
-                lowpass::shares_into(topo, pos, pair, out, first + at)
+                let counts = &counts[first + at..first + at + out.len()];
+                lowpass::shares_into(topo, pos, pair, counts, out, first + at)
             })
         });
         // A stencil of an owned vertex reaches two rings out, whose shares other processes own.

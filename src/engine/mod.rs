@@ -135,6 +135,8 @@ impl Plan {
         let n = reordered.positions.len();
         let mut prev: Buf<DVec3> = storage.zeroed(if opts.method.is_jacobi() { 0 } else { n })?;
         let mut scratch: Buf<DVec3> = storage.zeroed(n)?;
+        let lowpass = opts.method == crate::smooth::Method::VcsLowpass;
+        let mut counts: Buf<u8> = storage.zeroed(if lowpass { n } else { 0 })?;
         // The input positions, for a deviation bound: in the plan's storage (scratch out of core).
         let input: Buf<DVec3> = match opts.max_deviation {
             Some(_) => storage.copy_of(&reordered.positions)?,
@@ -175,6 +177,7 @@ impl Plan {
                 pos,
                 scratch: &mut scratch,
                 prev: &mut prev,
+                counts: &mut counts,
                 input: &input,
                 auto: auto.as_mut(),
             };

@@ -29,7 +29,7 @@ use glam::DVec3;
 
 use super::stencil::{self, Outcome};
 use super::{Field, SweepStats};
-use crate::topology::{Topology, corners_after};
+use crate::topology::{Topology, TopologyParts, corners_after};
 
 /// Graph radius of the restoring stencils (1 fails the quality target, 2 meets it).
 pub const RING_RADIUS: usize = 2;
@@ -53,6 +53,8 @@ pub struct Ring {
     /// Open addressing, linear probing: `stamp << 32 | vertex`; a slot of another stamp is empty,
     /// so clearing is one increment.
     slots: Vec<u64>,
+    /// `32 − log2(slots.len())`: the hash keeps the product's top bits.
+    shift: u32,
     stamp: u32,
 }
 
@@ -61,6 +63,7 @@ impl Default for Ring {
         Ring {
             members: Vec::with_capacity(64),
             slots: vec![0; 128],
+            shift: 32 - 7,
             stamp: 1,
         }
     }
@@ -80,9 +83,8 @@ impl Ring {
     #[inline(always)]
     fn slot(&self, v: u32) -> (usize, bool) {
         let mask = self.slots.len() - 1;
-        let bits = self.slots.len().trailing_zeros();
         // Fibonacci hashing: the top bits of the product spread consecutive ids.
-        let mut at = (v.wrapping_mul(0x9E37_79B9) >> (32 - bits)) as usize;
+        let mut at = (v.wrapping_mul(0x9E37_79B9) >> self.shift) as usize;
         let want = (self.stamp as u64) << 32 | v as u64;
         loop {
             let e = self.slots[at];
@@ -96,21 +98,27 @@ impl Ring {
         }
     }
 
+    /// Insert `v`; [`Ring::reserve`] must have made room for it.
     #[inline(always)]
     fn insert(&mut self, v: u32) {
         let (at, found) = self.slot(v);
         if !found {
             self.slots[at] = (self.stamp as u64) << 32 | v as u64;
             self.members.push(v);
-            if self.members.len() * 2 > self.slots.len() {
-                self.grow();
-            }
         }
     }
 
-    /// Twice the slots, the members placed again (a vertex of unusually high valence).
-    fn grow(&mut self) {
-        self.slots = vec![0; self.slots.len() * 2];
+    /// Room for `more` members beyond those held, the table at most half full (a vertex of
+    /// unusually high valence doubles it, the members placed again).
+    #[inline]
+    fn reserve(&mut self, more: usize) {
+        let need = (self.members.len() + more) * 2;
+        if need <= self.slots.len() {
+            return;
+        }
+        let len = need.next_power_of_two();
+        self.slots = vec![0; len];
+        self.shift = 32 - len.trailing_zeros();
         self.stamp = 1;
         for k in 0..self.members.len() {
             let v = self.members[k];
@@ -131,17 +139,20 @@ impl Ring {
 /// relation is symmetric (a path of movable vertices reversed is one), so `u ∈ F_v ⇔ v ∈ F_u`
 /// and the number of stencils holding `u` is `|F_u|`: no per-vertex count has to be stored.
 /// With `sorted` false the members stay in the order found (enough for counting them).
-pub fn ring_of(topo: &Topology, v: u32, ring: &mut Ring, sorted: bool) {
+pub fn ring_of(topo: &TopologyParts, v: u32, ring: &mut Ring, sorted: bool) {
     const { assert!(RING_RADIUS == 2, "ring_of walks exactly two rings") };
     ring.clear();
     if topo.is_fixed(v) {
         return;
     }
+    ring.reserve(1);
     ring.insert(v);
     for &u in topo.neighbors(v) {
         if !topo.is_fixed(u) {
+            let around = topo.neighbors(u);
+            ring.reserve(1 + around.len());
             ring.insert(u);
-            for &w in topo.neighbors(u) {
+            for &w in around {
                 if !topo.is_fixed(w) {
                     ring.insert(w);
                 }
@@ -153,22 +164,44 @@ pub fn ring_of(topo: &Topology, v: u32, ring: &mut Ring, sorted: bool) {
     }
 }
 
+/// The sizes `|F_u|` of the vertices `first .. first + out.len()`, for [`shares_into`]: they
+/// depend on the topology alone, so a run counts them once. A size above 254 is kept as
+/// [`COUNT_AGAIN`] (the byte cannot hold it; such a stencil is counted again when needed).
+pub fn counts_into(topo: &Topology, out: &mut [u8], first: usize) {
+    let topo = topo.parts();
+    let mut ring = Ring::default();
+    for (k, o) in out.iter_mut().enumerate() {
+        ring_of(&topo, (first + k) as u32, &mut ring, false);
+        *o = ring.members.len().min(COUNT_AGAIN as usize) as u8;
+    }
+}
+
+/// The size [`counts_into`] keeps for a stencil too large for its byte.
+pub const COUNT_AGAIN: u8 = u8::MAX;
+
 /// Step 1's share for the vertices `first .. first + out.len()`: `(t_u − p_u) / |F_u|`, with `t`
 /// the positions after one Jacobi λ|μ pair from `pos` (so summed over the `|F_u|` stencils that
 /// hold `u`, every vertex receives its whole Taubin displacement once); zero for a fixed vertex.
-/// Each entry depends only on `pos` and `taubin`, so any split of the range gives the same bits.
+/// `counts` holds the sizes from [`counts_into`] for the same vertices. Each entry depends only
+/// on `pos`, `taubin` and the topology, so any split of the range gives the same bits.
 pub fn shares_into(
     topo: &Topology,
     pos: &[DVec3],
     taubin: &[DVec3],
+    counts: &[u8],
     out: &mut [DVec3],
     first: usize,
 ) {
+    let topo = topo.parts();
     let mut ring = Ring::default();
-    for (k, o) in out.iter_mut().enumerate() {
+    for ((k, o), &count) in out.iter_mut().enumerate().zip(counts) {
         let u = first + k;
-        ring_of(topo, u as u32, &mut ring, false);
-        let count = ring.members.len();
+        let count = if count == COUNT_AGAIN {
+            ring_of(&topo, u as u32, &mut ring, false);
+            ring.members.len()
+        } else {
+            count as usize
+        };
         *o = if count == 0 {
             DVec3::ZERO
         } else {
@@ -186,7 +219,7 @@ pub fn shares_into(
 /// farther than the limit from its input position (as `vcs`'s stencils are, so the volume stays
 /// exact). `ring` is scratch space. Writes only when the outcome is [`Outcome::Applied`].
 pub fn apply_ring<P: Field + ?Sized, D: Field + ?Sized>(
-    topo: &Topology,
+    topo: &TopologyParts,
     triangles: &[[u32; 3]],
     pos: &mut P,
     shares: &D,
@@ -200,10 +233,25 @@ pub fn apply_ring<P: Field + ?Sized, D: Field + ?Sized>(
         return Outcome::SkippedFixed;
     }
     let origin = pos.get(v);
-    let free = |u: u32| ring.contains(u);
     let share = |free: bool, u: u32| if free { shares.get(u) } else { DVec3::ZERO };
     let (mut dv, mut n, mut scale) = (0.0, DVec3::ZERO, 0.0);
+    // Whether the member is `v` or one of its neighbours, walked beside the ascending members:
+    // then every movable neighbour of it is a member too, and the hash set need not be asked.
+    let around = topo.neighbors(v);
+    let mut next = 0;
     for &a in &ring.members {
+        while next < around.len() && around[next] < a {
+            next += 1;
+        }
+        let near = a == v || around.get(next) == Some(&a);
+        let free = |u: u32| {
+            if near {
+                !topo.is_fixed(u)
+            } else {
+                ring.contains(u)
+            }
+        };
+        let (pa, sa) = (pos.get(a) - origin, shares.get(a));
         for &t in topo.faces_of(a) {
             let (b, c) = corners_after(triangles[t as usize], a);
             let (b_free, c_free) = (free(b), free(c));
@@ -212,10 +260,10 @@ pub fn apply_ring<P: Field + ?Sized, D: Field + ?Sized>(
                 continue;
             }
             stencil::shared_face(
-                pos.get(a) - origin,
+                pa,
                 pos.get(b) - origin,
                 pos.get(c) - origin,
-                shares.get(a),
+                sa,
                 share(b_free, b),
                 share(c_free, c),
                 b_free,
@@ -261,10 +309,11 @@ pub fn sweep_rings<P: Field + ?Sized, D: Field + ?Sized>(
     owned: Range<u32>,
     deviation: Option<stencil::Deviation>,
 ) -> SweepStats {
+    let topo = topo.parts();
     let mut stats = SweepStats::default();
     let mut ring = Ring::default();
     for v in owned {
-        let outcome = apply_ring(topo, triangles, pos, shares, v, deviation, &mut ring);
+        let outcome = apply_ring(&topo, triangles, pos, shares, v, deviation, &mut ring);
         stencil::count(&mut stats, outcome);
     }
     stats
@@ -740,7 +789,9 @@ mod tests {
         );
         crate::smooth::laplacian::jacobi_step(topo, p, &mut q, 0, 0.5);
         crate::smooth::laplacian::jacobi_step(topo, &q, &mut t, 0, -0.53);
-        shares_into(topo, p, &t, &mut shares, 0);
+        let mut counts = vec![0; n];
+        counts_into(topo, &mut counts, 0);
+        shares_into(topo, p, &t, &counts, &mut shares, 0);
         sweep_rings(topo, tris, p, &shares[..], 0..n as u32, None)
     }
 
@@ -758,13 +809,13 @@ mod tests {
         let st = RingStencils::build(&topo, RING_RADIUS);
         let (mut a, mut b) = (Ring::default(), Ring::default());
         for v in 0..topo.len() as u32 {
-            ring_of(&topo, v, &mut a, true);
+            ring_of(&topo.parts(), v, &mut a, true);
             let mut want = st.of(v).to_vec();
             want.sort_unstable();
             assert_eq!(a.members, want, "vertex {v}");
             for &u in &a.members {
                 assert!(!topo.is_fixed(u));
-                ring_of(&topo, u, &mut b, false);
+                ring_of(&topo.parts(), u, &mut b, false);
                 assert!(b.contains(v));
                 assert!(b.members.contains(&v));
             }
@@ -782,7 +833,11 @@ mod tests {
             ring.clear();
             let size = if round % 50 == 0 { 1000 } else { 20 };
             let members: Vec<u32> = (0..size).map(|k| k * 7919 + round).collect();
-            for &v in &members {
+            for (k, &v) in members.iter().enumerate() {
+                // Room made in pieces, as `ring_of` makes it ring by ring.
+                if k % 10 == 0 {
+                    ring.reserve(10);
+                }
                 ring.insert(v);
                 ring.insert(v);
             }

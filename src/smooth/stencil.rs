@@ -96,54 +96,13 @@ pub fn apply<const N: usize, P: Field + ?Sized, S: Field + ?Sized>(
     free: [u32; N],
     params: StencilParams,
 ) -> Outcome {
-    apply_in(
-        topo,
-        &Adjacency::of(topo),
-        triangles,
-        pos,
-        sums,
-        free,
-        params,
-    )
-}
-
-/// The arrays of a [`Topology`] as plain slices, taken once per sweep: its accessors ask at
-/// every call whether an array is on the heap or mapped.
-struct Adjacency<'a>(TopologyParts<'a>);
-
-impl<'a> Adjacency<'a> {
-    fn of(topo: &'a Topology) -> Adjacency<'a> {
-        Adjacency(topo.parts())
-    }
-
-    #[inline(always)]
-    fn neighbors(&self, v: u32) -> &'a [u32] {
-        let (offsets, v) = (self.0.vv_offsets, v as usize);
-        &self.0.vv[offsets[v]..offsets[v + 1]]
-    }
-
-    #[inline(always)]
-    fn deg(&self, v: u32) -> usize {
-        let (offsets, v) = (self.0.vv_offsets, v as usize);
-        offsets[v + 1] - offsets[v]
-    }
-
-    #[inline(always)]
-    fn faces_of(&self, v: u32) -> &'a [u32] {
-        let (offsets, v) = (self.0.vf_offsets, v as usize);
-        &self.0.vf[offsets[v]..offsets[v + 1]]
-    }
-
-    #[inline(always)]
-    fn is_fixed(&self, v: u32) -> bool {
-        self.0.fixed[v as usize] != 0
-    }
+    apply_in(topo, &topo.parts(), triangles, pos, sums, free, params)
 }
 
 /// [`apply`] with the topology's arrays already taken.
 fn apply_in<const N: usize, P: Field + ?Sized, S: Field + ?Sized>(
     topo: &Topology,
-    adj: &Adjacency,
+    adj: &TopologyParts,
     triangles: &[[u32; 3]],
     pos: &mut P,
     sums: &mut S,
@@ -352,7 +311,7 @@ fn merge_rows<const N: usize>(lists: [&[u32]; N], mut row: impl FnMut(u32, u8)) 
 /// (a triangle stencil on a closed tetrahedron shrinks it to a point) cannot shrink the yardstick
 /// along with the gradient it measures.
 fn volume_translation<const N: usize, P: Field + ?Sized>(
-    adj: &Adjacency,
+    adj: &TopologyParts,
     triangles: &[[u32; 3]],
     pos: &P,
     free: &[u32; N],
@@ -569,7 +528,7 @@ pub fn sweep_edges<P: Field + ?Sized, S: Field + ?Sized>(
     edges: impl IntoIterator<Item = [u32; 2]>,
     params: StencilParams,
 ) -> SweepStats {
-    let (adj, mut stats) = (Adjacency::of(topo), SweepStats::default());
+    let (adj, mut stats) = (topo.parts(), SweepStats::default());
     for e in edges {
         count(
             &mut stats,
@@ -589,7 +548,7 @@ pub fn sweep_triangles<P: Field + ?Sized, S: Field + ?Sized>(
     faces: impl IntoIterator<Item = u32>,
     params: StencilParams,
 ) -> SweepStats {
-    let (adj, mut stats) = (Adjacency::of(topo), SweepStats::default());
+    let (adj, mut stats) = (topo.parts(), SweepStats::default());
     for t in faces {
         let free = triangles[t as usize];
         count(

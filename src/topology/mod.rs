@@ -56,6 +56,34 @@ pub struct TopologyParts<'a> {
     pub fixed: &'a [u8],
 }
 
+/// The accessors of [`Topology`] on the plain slices: a kernel takes the parts once per sweep,
+/// because the topology's own accessors ask at every call whether an array is on the heap or
+/// mapped.
+impl<'a> TopologyParts<'a> {
+    #[inline(always)]
+    pub fn neighbors(&self, v: u32) -> &'a [u32] {
+        let (offsets, v) = (self.vv_offsets, v as usize);
+        &self.vv[offsets[v]..offsets[v + 1]]
+    }
+
+    #[inline(always)]
+    pub fn deg(&self, v: u32) -> usize {
+        let (offsets, v) = (self.vv_offsets, v as usize);
+        offsets[v + 1] - offsets[v]
+    }
+
+    #[inline(always)]
+    pub fn faces_of(&self, v: u32) -> &'a [u32] {
+        let (offsets, v) = (self.vf_offsets, v as usize);
+        &self.vf[offsets[v]..offsets[v + 1]]
+    }
+
+    #[inline(always)]
+    pub fn is_fixed(&self, v: u32) -> bool {
+        self.fixed[v as usize] != 0
+    }
+}
+
 /// What the topology build counted.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct TopologyStats {
@@ -387,7 +415,7 @@ impl Topology {
         })
     }
 
-    /// The arrays, for storing a plan on disk.
+    /// The arrays: for storing a plan on disk, and for kernels (see [`TopologyParts`]).
     pub fn parts(&self) -> TopologyParts<'_> {
         TopologyParts {
             vv_offsets: &self.vv_offsets,
