@@ -42,26 +42,39 @@ pub const RING_RADIUS: usize = 2;
 // - it reads the positions of every corner of the faces touching `F_v` (within 3 rings) and the
 //   step-1 shares of `F_v`, which are computed before the sweep and only read during it.
 
-/// A ring stencil's members: ascending, with a hash set beside them for membership, because a
-/// ring stencil asks "is this corner free?" for every face it touches (about six per member), and
-/// the 2-ring is found through its vertices' neighbour lists, which repeat most vertices.
+/// A ring stencil's members: ascending, with a set beside them for membership, because a ring
+/// stencil asks "is this corner free?" for every face it touches (about six per member), and the
+/// 2-ring is found through its vertices' neighbour lists, which repeat most vertices. The set is
+/// a table indexed by the id's distance from the stencil's centre, which holds nearly every
+/// member because the plan's order keeps neighbours close, and a hash table for the others.
 /// Scratch space: one per thread, reused from stencil to stencil.
 #[derive(Debug, Clone)]
 pub struct Ring {
     /// The members, ascending (after [`ring_of`]).
     pub members: Vec<u32>,
-    /// Open addressing, linear probing: `stamp << 32 | vertex`; a slot of another stamp is empty,
-    /// so clearing is one increment.
+    /// The ids `centre − WINDOW / 2 .. centre + WINDOW / 2`: the stamp of the ring that holds
+    /// them (another stamp: not a member), so clearing is one increment.
+    window: Vec<u32>,
+    centre: u32,
+    /// Whether every vertex within two rings of the centre is movable (set by [`ring_of`]).
+    all_movable: bool,
+    /// Open addressing, linear probing: `stamp << 32 | vertex`, for the ids outside the window.
     slots: Vec<u64>,
     /// `32 − log2(slots.len())`: the hash keeps the product's top bits.
     shift: u32,
     stamp: u32,
 }
 
+/// The ids around a stencil's centre that [`Ring`] finds without hashing.
+const WINDOW: usize = 2048;
+
 impl Default for Ring {
     fn default() -> Ring {
         Ring {
             members: Vec::with_capacity(64),
+            window: vec![0; WINDOW],
+            centre: 0,
+            all_movable: false,
             slots: vec![0; 128],
             shift: 32 - 7,
             stamp: 1,
@@ -70,13 +83,23 @@ impl Default for Ring {
 }
 
 impl Ring {
-    fn clear(&mut self) {
+    /// An empty ring about `centre`.
+    fn clear(&mut self, centre: u32) {
         self.members.clear();
+        self.centre = centre;
         self.stamp = self.stamp.wrapping_add(1);
         if self.stamp == 0 {
+            self.window.fill(0);
             self.slots.fill(0);
             self.stamp = 1;
         }
+    }
+
+    /// Where `v` is in the window, if it is.
+    #[inline(always)]
+    fn in_window(&self, v: u32) -> Option<usize> {
+        let at = v.wrapping_sub(self.centre).wrapping_add(WINDOW as u32 / 2) as usize;
+        (at < WINDOW).then_some(at)
     }
 
     /// The slot of `v`: where it is, or the empty slot where it would go.
@@ -101,6 +124,13 @@ impl Ring {
     /// Insert `v`; [`Ring::reserve`] must have made room for it.
     #[inline(always)]
     fn insert(&mut self, v: u32) {
+        if let Some(at) = self.in_window(v) {
+            if self.window[at] != self.stamp {
+                self.window[at] = self.stamp;
+                self.members.push(v);
+            }
+            return;
+        }
         let (at, found) = self.slot(v);
         if !found {
             self.slots[at] = (self.stamp as u64) << 32 | v as u64;
@@ -108,29 +138,38 @@ impl Ring {
         }
     }
 
-    /// Room for `more` members beyond those held, the table at most half full (a vertex of
-    /// unusually high valence doubles it, the members placed again).
-    #[inline]
+    /// Room for `more` members beyond those held, the hash table at most half full.
+    #[inline(always)]
     fn reserve(&mut self, more: usize) {
         let need = (self.members.len() + more) * 2;
-        if need <= self.slots.len() {
-            return;
+        if need > self.slots.len() {
+            self.grow(need);
         }
+    }
+
+    /// A hash table of at least `need` slots, the members outside the window placed again (a
+    /// vertex of unusually high valence).
+    #[cold]
+    fn grow(&mut self, need: usize) {
         let len = need.next_power_of_two();
         self.slots = vec![0; len];
         self.shift = 32 - len.trailing_zeros();
-        self.stamp = 1;
         for k in 0..self.members.len() {
             let v = self.members[k];
-            let (at, _) = self.slot(v);
-            self.slots[at] = 1 << 32 | v as u64;
+            if self.in_window(v).is_none() {
+                let (at, _) = self.slot(v);
+                self.slots[at] = (self.stamp as u64) << 32 | v as u64;
+            }
         }
     }
 
     /// Whether `v` is a member.
     #[inline(always)]
     pub fn contains(&self, v: u32) -> bool {
-        self.slot(v).1
+        match self.in_window(v) {
+            Some(at) => self.window[at] == self.stamp,
+            None => self.slot(v).1,
+        }
     }
 }
 
@@ -141,24 +180,34 @@ impl Ring {
 /// With `sorted` false the members stay in the order found (enough for counting them).
 pub fn ring_of(topo: &TopologyParts, v: u32, ring: &mut Ring, sorted: bool) {
     const { assert!(RING_RADIUS == 2, "ring_of walks exactly two rings") };
-    ring.clear();
+    ring.clear(v);
     if topo.is_fixed(v) {
         return;
     }
     ring.reserve(1);
     ring.insert(v);
+    let mut fixed_near = false;
     for &u in topo.neighbors(v) {
-        if !topo.is_fixed(u) {
-            let around = topo.neighbors(u);
-            ring.reserve(1 + around.len());
-            ring.insert(u);
-            for &w in around {
-                if !topo.is_fixed(w) {
-                    ring.insert(w);
-                }
+        if topo.is_fixed(u) {
+            fixed_near = true;
+            continue;
+        }
+        let around = topo.neighbors(u);
+        ring.reserve(1 + around.len());
+        ring.insert(u);
+        for &w in around {
+            // `v` is a neighbour of each of its neighbours, and already in.
+            if w == v {
+                continue;
+            }
+            if topo.is_fixed(w) {
+                fixed_near = true;
+            } else {
+                ring.insert(w);
             }
         }
     }
+    ring.all_movable = !fixed_near;
     if sorted {
         ring.members.sort_unstable();
     }
@@ -236,7 +285,8 @@ pub fn apply_ring<P: Field + ?Sized, D: Field + ?Sized>(
     let share = |free: bool, u: u32| if free { shares.get(u) } else { DVec3::ZERO };
     let (mut dv, mut n, mut scale) = (0.0, DVec3::ZERO, 0.0);
     // Whether the member is `v` or one of its neighbours, walked beside the ascending members:
-    // then every movable neighbour of it is a member too, and the hash set need not be asked.
+    // then every movable neighbour of it is a member too (every neighbour, when no vertex within
+    // two rings of `v` is fixed), and the set need not be asked.
     let around = topo.neighbors(v);
     let mut next = 0;
     for &a in &ring.members {
@@ -246,7 +296,7 @@ pub fn apply_ring<P: Field + ?Sized, D: Field + ?Sized>(
         let near = a == v || around.get(next) == Some(&a);
         let free = |u: u32| {
             if near {
-                !topo.is_fixed(u)
+                ring.all_movable || !topo.is_fixed(u)
             } else {
                 ring.contains(u)
             }
@@ -825,14 +875,23 @@ mod tests {
         }
     }
 
-    /// The ring's set through growth (a vertex of high valence) and many clears.
+    /// The ring's set through growth (a vertex of high valence) and many clears, with members
+    /// both in its window about the centre and in its hash table.
     #[test]
     fn a_ring_grows_and_clears() {
         let mut ring = Ring::default();
+        let mut before: Vec<u32> = Vec::new();
         for round in 0..300u32 {
-            ring.clear();
+            let centre = 5000 + round * 13;
+            ring.clear(centre);
             let size = if round % 50 == 0 { 1000 } else { 20 };
-            let members: Vec<u32> = (0..size).map(|k| k * 7919 + round).collect();
+            // Even k about the centre (the window), odd k far from it (the hash table).
+            let members: Vec<u32> = (0..size)
+                .map(|k| match k % 2 {
+                    0 => centre + k - size / 2,
+                    _ => k * 7919 + round + 100_000,
+                })
+                .collect();
             for (k, &v) in members.iter().enumerate() {
                 // Room made in pieces, as `ring_of` makes it ring by ring.
                 if k % 10 == 0 {
@@ -843,8 +902,12 @@ mod tests {
             }
             assert_eq!(ring.members, members);
             assert!(members.iter().all(|&v| ring.contains(v)));
-            assert!(!ring.contains(size * 7919 + round));
-            assert!(!ring.contains(round + 1));
+            assert!(!ring.contains(centre + size / 2 + 1), "in the window");
+            assert!(!ring.contains(100_007 + round), "outside it");
+            let gone = before.iter().filter(|v| !members.contains(v));
+            assert!(round == 0 || gone.clone().count() > 0);
+            assert!(gone.clone().all(|&v| !ring.contains(v)), "cleared");
+            before = members;
         }
     }
 
