@@ -141,6 +141,7 @@ pub struct MemoryStats {
 /// Seconds per phase.
 #[derive(Debug, Clone, Copy, Default, serde::Serialize)]
 pub struct PhaseTimings {
+    /// Reading the input; out of core also its second read for the write (see [`run_file`]).
     pub ingest: f64,
     pub reorder: f64,
     pub topology: f64,
@@ -161,7 +162,9 @@ impl PhaseTimings {
 }
 
 /// Read `input`, smooth it patch-parallel with `opts`, write `output` (atomically, in the input's
-/// vertex order and layout).
+/// vertex order and layout). Out of core (a binary PLY read into scratch files) the input, held
+/// open, is read a second time for the write instead of keeping its triangles while smoothing; a
+/// file rewritten in place meanwhile is an error, and nothing is written.
 pub fn run_file(
     input: &Path,
     output: &Path,
@@ -211,8 +214,8 @@ pub(crate) fn run_file_with(
     let storage = storage_for(input, output, engine, mesh_budget, opts)?;
 
     let clock = Instant::now();
-    let mut mesh = metered(observer, Phase::Read, bytes_read, |m| {
-        io::read_mesh_metered(input, &storage, m)
+    let (mut mesh, kept) = metered(observer, Phase::Read, bytes_read, |m| {
+        io::read_mesh_kept(input, &storage, m)
     })?;
     t.ingest = clock.elapsed().as_secs_f64();
     if mesh.triangles.is_empty() && opts.iterations > 0 {
@@ -233,8 +236,15 @@ pub(crate) fn run_file_with(
         plan.crease(opts.crease_angle);
         // The plan holds its own (reordered) copy: the input-order positions are not needed until
         // the write, so their memory is given back while smoothing (the peak of an in-core run).
-        let n = mesh.positions.len();
+        // Out of core (the triangles in a scratch file) the input's triangles go too, and the
+        // file, held open, is read again for the write: 12 B per triangle less scratch at the
+        // run's peak, for one more read of the input.
+        let (n, n_triangles) = (mesh.positions.len(), mesh.triangles.len());
         mesh.positions = Buf::default();
+        let again = kept.filter(|_| mesh.triangles.is_mapped());
+        if again.is_some() {
+            mesh.triangles = Buf::default();
+        }
         let smoothed = smooth_planned(
             &mut plan,
             &storage,
@@ -245,8 +255,26 @@ pub(crate) fn run_file_with(
             observer,
             |plan, obs| smooth(plan, &storage, obs),
         )?;
+        let mut positions = match again {
+            Some(kept) => {
+                let clock = Instant::now();
+                let read = metered(observer, Phase::Read, bytes_read, |m| {
+                    kept.read_again(&storage, m)
+                })?;
+                t.ingest += clock.elapsed().as_secs_f64();
+                if read.positions.len() != n || read.triangles.len() != n_triangles {
+                    return Err(Error::invalid(
+                        input,
+                        "read again for the write, it holds another mesh; nothing was written",
+                    ));
+                }
+                mesh.triangles = read.triangles;
+                // Every entry is overwritten below.
+                read.positions
+            }
+            None => storage.zeroed(n)?,
+        };
         mesh.positions = metered(observer, Phase::Restore, n as u64, |m| {
-            let mut positions = storage.zeroed(n)?;
             plan.positions_in_input_order_metered(&mut positions, m);
             Ok(positions)
         })?;

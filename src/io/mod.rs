@@ -143,9 +143,58 @@ pub fn read_mesh_metered(
     storage: &crate::mesh::Storage,
     meter: &Meter,
 ) -> Result<Mesh> {
-    let mesh = read_mesh_observed(path, storage, meter, |_| ())?;
+    read_mesh_kept(path, storage, meter).map(|(mesh, _)| mesh)
+}
+
+/// [`read_mesh_metered`], also handing back the file held open for [`Kept::read_again`] (not for
+/// a stream, which cannot be read twice).
+pub fn read_mesh_kept(
+    path: &Path,
+    storage: &crate::mesh::Storage,
+    meter: &Meter,
+) -> Result<(Mesh, Option<Kept>)> {
+    let read = read_mesh_observed(path, storage, meter, |_| ())?;
     meter.complete();
-    Ok(mesh)
+    Ok(read)
+}
+
+/// An input file held open after it was read, so that a long run can read it again instead of
+/// keeping all it read: the same file whatever is renamed or deleted under its name meanwhile, and
+/// its size and modification time to tell whether it was rewritten in place.
+#[derive(Debug)]
+pub struct Kept {
+    file: File,
+    path: std::path::PathBuf,
+    len: u64,
+    modified: Option<std::time::SystemTime>,
+}
+
+impl Kept {
+    /// The mesh read again, as the first read made it; an error, before any decoding, if the file
+    /// changed since (and, as every read, if it changes while being read).
+    pub fn read_again(mut self, storage: &crate::mesh::Storage, meter: &Meter) -> Result<Mesh> {
+        let path = self.path.clone();
+        let now = self.file.metadata().map_err(|e| Error::io(&path, e))?;
+        let what = if now.len() != self.len {
+            Some(format!("size {} -> {} bytes", self.len, now.len()))
+        } else if now.modified().ok() != self.modified {
+            Some("modification time changed".to_string())
+        } else {
+            None
+        };
+        if let Some(what) = what {
+            return Err(Error::invalid(
+                &path,
+                format!("file changed on disk during the run ({what}); nothing was written"),
+            ));
+        }
+        std::io::Seek::seek(&mut self.file, std::io::SeekFrom::Start(0))
+            .map_err(|e| Error::io(&path, e))?;
+        let mesh = read_open(&mut self.file, self.len, &path, storage, meter)?;
+        changed_while_read(&mut self.file, &now, &path)?;
+        meter.complete();
+        Ok(mesh)
+    }
 }
 
 /// Decode a mesh from bytes already in memory, choosing the reader as [`read_mesh`] does (by
@@ -168,7 +217,7 @@ fn read_mesh_observed(
     storage: &crate::mesh::Storage,
     meter: &Meter,
     decoded: impl FnOnce(&Path),
-) -> Result<Mesh> {
+) -> Result<(Mesh, Option<Kept>)> {
     // The type before opening: opening a named pipe blocks until a writer comes.
     let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
     let kind = detect::file_type(&meta).map_err(|what| Error::invalid(path, what))?;
@@ -179,14 +228,25 @@ fn read_mesh_observed(
         return Err(Error::invalid(path, "file replaced while it was opened"));
     }
     if kind == detect::Kind::Stream {
-        return read_stream(&mut file, path);
+        return read_stream(&mut file, path).map(|mesh| (mesh, None));
     }
     let mesh = read_open(&mut file, before.len(), path, storage, meter);
     decoded(path);
-    // A file rewritten under us decodes into a mix of old and new bytes, or into an error about
-    // bytes that are no longer there: compare the size and modification time seen before and
-    // after the decode, and report a change before whatever the decode made of it. (A file
-    // replaced by a rename is another inode: the one opened here is read consistently.)
+    changed_while_read(&mut file, &before, path)?;
+    let kept = Kept {
+        len: before.len(),
+        modified: before.modified().ok(),
+        path: path.to_path_buf(),
+        file,
+    };
+    Ok((mesh?, Some(kept)))
+}
+
+/// A file rewritten under us decodes into a mix of old and new bytes, or into an error about
+/// bytes that are no longer there: compare the size and modification time seen before and after
+/// the decode, and report a change before whatever the decode made of it. (A file replaced by a
+/// rename is another inode: the one opened is read consistently.)
+fn changed_while_read(file: &mut File, before: &std::fs::Metadata, path: &Path) -> Result<()> {
     let after = file.metadata().map_err(|e| Error::io(path, e))?;
     let what = if before.len() != after.len() {
         Some(format!("size {} -> {} bytes", before.len(), after.len()))
@@ -195,13 +255,13 @@ fn read_mesh_observed(
     } else {
         None
     };
-    if let Some(what) = what {
-        return Err(Error::invalid(
+    match what {
+        Some(what) => Err(Error::invalid(
             path,
             format!("file changed while it was being read ({what})"),
-        ));
+        )),
+        None => Ok(()),
     }
-    mesh
 }
 
 /// Write `mesh` to `path`, choosing the format from the extension, atomically.

@@ -866,6 +866,73 @@ fn damaged_files_never_panic() {
     }
 }
 
+/// A file held open reads again as it first read, whatever happened to its name (renamed away,
+/// deleted); rewritten in place (another size, another modification time), the second read is an
+/// error that says nothing was written.
+#[test]
+fn a_kept_file_reads_again_unless_it_changed() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("m.ply");
+    let heap = crate::mesh::Storage::heap();
+    let mesh = crate::shapes::icosphere(2);
+    write_mesh(&path, &mesh).unwrap();
+    // As stored (the positions rounded to the file's `float`).
+    let stored = read_mesh(&path).unwrap();
+    let kept = || {
+        let (first, kept) = read_mesh_kept(&path, &heap, &Meter::default()).unwrap();
+        assert_eq!(&first.triangles[..], &stored.triangles[..]);
+        kept.expect("a file is kept")
+    };
+    let same = |again: Result<Mesh>| {
+        let again = again.unwrap();
+        assert_eq!(&again.triangles[..], &stored.triangles[..]);
+        assert_eq!(&again.positions[..], &stored.positions[..]);
+    };
+    same(kept().read_again(&heap, &Meter::default()));
+    let k = kept();
+    std::fs::rename(&path, dir.path().join("away.ply")).unwrap();
+    same(k.read_again(&heap, &Meter::default()));
+    std::fs::rename(dir.path().join("away.ply"), &path).unwrap();
+    let k = kept();
+    std::fs::remove_file(&path).unwrap();
+    same(k.read_again(&heap, &Meter::default()));
+    write_mesh(&path, &mesh).unwrap();
+
+    let changed = |change: &dyn Fn(&Path), what: &str| {
+        write_mesh(&path, &mesh).unwrap();
+        let k = kept();
+        change(&path);
+        let e = k
+            .read_again(&heap, &Meter::default())
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            format!(
+                "{}: file changed on disk during the run ({what}); nothing was written",
+                path.display()
+            )
+        );
+    };
+    let len = std::fs::metadata(&path).unwrap().len();
+    changed(
+        &|p| {
+            let mut f = std::fs::OpenOptions::new().append(true).open(p).unwrap();
+            f.write_all(b"more").unwrap();
+        },
+        &format!("size {len} -> {} bytes", len + 4),
+    );
+    changed(
+        &|p| {
+            let f = std::fs::OpenOptions::new().write(true).open(p).unwrap();
+            let mtime = f.metadata().unwrap().modified().unwrap();
+            f.set_modified(mtime + std::time::Duration::from_secs(5))
+                .unwrap();
+        },
+        "modification time changed",
+    );
+}
+
 #[test]
 fn a_file_changed_while_it_is_read_is_reported() {
     let dir = tempfile::tempdir().unwrap();
