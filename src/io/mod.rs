@@ -165,8 +165,8 @@ pub fn read_mesh_kept(
 pub struct Kept {
     file: File,
     path: std::path::PathBuf,
-    len: u64,
-    modified: Option<std::time::SystemTime>,
+    /// The file as it was read.
+    seen: std::fs::Metadata,
 }
 
 impl Kept {
@@ -175,14 +175,7 @@ impl Kept {
     pub fn read_again(mut self, storage: &crate::mesh::Storage, meter: &Meter) -> Result<Mesh> {
         let path = self.path.clone();
         let now = self.file.metadata().map_err(|e| Error::io(&path, e))?;
-        let what = if now.len() != self.len {
-            Some(format!("size {} -> {} bytes", self.len, now.len()))
-        } else if now.modified().ok() != self.modified {
-            Some("modification time changed".to_string())
-        } else {
-            None
-        };
-        if let Some(what) = what {
+        if let Some(what) = change(&self.seen, &now) {
             return Err(Error::invalid(
                 &path,
                 format!("file changed on disk during the run ({what}); nothing was written"),
@@ -190,7 +183,7 @@ impl Kept {
         }
         std::io::Seek::seek(&mut self.file, std::io::SeekFrom::Start(0))
             .map_err(|e| Error::io(&path, e))?;
-        let mesh = read_open(&mut self.file, self.len, &path, storage, meter)?;
+        let mesh = read_open(&mut self.file, now.len(), &path, storage, meter)?;
         changed_while_read(&mut self.file, &now, &path)?;
         meter.complete();
         Ok(mesh)
@@ -234,10 +227,9 @@ fn read_mesh_observed(
     decoded(path);
     changed_while_read(&mut file, &before, path)?;
     let kept = Kept {
-        len: before.len(),
-        modified: before.modified().ok(),
-        path: path.to_path_buf(),
         file,
+        path: path.to_path_buf(),
+        seen: before,
     };
     Ok((mesh?, Some(kept)))
 }
@@ -248,19 +240,23 @@ fn read_mesh_observed(
 /// rename is another inode: the one opened is read consistently.)
 fn changed_while_read(file: &mut File, before: &std::fs::Metadata, path: &Path) -> Result<()> {
     let after = file.metadata().map_err(|e| Error::io(path, e))?;
-    let what = if before.len() != after.len() {
-        Some(format!("size {} -> {} bytes", before.len(), after.len()))
-    } else if before.modified().ok() != after.modified().ok() {
-        Some("modification time changed".to_string())
-    } else {
-        None
-    };
-    match what {
+    match change(before, &after) {
         Some(what) => Err(Error::invalid(
             path,
             format!("file changed while it was being read ({what})"),
         )),
         None => Ok(()),
+    }
+}
+
+/// How a file's size or modification time differs between two looks at it, if it does.
+fn change(before: &std::fs::Metadata, after: &std::fs::Metadata) -> Option<String> {
+    if before.len() != after.len() {
+        Some(format!("size {} -> {} bytes", before.len(), after.len()))
+    } else if before.modified().ok() != after.modified().ok() {
+        Some("modification time changed".to_string())
+    } else {
+        None
     }
 }
 
