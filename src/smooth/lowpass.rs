@@ -220,9 +220,15 @@ pub fn counts_into(topo: &Topology, out: &mut [u8], first: usize) {
     let topo = topo.parts();
     let mut ring = Ring::default();
     for (k, o) in out.iter_mut().enumerate() {
-        ring_of(&topo, (first + k) as u32, &mut ring, false);
-        *o = ring.members.len().min(COUNT_AGAIN as usize) as u8;
+        let size = ring_size(&topo, (first + k) as u32, &mut ring);
+        *o = size.min(COUNT_AGAIN as usize) as u8;
     }
+}
+
+/// `|F_v|`, `ring` being scratch space.
+fn ring_size(topo: &TopologyParts, v: u32, ring: &mut Ring) -> usize {
+    ring_of(topo, v, ring, false);
+    ring.members.len()
 }
 
 /// The size [`counts_into`] keeps for a stencil too large for its byte.
@@ -242,14 +248,13 @@ pub fn shares_into(
     first: usize,
 ) {
     let topo = topo.parts();
-    let mut ring = Ring::default();
+    // Only a stencil too large for its byte is counted again: the scratch space is made then.
+    let mut ring: Option<Ring> = None;
     for ((k, o), &count) in out.iter_mut().enumerate().zip(counts) {
         let u = first + k;
-        let count = if count == COUNT_AGAIN {
-            ring_of(&topo, u as u32, &mut ring, false);
-            ring.members.len()
-        } else {
-            count as usize
+        let count = match count {
+            COUNT_AGAIN => ring_size(&topo, u as u32, ring.get_or_insert_with(Ring::default)),
+            count => count as usize,
         };
         *o = if count == 0 {
             DVec3::ZERO
@@ -827,6 +832,35 @@ mod tests {
             rms_radius_error(&p),
             e0
         );
+    }
+
+    /// A stencil too large for its byte is counted again: on a bipyramid of 300 equator vertices
+    /// every 2-ring is the whole mesh (302 vertices), and its shares divide by 302.
+    #[test]
+    fn stencils_larger_than_a_byte_are_counted_again() {
+        let k = 300u32;
+        let (top, bottom) = (k, k + 1);
+        let mut positions: Vec<DVec3> = (0..k)
+            .map(|i| {
+                let a = std::f64::consts::TAU * i as f64 / k as f64;
+                DVec3::new(a.cos(), a.sin(), 0.0)
+            })
+            .collect();
+        positions.extend([DVec3::Z, -DVec3::Z]);
+        let triangles: Vec<[u32; 3]> = (0..k)
+            .flat_map(|i| [[i, (i + 1) % k, top], [(i + 1) % k, i, bottom]])
+            .collect();
+        let topo = Topology::build(positions.len(), &triangles).unwrap();
+        let n = positions.len();
+        let mut counts = vec![0; n];
+        counts_into(&topo, &mut counts, 0);
+        assert!(counts.iter().all(|&c| c == COUNT_AGAIN));
+        let taubin: Vec<DVec3> = positions.iter().map(|p| *p * 1.5).collect();
+        let mut shares = vec![DVec3::ZERO; n];
+        shares_into(&topo, &positions, &taubin, &counts, &mut shares, 0);
+        for u in 0..n {
+            assert_eq!(shares[u], (taubin[u] - positions[u]) * (1.0 / 302.0), "{u}");
+        }
     }
 
     /// One engine-kernel iteration over the whole mesh in index order (the prototype's order).
