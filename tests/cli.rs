@@ -380,6 +380,14 @@ fn usage_errors_fail_cleanly_and_write_nothing() {
         2,
         &["does not exist"],
     );
+    // A trailing slash names a directory: refused before the run, not when writing after it.
+    let slash = format!("{}/", dir.path().join("o1.ply").display());
+    fails(
+        &vcsmooth(["smooth".as_ref(), sphere.as_os_str(), slash.as_ref()]),
+        2,
+        &["o1.ply/", "ends with '/'"],
+    );
+    assert!(!dir.path().join("o1.ply").exists());
     fails(
         &vcsmooth(["smooth".as_ref(), sphere.as_os_str()]),
         2,

@@ -90,9 +90,30 @@ pub type Named<'a> = (&'a str, &'a Path);
 /// path with `.`, `..` and the symbolic links of its existing part resolved. The error names the
 /// flag of the file that would be overwritten.
 pub fn check_files(reads: &[Named], output: Option<Named>, sides: &[Named]) -> Result<()> {
-    let mut taken: Vec<(&str, Identity)> =
-        reads.iter().map(|&(n, p)| (n, Identity::of(p))).collect();
-    taken.extend(output.map(|(n, p)| (n, Identity::of(p))));
+    let mut taken: Vec<(String, Identity)> = reads
+        .iter()
+        .map(|&(n, p)| (n.to_string(), Identity::of(p)))
+        .collect();
+    // A glTF's external buffers and images are read too, and must survive the run.
+    let named: Vec<(String, std::path::PathBuf)> = reads
+        .iter()
+        .flat_map(|&(n, p)| {
+            crate::io::referenced_files(p)
+                .into_iter()
+                .map(move |f| (format!("a file {n} names"), f))
+        })
+        .collect();
+    if let Some((name, path)) = output {
+        let id = Identity::of(path);
+        if let Some((other, _)) = named.iter().find(|(_, f)| Identity::of(f) == id) {
+            return Err(Error::invalid(
+                path,
+                format!("{name} names the same file as {other}: it would be overwritten"),
+            ));
+        }
+        taken.push((name.to_string(), id));
+    }
+    taken.extend(named.iter().map(|(n, f)| (n.clone(), Identity::of(f))));
     for &(name, path) in sides {
         let id = Identity::of(path);
         if let Some((other, _)) = taken.iter().find(|(_, t)| *t == id) {
@@ -101,7 +122,16 @@ pub fn check_files(reads: &[Named], output: Option<Named>, sides: &[Named]) -> R
                 format!("{name} names the same file as {other}: it would be overwritten"),
             ));
         }
-        taken.push((name, id));
+        if let (Some((out, out_path)), Some(file)) = (output, path.file_name())
+            && crate::io::buffer_name_of(out_path, file)
+            && Identity::of(&out_path.with_file_name(file)) == id
+        {
+            return Err(Error::invalid(
+                path,
+                format!("{name} names a file the buffers of {out} may be written to"),
+            ));
+        }
+        taken.push((name.to_string(), id));
     }
     for (_, path) in output.iter().chain(sides) {
         writable(path)?;
@@ -158,6 +188,9 @@ fn resolved(path: &Path) -> std::path::PathBuf {
 /// temporary files, `.<name>.tmp-<pid>-<n>`, removed at once), and `path` itself is not a
 /// directory or another non-regular file (a device, a pipe) that the final rename would replace.
 pub fn writable(path: &Path) -> Result<()> {
+    if path.as_os_str().as_encoded_bytes().ends_with(b"/") {
+        return Err(Error::invalid(path, "ends with '/': it names a directory, not a file"));
+    }
     parent_exists(path)?;
     let dir = path
         .parent()

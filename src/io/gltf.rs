@@ -73,6 +73,8 @@ pub struct GltfLayout {
     vertices: usize,
     triangles: usize,
     carried: Carried,
+    /// The directory the input's external files are relative to, when it came from a file.
+    dir: Option<PathBuf>,
 }
 
 /// One buffer's bytes and where they came from.
@@ -253,6 +255,7 @@ pub(super) fn read(
         vertices: all.len(),
         triangles: corners.len(),
         carried,
+        dir: dir.map(Path::to_path_buf),
     };
     let source = Source {
         format: Some(if binary { Format::Glb } else { Format::Gltf }),
@@ -712,21 +715,29 @@ fn set_bounds(json: &mut Value, accessor: usize, lo: [f32; 3], hi: [f32; 3], if_
     }
 }
 
-/// The `n`th changed external buffer of an output: named after it, never one of the input's files.
+/// The `n`th changed external buffer of an output, named after it: `STEM.bin`, else
+/// `STEM-K.bin` for the first K that is free. Free means neither a file the input names (any
+/// buffer or image, used by the geometry or not) nor an existing file, unless the output being
+/// replaced names it (its own buffer from an earlier run): nothing else is ever written over.
 fn bin_path(output: &Path, n: usize, layout: &GltfLayout) -> PathBuf {
     let stem = output
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_default();
-    let inputs: Vec<PathBuf> = layout
+    let mut inputs: Vec<PathBuf> = layout
         .buffers
         .iter()
         .flatten()
         .filter_map(|b| match &b.origin {
-            Origin::File(p) => Some(std::fs::canonicalize(p).unwrap_or_else(|_| p.clone())),
+            Origin::File(p) => Some(p.clone()),
             _ => None,
         })
         .collect();
+    if let Some(dir) = &layout.dir {
+        inputs.extend(named_files(&layout.json, dir));
+    }
+    let inputs: Vec<PathBuf> = inputs.iter().map(|p| canonical(p)).collect();
+    let replaced: Vec<PathBuf> = referenced_files(output).iter().map(|p| canonical(p)).collect();
     let mut k = n;
     loop {
         let name = if k == 0 {
@@ -735,23 +746,91 @@ fn bin_path(output: &Path, n: usize, layout: &GltfLayout) -> PathBuf {
             format!("{stem}-{k}.bin")
         };
         let candidate = output.with_file_name(name);
-        let resolved = candidate
-            .parent()
-            .and_then(|d| {
-                std::fs::canonicalize(if d.as_os_str().is_empty() {
-                    Path::new(".")
-                } else {
-                    d
-                })
-                .ok()
-            })
-            .map(|d| d.join(candidate.file_name().unwrap_or_default()))
-            .unwrap_or_else(|| candidate.clone());
-        if !inputs.contains(&resolved) {
+        let resolved = canonical(&candidate);
+        let taken = inputs.contains(&resolved)
+            || (std::fs::symlink_metadata(&candidate).is_ok() && !replaced.contains(&resolved));
+        if !taken {
             return candidate;
         }
         k += 1;
     }
+}
+
+/// Whether `name` is one [`bin_path`] may give a buffer of the `.gltf` output `output`
+/// (`STEM.bin` or `STEM-K.bin`), so that no side file of a run is given such a name.
+pub(crate) fn buffer_name_of(output: &Path, name: &std::ffi::OsStr) -> bool {
+    let gltf = output
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("gltf"));
+    let (Some(stem), Some(name)) = (output.file_stem(), name.to_str()) else {
+        return false;
+    };
+    let Some(rest) = stem.to_str().and_then(|s| name.strip_prefix(s)) else {
+        return false;
+    };
+    let Some(k) = rest.strip_suffix(".bin") else {
+        return false;
+    };
+    gltf && (k.is_empty()
+        || k.strip_prefix('-')
+            .is_some_and(|d| !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit())))
+}
+
+/// `path` with its directory made canonical (the file itself need not exist).
+fn canonical(path: &Path) -> PathBuf {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    match (std::fs::canonicalize(dir), path.file_name()) {
+        (Ok(d), Some(name)) => d.join(name),
+        _ => path.to_path_buf(),
+    }
+}
+
+/// The external files (buffers and images, not `data:` URIs) a glTF's JSON names, relative to
+/// `dir`.
+fn named_files(json: &Value, dir: &Path) -> Vec<PathBuf> {
+    ["buffers", "images"]
+        .iter()
+        .flat_map(|key| array(json, key))
+        .filter_map(|item| item.get("uri")?.as_str())
+        .filter(|uri| !uri.starts_with("data:"))
+        .filter_map(percent_decode)
+        .map(|name| dir.join(name))
+        .collect()
+}
+
+/// The external files the glTF or GLB at `path` names (see [`named_files`]); none when `path`
+/// is not such a file or cannot be read. Only a GLB's JSON chunk is read, and a text file only
+/// when it is named `.gltf`.
+pub(crate) fn referenced_files(path: &Path) -> Vec<PathBuf> {
+    use std::io::Read;
+    let json = || -> Option<Value> {
+        let mut file = std::fs::File::open(path).ok()?;
+        let size = file.metadata().ok()?.len();
+        let mut head = Vec::new();
+        (&mut file).take(20).read_to_end(&mut head).ok()?;
+        if head.len() == 20 && has_magic(&head) {
+            let len = u32::from_le_bytes([head[12], head[13], head[14], head[15]]);
+            if u64::from(len) > size {
+                return None;
+            }
+            let mut text = Vec::new();
+            file.take(u64::from(len)).read_to_end(&mut text).ok()?;
+            return serde_json::from_slice(&text).ok();
+        }
+        let gltf = path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("gltf"));
+        let bytes = if gltf { std::fs::read(path).ok()? } else { return None };
+        serde_json::from_slice(super::without_bom(&bytes)).ok()
+    };
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    json().map(|j| named_files(&j, dir)).unwrap_or_default()
 }
 
 /// A GLB: header, JSON chunk (padded with spaces), binary chunk (padded with zeros).

@@ -107,6 +107,7 @@ mod stl;
 mod stream;
 
 pub(crate) use atomic::write_atomically;
+pub(crate) use gltf::{buffer_name_of, referenced_files};
 
 use std::fmt;
 use std::fs::File;

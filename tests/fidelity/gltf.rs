@@ -279,6 +279,64 @@ fn gltf_with_an_external_bin_writes_its_own_bin() {
     check_smoothed(&json2, &bin, &after, &bin_after);
 }
 
+/// The files around a `.gltf` are never written over: not another buffer of the input (one
+/// named like the output's buffer), not a file the user has, not one named by a side file; a run
+/// again replaces its own earlier buffer instead of leaving it behind.
+#[test]
+fn the_files_around_a_gltf_are_never_written_over() {
+    let dir = tempfile::tempdir().unwrap();
+    let at = |name: &str| dir.path().join(name);
+    let (mut json, bin) = sphere();
+    json["buffers"][0]["uri"] = json!("geom.bin");
+    // A second buffer the geometry does not use, named as the output's buffer would be.
+    let other = b"sixteen bytes!!!".to_vec();
+    json["buffers"]
+        .as_array_mut()
+        .unwrap()
+        .push(json!({"uri": "out.bin", "byteLength": 16}));
+    std::fs::write(at("scene.gltf"), serde_json::to_vec(&json).unwrap()).unwrap();
+    std::fs::write(at("geom.bin"), &bin).unwrap();
+    std::fs::write(at("out.bin"), &other).unwrap();
+    let run = |args: &[&str]| {
+        let mut all: Vec<std::ffi::OsString> = vec!["smooth".into(), at("scene.gltf").into()];
+        all.extend(args.iter().map(|a| match a.starts_with('-') {
+            true => a.into(),
+            false => at(a).into_os_string(),
+        }));
+        vcsmooth(all)
+    };
+
+    ok(run(&["out.gltf"]));
+    assert_eq!(std::fs::read(at("out.bin")).unwrap(), other);
+    let after = crate::util::read_json(&at("out.gltf"));
+    assert_eq!(after["buffers"][0]["uri"], "out-1.bin");
+    assert_eq!(after["buffers"][1]["uri"], "out.bin");
+    check_smoothed(&json, &bin, &after, &std::fs::read(at("out-1.bin")).unwrap());
+    // Again: its own buffer from the first run is replaced, not a third file made.
+    ok(run(&["out.gltf"]));
+    assert_eq!(crate::util::read_json(&at("out.gltf"))["buffers"][0]["uri"], "out-1.bin");
+    assert!(!at("out-2.bin").exists());
+
+    // A file of the user's named like the buffer stays as it was.
+    std::fs::write(at("mine.bin"), b"mine").unwrap();
+    ok(run(&["mine.gltf"]));
+    assert_eq!(std::fs::read(at("mine.bin")).unwrap(), b"mine");
+    assert_eq!(crate::util::read_json(&at("mine.gltf"))["buffers"][0]["uri"], "mine-1.bin");
+
+    // A report over one of the input's buffers, or where the output's buffer goes: refused
+    // before any work.
+    let o = run(&["a.gltf", "--report", "geom.bin"]);
+    fails(&o, 2, &["geom.bin", "a file IN names"]);
+    assert_eq!(std::fs::read(at("geom.bin")).unwrap(), bin);
+    let o = run(&["b.gltf", "--report", "b.bin"]);
+    fails(&o, 2, &["b.bin", "buffers of OUT"]);
+    let o = run(&["b.gltf", "--report", "b-2.bin"]);
+    fails(&o, 2, &["b-2.bin", "buffers of OUT"]);
+    assert!(!at("b.gltf").exists() && !at("a.gltf").exists());
+    // Names that only look alike are free.
+    ok(run(&["b.gltf", "--report", "b-x.bin"]));
+}
+
 #[test]
 fn gltf_with_a_data_uri_is_re_encoded() {
     let dir = tempfile::tempdir().unwrap();
