@@ -282,6 +282,25 @@ fn double_ply_input_stays_double_through_a_ply_round_trip() {
     assert!(bytes.starts_with(b"ply\nformat ascii 1.0\n"));
 }
 
+/// A `double` in any coordinate, not only `x`, keeps every output in double precision.
+#[test]
+fn a_double_y_or_z_keeps_double_precision() {
+    for (types, at) in [(["float", "double", "double"], 1), (["float", "float", "double"], 2)] {
+        let [x, y, z] = types;
+        let text = format!(
+            "ply\nformat ascii 1.0\nelement vertex 3\nproperty {x} x\nproperty {y} y\n\
+             property {z} z\nelement face 1\nproperty list uchar int vertex_indices\n\
+             end_header\n0 0.123456789012345 0.123456789012345\n1 0 0\n0 1 0\n3 0 1 2\n"
+        );
+        let mesh = parse_as(text.as_bytes(), "m.ply").unwrap();
+        assert_eq!(mesh.source.precision, Precision::Double, "{types:?}");
+        for name in ["m.obj", "m.off"] {
+            let back = roundtrip(&mesh, name);
+            assert_eq!(back.positions[0][at], 0.123456789012345, "{types:?} {name}");
+        }
+    }
+}
+
 /// A hand-written ASCII PLY with colours, a list between the coordinates and the normals, a quad,
 /// face quality, another element, comments and obj_info.
 const RICH: &str = "ply\r\nformat ascii 1.0\r\ncomment made by hand\r\nobj_info scanner 42\r\n\

@@ -932,9 +932,11 @@ pub(crate) fn read_metered(
             }
         }
     }
-    let precision = match elements[roles.vertex].props[roles.xyz[0]].kind {
-        Kind::Scalar(Scalar::F64) => Precision::Double,
-        _ => Precision::Float,
+    // A `double` in any coordinate asks for double precision wherever the output has a choice.
+    let double = |k: usize| elements[roles.vertex].props[k].kind == Kind::Scalar(Scalar::F64);
+    let precision = match roles.xyz.iter().any(|&k| double(k)) {
+        true => Precision::Double,
+        false => Precision::Float,
     };
     let layout = PlyLayout {
         encoding: header.encoding,
