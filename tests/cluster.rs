@@ -335,6 +335,62 @@ fn a_killed_run_resumes_to_the_uninterrupted_output() {
     assert_eq!(report["iterations"].as_array().unwrap().len(), 12);
 }
 
+/// A resumed `--boundary smooth` run keeps the input's hole areas, not the checkpoint's: the
+/// same bits as a run never stopped (the bunny × 4 with noise, in double precision so that no
+/// difference hides in the rounding to `float`).
+#[test]
+fn a_resumed_run_keeps_the_input_hole_areas() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = tmp.path().join("bunny.ply");
+    ok(vcsmooth([
+        "generate".as_ref(),
+        "mesh".as_ref(),
+        input.as_os_str(),
+        "--from".as_ref(),
+        crate::util::scan("stanford-bunny.ply").as_os_str(),
+        "--subdivide".as_ref(),
+        "1".as_ref(),
+        "--noise".as_ref(),
+        "0.3".as_ref(),
+        "--seed".as_ref(),
+        "4".as_ref(),
+    ]));
+    let mut mesh = io::read_mesh(&input).unwrap();
+    mesh.source.layout = None;
+    mesh.source.precision = io::Precision::Double;
+    io::write_mesh(&input, &mesh).unwrap();
+    let head = std::fs::read(&input).unwrap();
+    assert!(head.windows(17).any(|w| w == b"property double x"));
+    let smooth = |out: &Path, iterations: &str, checkpoint: Option<&Path>| {
+        let mut args: Vec<std::ffi::OsString> = vec!["smooth".into(), input.clone().into()];
+        args.push(out.into());
+        for a in [
+            "--method",
+            "vcs",
+            "--boundary",
+            "smooth",
+            "--iterations",
+            iterations,
+        ] {
+            args.push(a.into());
+        }
+        if let Some(work) = checkpoint {
+            args.extend(["--checkpoint".into(), work.into()]);
+        }
+        ok(vcsmooth(args))
+    };
+    let plain = tmp.path().join("plain.ply");
+    smooth(&plain, "6", None);
+    let out = tmp.path().join("out.ply");
+    for stop in [2, 4] {
+        let work = tmp.path().join(format!("ck{stop}"));
+        smooth(&out, &stop.to_string(), Some(&work));
+        assert!(smooth(&out, "6", Some(&work)).contains(&format!("resumed after {stop}")));
+        let same = std::fs::read(&out).unwrap() == std::fs::read(&plain).unwrap();
+        assert!(same, "resumed after {stop} of 6 iterations");
+    }
+}
+
 #[test]
 fn comm_sum_is_identical_on_every_rank() {
     let comms = Local::group(3);
@@ -367,7 +423,7 @@ fn a_run_measuring_only_its_last_iteration_resumes() {
     let plain = tmp.path().join("plain.ply");
     let single = engine::run_file(&input, &plain, &opts(4), &engine, &mut Quiet).unwrap();
     let (work, out) = (tmp.path().join("ck"), tmp.path().join("out.ply"));
-    for (iterations, resumed) in [(2, 0), (4, 2)] {
+    for (iterations, resumed) in [(3, 0), (6, 3)] {
         let run = run_ranks(
             2,
             &input,

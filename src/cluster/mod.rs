@@ -285,7 +285,9 @@ fn ensure_plan(
         }
         crate::smooth::Boundary::Fixed => Vec::new(),
     };
-    let keep_input = opts.max_deviation.is_some() || opts.auto_stop;
+    // A resumed run measures the input again: a deviation bound, the automatic stop's replay,
+    // the hole areas that smooth boundaries keep.
+    let keep_input = opts.max_deviation.is_some() || opts.auto_stop || !loops.is_empty();
     work.write_plan(&new_plan, key, input_stats, keep_input, &loops)
 }
 
@@ -583,11 +585,13 @@ impl<'a> RankRun<'a> {
         let loops = match opts.boundary {
             crate::smooth::Boundary::Smooth => {
                 let edges = self.work.read_loops(&self.plan.doc)?;
-                Some(Loops::from_edges(
-                    &self.plan.topology,
-                    &self.plan.triangles,
-                    edges,
-                ))
+                let mut loops = Loops::from_edges(&self.plan.topology, &self.plan.triangles, edges);
+                if self.state.done > 0 && !loops.is_empty() {
+                    // The hole areas to keep are the input's, which an uninterrupted run
+                    // measures at its first iteration, not those of the checkpoint.
+                    loops.measure(&self.work.map_input(n)?);
+                }
+                Some(loops)
             }
             crate::smooth::Boundary::Fixed => None,
         };
