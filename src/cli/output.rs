@@ -189,7 +189,10 @@ fn resolved(path: &Path) -> std::path::PathBuf {
 /// directory or another non-regular file (a device, a pipe) that the final rename would replace.
 pub fn writable(path: &Path) -> Result<()> {
     if path.as_os_str().as_encoded_bytes().ends_with(b"/") {
-        return Err(Error::invalid(path, "ends with '/': it names a directory, not a file"));
+        return Err(Error::invalid(
+            path,
+            "ends with '/': it names a directory, not a file",
+        ));
     }
     parent_exists(path)?;
     let dir = path

@@ -737,7 +737,10 @@ fn bin_path(output: &Path, n: usize, layout: &GltfLayout) -> PathBuf {
         inputs.extend(named_files(&layout.json, dir));
     }
     let inputs: Vec<PathBuf> = inputs.iter().map(|p| canonical(p)).collect();
-    let replaced: Vec<PathBuf> = referenced_files(output).iter().map(|p| canonical(p)).collect();
+    let replaced: Vec<PathBuf> = referenced_files(output)
+        .iter()
+        .map(|p| canonical(p))
+        .collect();
     let mut k = n;
     loop {
         let name = if k == 0 {
@@ -823,7 +826,11 @@ pub(crate) fn referenced_files(path: &Path) -> Vec<PathBuf> {
         let gltf = path
             .extension()
             .is_some_and(|e| e.eq_ignore_ascii_case("gltf"));
-        let bytes = if gltf { std::fs::read(path).ok()? } else { return None };
+        let bytes = if gltf {
+            std::fs::read(path).ok()?
+        } else {
+            return None;
+        };
         serde_json::from_slice(super::without_bom(&bytes)).ok()
     };
     let dir = match path.parent() {

@@ -285,7 +285,10 @@ fn double_ply_input_stays_double_through_a_ply_round_trip() {
 /// A `double` in any coordinate, not only `x`, keeps every output in double precision.
 #[test]
 fn a_double_y_or_z_keeps_double_precision() {
-    for (types, at) in [(["float", "double", "double"], 1), (["float", "float", "double"], 2)] {
+    for (types, at) in [
+        (["float", "double", "double"], 1),
+        (["float", "float", "double"], 2),
+    ] {
         let [x, y, z] = types;
         let text = format!(
             "ply\nformat ascii 1.0\nelement vertex 3\nproperty {x} x\nproperty {y} y\n\

@@ -311,17 +311,28 @@ fn the_files_around_a_gltf_are_never_written_over() {
     let after = crate::util::read_json(&at("out.gltf"));
     assert_eq!(after["buffers"][0]["uri"], "out-1.bin");
     assert_eq!(after["buffers"][1]["uri"], "out.bin");
-    check_smoothed(&json, &bin, &after, &std::fs::read(at("out-1.bin")).unwrap());
+    check_smoothed(
+        &json,
+        &bin,
+        &after,
+        &std::fs::read(at("out-1.bin")).unwrap(),
+    );
     // Again: its own buffer from the first run is replaced, not a third file made.
     ok(run(&["out.gltf"]));
-    assert_eq!(crate::util::read_json(&at("out.gltf"))["buffers"][0]["uri"], "out-1.bin");
+    assert_eq!(
+        crate::util::read_json(&at("out.gltf"))["buffers"][0]["uri"],
+        "out-1.bin"
+    );
     assert!(!at("out-2.bin").exists());
 
     // A file of the user's named like the buffer stays as it was.
     std::fs::write(at("mine.bin"), b"mine").unwrap();
     ok(run(&["mine.gltf"]));
     assert_eq!(std::fs::read(at("mine.bin")).unwrap(), b"mine");
-    assert_eq!(crate::util::read_json(&at("mine.gltf"))["buffers"][0]["uri"], "mine-1.bin");
+    assert_eq!(
+        crate::util::read_json(&at("mine.gltf"))["buffers"][0]["uri"],
+        "mine-1.bin"
+    );
 
     // A report over one of the input's buffers, or where the output's buffer goes: refused
     // before any work.
