@@ -329,3 +329,68 @@ fn usage_errors_are_one_line_and_write_nothing() {
     ok(vcsmooth(["smooth", &input, &o, "--multires"]));
     assert!(out.exists());
 }
+
+/// The summary's and the records' percentages are of the input, as the output file has them
+/// (measured here from both files), also when only the coarse levels smooth.
+#[test]
+fn the_percentages_are_of_the_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("s.ply");
+    generate_sphere(&input, 5, Some(0.3), Some(1));
+    let measured = |path: &Path| {
+        let m = io::read_mesh(path).unwrap();
+        (
+            metrics::volume(&m.positions, &m.triangles),
+            metrics::area(&m.positions, &m.triangles),
+        )
+    };
+    let (v0, a0) = measured(&input);
+    for extra in [
+        &["--levels", "3", "--transfer", "constant"][..],
+        &["--iterations", "0", "--coarse-iterations", "5"][..],
+    ] {
+        let (out, report) = (dir.path().join("o.ply"), dir.path().join("r.json"));
+        let mut args = vec![
+            "smooth".as_ref(),
+            input.as_os_str(),
+            out.as_os_str(),
+            "--multires".as_ref(),
+            "--report".as_ref(),
+            report.as_os_str(),
+        ];
+        args.extend(extra.iter().map(std::ffi::OsStr::new));
+        let printed = ok(vcsmooth(args));
+        let (v, a) = measured(&out);
+        let r = read_json(&report);
+        let area_pct = r["summary"]["area_pct"].as_f64().unwrap();
+        let volume_pct = r["summary"]["volume_pct"].as_f64().unwrap();
+        // The file stores float coordinates: its figures agree to about 1e-6.
+        assert!(
+            (area_pct - 100.0 * a / a0).abs() < 1e-3,
+            "{extra:?}: area {area_pct} %, file {}",
+            100.0 * a / a0
+        );
+        assert!(
+            (volume_pct - 100.0 * v / v0).abs() < 1e-3,
+            "{extra:?}: volume {volume_pct} %"
+        );
+        assert!(
+            area_pct < 99.999,
+            "{extra:?}: the smoothing shrank the area: {area_pct} %"
+        );
+        assert!(
+            printed.contains(&format!("area {area_pct:.4} %")),
+            "{extra:?}: {printed}"
+        );
+        for rec in r["iterations"].as_array().unwrap() {
+            let (vol, pct) = (
+                rec["volume"].as_f64().unwrap(),
+                rec["volume_pct"].as_f64().unwrap(),
+            );
+            assert!(
+                (pct - 100.0 * vol / v0).abs() < 1e-9 * pct.abs(),
+                "{extra:?}: {rec}"
+            );
+        }
+    }
+}

@@ -130,6 +130,20 @@ impl Summary {
             seconds: records.iter().map(|r| r.seconds).sum(),
         }
     }
+
+    /// [`Summary::of`] a run's records; with `--multires`, the output's volume and area as the
+    /// run measured them after its final correction (the coarse levels move the mesh even when
+    /// the input level runs no iteration).
+    pub fn of_run(
+        records: &[IterationRecord],
+        multires: Option<&crate::multires::MultiresStats>,
+    ) -> Summary {
+        let mut s = Summary::of(records);
+        if let Some(m) = multires {
+            (s.volume_pct, s.area_pct) = (m.volume_pct, m.area_pct);
+        }
+        s
+    }
 }
 
 /// The iterations a run of `opts` ran, for people: `10 iterations`, or with the automatic stop

@@ -101,15 +101,45 @@ impl Plan {
         observer: &mut dyn Observer,
     ) -> Result<(Vec<IterationRecord>, Option<AutoStopStats>)> {
         let mut records = Vec::new();
-        let auto = self.smooth_into(storage, opts, when, observer, Some(&mut records))?;
+        let auto = self.smooth_into(storage, opts, when, observer, Some(&mut records), None)?;
         Ok((records, auto))
+    }
+
+    /// [`Plan::smooth`] with the records' volumes and areas measured against `reference`
+    /// instead of the positions the smoothing starts from (the multiresolution mode's input
+    /// level, whose smoothing starts from the coarse levels' result). The reference's origin
+    /// must not change the result: no automatic stop.
+    pub(crate) fn smooth_against(
+        &mut self,
+        storage: &Storage,
+        opts: &Options,
+        when: Statistics,
+        reference: Reference,
+        observer: &mut dyn Observer,
+    ) -> Result<Vec<IterationRecord>> {
+        if opts.auto_stop {
+            return Err(Error::parameter(
+                "auto_stop",
+                "measures against the positions it starts from",
+            ));
+        }
+        let mut records = Vec::new();
+        self.smooth_into(
+            storage,
+            opts,
+            when,
+            observer,
+            Some(&mut records),
+            Some(reference),
+        )?;
+        Ok(records)
     }
 
     /// [`Plan::smooth`] measuring only the last iteration and keeping no record: a step whose
     /// records nobody reads (a coarse level of the multiresolution mode), so that its memory does
     /// not grow with the iteration count.
     pub fn smooth_unrecorded(&mut self, storage: &Storage, opts: &Options) -> Result<()> {
-        self.smooth_into(storage, opts, Statistics::Last, &mut Quiet, None)
+        self.smooth_into(storage, opts, Statistics::Last, &mut Quiet, None, None)
             .map(drop)
     }
 
@@ -122,6 +152,7 @@ impl Plan {
         when: Statistics,
         observer: &mut dyn Observer,
         records: Option<&mut Vec<IterationRecord>>,
+        reference: Option<Reference>,
     ) -> Result<Option<AutoStopStats>> {
         opts.check()?;
         let Plan {
@@ -172,7 +203,7 @@ impl Plan {
                 loops: None,
                 tiles: *in_memory,
             };
-            let reference = Reference::measure(&mesh, pos, &alone);
+            let reference = reference.unwrap_or_else(|| Reference::measure(&mesh, pos, &alone));
             let buffers = iterate::Buffers {
                 pos,
                 scratch: &mut scratch,

@@ -104,6 +104,10 @@ pub struct MultiresStats {
     pub levels: Vec<LevelStats>,
     /// Volume % after the fine smoothing, before the final correction.
     pub volume_pct_before_correction: f64,
+    /// The output's volume and area as a percentage of the input's: also after 0 iterations of
+    /// the input level, when the coarse levels still moved it.
+    pub volume_pct: f64,
+    pub area_pct: f64,
     /// |V_out − V_in| / |V_in| after the final correction (f64 positions).
     pub volume_error: f64,
     pub correction_seconds: f64,
@@ -205,7 +209,15 @@ pub fn smooth_plan(
     let start = Instant::now();
     let origin = reduce::centroid(&plan.reordered.positions);
     let v0 = reduce::volume(&plan.reordered.positions, &plan.reordered.triangles, origin);
+    let a0 = reduce::volume_area(&plan.reordered.positions, &plan.reordered.triangles, origin).1;
     let pct = |v: f64| metrics::percent(v, v0);
+    // The input level's records are measured against the input, not the coarse levels' result
+    // it starts from.
+    let input = crate::engine::Reference {
+        origin: origin.to_array(),
+        volume: v0,
+        area: a0,
+    };
     let coarse_iterations = m.coarse_iterations.unwrap_or(opts.iterations);
 
     // 1. The hierarchy, finest to coarsest.
@@ -339,7 +351,7 @@ pub fn smooth_plan(
         method: m.fine_method,
         ..*opts
     };
-    let mut records = plan.smooth(storage, &fine_opts, when, observer)?;
+    let mut records = plan.smooth_against(storage, &fine_opts, when, input, observer)?;
     fine.smooth_seconds = t.elapsed().as_secs_f64();
 
     // 4. The final volume correction.
@@ -354,9 +366,10 @@ pub fn smooth_plan(
         v0,
         origin,
     )?;
+    let (volume, area) = reduce::volume_area(&r.positions, &r.triangles, origin);
     if let Some(last) = records.last_mut() {
-        last.volume = reduce::volume(&r.positions, &r.triangles, origin);
-        last.volume_pct = pct(last.volume);
+        last.volume = volume;
+        last.volume_pct = pct(volume);
     }
     let correction_seconds = t.elapsed().as_secs_f64();
 
@@ -368,6 +381,8 @@ pub fn smooth_plan(
             options: *m,
             levels: all,
             volume_pct_before_correction: before,
+            volume_pct: pct(volume),
+            area_pct: metrics::percent(area, a0),
             volume_error: err.abs(),
             correction_seconds,
             seconds: start.elapsed().as_secs_f64(),

@@ -201,7 +201,7 @@ impl SmoothReport {
             memory: run.memory.clone(),
             timings: run.timings,
             cluster: run.cluster.clone(),
-            summary: Summary::of(&run.records),
+            summary: Summary::of_run(&run.records, multires.as_ref()),
             iterations_run: run.iterations_run,
             auto_stop: run.auto_stop.clone(),
             iterations: run.records.clone(),
@@ -315,7 +315,7 @@ fn report(
     }
     progress.finish();
 
-    let s = Summary::of(records);
+    let s = Summary::of_run(records, multires.as_ref());
     let text = format!(
         "{} -> {}: {}, {}, {} vertices, {} triangles; volume {} %, area {} %\n",
         cfg.input.display(),
