@@ -282,6 +282,24 @@ fn double_ply_input_stays_double_through_a_ply_round_trip() {
     assert!(bytes.starts_with(b"ply\nformat ascii 1.0\n"));
 }
 
+/// A `uchar` index list over more than 256 vertices is written back when its faces use only
+/// the first 256 (the type must hold the indices, not the vertex count).
+#[test]
+fn a_uchar_index_list_over_many_vertices_writes_back() {
+    let mut text = String::from(
+        "ply\nformat ascii 1.0\nelement vertex 300\nproperty float x\nproperty float y\n\
+         property float z\nelement face 1\nproperty list uchar uchar vertex_indices\nend_header\n",
+    );
+    for i in 0..300 {
+        text.push_str(&format!("{i} {} 0\n", i % 7));
+    }
+    text.push_str("3 0 1 255\n");
+    let mesh = parse_as(text.as_bytes(), "u.ply").unwrap();
+    let back = roundtrip(&mesh, "u.ply");
+    assert_eq!(back.triangles.to_vec(), vec![[0, 1, 255]]);
+    assert_eq!(back.positions.len(), 300);
+}
+
 /// A `double` in any coordinate, not only `x`, keeps every output in double precision.
 #[test]
 fn a_double_y_or_z_keeps_double_precision() {

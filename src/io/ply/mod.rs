@@ -1455,10 +1455,12 @@ pub(crate) fn check_writable(mesh: &Mesh) -> Fallible<()> {
             count.name()
         ));
     }
-    if !mesh.positions.is_empty() && !index.holds((mesh.positions.len() - 1) as f64) {
+    // The indices the faces use, not the vertex count: a `uchar` list may index the first 256
+    // vertices of many.
+    let largest = mesh.triangles.iter().flatten().max();
+    if let Some(&v) = largest.filter(|&&v| !index.holds(v as f64)) {
         return Err(format!(
-            "{} vertices: indices do not fit PLY type {}",
-            mesh.positions.len(),
+            "vertex index {v} does not fit the PLY index type {}",
             index.name()
         ));
     }
