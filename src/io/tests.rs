@@ -765,6 +765,7 @@ fn malformed_inputs_give_clear_one_line_errors() {
         ("a.ply", ascii("0 0 0 1\n1 zero 0 2\n3 0 1 1\n"), "vertex 1 (line 12): \"zero\" is not a number ('y' is float)".into()),
         ("a.ply", ascii("0 0 0 1\n1 inf 0 2\n3 0 1 1\n"), "vertex 1 (line 12): coordinate is not finite (1, inf, 0)".into()),
         ("a.ply", ascii("0 0 0 1\n1 0 0 300\n3 0 1 1\n"), "vertex 1 (line 12): value 300 does not fit 'red' (uchar)".into()),
+        ("a.ply", ascii("0 0 0 1\n1 1e39 0 2\n3 0 1 1\n"), "vertex 1 (line 12): value \"1e39\" does not fit 'y' (float)".into()),
         ("a.ply", ascii("0 0 0 1 7\n1 0 0 2\n3 0 1 1\n"), "vertex 0 (line 11): unexpected value \"7\" after the last property".into()),
         ("a.ply", ascii("0 0 0 1\n1 0 0\n3 0 1 1\n"), "vertex 1 (line 12): too few values: 'red' is missing".into()),
         ("a.ply", ascii("0 0 0 1\n\n1 0 0 2\n3 0 1 1\n"), "vertex 1 (line 12): too few values".into()),

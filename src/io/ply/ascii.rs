@@ -117,6 +117,20 @@ fn push(records: &mut Vec<u8>, t: Scalar, token: &[u8], p: &Property) -> Result<
             t.name()
         )
     })?;
+    // A finite number too large for the type would be carried as infinity; an infinity (or a
+    // NaN) written as such is the file's own value.
+    let spelled_infinite = text
+        .trim_start_matches(['+', '-'])
+        .to_ascii_lowercase()
+        .starts_with("inf");
+    if value.is_infinite() && !spelled_infinite {
+        return Err(format!(
+            "value {} does not fit '{}' ({})",
+            show(token),
+            p.name,
+            t.name()
+        ));
+    }
     let at = records.len();
     records.resize(at + t.size(), 0);
     t.put(value, &mut records[at..]);
