@@ -356,17 +356,11 @@ def worker_trimesh(V, F, a):
     return trimesh.__version__
 
 
-def worker_vtk(V, F, a):
-    from vtkmodules.vtkCommonCore import vtkPoints, vtkSMPTools, vtkVersion
+def vtk_polydata(V, F):
+    """A vtkPolyData of the vertices V (n, 3) and the triangles F (m, 3), copied."""
+    from vtkmodules.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray
+    from vtkmodules.vtkCommonCore import vtkPoints
     from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData
-    from vtkmodules.vtkFiltersCore import vtkSmoothPolyDataFilter, vtkWindowedSincPolyDataFilter
-    from vtkmodules.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray, vtk_to_numpy
-
-    # The pip wheels default to the Sequential SMP backend; give VTK the same thread budget as
-    # the others (vtkWindowedSincPolyDataFilter is vtkSMPTools-threaded since VTK 9.2).
-    vtkSMPTools.SetBackend("STDThread")
-    vtkSMPTools.Initialize(a.threads)
-    backend = f"{vtkSMPTools.GetBackend()} x{vtkSMPTools.GetEstimatedNumberOfThreads()}"
 
     pts = vtkPoints()
     pts.SetData(numpy_to_vtk(np.ascontiguousarray(V, dtype=np.float64), deep=True))
@@ -377,6 +371,21 @@ def worker_vtk(V, F, a):
     poly = vtkPolyData()
     poly.SetPoints(pts)
     poly.SetPolys(cells)
+    return poly
+
+
+def worker_vtk(V, F, a):
+    from vtkmodules.vtkCommonCore import vtkSMPTools, vtkVersion
+    from vtkmodules.vtkFiltersCore import vtkSmoothPolyDataFilter, vtkWindowedSincPolyDataFilter
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+
+    # The pip wheels default to the Sequential SMP backend; give VTK the same thread budget as
+    # the others (vtkWindowedSincPolyDataFilter is vtkSMPTools-threaded since VTK 9.2).
+    vtkSMPTools.SetBackend("STDThread")
+    vtkSMPTools.Initialize(a.threads)
+    backend = f"{vtkSMPTools.GetBackend()} x{vtkSMPTools.GetEstimatedNumberOfThreads()}"
+
+    poly = vtk_polydata(V, F)
 
     def fetch(f):
         out = f.GetOutput()

@@ -24,27 +24,17 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 import quality_table as q  # noqa: E402
-from compare_peers import read_ply  # noqa: E402
+from compare_peers import read_ply, vtk_polydata  # noqa: E402
 
 BINARY = os.path.join(HERE, "..", "target", "release", "vcsmooth")
 MESHES = os.path.join(HERE, "..", "..", "shared", "meshes")
 
 
 def windowed_sinc(v, f, iterations, pass_band):
-    from vtkmodules.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray, vtk_to_numpy
-    from vtkmodules.vtkCommonCore import vtkPoints
-    from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData
+    from vtkmodules.util.numpy_support import vtk_to_numpy
     from vtkmodules.vtkFiltersCore import vtkWindowedSincPolyDataFilter
 
-    pts = vtkPoints()
-    pts.SetData(numpy_to_vtk(np.ascontiguousarray(v), deep=True))
-    cells = vtkCellArray()
-    offsets = np.arange(0, 3 * len(f) + 1, 3, dtype=np.int64)
-    cells.SetData(numpy_to_vtkIdTypeArray(offsets, deep=True),
-                  numpy_to_vtkIdTypeArray(np.ascontiguousarray(f, dtype=np.int64).ravel(), deep=True))
-    poly = vtkPolyData()
-    poly.SetPoints(pts)
-    poly.SetPolys(cells)
+    poly = vtk_polydata(v, f)
     s = vtkWindowedSincPolyDataFilter()
     s.SetInputData(poly)
     s.SetNumberOfIterations(iterations)
