@@ -330,7 +330,7 @@ pub fn cases() -> Vec<Case> {
         error("ascii_index_negative.ply", ascii_xyz(3, 1, "0 0 0\n1 0 0\n0 1 0\n3 0 -1 2\n"), "face 0 (line 13): vertex index -1 is negative"),
         error("ascii_face_with_2_vertices.ply", ascii_xyz(3, 1, "0 0 0\n1 0 0\n0 1 0\n2 0 1\n"), "face 0 (line 13): face has 2 vertices, at least 3 are needed"),
         error("ascii_nan.ply", ascii_xyz(3, 1, "0 0 0\n1 nan 0\n0 1 0\n3 0 1 2\n"), "vertex 1 (line 11): coordinate is not finite (1, NaN, 0)"),
-        error("ascii_overflow_to_inf.ply", ascii_xyz(3, 1, "0 0 0\n1 0 1e999\n0 1 0\n3 0 1 2\n"), "vertex 1 (line 11): coordinate is not finite (1, 0, inf)"),
+        error("ascii_overflow_to_inf.ply", ascii_xyz(3, 1, "0 0 0\n1 0 1e999\n0 1 0\n3 0 1 2\n"), "vertex 1 (line 11): value \"1e999\" does not fit 'z' (float)"),
         error("ascii_not_a_number.ply", ascii_xyz(3, 1, "0 0 0\n1 zero 0\n0 1 0\n3 0 1 2\n"), "vertex 1 (line 11): \"zero\" is not a number ('y' is float)"),
         error("ascii_decimal_comma.ply", ascii_xyz(3, 1, "0 0 0\n1,5 0 0\n0 1 0\n3 0 1 2\n"), "vertex 1 (line 11): \"1,5\" is not a number ('x' is float)"),
         error("ascii_too_few_values.ply", ascii_xyz(3, 1, "0 0 0\n1 0\n0 1 0\n3 0 1 2\n"), "vertex 1 (line 11): too few values: 'z' is missing"),
