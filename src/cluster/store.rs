@@ -205,7 +205,8 @@ impl WorkDir {
 
     /// Store `made` (fresh from [`engine::Plan::new`]) as the plan, replacing whatever plan was
     /// there; with `keep_input`, also its positions as `input.f64` (read by a deviation bound, by
-    /// a resumed automatic stop and by resumed smooth boundaries); `loops`: the directed boundary edges of `boundary: smooth`.
+    /// a resumed automatic stop and by resumed smooth boundaries); `loops`: the directed boundary
+    /// edges of `boundary: smooth`.
     pub fn write_plan(
         &self,
         made: &engine::Plan,

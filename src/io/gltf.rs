@@ -779,13 +779,17 @@ pub(crate) fn buffer_name_of(output: &Path, name: &std::ffi::OsStr) -> bool {
             .is_some_and(|d| !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit())))
 }
 
-/// `path` with its directory made canonical (the file itself need not exist).
-fn canonical(path: &Path) -> PathBuf {
-    let dir = match path.parent() {
+/// The directory `path` is in (`.` for a bare file name).
+fn directory_of(path: &Path) -> &Path {
+    match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
-    };
-    match (std::fs::canonicalize(dir), path.file_name()) {
+    }
+}
+
+/// `path` with its directory made canonical (the file itself need not exist).
+fn canonical(path: &Path) -> PathBuf {
+    match (std::fs::canonicalize(directory_of(path)), path.file_name()) {
         (Ok(d), Some(name)) => d.join(name),
         _ => path.to_path_buf(),
     }
@@ -826,18 +830,15 @@ pub(crate) fn referenced_files(path: &Path) -> Vec<PathBuf> {
         let gltf = path
             .extension()
             .is_some_and(|e| e.eq_ignore_ascii_case("gltf"));
-        let bytes = if gltf {
-            std::fs::read(path).ok()?
-        } else {
+        if !gltf {
             return None;
-        };
+        }
+        let bytes = std::fs::read(path).ok()?;
         serde_json::from_slice(super::without_bom(&bytes)).ok()
     };
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    json().map(|j| named_files(&j, dir)).unwrap_or_default()
+    json()
+        .map(|j| named_files(&j, directory_of(path)))
+        .unwrap_or_default()
 }
 
 /// A GLB: header, JSON chunk (padded with spaces), binary chunk (padded with zeros).
