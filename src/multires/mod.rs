@@ -208,8 +208,8 @@ pub fn smooth_plan(
     validate(opts, m)?;
     let start = Instant::now();
     let origin = reduce::centroid(&plan.reordered.positions);
-    let v0 = reduce::volume(&plan.reordered.positions, &plan.reordered.triangles, origin);
-    let a0 = reduce::volume_area(&plan.reordered.positions, &plan.reordered.triangles, origin).1;
+    let (v0, a0) =
+        reduce::volume_area(&plan.reordered.positions, &plan.reordered.triangles, origin);
     let pct = |v: f64| metrics::percent(v, v0);
     // The input level's records are measured against the input, not the coarse levels' result
     // it starts from.
