@@ -369,8 +369,7 @@ pub fn edge_sums(
             sums.length.0 += p.distance(pos[j as usize]);
             sums.length.1 += 1;
             if e.count == 2 && e.usable == 0b11 {
-                let [a, b] = e.normals;
-                angles.push((a.cross(b).length(), a.dot(b)));
+                angles.push(angle_arguments(e.normals[0], e.normals[1]));
             }
         }
         if angles.len() >= ANGLE_BATCH {
@@ -386,10 +385,10 @@ pub fn edge_sums(
 /// so that the processor overlaps them; the sum is the same, in the same order.
 const ANGLE_BATCH: usize = 64;
 
-/// Add the angles `atan2(y, x)` of `pending` ([`angle_deg`]'s arguments), in order, to `sums`.
+/// Add the angles of `pending` ([`angle_arguments`]), in order, to `sums`.
 fn add_angles(sums: &mut EdgeSums, pending: &mut Vec<(f64, f64)>) {
-    for &(y, x) in pending.iter() {
-        sums.angle.0 += y.atan2(x).to_degrees();
+    for &args in pending.iter() {
+        sums.angle.0 += degrees_of(args);
     }
     sums.angle.1 += pending.len();
     pending.clear();
@@ -417,7 +416,17 @@ impl EdgeFaces {
 
 /// The angle between two non-zero vectors, in degrees.
 pub(crate) fn angle_deg(a: DVec3, b: DVec3) -> f64 {
-    a.cross(b).length().atan2(a.dot(b)).to_degrees()
+    degrees_of(angle_arguments(a, b))
+}
+
+/// The two arguments of [`angle_deg`]'s arctangent, `(|a × b|, a · b)`: accurate near 0° and 180°.
+fn angle_arguments(a: DVec3, b: DVec3) -> (f64, f64) {
+    (a.cross(b).length(), a.dot(b))
+}
+
+/// The angle of [`angle_arguments`], in degrees.
+fn degrees_of((y, x): (f64, f64)) -> f64 {
+    y.atan2(x).to_degrees()
 }
 
 #[cfg(test)]
