@@ -8,7 +8,7 @@
 
 use std::fs::{self, File, OpenOptions};
 use std::io::{self, BufWriter};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use crate::error::{Error, Result};
@@ -20,6 +20,22 @@ pub(crate) fn write_atomically(
     target: &Path,
     write: impl FnOnce(&mut BufWriter<File>) -> io::Result<()>,
 ) -> Result<()> {
+    stage(target, write)?.commit()
+}
+
+/// A complete temporary file, on disk, waiting to be renamed over its target: several files that
+/// belong together (a `.gltf` and its buffers) are all staged before any is committed, so that a
+/// failure while writing any of them changes none. Dropped uncommitted, the file is removed.
+pub(crate) struct Staged {
+    temp: Temporary,
+    target: PathBuf,
+}
+
+/// Writes `write`'s bytes to a temporary file beside `target`, synced, for [`Staged::commit`].
+pub(crate) fn stage(
+    target: &Path,
+    write: impl FnOnce(&mut BufWriter<File>) -> io::Result<()>,
+) -> Result<Staged> {
     remove_stale_temps(target);
     let (temp, file) = create_temp(target).map_err(|e| Error::io(target, e))?;
     let mut out = BufWriter::with_capacity(1 << 20, file);
@@ -30,10 +46,20 @@ pub(crate) fn write_atomically(
     // The data must be on disk before the rename makes it visible, or a power cut could leave a
     // renamed but empty file.
     file.sync_all().map_err(|e| Error::io(target, e))?;
-    drop(file);
-    temp.rename_to(target).map_err(|e| Error::io(target, e))?;
-    sync_directory(target);
-    Ok(())
+    Ok(Staged {
+        temp,
+        target: target.to_path_buf(),
+    })
+}
+
+impl Staged {
+    /// Renames the file over its target.
+    pub(crate) fn commit(self) -> Result<()> {
+        let Staged { temp, target } = self;
+        temp.rename_to(&target).map_err(|e| Error::io(&target, e))?;
+        sync_directory(&target);
+        Ok(())
+    }
 }
 
 /// The directory and file name of `target`.

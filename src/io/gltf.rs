@@ -611,7 +611,9 @@ pub(super) fn check_writable(mesh: &Mesh, format: Format) -> std::result::Result
 }
 
 /// Writes `mesh` (checked by [`check_writable`]) to `path`, with its changed external buffers
-/// beside it, each atomically (buffers first, so the glTF never names a missing file).
+/// beside it, each atomically. Every file is complete on disk before any is renamed into place
+/// (buffers first, so the glTF never names a missing file): a failure while writing leaves no
+/// new file and changes none.
 pub(super) fn write(path: &Path, mesh: &Mesh) -> Result<()> {
     let Some(layout) = layout_of(mesh) else {
         return Err(Error::invalid(path, "cannot write: not a glTF mesh"));
@@ -659,7 +661,7 @@ pub(super) fn write(path: &Path, mesh: &Mesh) -> Result<()> {
         }
     }
     let mut chunk = None;
-    let mut files = 0;
+    let mut staged = Vec::new();
     for (i, loaded) in layout.buffers.iter().enumerate() {
         let (Some(loaded), true) = (loaded, changed[i]) else {
             continue;
@@ -672,9 +674,8 @@ pub(super) fn write(path: &Path, mesh: &Mesh) -> Result<()> {
                     Value::String(format!("{head},{}", base64_encode(&bytes)));
             }
             Origin::File(_) => {
-                let bin = bin_path(path, files, layout);
-                files += 1;
-                super::write_atomically(&bin, |out| out.write_all(&bytes))?;
+                let bin = bin_path(path, staged.len(), layout);
+                staged.push(super::atomic::stage(&bin, |out| out.write_all(&bytes))?);
                 let name = bin
                     .file_name()
                     .map(|n| n.to_string_lossy().into_owned())
@@ -685,19 +686,24 @@ pub(super) fn write(path: &Path, mesh: &Mesh) -> Result<()> {
     }
     let text = serde_json::to_vec(&json)
         .map_err(|e| Error::invalid(path, format!("cannot write: {e}")))?;
-    if !layout.binary {
-        return super::write_atomically(path, |out| out.write_all(&text));
+    let gltf = if layout.binary {
+        let chunk = chunk.or_else(|| {
+            // The binary chunk was not changed (no geometry in it): carried as it was.
+            layout
+                .buffers
+                .iter()
+                .flatten()
+                .find(|b| matches!(b.origin, Origin::Chunk))
+                .map(|b| b.bytes.clone())
+        });
+        super::atomic::stage(path, |out| write_glb(out, &text, chunk.as_deref()))?
+    } else {
+        super::atomic::stage(path, |out| out.write_all(&text))?
+    };
+    for bin in staged {
+        bin.commit()?;
     }
-    let chunk = chunk.or_else(|| {
-        // The binary chunk was not changed (no geometry in it): carried as it was.
-        layout
-            .buffers
-            .iter()
-            .flatten()
-            .find(|b| matches!(b.origin, Origin::Chunk))
-            .map(|b| b.bytes.clone())
-    });
-    super::write_atomically(path, |out| write_glb(out, &text, chunk.as_deref()))
+    gltf.commit()
 }
 
 /// Sets an accessor's `min`/`max` to `lo`/`hi` (only if it had them, when `if_present`).

@@ -348,6 +348,51 @@ fn the_files_around_a_gltf_are_never_written_over() {
     ok(run(&["b.gltf", "--report", "b-x.bin"]));
 }
 
+/// A `.gltf` whose writing fails changes nothing: an earlier output and the buffer it names stay
+/// as they were, and no new file is left (the buffer was once renamed into place before the
+/// `.gltf` was written, so the earlier output named the new geometry).
+#[test]
+fn a_failed_gltf_write_changes_no_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let at = |name: &str| dir.path().join(name);
+    let (mut json, bin) = sphere();
+    json["buffers"][0]["uri"] = json!("geom.bin");
+    // The JSON, not the buffer, crosses the file-size limit below.
+    json["extras"]["notes"] = json!("x".repeat(100_000));
+    std::fs::write(at("scene.gltf"), serde_json::to_vec(&json).unwrap()).unwrap();
+    std::fs::write(at("geom.bin"), &bin).unwrap();
+    assert!(bin.len() < 32 << 10);
+    let smooth_args = |iterations: &str| {
+        vec![
+            "smooth".into(),
+            at("scene.gltf").into_os_string(),
+            at("out.gltf").into_os_string(),
+            "--iterations".into(),
+            std::ffi::OsString::from(iterations),
+        ]
+    };
+    ok(vcsmooth(smooth_args("2")));
+    let before = [
+        std::fs::read(at("out.gltf")).unwrap(),
+        std::fs::read(at("out.bin")).unwrap(),
+    ];
+    let files = crate::util::listing(dir.path());
+    // RLIMIT_FSIZE with SIGXFSZ ignored: a write past 64 KiB fails with EFBIG.
+    let out = std::process::Command::new("sh")
+        .args([
+            "-c",
+            "trap '' XFSZ; ulimit -f 128 && exec \"$0\" \"$@\"",
+            crate::util::BIN,
+        ])
+        .args(smooth_args("5"))
+        .output()
+        .unwrap();
+    fails(&out, 1, &["out.gltf", "File too large"]);
+    assert_eq!(std::fs::read(at("out.gltf")).unwrap(), before[0]);
+    assert_eq!(std::fs::read(at("out.bin")).unwrap(), before[1]);
+    assert_eq!(crate::util::listing(dir.path()), files);
+}
+
 #[test]
 fn gltf_with_a_data_uri_is_re_encoded() {
     let dir = tempfile::tempdir().unwrap();
