@@ -110,24 +110,149 @@ pub fn reorder_metered(
             meter.add(p.len() as u64);
         });
 
+    // Renumbered, smallest vertex first, and sorted by a bucket sort on that vertex.
+    let renumbered = |t: usize| {
+        let r = triangles[t].map(|v| rank[v as usize]);
+        let first = (0..3).min_by_key(|&k| r[k]).unwrap_or(0);
+        [r[first], r[(first + 1) % 3], r[(first + 2) % 3]]
+    };
     let mut tris: Buf<[u32; 3]> = storage.zeroed(triangles.len())?;
-    tris.par_chunks_mut(STEP)
-        .zip(triangles.par_chunks(STEP))
-        .for_each(|(t, old)| {
-            for (t, old) in t.iter_mut().zip(old) {
-                let r = old.map(|v| rank[v as usize]);
-                let first = (0..3).min_by_key(|&k| r[k]).unwrap_or(0);
-                *t = [r[first], r[(first + 1) % 3], r[(first + 2) % 3]];
-            }
-            meter.add(t.len() as u64);
-        });
-    tris.par_sort_unstable();
+    let shift = first_corner_shift(n);
+    sort_by_buckets(
+        triangles.len(),
+        renumbered,
+        |t| (t[0] >> shift) as usize,
+        |bucket| sort_by_first(bucket, shift),
+        &mut tris,
+        meter,
+    );
     meter.add(triangles.len() as u64);
     Ok(Reordered {
         order,
         positions: new_pos,
         triangles: tris,
     })
+}
+
+/// Buckets of [`sort_by_buckets`]: few enough that every chunk of items keeps a count for each
+/// and that the streams it writes stay in cache.
+const BUCKETS: usize = 1 << 11;
+
+/// Most chunks [`sort_by_buckets`] cuts its items into.
+const CHUNKS: usize = 256;
+
+/// `out` = the items `item(0..count)` in ascending order: a counting sort into [`BUCKETS`] by
+/// `bucket(item)` (not decreasing with the item), stable, each bucket then sorted in cache by
+/// `sort`.
+/// Chunks of at least [`STEP`] items count their buckets, so each chunk knows where its items of each
+/// bucket go: the placement does not depend on the threads. `meter` counts the items placed.
+fn sort_by_buckets<T: Copy + Ord + Send + Sync>(
+    count: usize,
+    item: impl Fn(usize) -> T + Sync,
+    bucket: impl Fn(&T) -> usize + Sync,
+    sort: impl Fn(&mut [T]) + Sync,
+    out: &mut [T],
+    meter: &Meter,
+) {
+    assert_eq!(out.len(), count);
+    // At most CHUNKS chunks, so that their counts stay small on the largest meshes.
+    let step = count.div_ceil(CHUNKS).max(STEP);
+    let range = |c: usize| c * step..((c + 1) * step).min(count);
+    let mut counts: Vec<Vec<usize>> = (0..count.div_ceil(step))
+        .into_par_iter()
+        .map(|c| {
+            let mut n = vec![0usize; BUCKETS];
+            for i in range(c) {
+                n[bucket(&item(i))] += 1;
+            }
+            n
+        })
+        .collect();
+    // Counts into where each chunk's items of each bucket start, bucket by bucket.
+    let mut ends = vec![0usize; BUCKETS];
+    let mut at = 0;
+    for (b, end) in ends.iter_mut().enumerate() {
+        for n in counts.iter_mut() {
+            let k = n[b];
+            n[b] = at;
+            at += k;
+        }
+        *end = at;
+    }
+    let slots = Slots(out.as_mut_ptr());
+    counts
+        .into_par_iter()
+        .enumerate()
+        .for_each(|(c, mut next)| {
+            let items = range(c);
+            let placed = items.len() as u64;
+            for i in items {
+                let x = item(i);
+                let slot = &mut next[bucket(&x)];
+                // SAFETY: the chunks' slots of a bucket are disjoint ranges of `0..count`, and each
+                // is handed out once.
+                unsafe { slots.write(*slot, x) };
+                *slot += 1;
+            }
+            meter.add(placed);
+        });
+    let mut rest = out;
+    let mut parts = Vec::with_capacity(BUCKETS);
+    let mut from = 0;
+    for end in ends {
+        let (head, tail) = std::mem::take(&mut rest).split_at_mut(end - from);
+        parts.push(head);
+        rest = tail;
+        from = end;
+    }
+    parts.into_par_iter().for_each(&sort);
+}
+
+/// The smallest shift of a vertex id below `n` that gives one of the [`BUCKETS`].
+fn first_corner_shift(n: usize) -> u32 {
+    usize::BITS - (n >> BUCKETS.trailing_zeros()).leading_zeros()
+}
+
+/// Sorts `tris`, whose first corners agree above their low `bits` bits: a counting sort by the
+/// first corner, then each run of one first corner (a vertex's few triangles) by the others.
+fn sort_by_first(tris: &mut [[u32; 3]], bits: u32) {
+    if tris.len() < 2 {
+        return;
+    }
+    let low = |t: &[u32; 3]| (t[0] & ((1u32 << bits) - 1)) as usize;
+    let mut starts = vec![0usize; (1 << bits) + 1];
+    for t in tris.iter() {
+        starts[low(t) + 1] += 1;
+    }
+    for k in 1..starts.len() {
+        starts[k] += starts[k - 1];
+    }
+    let copy = tris.to_vec();
+    let mut next = starts.clone();
+    for t in copy {
+        let slot = &mut next[low(&t)];
+        tris[*slot] = t;
+        *slot += 1;
+    }
+    for run in starts.windows(2) {
+        let run = &mut tris[run[0]..run[1]];
+        if run.len() > 1 {
+            run.sort_unstable();
+        }
+    }
+}
+
+/// The items of [`sort_by_buckets`]'s output, written from several threads at distinct slots.
+struct Slots<T>(*mut T);
+
+// SAFETY: the pointer is only used to write distinct slots (see `sort_by_buckets`).
+unsafe impl<T: Send> Sync for Slots<T> {}
+
+impl<T> Slots<T> {
+    /// SAFETY: `slot` is in bounds and no other thread reads or writes it meanwhile.
+    unsafe fn write(&self, slot: usize, x: T) {
+        unsafe { self.0.add(slot).write(x) }
+    }
 }
 
 /// `out[index[k]] = value(k)` for every `k`, on the current pool; `index` must be a permutation
@@ -292,6 +417,54 @@ mod tests {
             let mut out = vec![0u64; n];
             pool.install(|| scatter(&mut out, &index, |k| k as u64 * 3));
             assert_eq!(out, want, "{threads} threads");
+        }
+    }
+
+    /// The triangles' bucket sort gives what a plain sort gives (duplicates, runs of one first
+    /// corner, empty buckets, more than one chunk), for any thread count and vertex count.
+    #[test]
+    fn bucket_sort_equals_a_plain_sort() {
+        let mut x = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = move |m: u32| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x % m as u64) as u32
+        };
+        for n in [1u32, 5, 2048, 4099, 1 << 16, 3_000_017] {
+            let count = 3 * STEP + 7;
+            let tris: Vec<[u32; 3]> = (0..count)
+                .map(|_| {
+                    // Some vertices far more often than others, and repeated triangles.
+                    let a = if next(4) == 0 {
+                        next(n.min(3))
+                    } else {
+                        next(n)
+                    };
+                    [a, next(n), next(n)]
+                })
+                .collect();
+            let mut want = tris.clone();
+            want.sort_unstable();
+            let shift = first_corner_shift(n as usize);
+            for threads in [1, 3] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                let mut out = vec![[0; 3]; count];
+                pool.install(|| {
+                    sort_by_buckets(
+                        count,
+                        |t| tris[t],
+                        |t| (t[0] >> shift) as usize,
+                        |b| sort_by_first(b, shift),
+                        &mut out,
+                        &Meter::default(),
+                    )
+                });
+                assert_eq!(out, want, "{n} vertices, {threads} threads");
+            }
         }
     }
 }
