@@ -1473,3 +1473,56 @@ fn stored_positions_are_those_read_back_in_every_format_and_layout() {
     }
     assert_eq!(Stored::of(Path::new("m.xyz"), &octahedron()), None);
 }
+
+/// Normals stored in integer types are written as normalized integers (`char` n × 127, `uchar`
+/// (n + 1) / 2 × 255, …), pointing where the float normals of the same mesh point: not rounded
+/// to -1, 0 or 1.
+#[test]
+fn integer_normals_are_written_as_normalized_integers() {
+    let header = |t: &str| {
+        format!(
+            "ply\nformat ascii 1.0\nelement vertex 6\nproperty float x\nproperty float y\n\
+             property float z\nproperty {t} nx\nproperty {t} ny\nproperty {t} nz\n\
+             element face 8\nproperty list uchar int vertex_indices\nend_header\n"
+        )
+    };
+    let oct = octahedron();
+    let body = |zero: &str| {
+        let mut b = String::new();
+        for p in oct.positions.iter() {
+            // Tilted, so that the normals have components other than 0 and ±1.
+            let q = DVec3::new(p.x * 1.5 + 0.25 * p.y, p.y + 0.3 * p.z, p.z * 0.75 + 0.2 * p.x);
+            b += &format!("{} {} {} {zero} {zero} {zero}\n", q.x, q.y, q.z);
+        }
+        for t in oct.triangles.iter() {
+            b += &format!("3 {} {} {}\n", t[0], t[1], t[2]);
+        }
+        b
+    };
+    let normals_of = |t: &str, zero: &str| -> Vec<[f64; 3]> {
+        let mesh = parse_as(format!("{}{}", header(t), body(zero)).as_bytes(), "n.ply").unwrap();
+        let out = String::from_utf8(write_bytes(&mesh, "out.ply")).unwrap();
+        let rows = out.split("end_header\n").nth(1).unwrap().lines().take(6);
+        rows.map(|r| {
+            let f: Vec<f64> = r.split(' ').map(|x| x.parse().unwrap()).collect();
+            [f[3], f[4], f[5]]
+        })
+        .collect()
+    };
+    let want = normals_of("float", "0");
+    for (t, zero, decode) in [
+        ("char", "0", (|x: f64| x / 127.0) as fn(f64) -> f64),
+        ("short", "0", |x| x / 32767.0),
+        ("uchar", "127", |x| x / 255.0 * 2.0 - 1.0),
+        ("ushort", "32767", |x| x / 65535.0 * 2.0 - 1.0),
+    ] {
+        let got = normals_of(t, zero);
+        for (g, w) in got.iter().zip(&want) {
+            let g = DVec3::from(g.map(decode));
+            let w = DVec3::from(*w);
+            assert!(w.length() > 0.99 && g.angle_between(w) < 0.02, "{t}: {g} vs {w}");
+        }
+    }
+    let inner = |c: &f64| c.abs() > 0.05 && c.abs() < 0.95;
+    assert!(want.iter().flatten().filter(|c| inner(c)).count() >= 4, "{want:?}");
+}

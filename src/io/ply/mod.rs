@@ -148,6 +148,18 @@ impl Scalar {
         }
     }
 
+    /// A unit-vector component `c` (in [-1, 1]) as this type stores it: floats as it is, integers
+    /// as normalized integers (the convention of glTF and GPU formats): a signed type holds
+    /// `c × MAX`, an unsigned one `(c + 1) / 2 × MAX`, so that a normal keeps its direction
+    /// instead of rounding to -1, 0 or 1.
+    pub(crate) fn unit_component(self, c: f64) -> f64 {
+        match self.int_range() {
+            Some((lo, hi)) if lo < 0 => c * hi as f64,
+            Some((_, hi)) => (c + 1.0) / 2.0 * hi as f64,
+            None => c,
+        }
+    }
+
     /// Whether [`Scalar::put`] stores `v` without saturating or overflowing to infinity.
     pub(crate) fn holds(self, v: f64) -> bool {
         match (self, self.int_range()) {
@@ -1568,9 +1580,9 @@ fn write_vertices(out: &mut impl Write, el: &Element, mesh: &Mesh, ascii: bool) 
     } else {
         Vec::new()
     };
-    let value = |i: usize, v: Value| match v {
+    let value = |i: usize, t: Scalar, v: Value| match v {
         Value::Coordinate(c) => mesh.positions[i][c],
-        Value::Normal(c) => normals[i][c],
+        Value::Normal(c) => t.unit_component(normals[i][c]),
     };
 
     let Some(stride) = el.stride() else {
@@ -1583,7 +1595,7 @@ fn write_vertices(out: &mut impl Write, el: &Element, mesh: &Mesh, ascii: bool) 
             pos = walk_record(records, pos, &el.props, false, &mut fields)
                 .map_err(|_| io::Error::other("stored PLY vertex records are corrupt"))?;
             for &(k, t, v) in &targets {
-                t.put(value(i, v), &mut patched[fields[k].at..]);
+                t.put(value(i, t, v), &mut patched[fields[k].at..]);
             }
         }
         return emit(out, &el.props, &patched, ascii);
@@ -1629,7 +1641,7 @@ fn write_vertices(out: &mut impl Write, el: &Element, mesh: &Mesh, ascii: bool) 
         }
         for (record, i) in buf.chunks_exact_mut(stride).zip(start..) {
             for &(at, t, v) in &targets {
-                t.put(value(i, v), &mut record[at..]);
+                t.put(value(i, t, v), &mut record[at..]);
             }
         }
         emit(out, &el.props, &buf, ascii)?;
