@@ -1491,7 +1491,11 @@ fn integer_normals_are_written_as_normalized_integers() {
         let mut b = String::new();
         for p in oct.positions.iter() {
             // Tilted, so that the normals have components other than 0 and ±1.
-            let q = DVec3::new(p.x * 1.5 + 0.25 * p.y, p.y + 0.3 * p.z, p.z * 0.75 + 0.2 * p.x);
+            let q = DVec3::new(
+                p.x * 1.5 + 0.25 * p.y,
+                p.y + 0.3 * p.z,
+                p.z * 0.75 + 0.2 * p.x,
+            );
             b += &format!("{} {} {} {zero} {zero} {zero}\n", q.x, q.y, q.z);
         }
         for t in oct.triangles.iter() {
@@ -1520,9 +1524,15 @@ fn integer_normals_are_written_as_normalized_integers() {
         for (g, w) in got.iter().zip(&want) {
             let g = DVec3::from(g.map(decode));
             let w = DVec3::from(*w);
-            assert!(w.length() > 0.99 && g.angle_between(w) < 0.02, "{t}: {g} vs {w}");
+            assert!(
+                w.length() > 0.99 && g.angle_between(w) < 0.02,
+                "{t}: {g} vs {w}"
+            );
         }
     }
     let inner = |c: &f64| c.abs() > 0.05 && c.abs() < 0.95;
-    assert!(want.iter().flatten().filter(|c| inner(c)).count() >= 4, "{want:?}");
+    assert!(
+        want.iter().flatten().filter(|c| inner(c)).count() >= 4,
+        "{want:?}"
+    );
 }
