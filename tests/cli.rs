@@ -177,6 +177,34 @@ fn smooth_with_each_method_writes_mesh_report_and_plot() {
     }
 }
 
+/// An open mesh's signed volume depends on the point it is measured about: the report measures
+/// input and output about the input's centroid (`volume_origin`), so their ratio is the
+/// summary's `volume_pct` (up to the output file's `float` rounding), not off by the centroid's
+/// move.
+#[test]
+fn an_open_meshs_report_volumes_compare() {
+    let dir = tempfile::tempdir().unwrap();
+    let report = dir.path().join("r.json");
+    ok(vcsmooth([
+        "smooth".as_ref(),
+        scan("stanford-bunny.ply").as_os_str(),
+        dir.path().join("out.ply").as_os_str(),
+        "--method".as_ref(),
+        "vcs".as_ref(),
+        "--iterations".as_ref(),
+        "10".as_ref(),
+        "--report".as_ref(),
+        report.as_os_str(),
+    ]));
+    let r = read_json(&report);
+    let (input, output) = (&r["input"]["stats"], &r["output"]["stats"]);
+    assert_eq!(input["closed"], false);
+    assert_eq!(input["volume_origin"], output["volume_origin"]);
+    let ratio = 100.0 * output["volume"].as_f64().unwrap() / input["volume"].as_f64().unwrap();
+    let pct = r["summary"]["volume_pct"].as_f64().unwrap();
+    assert!((ratio - pct).abs() < 1e-5, "{ratio} % against {pct} %");
+}
+
 #[test]
 fn smooth_defaults_and_other_formats() {
     let (dir, sphere) = noisy_sphere_file();

@@ -338,8 +338,9 @@ fn output_stats(
         // An output that write_mesh refuses has no statistics; its error is the write's.
         return Ok(None);
     };
+    let origin = DVec3::from(info.volume_origin);
     let geometry = if stored.is_exact() {
-        reduce::geometry(last, &plan.triangles, &plan.topology)
+        reduce::geometry_about(last, &plan.triangles, &plan.topology, origin)
     } else {
         let mut rounded: Buf<DVec3> = storage.zeroed(last.len())?;
         reduce::for_chunks_mut(&mut rounded, |first, chunk| {
@@ -347,7 +348,7 @@ fn output_stats(
                 *p = stored.round(q);
             }
         });
-        reduce::geometry(&rounded, &plan.triangles, &plan.topology)
+        reduce::geometry_about(&rounded, &plan.triangles, &plan.topology, origin)
     };
     info.set_geometry(geometry);
     Ok(Some(info))

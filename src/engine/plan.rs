@@ -246,12 +246,17 @@ impl Plan {
 
     /// The figures of [`Plan::info`] that depend on the positions, of the current positions.
     pub fn geometry(&self) -> crate::metrics::Geometry {
+        self.geometry_about(reduce::centroid(&self.reordered.positions))
+    }
+
+    /// [`Plan::geometry`] with the volume about `origin`.
+    pub fn geometry_about(&self, origin: glam::DVec3) -> crate::metrics::Geometry {
         let Reordered {
             positions,
             triangles,
             ..
         } = &self.reordered;
-        reduce::geometry(positions, triangles, &self.topology)
+        reduce::geometry_about(positions, triangles, &self.topology, origin)
     }
 
     /// The decomposition's figures for reports, with the colouring and halo `method` runs on

@@ -69,7 +69,17 @@ pub fn volume_area(pos: &[DVec3], tris: &[[u32; 3]], origin: DVec3) -> (f64, f64
 /// centroid summed over chunks of vertices; the extent, and the edges by their smaller vertex
 /// (in ascending `(i, j)` order within a chunk), over chunks of vertices.
 pub fn geometry(pos: &[DVec3], tris: &[[u32; 3]], topo: &Topology) -> metrics::Geometry {
-    let (volume, area) = volume_area(pos, tris, centroid(pos));
+    geometry_about(pos, tris, topo, centroid(pos))
+}
+
+/// [`geometry`] with the volume about `origin` (an output's about its input's centroid).
+pub fn geometry_about(
+    pos: &[DVec3],
+    tris: &[[u32; 3]],
+    topo: &Topology,
+    origin: DVec3,
+) -> metrics::Geometry {
+    let (volume, area) = volume_area(pos, tris, origin);
     let extent = map_fold(
         pos,
         |_, chunk| metrics::extent(chunk),
@@ -87,6 +97,7 @@ pub fn geometry(pos: &[DVec3], tris: &[[u32; 3]], topo: &Topology) -> metrics::G
     );
     metrics::Geometry {
         volume,
+        origin,
         area,
         extent,
         edges,

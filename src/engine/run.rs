@@ -345,7 +345,7 @@ fn output_stats(
             chunk.iter_mut().for_each(|p| *p = stored.round(*p))
         });
     }
-    info.set_geometry(plan.geometry());
+    info.set_geometry(plan.geometry_about(glam::DVec3::from(info.volume_origin)));
     Some(info)
 }
 
@@ -383,7 +383,7 @@ pub(crate) fn run_mesh(
         )?;
         let clock = Instant::now();
         smoothed.output_stats = smoothed.input_stats.clone().map(|mut info| {
-            info.set_geometry(plan.geometry());
+            info.set_geometry(plan.geometry_about(glam::DVec3::from(info.volume_origin)));
             info
         });
         t.metrics += clock.elapsed().as_secs_f64();

@@ -62,8 +62,13 @@ pub struct MeshInfo {
     /// least one triangle.
     pub closed: bool,
     /// Signed volume ([`crate::metrics::volume`]): positive for an outward-oriented closed mesh
-    /// (of the consistently oriented faces, see `inconsistent_orientation_edges`).
+    /// (of the consistently oriented faces, see `inconsistent_orientation_edges`). Measured
+    /// about `volume_origin`, which matters on an open mesh only.
     pub volume: f64,
+    /// The point the volume is measured about: the input's centroid (all vertices), for the
+    /// output too, so that an open mesh's input and output volumes compare.
+    #[serde(default)]
+    pub volume_origin: [f64; 3],
     pub area: f64,
     /// Bounding box of all vertices (unreferenced ones included); zeros for an empty mesh.
     pub bbox_min: [f64; 3],
@@ -146,8 +151,9 @@ pub fn connectivity(
 /// be measured apart and combined.
 #[derive(Debug, Clone, Copy)]
 pub struct Geometry {
-    /// Signed volume ([`crate::metrics::volume`]) and area.
+    /// Signed volume about `origin` ([`crate::metrics::volume_about`]) and area.
     pub volume: f64,
+    pub origin: DVec3,
     pub area: f64,
     /// Smallest and largest coordinates, see [`extent`].
     pub extent: (DVec3, DVec3),
@@ -156,8 +162,10 @@ pub struct Geometry {
 
 /// [`Geometry`] of a whole mesh, summed in the order of its arrays.
 pub fn geometry(pos: &[DVec3], triangles: &[[u32; 3]], topo: &Topology) -> Geometry {
+    let origin = super::centroid(pos);
     Geometry {
-        volume: super::volume(pos, triangles),
+        volume: super::volume_about(pos, triangles, origin),
+        origin,
         area: super::area(pos, triangles),
         extent: extent(pos),
         edges: edge_sums(pos, triangles, topo, 0..topo.len() as u32),
@@ -170,6 +178,7 @@ impl MeshInfo {
     pub fn set_geometry(&mut self, g: Geometry) {
         let (lo, hi) = bounding(g.extent);
         self.volume = g.volume;
+        self.volume_origin = g.origin.to_array();
         self.area = g.area;
         self.bbox_min = lo.to_array();
         self.bbox_max = hi.to_array();
