@@ -17,13 +17,17 @@ kept, the radius range of a sphere, a crack counted as boundary).
     python3 tools/hostile_probe.py [--bin target/release/vcsmooth] [--only CLASS] [--list]
 
 prints one line per case that went wrong and, last, `N cases, M went wrong` (exit 1 if M > 0).
-The classes follow issue #17: paths, values, readers, geometry, memory, signals, batch, output.
+The classes follow issue #17: paths, values, readers, geometry, memory, signals, batch, output,
+and gltf (`.gltf` with external and `data:` buffers, `.glb`: what a glTF input may hold, where a
+glTF output's buffers go).
 Only the Python standard library is needed.
 """
 
 from __future__ import annotations
 
 import argparse
+import base64
+import copy
 import gzip
 import hashlib
 import json
@@ -37,6 +41,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import urllib.parse
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(HERE)
@@ -183,7 +188,7 @@ def norm(p):
 
 class Case:
     def __init__(self, cls, name, setup, argv, expect="either", check=None, signal_after=None,
-                 limit_as_kb=None, timeout=None, output=None):
+                 limit_as_kb=None, timeout=None, output=None, replaces=(), new_files=None):
         self.cls = cls
         self.name = name
         self.setup = setup  # fn(dir) -> None: writes the files
@@ -194,6 +199,10 @@ class Case:
         self.limit_as_kb = limit_as_kb
         self.timeout = timeout or TIMEOUT
         self.output = output  # the named output, relative to the folder
+        # Files besides the output the command may replace (a .gltf output's own earlier buffer),
+        # and, when not None, the only files besides the output that may appear (its new buffers).
+        self.replaces = replaces
+        self.new_files = new_files
 
 
 def snapshot(d):
@@ -272,12 +281,19 @@ def judge(case, d, before, code, out, err, seconds):
         return f"refused: {lines[0] if lines else ''}"
     after = snapshot(d)
     output = os.path.join(d, case.output) if case.output else None
+    replaced = {os.path.join(d, r) for r in case.replaces}
     for p, h in before.items():
         # The output is the command's to replace; a stale temporary of it is its to remove.
-        if p == output or re.search(r"\.tmp-", os.path.basename(p)):
+        if p == output or p in replaced or re.search(r"\.tmp-", os.path.basename(p)):
             continue
         if after.get(p) != h:
             return f"{os.path.relpath(p, d)} was changed or removed"
+    if case.new_files is not None:
+        allowed = {os.path.join(d, n) for n in case.new_files} | {output}
+        new = sorted(os.path.relpath(p, d) for p in after if p not in before and p not in allowed
+                     and not re.search(r"\.tmp-", os.path.basename(p)))
+        if new:
+            return "new files besides the output: " + ", ".join(new)
     for p in after:
         if re.search(r"\.tmp-", os.path.basename(p)):
             return f"temporary file left: {os.path.relpath(p, d)}"
@@ -837,6 +853,581 @@ def no_undefined_numbers(d, code, out, err):
     return None
 
 
+# ---------------------------------------------------------------------------------------------
+# glTF
+
+GLB_JSON, GLB_BIN = 0x4E4F534A, 0x004E4942
+
+
+def unit(p):
+    n = math.sqrt(sum(c * c for c in p)) or 1.0
+    return tuple(c / n for c in p)
+
+
+def gltf_mesh(v, f, index_type=5125, normals=False):
+    """One triangle primitive as a glTF document (buffer 0, no uri yet) and that buffer's bytes:
+    accessor 0 the positions (view 0), 1 the indices (view 1), 2 the normals (view 2, if asked)."""
+    pos = b"".join(struct.pack("<3f", *p) for p in v)
+    code = {5121: "B", 5123: "H", 5125: "I"}[index_type]
+    idx = b"".join(struct.pack("<3" + code, *t) for t in f)
+    idx += b"\0" * (-len(idx) % 4)
+    views = [{"buffer": 0, "byteLength": len(pos), "target": 34962},
+             {"buffer": 0, "byteOffset": len(pos), "byteLength": len(idx), "target": 34963}]
+    accessors = [{"bufferView": 0, "componentType": 5126, "count": len(v), "type": "VEC3",
+                  "min": [min(p[k] for p in v) for k in range(3)],
+                  "max": [max(p[k] for p in v) for k in range(3)]},
+                 {"bufferView": 1, "componentType": index_type, "count": 3 * len(f), "type": "SCALAR"}]
+    data = pos + idx
+    prim = {"attributes": {"POSITION": 0}, "indices": 1}
+    if normals:
+        nrm = b"".join(struct.pack("<3f", *unit(p)) for p in v)
+        views.append({"buffer": 0, "byteOffset": len(data), "byteLength": len(nrm), "target": 34962})
+        accessors.append({"bufferView": 2, "componentType": 5126, "count": len(v), "type": "VEC3"})
+        prim["attributes"]["NORMAL"] = 2
+        data += nrm
+    doc = {"asset": {"version": "2.0", "generator": "hostile_probe"}, "scene": 0,
+           "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}], "meshes": [{"primitives": [prim]}],
+           "buffers": [{"byteLength": len(data)}], "bufferViews": views, "accessors": accessors}
+    return doc, data
+
+
+def gltf_text(doc, uri=None):
+    """`doc` as `.gltf` JSON, its buffer 0 named `uri`."""
+    if uri is not None:
+        doc = edited(doc, lambda j: j["buffers"][0].update(uri=uri))
+    return json.dumps(doc).encode()
+
+
+def data_uri(data):
+    return "data:application/octet-stream;base64," + base64.b64encode(data).decode()
+
+
+def glb(doc, data, version=2, pad_json=True):
+    """A GLB: header, JSON chunk, BIN chunk (none if `data` is None)."""
+    text = json.dumps(doc).encode()
+    if pad_json:
+        text += b" " * (-len(text) % 4)
+    body = struct.pack("<II", len(text), GLB_JSON) + text
+    if data is not None:
+        data = data + b"\0" * (-len(data) % 4)
+        body += struct.pack("<II", len(data), GLB_BIN) + data
+    return b"glTF" + struct.pack("<II", version, 12 + len(body)) + body
+
+
+def edited(doc, fn):
+    """A deep copy of `doc` after `fn(copy)`."""
+    doc = copy.deepcopy(doc)
+    fn(doc)
+    return doc
+
+
+def patched(data, at, fmt, *values):
+    b = bytearray(data)
+    struct.pack_into(fmt, b, at, *values)
+    return bytes(b)
+
+
+def gltf_files(doc, data, name="m.gltf", uri="m.bin", file=None):
+    """Setup: `name`, JSON whose buffer 0 is `uri`, and that buffer as `file` (default: `uri`)."""
+    return both(write(name, gltf_text(doc, uri)), write(file or uri, data))
+
+
+def read_gltf(path):
+    """A glTF or GLB file's JSON and its buffers' bytes (None where one cannot be read)."""
+    with open(path, "rb") as fh:
+        raw = fh.read()
+    chunk = None
+    if raw[:4] == b"glTF":
+        n = struct.unpack_from("<I", raw, 12)[0]
+        doc = json.loads(raw[20:20 + n])
+        at = 20 + n
+        if at + 8 <= len(raw) and struct.unpack_from("<I", raw, at + 4)[0] == GLB_BIN:
+            chunk = raw[at + 8:at + 8 + struct.unpack_from("<I", raw, at)[0]]
+    else:
+        doc = json.loads(raw)
+    buffers = []
+    for b in doc.get("buffers", []):
+        uri = b.get("uri")
+        if uri is None:
+            buffers.append(chunk)
+        elif uri.startswith("data:"):
+            buffers.append(base64.b64decode(uri.split(",", 1)[1]))
+        else:
+            try:
+                with open(os.path.join(os.path.dirname(path), urllib.parse.unquote(uri)), "rb") as fh:
+                    buffers.append(fh.read())
+            except OSError:
+                buffers.append(None)
+    return doc, buffers
+
+
+def gltf_written(inp, outp, uris=None, same=False):
+    """The output reads back with the input's vertex and triangle counts, finite coordinates inside
+    the input's bounding box grown by its diagonal; with `same` (0 iterations), every vertex where
+    it was; `uris`: the external buffers a glTF output must name, in order."""
+    def check(d, code, out, err):
+        if code != 0:
+            return None
+        i, o = os.path.join(d, inp), os.path.join(d, outp)
+        p = subprocess.run([BIN, "info", "--json", o], capture_output=True, timeout=TIMEOUT)
+        if p.returncode != 0:
+            return "the output does not read back: " + p.stderr.decode(errors="replace").strip()[:300]
+        a, b = info(i), json.loads(p.stdout)
+        if a is None:
+            return "the input (or its copy) no longer reads"
+        counts = lambda j: (find(j, "vertices"), find(j, "triangles"))
+        if counts(a) != counts(b):
+            return f"read back {counts(b)} vertices and triangles, the input has {counts(a)}"
+        lo, hi, g = find(a, "bbox_min"), find(a, "bbox_max"), find(a, "bbox_diagonal")
+        blo, bhi = find(b, "bbox_min"), find(b, "bbox_max")
+        if any(not math.isfinite(x) for x in blo + bhi):
+            return "non-finite coordinates in the output"
+        if any(blo[k] < lo[k] - g or bhi[k] > hi[k] + g for k in range(3)):
+            return f"output box {blo}..{bhi} outside the input's {lo}..{hi} grown by {g:.3g}"
+        if same:
+            c = subprocess.run([BIN, "compare", "--json", i, o], capture_output=True, timeout=TIMEOUT)
+            if c.returncode != 0:
+                return "compare with the input failed: " + c.stderr.decode(errors="replace").strip()[:200]
+            moved = find(json.loads(c.stdout), "max_distance")
+            if moved != 0:
+                return f"0 iterations moved a vertex by {moved!r}"
+        if uris is not None:
+            doc, _ = read_gltf(o)
+            got = [b.get("uri") for b in doc.get("buffers", [])
+                   if not str(b.get("uri", "data:")).startswith("data:")]
+            if got != uris:
+                return f"the output names buffers {got}, expected {uris}"
+        return None
+    return check
+
+
+def refused_naming(*names):
+    """A refusal's line names these (the file, the uri)."""
+    def check(d, code, out, err):
+        if code != 0 and not all(n in err for n in names):
+            return f"the error does not name {', '.join(names)}: {err.strip()[:200]!r}"
+        return None
+    return check
+
+
+def all_of(*checks):
+    def check(d, code, out, err):
+        for c in checks:
+            problem = c(d, code, out, err)
+            if problem:
+                return problem
+        return None
+    return check
+
+
+def same_bytes(outp, buffer, start, end, expected):
+    """Bytes `start..end` of the output's buffer `buffer` are `expected` (data the writer must not
+    touch)."""
+    def check(d, code, out, err):
+        if code != 0:
+            return None
+        _, buffers = read_gltf(os.path.join(d, outp))
+        got = buffers[buffer] if buffer < len(buffers) else None
+        if got is None or got[start:end] != expected:
+            return f"bytes {start}..{end} of buffer {buffer} changed"
+        return None
+    return check
+
+
+def noisy_icosphere(k, seed=3):
+    v, f = icosphere(k)
+    rng = Lcg(seed)
+    return [tuple(c * (1 + 0.1 * (rng.next() - 0.5)) for c in p) for p in v], f
+
+
+GLTF_SPHERE = noisy_icosphere(2)
+
+
+def cases_gltf():
+    out = []
+    v, f = GLTF_SPHERE
+    nv, nf = len(v), len(f)
+    doc, data = gltf_mesh(v, f, normals=True)
+    npos = 12 * nv  # the positions' bytes, then the indices', then the normals'
+    ext = gltf_files(doc, data)
+    emb = write("e.gltf", gltf_text(doc, data_uri(data)))
+    bin_ = write("m.glb", glb(doc, data))
+
+    def smooth(src, dst, *extra):
+        return ["smooth", src, dst, "--iterations", "3", *extra]
+
+    def ok(name, setup, argv, output="out.gltf", new=(), check=None, **kw):
+        out.append(Case("gltf", name, setup, argv, expect="ok", output=output,
+                        new_files=None if new is None else list(new), check=check, **kw))
+
+    def either(name, setup, argv, output="out.gltf", check=None, **kw):
+        out.append(Case("gltf", name, setup, argv, expect="either", output=output, check=check, **kw))
+
+    def bad(name, setup, argv=None, names=("m.gltf",), **kw):
+        out.append(Case("gltf", name, setup, argv or smooth("m.gltf", "out.gltf"), expect="error",
+                        new_files=[], check=refused_naming(*names), **kw))
+
+    def bad_doc(name, fn, data=data, names=("m.gltf",)):
+        bad(name, gltf_files(edited(doc, fn), data), names=names)
+
+    # Round trips, each kind into itself; 0 iterations keeps every vertex.
+    for src, setup, new, uris in [("m.gltf", ext, ["out.bin"], ["out.bin"]), ("e.gltf", emb, [], []),
+                                  ("m.glb", bin_, [], [])]:
+        dst = "out.glb" if src.endswith(".glb") else "out.gltf"
+        ok(f"{src} -> {dst}", setup, smooth(src, dst), dst, new,
+           gltf_written(src, dst, uris=uris))
+        ok(f"{src} -> {dst}, 0 iterations", setup, ["smooth", src, dst, "--iterations", "0"], dst,
+           new, gltf_written(src, dst, uris=uris, same=True))
+    # glTF only to its own kind, and only from glTF; to the other formats, a plain mesh.
+    bad("m.glb -> .gltf refused", bin_, smooth("m.glb", "out.gltf"), names=())
+    bad("m.gltf -> .glb refused", ext, smooth("m.gltf", "out.glb"), names=())
+    bad("ply -> .gltf refused", write("s.ply", ply_binary(v, f)), smooth("s.ply", "out.gltf"), names=())
+    bad("obj -> .glb refused", write("s.obj", obj(v, f)), smooth("s.obj", "out.glb"), names=())
+    for src, setup, dst in [("m.gltf", ext, "out.ply"), ("e.gltf", emb, "out.obj"),
+                            ("m.glb", bin_, "out.off"), ("m.gltf", ext, "out.stl")]:
+        ok(f"{src} -> {dst}", setup, smooth(src, dst), dst, check=gltf_written(src, dst))
+    ok("m.glb -> out.ply, 0 iterations", bin_, ["smooth", "m.glb", "out.ply", "--iterations", "0"],
+       "out.ply", check=gltf_written("m.glb", "out.ply", same=True))
+    for src, setup in [("m.gltf", ext), ("e.gltf", emb), ("m.glb", bin_)]:
+        ok(f"info {src}", setup, ["info", "--json", src], None, check=expect_counts(nv, nf))
+    ok("compare m.gltf m.glb", both(ext, bin_), ["compare", "--json", "m.gltf", "m.glb"], None,
+       check=lambda d, c, o, e: None if find(json.loads(o), "max_distance") == 0 else "not equal")
+
+    # Buffers, views and accessors that lie.
+    bad("the .bin shorter than byteLength", gltf_files(doc, data[:len(data) // 2]))
+    ok("the .bin longer than byteLength", gltf_files(doc, data + b"\xff" * 1000),
+       smooth("m.gltf", "out.gltf"), new=["out.bin"], check=gltf_written("m.gltf", "out.gltf"))
+    for value in [2 ** 64 - 1, 2 ** 64, -1, 1.5, "168"]:
+        bad_doc(f"byteLength {value!r}", lambda j, x=value: j["buffers"][0].update(byteLength=x))
+    bad("byteLength 1e400", both(write("m.gltf", gltf_text(doc, "m.bin").replace(
+        b'"byteLength": %d' % len(data), b'"byteLength": 1e400')), write("m.bin", data)))
+    bad_doc("bufferView past its buffer", lambda j: j["bufferViews"][0].update(byteOffset=len(data)))
+    bad_doc("bufferView offset 2^64-1", lambda j: j["bufferViews"][0].update(byteOffset=2 ** 64 - 1))
+    bad_doc("accessor count past its view", lambda j: j["accessors"][0].update(count=nv + 1))
+    bad_doc("accessor offset 2^64-1", lambda j: j["accessors"][0].update(byteOffset=2 ** 64 - 1))
+    for stride in [4, 2 ** 62, 2 ** 64 - 1]:
+        bad_doc(f"byteStride {stride}", lambda j, s=stride: j["bufferViews"][0].update(byteStride=s))
+    for value in [2 ** 64 - 1, -1, 1.5, "162", None]:
+        bad_doc(f"POSITION count {value!r}", lambda j, x=value: j["accessors"][0].update(count=x))
+    bad_doc("POSITION as u16 (quantized)", lambda j: j["accessors"][0].update(componentType=5123))
+    bad_doc("POSITION as VEC4", lambda j: j["accessors"][0].update(type="VEC4"))
+    attributes = lambda j: j["meshes"][0]["primitives"][0]["attributes"]
+    bad_doc("POSITION accessor 99", lambda j: attributes(j).update(POSITION=99))
+    bad_doc("POSITION accessor \"0\"", lambda j: attributes(j).update(POSITION="0"))
+    bad_doc("no POSITION", lambda j: attributes(j).pop("POSITION"))
+    bad_doc("buffer 7 of 1", lambda j: j["bufferViews"][0].update(buffer=7))
+    bad_doc("indices as float", lambda j: j["accessors"][1].update(componentType=5126))
+    bad_doc("indices as VEC3", lambda j: j["accessors"][1].update(type="VEC3", count=nf))
+    bad_doc("indices not a multiple of 3", lambda j: j["accessors"][1].update(count=3 * nf - 1))
+    bad("index = vertex count", gltf_files(doc, patched(data, npos + 4, "<I", nv)))
+    bad("index 2^32-1", gltf_files(doc, patched(data, npos, "<I", 2 ** 32 - 1)))
+    bad("a NaN vertex", gltf_files(doc, patched(data, 12 * 5, "<f", math.nan)))
+    bad("an infinite vertex", gltf_files(doc, patched(data, 12 * 5 + 8, "<f", -math.inf)))
+    sparse = {"count": 1, "indices": {"bufferView": 1, "componentType": 5125},
+              "values": {"bufferView": 0}}
+    bad_doc("sparse POSITION", lambda j: j["accessors"][0].update(sparse=sparse))
+    bad_doc("sparse indices", lambda j: j["accessors"][1].update(sparse=sparse))
+    bad_doc("Draco required", lambda j: j.update(extensionsRequired=["KHR_draco_mesh_compression"]))
+
+    def with_sparse_uv(j):
+        j["accessors"].append({"componentType": 5126, "count": nv, "type": "VEC2", "sparse": sparse})
+        j["meshes"][0]["primitives"][0]["attributes"]["TEXCOORD_0"] = len(j["accessors"]) - 1
+    ok("sparse TEXCOORD_0 is carried", gltf_files(edited(doc, with_sparse_uv), data),
+       smooth("m.gltf", "out.gltf"), new=["out.bin"], check=gltf_written("m.gltf", "out.gltf"))
+
+    # Primitive modes: nothing but points, lines, strips or fans is nothing to smooth; beside
+    # triangles, a line's points keep their bytes.
+    for mode in [0, 1, 5, 6]:
+        bad_doc(f"only a mode {mode} primitive",
+                lambda j, m=mode: j["meshes"][0]["primitives"][0].update(mode=m))
+    line = struct.pack("<6f", 9, 9, 9, 9, 9, 8)
+
+    def with_line(j):
+        j["buffers"][0]["byteLength"] = len(data) + len(line)
+        j["bufferViews"].append({"buffer": 0, "byteOffset": len(data), "byteLength": len(line)})
+        j["accessors"].append({"bufferView": 3, "componentType": 5126, "count": 2, "type": "VEC3"})
+        j["meshes"][0]["primitives"].append({"attributes": {"POSITION": 3}, "mode": 3})
+    ok("triangles beside a line strip", gltf_files(edited(doc, with_line), data + line),
+       smooth("m.gltf", "out.gltf"), new=["out.bin"],
+       check=all_of(gltf_written("m.gltf", "out.gltf"),
+                    same_bytes("out.gltf", 0, len(data), len(data) + len(line), line)))
+
+    # Several primitives, meshes and nodes.
+    def split(j):
+        j["accessors"][1]["count"] = 3 * (nf // 2)
+        j["accessors"].append({"bufferView": 1, "byteOffset": 12 * (nf // 2), "componentType": 5125,
+                               "count": 3 * (nf - nf // 2), "type": "SCALAR"})
+        j["meshes"][0]["primitives"].append({"attributes": {"POSITION": 0}, "indices": 3})
+    ok("two primitives share POSITION", gltf_files(edited(doc, split), data),
+       ["info", "--json", "m.gltf"], None, check=expect_counts(nv, nf))
+
+    def nodes(j):
+        j["nodes"] = [{"mesh": 0, "scale": [(-1) ** k, 1, 1]} for k in range(10000)]
+        j["scenes"][0]["nodes"] = list(range(10000))
+    ok("10000 nodes, mirrored, one mesh", gltf_files(edited(doc, nodes), data),
+       smooth("m.gltf", "out.gltf"), new=["out.bin"], check=gltf_written("m.gltf", "out.gltf"))
+    either("one primitive in two meshes",
+           gltf_files(edited(doc, lambda j: j["meshes"].append(copy.deepcopy(j["meshes"][0]))), data),
+           smooth("m.gltf", "out.gltf"), new_files=["out.bin"],
+           check=gltf_written("m.gltf", "out.gltf"))
+    bad_doc("no meshes", lambda j: j.update(meshes=[]))
+    bad_doc("a mesh without primitives", lambda j: j["meshes"][0].update(primitives=[]))
+    bad_doc("0 vertices, 0 indices", lambda j: [j["accessors"][k].update(count=0) for k in range(3)])
+
+    # Buffer files: missing, a folder, a device, outside the folder, escaped names.
+    bad("the .bin missing", write("m.gltf", gltf_text(doc, "m.bin")), names=("m.gltf", "m.bin"))
+    bad("the .bin a folder", both(write("m.gltf", gltf_text(doc, "m.bin")),
+                                  lambda d: os.mkdir(os.path.join(d, "m.bin"))), names=("m.gltf",))
+    # An endless device: read no more than byteLength (under a cap here, to spare the machine).
+    either("a buffer uri /dev/zero", write("m.gltf", gltf_text(doc, "/dev/zero")),
+           smooth("m.gltf", "out.gltf"), new_files=["out.bin"], timeout=20, limit_as_kb=2_000_000,
+           check=lambda d, c, o, e: "read the device until memory ran out" if "out of memory" in e
+           else None)
+    ok("a buffer uri ../shared.bin", gltf_files(doc, data, "sub/m.gltf", "../shared.bin", "shared.bin"),
+       ["smooth", "sub/m.gltf", "out.gltf", "--iterations", "0"], new=["out.bin"],
+       check=gltf_written("sub/m.gltf", "out.gltf", uris=["out.bin"], same=True))
+
+    def absolute(d):
+        write("m.gltf", gltf_text(doc, os.path.join(d, "store", "m.bin")))(d)
+        write("store/m.bin", data)(d)
+    ok("a buffer uri absolute", absolute, smooth("m.gltf", "out.gltf"), new=["out.bin"],
+       check=gltf_written("m.gltf", "out.gltf", uris=["out.bin"]))
+    ok("a buffer uri m%20x.bin", gltf_files(doc, data, uri="m%20x.bin", file="m x.bin"),
+       smooth("m.gltf", "out.gltf"), new=["out.bin"], check=gltf_written("m.gltf", "out.gltf"))
+    for uri in ["m%zz.bin", "m%2", "m%FF.bin"]:
+        bad(f"a buffer uri {uri}", both(write("m.gltf", gltf_text(doc, uri)), write("m.bin", data)))
+    ok("the input's buffer is out%2Ebin", gltf_files(doc, data, uri="out%2Ebin", file="out.bin"),
+       ["smooth", "m.gltf", "out.gltf", "--iterations", "0"], new=["out-1.bin"],
+       check=gltf_written("m.gltf", "out.gltf", uris=["out-1.bin"], same=True))
+
+    # The input names the output, or a report: refused before anything is written.
+    with_image = lambda name: edited(doc, lambda j: j.update(images=[{"uri": name}]))
+    bad("an image uri names the output", both(gltf_files(with_image("out.gltf"), data),
+                                              write("out.gltf", b"earlier")), names=("out.gltf",))
+    bad("the buffer is the .obj output", gltf_files(doc, data, uri="out.obj"),
+        smooth("m.gltf", "out.obj"), names=("out.obj",))
+    for flag, target in [("--report", "m.bin"), ("--report", "out.bin"), ("--report", "out-7.bin"),
+                         ("--report", "sub/../out.bin")]:
+        bad(f"{flag} {target}", both(ext, lambda d: os.makedirs(os.path.join(d, "sub"))),
+            smooth("m.gltf", "out.gltf", flag, target), names=())
+    ok("an image uri names out.bin (absent)", gltf_files(with_image("out.bin"), data),
+       ["smooth", "m.gltf", "out.gltf", "--iterations", "0"], new=["out-1.bin"],
+       check=gltf_written("m.gltf", "out.gltf", uris=["out-1.bin"], same=True))
+
+    # The output's buffer beside it: never over a file that is not its own.
+    def user(kind):
+        def setup(d):
+            ext(d)
+            p = os.path.join(d, "out.bin")
+            if kind == "file":
+                write("out.bin", b"the user's")(d)
+            elif kind == "dir":
+                os.mkdir(p)
+            elif kind == "dangling":
+                os.symlink("nowhere", p)
+            elif kind == "two":
+                write("out.bin", b"the user's")(d)
+                write("out-1.bin", b"the user's too")(d)
+        return setup
+    for kind, first in [("file", "out-1.bin"), ("dir", "out-1.bin"), ("dangling", "out-1.bin"),
+                        ("two", "out-2.bin")]:
+        ok(f"out.bin exists ({kind})", user(kind), ["smooth", "m.gltf", "out.gltf", "--iterations", "0"],
+           new=[first], check=gltf_written("m.gltf", "out.gltf", uris=[first], same=True))
+
+    def rerun(d):
+        ext(d)
+        subprocess.run([BIN, "smooth", "m.gltf", "out.gltf", "--iterations", "1"], cwd=d,
+                       check=True, capture_output=True)
+    ok("an earlier run's out.bin is replaced", rerun, smooth("m.gltf", "out.gltf"), replaces=["out.bin"],
+       check=gltf_written("m.gltf", "out.gltf", uris=["out.bin"]))
+
+    def rerun_link(d):
+        rerun(d)
+        os.remove(os.path.join(d, "out.bin"))
+        os.symlink("m.bin", os.path.join(d, "out.bin"))
+    ok("an earlier run's out.bin, now a link to the input's", rerun_link, smooth("m.gltf", "out.gltf"),
+       replaces=["out.bin"], check=gltf_written("m.gltf", "out.gltf"))
+
+    # Two external buffers, each holding a mesh.
+    w = [(x + 5, y, z) for x, y, z in v]
+    doc2, data2 = gltf_mesh(w, f)
+
+    def two(j):
+        j["buffers"].append({"byteLength": len(data2) + 8, "uri": "b.bin"})
+        j["bufferViews"] += [{"buffer": 1, "byteLength": npos},
+                             {"buffer": 1, "byteOffset": npos, "byteLength": 12 * nf}]
+        j["accessors"] += [{"bufferView": 3, "componentType": 5126, "count": nv, "type": "VEC3"},
+                           {"bufferView": 4, "componentType": 5125, "count": 3 * nf, "type": "SCALAR"}]
+        j["meshes"].append({"primitives": [{"attributes": {"POSITION": 3}, "indices": 4}]})
+    two_doc = edited(doc, two)
+    two_files = both(gltf_files(two_doc, data, "m.gltf", "a.bin"), write("b.bin", data2 + b"\0" * 8))
+    ok("two buffers", two_files, ["smooth", "m.gltf", "out.gltf", "--iterations", "0"],
+       new=["out.bin", "out-1.bin"],
+       check=gltf_written("m.gltf", "out.gltf", uris=["out.bin", "out-1.bin"], same=True))
+    ok("two buffers, out.bin exists", both(two_files, write("out.bin", b"the user's")),
+       ["smooth", "m.gltf", "out.gltf", "--iterations", "0"], new=["out-1.bin", "out-2.bin"],
+       check=gltf_written("m.gltf", "out.gltf", uris=["out-1.bin", "out-2.bin"], same=True))
+
+    # In place.
+    ok("in place", both(gltf_files(doc, data, "a.gltf", "a.bin"),
+                        write("orig.gltf", gltf_text(doc, "a.bin"))),
+       ["smooth", "a.gltf", "a.gltf", "--iterations", "0"], "a.gltf", new=["a-1.bin"],
+       check=gltf_written("orig.gltf", "a.gltf", uris=["a-1.bin"], same=True))
+    ok("in place, two buffers",
+       both(two_files, lambda d: shutil.copy(os.path.join(d, "m.gltf"), os.path.join(d, "orig.gltf"))),
+       ["smooth", "m.gltf", "m.gltf", "--iterations", "0"], "m.gltf", new=["m.bin", "m-1.bin"],
+       check=gltf_written("orig.gltf", "m.gltf", uris=["m.bin", "m-1.bin"], same=True))
+    a_doc = edited(two_doc, lambda j: j["buffers"][1].update(uri="a-1.bin"))
+    ok("in place, the buffers named a.bin and a-1.bin",
+       both(gltf_files(a_doc, data, "a.gltf", "a.bin"), write("a-1.bin", data2 + b"\0" * 8),
+            write("orig.gltf", gltf_text(a_doc, "a.bin"))),
+       ["smooth", "a.gltf", "a.gltf", "--iterations", "0"], "a.gltf", new=["a-2.bin", "a-3.bin"],
+       check=gltf_written("orig.gltf", "a.gltf", uris=["a-2.bin", "a-3.bin"], same=True))
+
+    # A GLB whose buffer is an external file: the buffer goes beside the output too.
+    glb_ext = both(write("m.glb", glb(edited(doc, lambda j: j["buffers"][0].update(uri="m.bin")), None)),
+                   write("m.bin", data))
+    ok("a GLB with an external buffer", glb_ext, ["smooth", "m.glb", "out.glb", "--iterations", "0"],
+       "out.glb", new=["out.bin"], check=gltf_written("m.glb", "out.glb", uris=["out.bin"], same=True))
+    either("a GLB with an external buffer, --report out.bin", glb_ext,
+           smooth("m.glb", "out.glb", "--report", "out.bin"), "out.glb",
+           check=gltf_written("m.glb", "out.glb"))
+    ok("output named 'a b%.gltf'", ext, smooth("m.gltf", "a b%.gltf"), "a b%.gltf", new=["a b%.bin"],
+       check=gltf_written("m.gltf", "a b%.gltf", uris=["a%20b%25.bin"]))
+
+    ok("in place, a GLB with an external buffer",
+       both(glb_ext, lambda d: shutil.copy(os.path.join(d, "m.glb"), os.path.join(d, "orig.glb"))),
+       ["smooth", "m.glb", "m.glb", "--iterations", "0"], "m.glb", new=["m-1.bin"],
+       check=gltf_written("orig.glb", "m.glb", uris=["m-1.bin"], same=True))
+    bad("--report OUT.bin for OUT.GLTF", ext, smooth("m.gltf", "OUT.GLTF", "--report", "OUT.bin"), names=())
+
+    def linked(d):
+        gltf_files(doc, data, uri="out.bin")(d)
+        os.symlink(".", os.path.join(d, "link"))
+    ok("output through a linked folder, the input's buffer is out.bin", linked,
+       ["smooth", "m.gltf", "link/out.gltf", "--iterations", "0"], "out.gltf", new=["out-1.bin"],
+       check=gltf_written("m.gltf", "out.gltf", uris=["out-1.bin"], same=True))
+    ok("two buffers naming the same file",
+       gltf_files(edited(two_doc, lambda j: j["buffers"][1].update(uri="m.bin", byteLength=len(data2))),
+                  data), ["smooth", "m.gltf", "out.gltf", "--iterations", "0"], new=["out.bin", "out-1.bin"],
+       check=gltf_written("m.gltf", "out.gltf", uris=["out.bin", "out-1.bin"], same=True))
+    ok("out of core into .gltf", ext, smooth("m.gltf", "out.gltf", "--memory-budget", "64M"),
+       new=["out.bin"], check=gltf_written("m.gltf", "out.gltf", uris=["out.bin"]))
+    ok("multires into .glb", bin_, smooth("m.glb", "out.glb", "--multires"), "out.glb",
+       check=gltf_written("m.glb", "out.glb"))
+    bad("subdivide m.gltf into .gltf is refused", ext,
+        ["subdivide", "m.gltf", "out.gltf", "--max-edge", "0.1"], names=("out.gltf",))
+    ok("subdivide m.glb into .ply", bin_, ["subdivide", "m.glb", "out.ply", "--max-edge", "0.1"],
+       "out.ply")
+
+    # Hostile GLB containers.
+    g = glb(doc, data)
+    jlen = struct.unpack_from("<I", g, 12)[0]
+    for name, blob in [
+            ("bad magic", b"gLTF" + g[4:]),
+            ("version 1", g[:4] + struct.pack("<I", 1) + g[8:]),
+            ("length past the end", g[:8] + struct.pack("<I", len(g) + 4) + g[12:]),
+            ("length 0", g[:8] + struct.pack("<I", 0) + g[12:]),
+            ("JSON chunk past the end", g[:12] + struct.pack("<I", len(g)) + g[16:]),
+            ("JSON chunk 2^32-1", g[:12] + struct.pack("<I", 2 ** 32 - 1) + g[16:]),
+            ("BIN chunk first", g[:12] + g[20 + jlen:] + g[12:20 + jlen]),
+            ("no BIN chunk", g[:8] + struct.pack("<I", 20 + jlen) + g[12:20 + jlen]),
+            ("header only", g[:12]),
+            ("unknown first chunk", g[:16] + struct.pack("<I", 0x12345678) + g[20:])]:
+        bad(f"GLB {name}", write("m.glb", blob), smooth("m.glb", "out.glb"), names=("m.glb",))
+    for frac in [0.001, 0.3, 0.9, 0.999]:
+        cut = max(1, int(len(g) * frac))
+        bad(f"GLB cut at {cut}", write("m.glb", g[:cut]), smooth("m.glb", "out.glb"), names=("m.glb",))
+    unpadded = glb(doc, data, pad_json=False)
+    either("GLB JSON unpadded (BIN chunk misaligned)", write("m.glb", unpadded),
+           smooth("m.glb", "out.glb"), "out.glb", new_files=[], check=gltf_written("m.glb", "out.glb"))
+    extra = g[:8] + struct.pack("<I", len(g) + 12) + g[12:20 + jlen] + struct.pack("<II", 4, 0x58595A) \
+        + b"zzzz" + g[20 + jlen:]
+    either("GLB unknown chunk before BIN", write("m.glb", extra), smooth("m.glb", "out.glb"), "out.glb",
+           new_files=[], check=gltf_written("m.glb", "out.glb"))
+    either("GLB named .gltf", write("m.gltf", g), smooth("m.gltf", "out.glb"), "out.glb", new_files=[],
+           check=gltf_written("m.gltf", "out.glb"))
+
+    # Hostile JSON.
+    text = gltf_text(doc, "m.bin")
+    count = b'"count": %d' % nv
+    for name, blob in [
+            ("NaN count", text.replace(count, b'"count": NaN', 1)),
+            ("Infinity count", text.replace(count, b'"count": Infinity', 1)),
+            ("a 400-digit count", text.replace(count, b'"count": 1' + b"0" * 400, 1)),
+            ("nesting 100000 deep", text[:-1] + b', "extras": ' + b"[" * 100000 + b"]" * 100000 + b"}"),
+            ("trailing garbage", text + b"}{"),
+            ("invalid UTF-8 in a string", text.replace(b"hostile_probe", b"hostile\xff\xfe", 1)),
+            ("UTF-16", text.decode().encode("utf-16")),
+            ("empty", b""), ("null", b"null"), ("[]", b"[]"), ("{}", b"{}"),
+            ("asset.version 1.0", text.replace(b'"version": "2.0"', b'"version": "1.0"')),
+            ("asset.version 2 (a number)", text.replace(b'"version": "2.0"', b'"version": 2'))]:
+        bad(f"JSON {name}", both(write("m.gltf", blob), write("m.bin", data)))
+    either("JSON duplicate count", both(write("m.gltf", text.replace(count, b'"count": 999999, ' + count, 1)),
+                                        write("m.bin", data)),
+           smooth("m.gltf", "out.gltf"), new_files=["out.bin"], check=gltf_written("m.gltf", "out.gltf"))
+    either("JSON nesting 100 deep", both(write("m.gltf", text[:-1] + b', "extras": ' + b"[" * 100
+                                               + b"]" * 100 + b"}"), write("m.bin", data)),
+           smooth("m.gltf", "out.gltf"), new_files=["out.bin"], check=gltf_written("m.gltf", "out.gltf"))
+    ok("JSON with a BOM", both(write("m.gltf", b"\xef\xbb\xbf" + text), write("m.bin", data)),
+       smooth("m.gltf", "out.gltf"), new=["out.bin"], check=gltf_written("m.gltf", "out.gltf"))
+    ok("min/max as strings", gltf_files(edited(doc, lambda j: j["accessors"][0].update(
+        min=["nan"] * 3, max=["inf"] * 3)), data), smooth("m.gltf", "out.gltf"), new=["out.bin"],
+       check=gltf_written("m.gltf", "out.gltf"))
+
+    # data: URIs.
+    b64 = base64.b64encode(data).decode()
+    for name, uri in [("bad base64", "data:application/octet-stream;base64,!!!!" + b64[4:]),
+                      ("not base64", "data:application/octet-stream," + b64),
+                      ("no comma", "data:application/octet-stream;base64"),
+                      ("a line break", "data:application/octet-stream;base64," + b64[:40] + "\n" + b64[40:]),
+                      ("cut short", "data:application/octet-stream;base64," + b64[:len(b64) // 2])]:
+        bad(f"data: URI {name}", write("m.gltf", gltf_text(doc, uri)))
+    bad("data: URI byteLength 2^63", write("m.gltf", gltf_text(
+        edited(doc, lambda j: j["buffers"][0].update(byteLength=2 ** 63)), data_uri(data))))
+
+    # Writer against hostile layouts: the geometry written must read back.
+    def normal_over(view):
+        return lambda j: j["accessors"][2].update(bufferView=view)
+    either("NORMAL over the index bytes", gltf_files(edited(doc, normal_over(1)), data),
+           smooth("m.gltf", "out.gltf"), new_files=["out.bin"], check=gltf_written("m.gltf", "out.gltf"))
+    far = [(x + 1000, y, z) for x, y, z in v]
+    fdoc, fdata = gltf_mesh(far, f, normals=True)
+    either("NORMAL is the POSITION accessor",
+           gltf_files(edited(fdoc, lambda j: j["meshes"][0]["primitives"][0]["attributes"].update(NORMAL=0)),
+                      fdata), smooth("m.gltf", "out.gltf"), new_files=["out.bin"],
+           check=gltf_written("m.gltf", "out.gltf"))
+    huge = [tuple(3.0e38 * c for c in p) for p in v]
+    for method in ["taubin", "vcs"]:
+        either(f"coordinates near the float limit, {method}", gltf_files(*gltf_mesh(huge, f)),
+               smooth("m.gltf", "out.gltf", "--method", method), new_files=["out.bin"],
+               check=gltf_written("m.gltf", "out.gltf"))
+
+    # info and compare on hostile files.
+    broken = gltf_files(doc, patched(data, npos + 4, "<I", nv), name="bad.gltf", uri="bad.bin")
+    bad("info on an index out of range", broken, ["info", "bad.gltf"], names=("bad.gltf",))
+    bad("compare with an index out of range", both(ext, broken), ["compare", "m.gltf", "bad.gltf"],
+        names=("bad.gltf",))
+    neg = [(x - 2, y - 2, z - 2) for x, y, z in v]
+    ok("info --json, coordinates up to -0", gltf_files(*gltf_mesh(
+        neg + [(-0.0, -0.0, -0.0)], f + [(0, 1, len(neg))])), ["info", "--json", "m.gltf"], None)
+
+    # batch: glTF inputs (written as PLY), the same stem twice, in place.
+    def folder(d):
+        gltf_files(doc, data, "in/a.gltf", "a.bin", "in/a.bin")(d)
+        write("in/b.glb", g)(d)
+        write("orig.gltf", gltf_text(doc, "in/a.bin"))(d)
+    # (new=None: batch writes its markers too)
+    ok("batch of glTF", folder, ["batch", "in", "out", "--iterations", "0"], None, new=None,
+       check=all_of(gltf_written("orig.gltf", "out/a.ply", same=True),
+                    gltf_written("in/b.glb", "out/b.ply", same=True)))
+    bad("batch: a.gltf and a.glb share a stem", both(folder, write("in/a.glb", g)),
+        ["batch", "in", "out", "--iterations", "0"], names=("a.gltf", "a.glb"))
+    bad("batch of glTF in place is refused", folder, ["batch", "in", "in", "--iterations", "0"],
+        names=("in",))
+    return out
+
+
 CLASSES = {
     "paths": cases_paths,
     "values": cases_values,
@@ -846,6 +1437,7 @@ CLASSES = {
     "signals": cases_signals,
     "batch": cases_batch,
     "output": cases_output,
+    "gltf": cases_gltf,
 }
 
 

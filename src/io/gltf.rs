@@ -39,7 +39,7 @@
 
 use std::collections::HashMap;
 use std::fmt;
-use std::io::Write;
+use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 
 use glam::DVec3;
@@ -490,7 +490,7 @@ impl<'a> Reader<'a> {
                 },
                 Some(None) => return Err(format!("buffer {i}: uri is not a string")),
                 Some(Some(uri)) => {
-                    load_uri(uri, self.dir).map_err(|e| format!("buffer {i}: {e}"))?
+                    load_uri(uri, self.dir, length).map_err(|e| format!("buffer {i}: {e}"))?
                 }
             };
             if bytes.len() < length {
@@ -506,8 +506,12 @@ impl<'a> Reader<'a> {
     }
 }
 
-/// A `data:` URI's bytes, or an external file's, resolved against `dir`.
-fn load_uri(uri: &str, dir: Option<&Path>) -> std::result::Result<(Vec<u8>, Origin), String> {
+/// A `data:` URI's bytes, or an external file's (its first `length` bytes), resolved against `dir`.
+fn load_uri(
+    uri: &str,
+    dir: Option<&Path>,
+    length: usize,
+) -> std::result::Result<(Vec<u8>, Origin), String> {
     if let Some(rest) = uri.strip_prefix("data:") {
         let (head, data) = rest.split_once(',').ok_or("data URI without a comma")?;
         if !head.ends_with(";base64") {
@@ -525,7 +529,16 @@ fn load_uri(uri: &str, dir: Option<&Path>) -> std::result::Result<(Vec<u8>, Orig
     let name = percent_decode(uri).ok_or_else(|| format!("uri {uri:?} is not valid"))?;
     let path = dir.join(name);
     // The uri, quoted: a file name may hold any character, a line break too.
-    let bytes = std::fs::read(&path).map_err(|e| format!("cannot read {uri:?}: {e}"))?;
+    let cannot = |e: std::io::Error| format!("cannot read {uri:?}: {e}");
+    let file = std::fs::File::open(&path).map_err(cannot)?;
+    // A device or a pipe would be read without end (only `length` bytes are used).
+    if !file.metadata().map_err(cannot)?.is_file() {
+        return Err(format!("{uri:?} is not a regular file"));
+    }
+    let mut bytes = Vec::new();
+    file.take(length as u64)
+        .read_to_end(&mut bytes)
+        .map_err(cannot)?;
     Ok((bytes, Origin::File(path)))
 }
 
@@ -662,6 +675,7 @@ pub(super) fn write(path: &Path, mesh: &Mesh) -> Result<()> {
     }
     let mut chunk = None;
     let mut staged = Vec::new();
+    let mut chosen = Vec::new();
     for (i, loaded) in layout.buffers.iter().enumerate() {
         let (Some(loaded), true) = (loaded, changed[i]) else {
             continue;
@@ -674,8 +688,9 @@ pub(super) fn write(path: &Path, mesh: &Mesh) -> Result<()> {
                     Value::String(format!("{head},{}", base64_encode(&bytes)));
             }
             Origin::File(_) => {
-                let bin = bin_path(path, staged.len(), layout);
+                let bin = bin_path(path, &chosen, layout);
                 staged.push(super::atomic::stage(&bin, |out| out.write_all(&bytes))?);
+                chosen.push(bin.clone());
                 let name = bin
                     .file_name()
                     .map(|n| n.to_string_lossy().into_owned())
@@ -721,11 +736,12 @@ fn set_bounds(json: &mut Value, accessor: usize, lo: [f32; 3], hi: [f32; 3], if_
     }
 }
 
-/// The `n`th changed external buffer of an output, named after it: `STEM.bin`, else
-/// `STEM-K.bin` for the first K that is free. Free means neither a file the input names (any
-/// buffer or image, used by the geometry or not) nor an existing file, unless the output being
-/// replaced names it (its own buffer from an earlier run): nothing else is ever written over.
-fn bin_path(output: &Path, n: usize, layout: &GltfLayout) -> PathBuf {
+/// The next changed external buffer of an output, named after it: `STEM.bin`, else `STEM-K.bin`
+/// for the first K that is free. Free means none of the names `chosen` for its other buffers, nor
+/// a file the input names (any buffer or image, used by the geometry or not), nor an existing
+/// file unless the output being replaced names it (its own buffer from an earlier run): nothing
+/// else is ever written over.
+fn bin_path(output: &Path, chosen: &[PathBuf], layout: &GltfLayout) -> PathBuf {
     let stem = output
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())
@@ -747,7 +763,8 @@ fn bin_path(output: &Path, n: usize, layout: &GltfLayout) -> PathBuf {
         .iter()
         .map(|p| canonical(p))
         .collect();
-    let mut k = n;
+    let chosen: Vec<PathBuf> = chosen.iter().map(|p| canonical(p)).collect();
+    let mut k = 0;
     loop {
         let name = if k == 0 {
             format!("{stem}.bin")
@@ -757,6 +774,7 @@ fn bin_path(output: &Path, n: usize, layout: &GltfLayout) -> PathBuf {
         let candidate = output.with_file_name(name);
         let resolved = canonical(&candidate);
         let taken = inputs.contains(&resolved)
+            || chosen.contains(&resolved)
             || (std::fs::symlink_metadata(&candidate).is_ok() && !replaced.contains(&resolved));
         if !taken {
             return candidate;
@@ -765,12 +783,13 @@ fn bin_path(output: &Path, n: usize, layout: &GltfLayout) -> PathBuf {
     }
 }
 
-/// Whether `name` is one [`bin_path`] may give a buffer of the `.gltf` output `output`
-/// (`STEM.bin` or `STEM-K.bin`), so that no side file of a run is given such a name.
+/// Whether `name` is one [`bin_path`] may give a buffer of the glTF output `output` (`STEM.bin`
+/// or `STEM-K.bin`; a `.glb` too keeps an input's external buffers external), so that no side
+/// file of a run is given such a name.
 pub(crate) fn buffer_name_of(output: &Path, name: &std::ffi::OsStr) -> bool {
     let gltf = output
         .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("gltf"));
+        .is_some_and(|e| e.eq_ignore_ascii_case("gltf") || e.eq_ignore_ascii_case("glb"));
     let (Some(stem), Some(name)) = (output.file_stem(), name.to_str()) else {
         return false;
     };
@@ -818,7 +837,6 @@ fn named_files(json: &Value, dir: &Path) -> Vec<PathBuf> {
 /// is not such a file or cannot be read. Only a GLB's JSON chunk is read, and a text file only
 /// when it is named `.gltf`.
 pub(crate) fn referenced_files(path: &Path) -> Vec<PathBuf> {
-    use std::io::Read;
     let json = || -> Option<Value> {
         let mut file = std::fs::File::open(path).ok()?;
         let size = file.metadata().ok()?.len();

@@ -348,6 +348,99 @@ fn the_files_around_a_gltf_are_never_written_over() {
     ok(run(&["b.gltf", "--report", "b-x.bin"]));
 }
 
+/// `json` with a second buffer: copies of buffer 0's views and accessors on buffer 1, and a
+/// second primitive using them; the buffers named `a` and `b`.
+fn two_buffers(json: &Value, a: &str, b: &str) -> Value {
+    let mut two = json.clone();
+    let length = json["buffers"][0]["byteLength"].clone();
+    two["buffers"] = json!([{"uri": a, "byteLength": length}, {"uri": b, "byteLength": length}]);
+    let views = json["bufferViews"].as_array().unwrap().clone();
+    let accessors = json["accessors"].as_array().unwrap().clone();
+    for mut v in views.iter().cloned() {
+        v["buffer"] = json!(1);
+        two["bufferViews"].as_array_mut().unwrap().push(v);
+    }
+    for mut x in accessors.iter().cloned() {
+        x["bufferView"] = json!(x["bufferView"].as_u64().unwrap() + views.len() as u64);
+        two["accessors"].as_array_mut().unwrap().push(x);
+    }
+    let k = accessors.len();
+    two["meshes"][0]["primitives"]
+        .as_array_mut()
+        .unwrap()
+        .push(json!({
+            "attributes": {"POSITION": k, "NORMAL": k + 1, "TEXCOORD_0": k + 2, "COLOR_0": k + 3},
+            "indices": k + 4
+        }));
+    two
+}
+
+/// Each changed buffer of a `.gltf` gets a file of its own, also when the first free names are
+/// taken by a user's file or by the input's own buffers (smoothing in place).
+#[test]
+fn every_buffer_gets_its_own_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let at = |name: &str| dir.path().join(name);
+    let (json, bin) = sphere();
+    let triangles = |path: &Path| {
+        let o = ok(vcsmooth([
+            "info".as_ref(),
+            path.as_os_str(),
+            "--json".as_ref(),
+        ]));
+        parse_json(&o)["triangles"].as_u64().unwrap()
+    };
+    for (input, a, b, output) in [
+        ("m.gltf", "a.bin", "b.bin", "out.gltf"),
+        ("s.gltf", "s.bin", "s-1.bin", "s.gltf"),
+    ] {
+        std::fs::write(
+            at(input),
+            serde_json::to_vec(&two_buffers(&json, a, b)).unwrap(),
+        )
+        .unwrap();
+        std::fs::write(at(a), &bin).unwrap();
+        std::fs::write(at(b), &bin).unwrap();
+        std::fs::write(at("out.bin"), b"mine").unwrap();
+        let before = triangles(&at(input));
+        smooth(&at(input), &at(output));
+        let after = crate::util::read_json(&at(output));
+        let (u0, u1) = (&after["buffers"][0]["uri"], &after["buffers"][1]["uri"]);
+        assert_ne!(u0, u1, "{input}");
+        for name in [a, b] {
+            assert_eq!(std::fs::read(at(name)).unwrap(), bin, "{input}: {name}");
+        }
+        assert_eq!(std::fs::read(at("out.bin")).unwrap(), b"mine");
+        assert_eq!(triangles(&at(output)), before, "{input}");
+    }
+}
+
+/// A GLB output keeps an input's external buffer external, as a `.gltf` does: a side file named
+/// like it is refused before any work; and a buffer that is not a regular file is refused.
+#[test]
+fn a_glbs_external_buffers_are_guarded_too() {
+    let dir = tempfile::tempdir().unwrap();
+    let at = |name: &str| dir.path().join(name);
+    let (mut json, bin) = sphere();
+    json["buffers"][0]["uri"] = json!("m.bin");
+    std::fs::write(at("m.glb"), glb(&json, &[])).unwrap();
+    std::fs::write(at("m.bin"), &bin).unwrap();
+    let o = vcsmooth([
+        "smooth".as_ref(),
+        at("m.glb").as_os_str(),
+        at("out.glb").as_os_str(),
+        "--report".as_ref(),
+        at("out.bin").as_os_str(),
+    ]);
+    fails(&o, 2, &["out.bin", "buffers of OUT"]);
+    assert!(!at("out.glb").exists() && !at("out.bin").exists());
+
+    json["buffers"][0]["uri"] = json!("/dev/zero");
+    std::fs::write(at("z.gltf"), serde_json::to_vec(&json).unwrap()).unwrap();
+    let o = vcsmooth(["info".as_ref(), at("z.gltf").as_os_str()]);
+    fails(&o, 1, &["z.gltf", "not a regular file"]);
+}
+
 /// A `.gltf` whose writing fails changes nothing: an earlier output and the buffer it names stay
 /// as they were, and no new file is left (the buffer was once renamed into place before the
 /// `.gltf` was written, so the earlier output named the new geometry).
