@@ -206,6 +206,28 @@ fn list_files_collisions_and_environment() {
     assert!(!dir.path().join("o2").exists());
 }
 
+/// An input that is its own output under another name (a symbolic link into OUTDIR, or OUTDIR
+/// itself) is refused before anything runs, and left as it was.
+#[test]
+fn an_input_reached_through_a_link_is_never_its_own_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let (input, out) = (dir.path().join("in"), dir.path().join("out"));
+    std::fs::create_dir_all(&input).unwrap();
+    std::fs::create_dir_all(&out).unwrap();
+    generate_sphere(&out.join("a.ply"), 2, Some(0.3), Some(1));
+    let before = std::fs::read(out.join("a.ply")).unwrap();
+    std::os::unix::fs::symlink("../out/a.ply", input.join("a.ply")).unwrap();
+    let link = dir.path().join("link");
+    std::os::unix::fs::symlink("out", &link).unwrap();
+    for outdir in [&out, &link] {
+        let o = vcsmooth(["batch".as_ref(), input.as_os_str(), outdir.as_os_str()]);
+        assert_eq!(o.status.code(), Some(1), "{outdir:?}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains("its output would overwrite it"), "{err}");
+        assert_eq!(std::fs::read(out.join("a.ply")).unwrap(), before);
+    }
+}
+
 #[test]
 fn slurm_script_has_array_mem_and_dependent_summary() {
     let dir = tempfile::tempdir().unwrap();

@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use clap::{Args as ClapArgs, ValueEnum};
 
 use super::shared::{PinPropertyArg, SmoothingArgs};
+use crate::cli::output::Identity;
 use crate::engine::EngineSettings;
 use crate::error::{Error, Result};
 use crate::io::Format;
@@ -100,28 +101,14 @@ pub fn batch_inputs(list_or_dir: &Path, outdir: &Path, format: Format) -> Result
         ));
     }
     core::check_stems(&inputs)?;
-    if let Ok(out) = outdir.canonicalize() {
-        for input in &inputs {
-            let same_dir = input
-                .parent()
-                .map(|p| {
-                    if p.as_os_str().is_empty() {
-                        Path::new(".")
-                    } else {
-                        p
-                    }
-                })
-                .and_then(|p| p.canonicalize().ok())
-                .is_some_and(|p| p == out);
-            if same_dir && Format::from_extension(input) == Some(format) {
-                let name = core::output_path(outdir, input, format)?;
-                if name.file_name() == input.file_name() {
-                    return Err(Error::invalid(
-                        input,
-                        "its output would overwrite it: choose another OUTDIR or --format",
-                    ));
-                }
-            }
+    // The same file, however reached (a symbolic or hard link, `..`): not by its name only.
+    for input in &inputs {
+        let output = core::output_path(outdir, input, format)?;
+        if Identity::of(&output) == Identity::of(input) {
+            return Err(Error::invalid(
+                input,
+                "its output would overwrite it: choose another OUTDIR or --format",
+            ));
         }
     }
     Ok(inputs)
