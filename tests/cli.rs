@@ -205,6 +205,64 @@ fn an_open_meshs_report_volumes_compare() {
     assert!((ratio - pct).abs() < 1e-5, "{ratio} % against {pct} %");
 }
 
+/// `compare` and `refine` measure an open mesh's volumes about one point (the first mesh's
+/// centroid), so that a volume-keeping smoothing compares as kept and a subdivision (which adds
+/// vertices, moving their centroid, but not the surface) as unchanged.
+#[test]
+fn compare_and_refine_keep_an_open_meshs_volume() {
+    let dir = tempfile::tempdir().unwrap();
+    // A bumpy open 6 × 6 grid, its centroid far from the plane's: the origin matters.
+    let mut text = String::from(
+        "ply\nformat ascii 1.0\nelement vertex 36\nproperty double x\nproperty double y\n\
+         property double z\nelement face 50\nproperty list uchar int vertex_indices\nend_header\n",
+    );
+    for k in 0..36u32 {
+        let (x, y) = (k % 6, k / 6);
+        let z = 0.2 * ((k * 7919 % 13) as f64 / 6.0 - 1.0) + 0.05 * x as f64;
+        text += &format!("{x} {y} {z}\n");
+    }
+    for y in 0..5u32 {
+        for x in 0..5u32 {
+            let v = y * 6 + x;
+            text += &format!("3 {} {} {}\n3 {} {} {}\n", v, v + 1, v + 7, v, v + 7, v + 6);
+        }
+    }
+    let grid = dir.path().join("grid.ply");
+    std::fs::write(&grid, text).unwrap();
+    let out = dir.path().join("out.ply");
+    let run = |args: &[&std::ffi::OsStr]| ok(vcsmooth(args));
+    run(&[
+        "smooth".as_ref(),
+        grid.as_os_str(),
+        out.as_os_str(),
+        "--method".as_ref(),
+        "vcs".as_ref(),
+        "--iterations".as_ref(),
+        "5".as_ref(),
+    ]);
+    let c = json(&run(&[
+        "compare".as_ref(),
+        grid.as_os_str(),
+        out.as_os_str(),
+        "--json".as_ref(),
+    ]));
+    let ratio = c["volume_ratio"].as_f64().unwrap();
+    assert!((ratio - 1.0).abs() < 1e-9, "volume ratio {ratio}");
+    let text = run(&[
+        "refine".as_ref(),
+        grid.as_os_str(),
+        dir.path().join("r.ply").as_os_str(),
+        "--max-edge".as_ref(),
+        "0.6".as_ref(),
+        "--rounds".as_ref(),
+        "1".as_ref(),
+    ]);
+    assert!(
+        text.contains("volume after subdivision 100.000000000 %"),
+        "{text}"
+    );
+}
+
 #[test]
 fn smooth_defaults_and_other_formats() {
     let (dir, sphere) = noisy_sphere_file();

@@ -29,7 +29,8 @@ pub struct Comparison {
     pub area_ratio: Option<f64>,
     /// The bounding-box diagonal of `a` that the relative distances divide by.
     pub bbox_diagonal: f64,
-    /// Signed volumes and areas of `a` and `b` ([`crate::metrics::volume`], [`crate::metrics::area`]).
+    /// Signed volumes of `a` and `b`, both about `a`'s centroid ([`crate::metrics::volume_about`]),
+    /// and their areas ([`crate::metrics::area`]).
     pub volume_a: f64,
     pub volume_b: f64,
     pub area_a: f64,
@@ -94,9 +95,11 @@ pub fn compare(a: &Mesh, b: &Mesh) -> Result<Comparison> {
         }
     }
 
+    // Both about A's centroid: an open mesh's volume depends on the point.
+    let origin = super::centroid(&a.positions);
     let (volume_a, volume_b) = (
-        super::volume(&a.positions, ta),
-        super::volume(&b.positions, ta),
+        super::volume_about(&a.positions, ta, origin),
+        super::volume_about(&b.positions, ta, origin),
     );
     let (area_a, area_b) = (super::area(&a.positions, ta), super::area(&b.positions, ta));
     Ok(Comparison {

@@ -356,7 +356,8 @@ pub struct RoundRecord {
     /// 1-based round number.
     pub round: usize,
     pub subdivision: SubdivideStats,
-    /// Signed volume before the subdivision, after it, and after the smoothing.
+    /// Signed volume before the subdivision, after it, and after the smoothing, all about the
+    /// input's centroid.
     pub volume_before: f64,
     pub volume_subdivided: f64,
     pub volume_smoothed: f64,
@@ -376,10 +377,14 @@ pub fn refine(
     check_max_edge(opts.max_edge)?;
     // Grown round by round: `rounds` comes from the caller and may be anything.
     let mut records = Vec::new();
+    // Every volume about the input's centroid: an open mesh's depends on the point, and
+    // subdivision moves the centroid of the vertices.
+    let origin = metrics::centroid(&mesh.positions);
+    let volume = |m: &Mesh| metrics::volume_about(&m.positions, &m.triangles, origin);
     for round in 1..=opts.rounds {
-        let volume_before = metrics::volume(&mesh.positions, &mesh.triangles);
+        let volume_before = volume(mesh);
         let subdivision = subdivide(mesh, opts.max_edge)?;
-        let volume_subdivided = metrics::volume(&mesh.positions, &mesh.triangles);
+        let volume_subdivided = volume(mesh);
         let settings = engine::EngineSettings {
             threads,
             ..Default::default()
@@ -390,7 +395,7 @@ pub fn refine(
             subdivision,
             volume_before,
             volume_subdivided,
-            volume_smoothed: metrics::volume(&mesh.positions, &mesh.triangles),
+            volume_smoothed: volume(mesh),
             max_edge_smoothed: max_edge_of(&mesh.positions, &mesh.triangles),
         });
     }

@@ -71,7 +71,9 @@ pub fn run(cfg: &RefineConfig, progress: &mut Progress, out: &mut dyn Write) -> 
     progress.phase(format!("reading {}", cfg.input.display()));
     let mut mesh = io::read_mesh(&cfg.input)?;
     let (v0, t0) = (mesh.positions.len(), mesh.triangles.len());
-    let volume0 = crate::metrics::volume(&mesh.positions, &mesh.triangles);
+    // Every volume about the input's centroid: an open mesh's depends on the point.
+    let origin = crate::metrics::centroid(&mesh.positions);
+    let volume0 = crate::metrics::volume_about(&mesh.positions, &mesh.triangles, origin);
     progress.phase(format!(
         "refining and smoothing, {} rounds",
         cfg.options.rounds
@@ -81,7 +83,7 @@ pub fn run(cfg: &RefineConfig, progress: &mut Progress, out: &mut dyn Write) -> 
     progress.phase(format!("writing {}", cfg.output.display()));
     io::write_mesh(&cfg.output, &mesh)?;
     progress.finish();
-    let volume1 = crate::metrics::volume(&mesh.positions, &mesh.triangles);
+    let volume1 = crate::metrics::volume_about(&mesh.positions, &mesh.triangles, origin);
     let max_edge = records.last().map_or_else(
         || refine::max_edge_of(&mesh.positions, &mesh.triangles),
         |r| r.max_edge_smoothed,
