@@ -45,6 +45,49 @@ fn info_json_of_generated_sphere() {
     assert!(table.contains("642") && table.contains("closed"), "{table}");
 }
 
+/// `generate mesh --from` a file keeps its precision: a millimetre grid far from the origin
+/// (geographic coordinates) stays `double` and keeps its area.
+#[test]
+fn generate_from_a_double_mesh_stays_double() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut text = String::from(
+        "ply\nformat ascii 1.0\nelement vertex 4\nproperty double x\nproperty double y\n\
+         property double z\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n",
+    );
+    for (x, y) in [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)] {
+        text += &format!("{} {} 0.5\n", 6378137.0 + x * 1e-3, 4000000.125 + y * 1e-3);
+    }
+    text += "3 0 1 2\n3 0 2 3\n";
+    let (geo, out) = (dir.path().join("geo.ply"), dir.path().join("g.ply"));
+    std::fs::write(&geo, text).unwrap();
+    for levels in ["0", "2"] {
+        ok(vcsmooth([
+            "generate".as_ref(),
+            "mesh".as_ref(),
+            out.as_os_str(),
+            "--from".as_ref(),
+            geo.as_os_str(),
+            "--subdivide".as_ref(),
+            levels.as_ref(),
+            "--noise".as_ref(),
+            "0".as_ref(),
+        ]));
+        let header = std::fs::read(&out).unwrap();
+        assert!(header.windows(17).any(|w| w == b"property double x"));
+        let area = |p: &Path| {
+            json(&ok(vcsmooth([
+                "info".as_ref(),
+                p.as_os_str(),
+                "--json".as_ref(),
+            ])))["area"]
+                .as_f64()
+                .unwrap()
+        };
+        let (a0, a1) = (area(&geo), area(&out));
+        assert!((a1 / a0 - 1.0).abs() < 1e-6, "{levels}: area {a0} -> {a1}");
+    }
+}
+
 #[test]
 fn generate_torus_is_closed() {
     let dir = tempfile::tempdir().unwrap();

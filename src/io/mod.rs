@@ -118,7 +118,7 @@ use std::sync::Arc;
 pub use crate::mesh::{Format, Precision, Source};
 pub use gltf::GltfLayout;
 pub use ply::{PlyEncoding, PlyLayout};
-pub use stream::{PlyStream, write_ply_streamed};
+pub use stream::{PlyStream, write_ply_streamed, write_ply_streamed_in};
 
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;

@@ -40,6 +40,26 @@ pub fn write_ply_streamed(
     comments: &[&str],
     produce: impl FnOnce(&mut PlyStream<'_>) -> io::Result<()>,
 ) -> Result<()> {
+    write_ply_streamed_in(
+        path,
+        Precision::Float,
+        vertices,
+        triangles,
+        comments,
+        produce,
+    )
+}
+
+/// [`write_ply_streamed`] with the coordinates in `precision` (`double` for a mesh derived from
+/// one whose coordinates `float` cannot hold).
+pub fn write_ply_streamed_in(
+    path: &Path,
+    precision: Precision,
+    vertices: u64,
+    triangles: u64,
+    comments: &[&str],
+    produce: impl FnOnce(&mut PlyStream<'_>) -> io::Result<()>,
+) -> Result<()> {
     if Format::from_extension(path) != Some(Format::Ply) {
         return Err(Error::invalid(
             path,
@@ -60,7 +80,7 @@ pub fn write_ply_streamed(
     };
     let n_vertices = usize::try_from(vertices).map_err(|_| too_many("vertices"))?;
     let n_triangles = usize::try_from(triangles).map_err(|_| too_many("triangles"))?;
-    let records = PlainRecords::new(n_vertices, 3, Precision::Float);
+    let records = PlainRecords::new(n_vertices, 3, precision);
     let meta = comments.iter().map(|c| format!("comment {c}")).collect();
     let layout = records.layout(n_vertices, n_triangles, meta);
 
@@ -112,10 +132,15 @@ impl PlyStream<'_> {
                 self.vertices
             ));
         }
-        if !p.as_vec3().is_finite() {
+        let coordinate = self.records.coordinate;
+        let fits = match coordinate {
+            Scalar::F64 => p.is_finite(),
+            _ => p.as_vec3().is_finite(),
+        };
+        if !fits {
             return self.refuse(format!(
                 "vertex {i}: coordinate {p} does not fit PLY type {}",
-                Scalar::F32.name()
+                coordinate.name()
             ));
         }
         ply::put_xyz(self.records.coordinate, p, &mut self.buf);

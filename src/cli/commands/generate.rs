@@ -207,10 +207,19 @@ fn run_streamed(cfg: &GenerateConfig, progress: &mut Progress, out: &mut dyn Wri
         n.base_triangles(),
         n.pieces()
     );
-    io::write_ply_streamed(&cfg.output, n.vertices(), n.triangles(), &[&comment], |w| {
-        n.for_each_vertex(|p| w.vertex(p))?;
-        n.for_each_triangle(|t| w.triangle(t))
-    })?;
+    // A mesh from a file keeps its precision (`double` when `float` cannot hold it).
+    let precision = base.source.precision;
+    io::write_ply_streamed_in(
+        &cfg.output,
+        precision,
+        n.vertices(),
+        n.triangles(),
+        &[&comment],
+        |w| {
+            n.for_each_vertex(|p| w.vertex(p))?;
+            n.for_each_triangle(|t| w.triangle(t))
+        },
+    )?;
     progress.finish();
     writeln!(
         out,
