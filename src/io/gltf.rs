@@ -243,6 +243,7 @@ pub(super) fn read(
     {
         push_other(&mut carried, name);
     }
+    check_rewritten_bytes(&json, &reader, &positions, &normals)?;
     let buffers = reader.buffers;
     let mut faces = FaceBuilder::with_capacity(corners.len());
     corners.iter().for_each(|&t| faces.triangle(t));
@@ -504,6 +505,130 @@ impl<'a> Reader<'a> {
         }
         Ok(self.bytes(i))
     }
+}
+
+/// The bytes a write replaces, every element of the `POSITION` and `NORMAL` accessors, must hold
+/// nothing else: not each other (a `NORMAL` that is the `POSITION` accessor), not indices, not
+/// another attribute, not an image. Interleaved views are fine: only the elements' own bytes count.
+fn check_rewritten_bytes(
+    json: &Value,
+    reader: &Reader,
+    positions: &[(Span, usize)],
+    normals: &[(Span, usize)],
+) -> std::result::Result<(), String> {
+    let mut masks: HashMap<usize, Vec<u64>> = HashMap::new();
+    let mut rewritten: Vec<usize> = Vec::new();
+    let spans = positions.iter().map(|(s, _)| (s, "POSITION"));
+    for (span, what) in spans.chain(normals.iter().map(|(s, _)| (s, "NORMAL"))) {
+        if rewritten.contains(&span.accessor) {
+            if what == "NORMAL" && positions.iter().any(|(p, _)| p.accessor == span.accessor) {
+                return Err(format!(
+                    "accessor {} is both POSITION and NORMAL: the recomputed normals would \
+                     replace the positions",
+                    span.accessor
+                ));
+            }
+            continue;
+        }
+        rewritten.push(span.accessor);
+        let len = reader.bytes(span.buffer).len();
+        let mask = masks
+            .entry(span.buffer)
+            .or_insert_with(|| vec![0; len.div_ceil(64)]);
+        for i in 0..span.count {
+            let at = span.offset + i * span.stride;
+            for b in at..at + 12 {
+                if mask[b / 64] >> (b % 64) & 1 == 1 {
+                    return Err(format!(
+                        "{what} accessor {} shares bytes with another POSITION or NORMAL \
+                         accessor: one would overwrite the other",
+                        span.accessor
+                    ));
+                }
+                mask[b / 64] |= 1 << (b % 64);
+            }
+        }
+    }
+    let marked = |buffer: usize, bytes: std::ops::Range<usize>| {
+        masks.get(&buffer).is_some_and(|mask| {
+            let end = bytes.end.min(mask.len() * 64);
+            (bytes.start..end).any(|b| mask[b / 64] >> (b % 64) & 1 == 1)
+        })
+    };
+    let views = array(json, "bufferViews");
+    let view_of = |a: &Value| a.get("bufferView").and_then(index);
+    let accessors = array(json, "accessors");
+    let written_views: Vec<usize> = rewritten
+        .iter()
+        .filter_map(|&k| accessors.get(k).and_then(view_of))
+        .collect();
+    let clash = |what: String| {
+        Err(format!(
+            "{what} shares bytes with the POSITION or NORMAL data, which a write replaces"
+        ))
+    };
+    // Views that hold no rewritten accessor: every byte of theirs is someone else's.
+    for (v, view) in views.iter().enumerate() {
+        let (Ok(buffer), Ok(offset), Ok(length)) = (
+            field(view, "buffer", None),
+            field(view, "byteOffset", Some(0)),
+            field(view, "byteLength", None),
+        ) else {
+            continue;
+        };
+        if !written_views.contains(&v) && marked(buffer, offset..offset.saturating_add(length)) {
+            return clash(format!("bufferView {v}"));
+        }
+    }
+    // Other accessors in the rewritten views (interleaved attributes): their elements' bytes.
+    for (k, a) in accessors.iter().enumerate() {
+        let Some(v) = view_of(a).filter(|v| !rewritten.contains(&k) && written_views.contains(v))
+        else {
+            continue;
+        };
+        let view = &views[v];
+        let size = element_size(a);
+        let (Ok(buffer), Ok(v_offset), Ok(a_offset), Ok(count)) = (
+            field(view, "buffer", None),
+            field(view, "byteOffset", Some(0)),
+            field(a, "byteOffset", Some(0)),
+            field(a, "count", None),
+        ) else {
+            continue;
+        };
+        let stride = field(view, "byteStride", Some(size)).unwrap_or(size);
+        let start = v_offset.saturating_add(a_offset);
+        // Elements past the end of the buffer hold none of its bytes (a lying count).
+        let in_buffer = reader.bytes(buffer).len().saturating_sub(start) / stride.max(1) + 1;
+        let hits = (0..count.min(in_buffer)).any(|i| {
+            let at = start.saturating_add(i.saturating_mul(stride));
+            marked(buffer, at..at.saturating_add(size))
+        });
+        if hits {
+            return clash(format!("accessor {k}"));
+        }
+    }
+    Ok(())
+}
+
+/// Bytes of one element of accessor `a` (its component size times its components; 16 for a type
+/// this reader does not know, the largest vector).
+fn element_size(a: &Value) -> usize {
+    let component = match a.get("componentType").and_then(Value::as_u64) {
+        Some(5120 | 5121) => 1,
+        Some(5122 | 5123) => 2,
+        _ => 4,
+    };
+    let components = match a.get("type").and_then(Value::as_str) {
+        Some("SCALAR") => 1,
+        Some("VEC2") => 2,
+        Some("VEC3") => 3,
+        Some("MAT2") => 4,
+        Some("MAT3") => 9,
+        Some("MAT4") => 16,
+        _ => 4,
+    };
+    component * components
 }
 
 /// A `data:` URI's bytes, or an external file's (its first `length` bytes), resolved against `dir`.

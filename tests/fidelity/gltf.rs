@@ -415,6 +415,44 @@ fn every_buffer_gets_its_own_file() {
     }
 }
 
+/// A file whose `POSITION` or `NORMAL` bytes hold something else too (another attribute, another
+/// view, or each other) is refused when read: writing the new positions and normals would change it.
+#[test]
+fn rewritten_bytes_shared_with_other_data_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let (json, bin) = sphere();
+    let cases = [
+        (
+            "same.glb",
+            "/meshes/0/primitives/0/attributes/NORMAL",
+            json!(0),
+            "both POSITION and NORMAL",
+        ),
+        // TEXCOORD_0 interleaved over the positions themselves.
+        (
+            "uv.glb",
+            "/accessors/2/bufferView",
+            json!(0),
+            "accessor 2 shares bytes",
+        ),
+        // The colours' view over the start of the positions' view.
+        (
+            "view.glb",
+            "/bufferViews/2/byteOffset",
+            json!(0),
+            "bufferView 2 shares bytes",
+        ),
+    ];
+    for (name, pointer, value, message) in cases {
+        let mut bad = json.clone();
+        *bad.pointer_mut(pointer).unwrap() = value;
+        let path = dir.path().join(name);
+        std::fs::write(&path, glb(&bad, &bin)).unwrap();
+        let o = vcsmooth(["info".as_ref(), path.as_os_str()]);
+        fails(&o, 1, &[name, message]);
+    }
+}
+
 /// A GLB output keeps an input's external buffer external, as a `.gltf` does: a side file named
 /// like it is refused before any work; and a buffer that is not a regular file is refused.
 #[test]
