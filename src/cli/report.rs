@@ -127,7 +127,8 @@ impl Summary {
             volume_pct: records.last().map_or(100.0, |r| r.volume_pct),
             area_pct: records.last().map_or(100.0, |r| r.area_pct),
             stencils,
-            seconds: records.iter().map(|r| r.seconds).sum(),
+            // `+ 0.0`: an empty sum is −0.
+            seconds: records.iter().map(|r| r.seconds).sum::<f64>() + 0.0,
         }
     }
 

@@ -182,7 +182,7 @@ impl Pins {
 /// The indices of a pin file with their line numbers (1-based), in file order.
 fn read_pin_file(path: &Path) -> Result<Vec<(usize, u64)>> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let text = std::str::from_utf8(&bytes)
+    let text = std::str::from_utf8(crate::io::without_bom(&bytes))
         .map_err(|_| Error::invalid(path, "is not a text file of vertex indices"))?;
     let mut out = Vec::new();
     for (k, line) in text.lines().enumerate() {
@@ -257,6 +257,10 @@ mod tests {
         let path = dir.path().join("pins.txt");
         std::fs::write(&path, "# comment\n\n 5 \n3 # three\n5\n").unwrap();
         assert_eq!(read_pin_file(&path).unwrap(), vec![(3, 5), (4, 3), (5, 5)]);
+        // A byte-order mark (as some editors save text) is not part of the first line.
+        std::fs::write(&path, "\u{feff}7\r\n8\r\n").unwrap();
+        assert_eq!(read_pin_file(&path).unwrap(), vec![(1, 7), (2, 8)]);
+        std::fs::write(&path, "# comment\n\n 5 \n3 # three\n5\n").unwrap();
         // The key names the distinct indices, whatever their order, repeats or source.
         let key = Pins::File(path.clone()).key().unwrap();
         assert_eq!(key, Pins::Indices(vec![3, 5]).key().unwrap());

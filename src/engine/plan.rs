@@ -291,7 +291,9 @@ impl PlanStats {
             patches: halo.len(),
             colours,
             halo_min: halo.iter().copied().min().unwrap_or(0),
-            halo_mean: halo.iter().map(|&h| h as f64).sum::<f64>() / halo.len().max(1) as f64,
+            // `+ 0.0`: an empty sum is −0.
+            halo_mean: (halo.iter().map(|&h| h as f64).sum::<f64>() + 0.0)
+                / halo.len().max(1) as f64,
             halo_max: halo.iter().copied().max().unwrap_or(0),
             crossing_edge_stencils: crossing,
             threads: rayon::current_num_threads(),

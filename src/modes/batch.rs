@@ -59,6 +59,7 @@ pub fn list_inputs(list_or_dir: &Path) -> Result<Vec<PathBuf>> {
         return Ok(files);
     }
     let text = std::fs::read_to_string(list_or_dir).map_err(|e| Error::io(list_or_dir, e))?;
+    let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
     let base = list_or_dir.parent().unwrap_or(Path::new(""));
     Ok(text
         .lines()
@@ -625,6 +626,18 @@ pub fn array_tasks(inputs: usize, max_array_size: usize) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_list_file_may_start_with_a_byte_order_mark() {
+        let dir = tempfile::tempdir().unwrap();
+        let list = dir.path().join("list.txt");
+        std::fs::write(&list, "\u{feff}in/a.ply\r\n# b\r\nin/c.ply\r\n").unwrap();
+        let inputs = list_inputs(&list).unwrap();
+        assert_eq!(
+            inputs,
+            [dir.path().join("in/a.ply"), dir.path().join("in/c.ply")]
+        );
+    }
 
     #[test]
     fn round_robin_share_covers_every_input_once() {
