@@ -45,19 +45,31 @@ fn info_json_of_generated_sphere() {
     assert!(table.contains("642") && table.contains("closed"), "{table}");
 }
 
+/// An ASCII PLY of `points` (as `double`) and `triangles`.
+fn double_ply(points: &[[f64; 3]], triangles: &[[u32; 3]]) -> String {
+    let mut text = format!(
+        "ply\nformat ascii 1.0\nelement vertex {}\nproperty double x\nproperty double y\n\
+         property double z\nelement face {}\nproperty list uchar int vertex_indices\nend_header\n",
+        points.len(),
+        triangles.len()
+    );
+    for [x, y, z] in points {
+        text += &format!("{x} {y} {z}\n");
+    }
+    for [a, b, c] in triangles {
+        text += &format!("3 {a} {b} {c}\n");
+    }
+    text
+}
+
 /// `generate mesh --from` a file keeps its precision: a millimetre grid far from the origin
 /// (geographic coordinates) stays `double` and keeps its area.
 #[test]
 fn generate_from_a_double_mesh_stays_double() {
     let dir = tempfile::tempdir().unwrap();
-    let mut text = String::from(
-        "ply\nformat ascii 1.0\nelement vertex 4\nproperty double x\nproperty double y\n\
-         property double z\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n",
-    );
-    for (x, y) in [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)] {
-        text += &format!("{} {} 0.5\n", 6378137.0 + x * 1e-3, 4000000.125 + y * 1e-3);
-    }
-    text += "3 0 1 2\n3 0 2 3\n";
+    let points = [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)]
+        .map(|(x, y)| [6378137.0 + x * 1e-3, 4000000.125 + y * 1e-3, 0.5]);
+    let text = double_ply(&points, &[[0, 1, 2], [0, 2, 3]]);
     let (geo, out) = (dir.path().join("geo.ply"), dir.path().join("g.ply"));
     std::fs::write(&geo, text).unwrap();
     for levels in ["0", "2"] {
@@ -255,21 +267,20 @@ fn an_open_meshs_report_volumes_compare() {
 fn compare_and_refine_keep_an_open_meshs_volume() {
     let dir = tempfile::tempdir().unwrap();
     // A bumpy open 6 × 6 grid, its centroid far from the plane's: the origin matters.
-    let mut text = String::from(
-        "ply\nformat ascii 1.0\nelement vertex 36\nproperty double x\nproperty double y\n\
-         property double z\nelement face 50\nproperty list uchar int vertex_indices\nend_header\n",
-    );
-    for k in 0..36u32 {
-        let (x, y) = (k % 6, k / 6);
-        let z = 0.2 * ((k * 7919 % 13) as f64 / 6.0 - 1.0) + 0.05 * x as f64;
-        text += &format!("{x} {y} {z}\n");
-    }
-    for y in 0..5u32 {
-        for x in 0..5u32 {
-            let v = y * 6 + x;
-            text += &format!("3 {} {} {}\n3 {} {} {}\n", v, v + 1, v + 7, v, v + 7, v + 6);
-        }
-    }
+    let points: Vec<[f64; 3]> = (0..36u32)
+        .map(|k| {
+            let (x, y) = (k % 6, k / 6);
+            let z = 0.2 * ((k * 7919 % 13) as f64 / 6.0 - 1.0) + 0.05 * x as f64;
+            [x as f64, y as f64, z]
+        })
+        .collect();
+    let triangles: Vec<[u32; 3]> = (0..25u32)
+        .flat_map(|q| {
+            let v = q / 5 * 6 + q % 5;
+            [[v, v + 1, v + 7], [v, v + 7, v + 6]]
+        })
+        .collect();
+    let text = double_ply(&points, &triangles);
     let grid = dir.path().join("grid.ply");
     std::fs::write(&grid, text).unwrap();
     let out = dir.path().join("out.ply");
