@@ -389,3 +389,63 @@ fn cli_bad_max_edge_refused_without_output() {
         }
     }
 }
+
+/// The memory check sizes the output from above: a budget that the old lower bound on the
+/// triangles (1.35e6 here, 129 MiB at 96 B) let through, while the run made 3.4e6 triangles and
+/// peaked at 430 MiB, is refused before any work, by `subdivide` and by `refine`; one line, no
+/// output.
+#[test]
+fn a_budget_below_the_output_is_refused_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("sphere.ply");
+    generate_sphere(&input, 3, Some(0.3), None);
+    let out = dir.path().join("out.ply");
+    let input = input.to_str().unwrap();
+    let out_s = out.to_str().unwrap();
+    let budget = ["--max-edge", "0.005", "--memory-budget", "256M"];
+    for args in [
+        [&["subdivide", input, out_s][..], &budget].concat(),
+        [&["refine", input, out_s, "--rounds", "1"][..], &budget].concat(),
+    ] {
+        let o = vcsmooth(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{args:?} accepted");
+        let lines: Vec<&str> = err.trim_end().lines().collect();
+        assert_eq!(lines.len(), 1, "{err}");
+        for m in [
+            "vcsmooth: error: ",
+            "--max-edge 0.005",
+            "not enough memory",
+            "triangles",
+            "--memory-budget",
+        ] {
+            assert!(lines[0].contains(m), "'{m}' not in: {err}");
+        }
+        assert!(!out.exists(), "{args:?} wrote an output");
+    }
+}
+
+/// The estimate the memory checks use is never below the triangles made, and close above them
+/// (δ a hair below a fraction of the longest edge: at exactly `longest/2^k`, rounding decides
+/// whether halves of exactly δ are split once more).
+#[test]
+fn the_triangle_estimate_is_close_and_from_above() {
+    let mut meshes = vec![shapes::icosphere(1), shapes::torus(0)];
+    let mut noisy = shapes::icosphere(2);
+    shapes::add_normal_noise(&mut noisy, 0.3, 1);
+    meshes.push(noisy);
+    for mesh in &meshes {
+        let longest = refine::max_edge_of(&mesh.positions, &mesh.triangles);
+        for f in [1.0, 0.7, 0.5, 0.45, 0.3, 0.23, 0.1, 0.05, 0.03, 0.011] {
+            let delta = longest * f * (1.0 - 1e-6);
+            let estimate = refine::estimate_triangles(mesh, delta);
+            let mut m = mesh.clone();
+            let made = refine::subdivide(&mut m, delta).unwrap().triangles_after as f64;
+            assert!(
+                made <= estimate && estimate <= 1.3 * made,
+                "δ = {delta}: {made} made, {estimate} estimated"
+            );
+            assert!(refine::triangles_at_least(mesh, delta) <= made);
+        }
+    }
+}

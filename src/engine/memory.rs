@@ -41,10 +41,15 @@ pub const FILE_BYTES_PER_TRIANGLE: u64 = 19;
 /// at level 8); with noise also the adjacency and normals it builds (measured 38 B more).
 pub const GENERATE_BYTES_PER_TRIANGLE: u64 = 48;
 pub const NOISE_BYTES_PER_TRIANGLE: u64 = 48;
-/// `subdivide`, per output triangle: the mesh (f64 positions at about half a vertex per triangle,
-/// u32 triangles: 24 B) and the last bisection pass's arrays over the triangles before it, which
-/// are at least half as many (half-edges, edge ids, lengths, marks, midpoints: about 110 B each).
-pub const SUBDIVIDE_BYTES_PER_TRIANGLE: u64 = 96;
+/// `subdivide` (and each round of `refine`), per output triangle: the output mesh (f64 positions at
+/// about half a vertex per triangle, u32 triangles: 24 B) and the last bisection pass's arrays
+/// over its input triangles, which can be nearly as many when that pass splits few of them
+/// (input triangles 12 B, half-edges 48, edge ids 12, edge starts, lengths and midpoints at 1.5
+/// edges per triangle 39, work list 8, marks and longest edges 3: about 122 B), rounded up for
+/// the allocator. Measured peaks of `subdivide` and `refine` (RssAnon) were 111–127 B per output
+/// triangle on a noisy sphere; `refine`'s smoothing of the output needs less
+/// ([`HEAP_BYTES_PER_TRIANGLE`]).
+pub const SUBDIVIDE_BYTES_PER_TRIANGLE: u64 = 160;
 /// Memory for the process itself, its thread stacks and buffers, on top of the per-triangle part.
 pub const BASE_BYTES: u64 = 256 << 20;
 

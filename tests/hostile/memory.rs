@@ -152,6 +152,30 @@ fn commands_under_an_address_space_limit_fail_in_one_line_or_succeed() {
             "--max-edge",
         ],
     );
+    // So does `refine`, which had no check: the first round's subdivision aborted the process.
+    let o = under_ulimit_v(
+        300_000,
+        &[
+            "refine",
+            &input,
+            &sub,
+            "--max-edge",
+            "0.002",
+            "--rounds",
+            "1",
+        ],
+    );
+    one_line_error(
+        &o,
+        &[
+            "not enough memory",
+            "needed, budget",
+            "rlimit",
+            "--max-edge",
+            "--memory-budget",
+        ],
+    );
+    assert!(!Path::new(&sub).exists());
     let o = under_ulimit_v(
         300_000,
         &["generate", "sphere", &gen_, "--subdivisions", "10"],

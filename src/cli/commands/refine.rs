@@ -7,16 +7,19 @@ use std::path::PathBuf;
 
 use clap::Args as ClapArgs;
 
+use crate::cli::commands::subdivide::check_memory;
 use crate::cli::output::stdout_error;
 use crate::cli::progress::Progress;
 use crate::cli::report::{UNDEFINED, fixed, percent_of};
 use crate::cli::shared::{InOut, MAX_THREADS, length};
+use crate::engine::memory;
 use crate::error::Result;
 use crate::io;
+use crate::mesh::Mesh;
 use crate::modes::refine::{self, RefineOptions};
 use crate::smooth::Method;
 
-/// `vcsmooth refine IN OUT --max-edge DELTA --rounds R [--iterations N] [--method M] [--threads T]`
+/// `vcsmooth refine IN OUT --max-edge DELTA --rounds R [--iterations N] [--method M] [--threads T] [--memory-budget SIZE]`
 #[derive(Debug, Clone, ClapArgs)]
 pub struct RefineArgs {
     #[command(flatten)]
@@ -36,6 +39,9 @@ pub struct RefineArgs {
     /// Worker threads of the smoothing, 1 to 4096 [default: all cores].
     #[arg(long, value_name = "N", allow_negative_numbers = true, value_parser = clap::value_parser!(u32).range(1..=MAX_THREADS as i64))]
     pub threads: Option<u32>,
+    /// Memory allowed, with K/M/G/T suffixes (binary units): a round whose subdivision, estimated from above from the edge lengths, would need more is refused before it starts (the first before any work) [default: 3/4 of the available memory, or less under a cgroup limit or ulimit].
+    #[arg(long, value_name = "SIZE", value_parser = memory::parse_size)]
+    pub memory_budget: Option<u64>,
 }
 
 /// `vcsmooth refine`, resolved.
@@ -45,6 +51,7 @@ pub struct RefineConfig {
     pub output: PathBuf,
     pub options: RefineOptions,
     pub threads: Option<usize>,
+    pub budget: memory::Budget,
 }
 
 impl RefineConfig {
@@ -62,6 +69,7 @@ impl RefineConfig {
             output: a.files.output,
             options,
             threads: a.threads.map(|t| t as usize),
+            budget: memory::budget_or_default(a.memory_budget)?,
         })
     }
 }
@@ -78,8 +86,18 @@ pub fn run(cfg: &RefineConfig, progress: &mut Progress, out: &mut dyn Write) -> 
         "refining and smoothing, {} rounds",
         cfg.options.rounds
     ));
-    let records = refine::refine(&mut mesh, &cfg.options, cfg.threads, progress)
-        .map_err(|e| e.in_file(&cfg.input))?;
+    // Every round's output is built in memory: its size is checked before the round starts.
+    let mut check = |round: usize, m: &Mesh| {
+        let prefix = if round > 1 {
+            format!("round {round}: ")
+        } else {
+            String::new()
+        };
+        check_memory(m, cfg.options.max_edge, cfg.budget, &cfg.output, &prefix)
+    };
+    let records =
+        refine::refine_checked(&mut mesh, &cfg.options, cfg.threads, progress, &mut check)
+            .map_err(|e| e.in_file(&cfg.input))?;
     progress.phase(format!("writing {}", cfg.output.display()));
     io::write_mesh(&cfg.output, &mesh)?;
     progress.finish();

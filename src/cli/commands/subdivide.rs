@@ -3,7 +3,7 @@
 //! atomically only when everything succeeded.
 
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use clap::Args as ClapArgs;
 
@@ -13,6 +13,7 @@ use crate::cli::shared::{InOut, length};
 use crate::engine::memory;
 use crate::error::{Error, Result};
 use crate::io;
+use crate::mesh::Mesh;
 use crate::modes::refine;
 
 /// `vcsmooth subdivide IN OUT --max-edge DELTA`
@@ -23,7 +24,7 @@ pub struct SubdivideArgs {
     /// δ: split triangles (conforming longest-edge bisection) until no edge is longer than this; new vertices lie on the input's triangles.
     #[arg(long, value_name = "DELTA", allow_hyphen_values = true, value_parser = length)]
     pub max_edge: f64,
-    /// Memory allowed, with K/M/G/T suffixes (binary units): a δ whose output would need more is refused before any work [default: 3/4 of the available memory, or less under a cgroup limit or ulimit].
+    /// Memory allowed, with K/M/G/T suffixes (binary units): a δ whose output, estimated from above from the edge lengths, would need more is refused before any work [default: 3/4 of the available memory, or less under a cgroup limit or ulimit].
     #[arg(long, value_name = "SIZE", value_parser = memory::parse_size)]
     pub memory_budget: Option<u64>,
 }
@@ -53,19 +54,7 @@ impl SubdivideConfig {
 pub fn run(cfg: &SubdivideConfig, progress: &mut Progress, out: &mut dyn Write) -> Result<()> {
     progress.phase(format!("reading {}", cfg.input.display()));
     let mut mesh = io::read_mesh(&cfg.input)?;
-    // The output is built in memory: its size (at least the estimate) is checked first.
-    let triangles = refine::estimate_triangles(&mesh, cfg.max_edge);
-    if triangles <= refine::MAX_TRIANGLES as f64 {
-        let need = memory::subdivide_bytes(triangles as u64);
-        let what = format!("at least {triangles:.3e} triangles");
-        memory::check_fits(&what, need, cfg.budget).map_err(|e| {
-            Error::resource(format!(
-                "{}: --max-edge {}: {e}; choose a larger --max-edge or raise --memory-budget",
-                cfg.output.display(),
-                cfg.max_edge
-            ))
-        })?;
-    }
+    check_memory(&mesh, cfg.max_edge, cfg.budget, &cfg.output, "")?;
     progress.phase("subdividing");
     let s = refine::subdivide(&mut mesh, cfg.max_edge).map_err(|e| e.in_file(&cfg.input))?;
     progress.phase(format!("writing {}", cfg.output.display()));
@@ -86,4 +75,31 @@ pub fn run(cfg: &SubdivideConfig, progress: &mut Progress, out: &mut dyn Write) 
         s.passes
     )
     .map_err(stdout_error)
+}
+
+/// Refuse, before it allocates anything, a subdivision of `mesh` to `max_edge` whose output
+/// ([`refine::estimate_triangles`], an estimate from above) the budget cannot hold; `round` is
+/// prefixed to the problem (`refine`'s later rounds). A δ beyond [`refine::MAX_TRIANGLES`] is left
+/// to [`refine::subdivide`], which refuses it by that limit.
+pub(crate) fn check_memory(
+    mesh: &Mesh,
+    max_edge: f64,
+    budget: memory::Budget,
+    output: &Path,
+    round: &str,
+) -> Result<()> {
+    if refine::triangles_at_least(mesh, max_edge) > refine::MAX_TRIANGLES as f64 {
+        return Ok(());
+    }
+    let triangles = refine::estimate_triangles(mesh, max_edge);
+    // The smoothing of `refine` needs less per triangle than the subdivision; the larger counts.
+    let need =
+        memory::subdivide_bytes(triangles as u64).max(memory::in_core_bytes(triangles as u64));
+    let what = format!("about {triangles:.3e} triangles");
+    memory::check_fits(&what, need, budget).map_err(|e| {
+        Error::resource(format!(
+            "{}: {round}--max-edge {max_edge}: {e}; choose a larger --max-edge or raise --memory-budget",
+            output.display(),
+        ))
+    })
 }
