@@ -196,16 +196,12 @@ fn sort_by_buckets<T: Copy + Ord + Send + Sync>(
             }
             meter.add(placed);
         });
-    let mut rest = out;
-    let mut parts = Vec::with_capacity(BUCKETS);
-    let mut from = 0;
-    for end in ends {
-        let (head, tail) = std::mem::take(&mut rest).split_at_mut(end - from);
-        parts.push(head);
-        rest = tail;
-        from = end;
-    }
-    parts.into_par_iter().for_each(&sort);
+    let lens: Vec<usize> = (0..BUCKETS)
+        .map(|b| ends[b] - b.checked_sub(1).map_or(0, |p| ends[p]))
+        .collect();
+    crate::topology::split_lens(out, &lens)
+        .into_par_iter()
+        .for_each(&sort);
 }
 
 /// The smallest shift of a vertex id below `n` that gives one of the [`BUCKETS`].

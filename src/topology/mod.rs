@@ -906,7 +906,7 @@ struct BlockCount {
 }
 
 /// `data` cut into consecutive slices of `lens` (which sum to at most its length).
-fn split_lens<'a>(mut data: &'a mut [u32], lens: &[usize]) -> Vec<&'a mut [u32]> {
+pub(crate) fn split_lens<'a, T>(mut data: &'a mut [T], lens: &[usize]) -> Vec<&'a mut [T]> {
     lens.iter()
         .map(|&n| {
             let (head, tail) = std::mem::take(&mut data).split_at_mut(n);
