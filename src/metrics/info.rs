@@ -252,6 +252,9 @@ fn components(topo: &Topology, storage: &Storage) -> Result<usize> {
             return v;
         }
         let g = parent[p as usize].load(Relaxed);
+        if g == p {
+            return p;
+        }
         // Path halving: point v at its grandparent (a no-op if another thread moved it already).
         let _ = parent[v as usize].compare_exchange(p, g, Relaxed, Relaxed);
         v = g;
@@ -260,12 +263,17 @@ fn components(topo: &Topology, storage: &Storage) -> Result<usize> {
         .into_par_iter()
         .with_min_len(GRAIN)
         .for_each(|v| {
+            // v's root, found once for all its edges: the neighbours of a vertex are nearly always
+            // in its component already, so each edge costs one find. A root that has since been
+            // linked under another only makes the next find differ, and the link retry.
+            let mut root = None;
             for &u in topo.neighbors(v) {
                 if u < v {
                     continue;
                 }
+                let mut a = *root.get_or_insert_with(|| find(v));
                 loop {
-                    let (a, b) = (find(v), find(u));
+                    let b = find(u);
                     if a == b {
                         break;
                     }
@@ -274,8 +282,10 @@ fn components(topo: &Topology, storage: &Storage) -> Result<usize> {
                         .compare_exchange(hi, lo, Relaxed, Relaxed)
                         .is_ok()
                     {
+                        root = Some(lo);
                         break;
                     }
+                    a = find(a);
                 }
             }
         });
@@ -485,6 +495,50 @@ mod tests {
             4 * 2 * n as u64,
             "one u32 per vertex, mapped"
         );
+    }
+
+    #[test]
+    fn components_are_counted_the_same_for_any_thread_count() {
+        // 60 spheres whose vertex ids are shuffled together (so that every chunk holds pieces of
+        // many), every third joined to the next by a triangle, and a few unreferenced vertices:
+        // the union-find's count against a sequential search, on 1, 2 and 4 threads.
+        let s = icosphere(3);
+        let (n, k) = (s.positions.len() as u32, 60u32);
+        let total = n * k + 5;
+        let perm = crate::shapes::permutation(total as usize, 7);
+        let id = |v: u32| perm[v as usize];
+        let mut tris: Vec<[u32; 3]> = (0..k)
+            .flat_map(|c| s.triangles.iter().map(move |t| t.map(|v| v + c * n)))
+            .collect();
+        tris.extend((0..k - 1).step_by(3).map(|c| [c * n, c * n + 1, (c + 1) * n]));
+        let tris: Vec<[u32; 3]> = tris.iter().map(|t| t.map(id)).collect();
+        let t = Topology::build(total as usize, &tris).unwrap();
+        let mut seen = vec![false; total as usize];
+        let mut expected = 0;
+        for start in 0..total {
+            if seen[start as usize] || t.deg(start) == 0 {
+                continue;
+            }
+            expected += 1;
+            let mut stack = vec![start];
+            seen[start as usize] = true;
+            while let Some(v) = stack.pop() {
+                for &u in t.neighbors(v) {
+                    if !std::mem::replace(&mut seen[u as usize], true) {
+                        stack.push(u);
+                    }
+                }
+            }
+        }
+        assert_eq!(expected, 60 - 20);
+        for threads in [1, 2, 4] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let counted = pool.install(|| components(&t, &Storage::heap()).unwrap());
+            assert_eq!(counted, expected, "{threads} threads");
+        }
     }
 
     #[test]
