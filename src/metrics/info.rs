@@ -349,16 +349,23 @@ pub fn edge_sums(
     vertices: Range<u32>,
 ) -> EdgeSums {
     let mut sums = EdgeSums::default();
-    let mut edges: Vec<EdgeFaces> = Vec::new();
-    let mut angles = Vec::with_capacity(ANGLE_BATCH + 64);
+    let mut wide: Vec<EdgeFaces> = Vec::new();
+    let mut narrow = [EdgeFaces::default(); NARROW];
+    let mut angles = Angles::default();
     for i in vertices {
         let above = topo.neighbors(i);
         let above = &above[above.partition_point(|&j| j <= i)..];
         if above.is_empty() {
             continue;
         }
-        edges.clear();
-        edges.resize(above.len(), EdgeFaces::default());
+        let edges = if above.len() <= NARROW {
+            &mut narrow[..above.len()]
+        } else {
+            wide.resize(above.len(), EdgeFaces::default());
+            &mut wide[..]
+        };
+        // Only the counts and flags: a normal is read only where they say it was written.
+        edges.iter_mut().for_each(|e| (e.count, e.usable) = (0, 0));
         for &t in topo.faces_of(i) {
             let tri = triangles[t as usize];
             // Every corner of a face of `i` is a neighbour of `i`; those above it own the edges.
@@ -371,7 +378,7 @@ pub fn edge_sums(
             let n = (pb - pa).cross(pc - pa);
             let usable = n.length_squared() > 0.0 && n.is_finite();
             let slot = |v: u32| {
-                if above.len() <= 16 {
+                if above.len() <= NARROW {
                     above.iter().position(|&j| j == v)
                 } else {
                     above.binary_search(&v).ok()
@@ -384,33 +391,69 @@ pub fn edge_sums(
             }
         }
         let p = pos[i as usize];
-        for (&j, e) in above.iter().zip(&edges) {
+        for (&j, e) in above.iter().zip(edges.iter()) {
             sums.length.0 += p.distance(pos[j as usize]);
             sums.length.1 += 1;
             if e.count == 2 && e.usable == 0b11 {
                 angles.push(angle_arguments(e.normals[0], e.normals[1]));
             }
         }
-        if angles.len() >= ANGLE_BATCH {
-            add_angles(&mut sums, &mut angles);
+        if angles.len >= ANGLE_BATCH {
+            angles.add_to(&mut sums);
         }
     }
-    add_angles(&mut sums, &mut angles);
+    angles.add_to(&mut sums);
     sums
 }
+
+/// Neighbours above a vertex that [`edge_sums`] keeps in an array on the stack (more in a
+/// vector): surface meshes have degrees near 6.
+const NARROW: usize = 16;
 
 /// Dihedral angles waiting in [`edge_sums`]: taken in batches, the arctangents (the pass's
 /// longest chains of dependent instructions) follow one another without the walk between them,
 /// so that the processor overlaps them; the sum is the same, in the same order.
 const ANGLE_BATCH: usize = 64;
 
-/// Add the angles of `pending` ([`angle_arguments`]), in order, to `sums`.
-fn add_angles(sums: &mut EdgeSums, pending: &mut Vec<(f64, f64)>) {
-    for &args in pending.iter() {
-        sums.angle.0 += degrees_of(args);
+/// Dihedral angles waiting in [`edge_sums`], as [`angle_arguments`]: at most [`ANGLE_BATCH`]
+/// plus a vertex's edges.
+struct Angles {
+    args: [(f64, f64); ANGLE_BATCH + NARROW],
+    wide: Vec<(f64, f64)>,
+    len: usize,
+}
+
+impl Default for Angles {
+    fn default() -> Angles {
+        Angles {
+            args: [(0.0, 0.0); ANGLE_BATCH + NARROW],
+            wide: Vec::new(),
+            len: 0,
+        }
     }
-    sums.angle.1 += pending.len();
-    pending.clear();
+}
+
+impl Angles {
+    #[inline]
+    fn push(&mut self, args: (f64, f64)) {
+        match self.args.get_mut(self.len) {
+            Some(slot) => *slot = args,
+            // A vertex with more than NARROW edges above it, past a nearly full batch.
+            None => self.wide.push(args),
+        }
+        self.len += 1;
+    }
+
+    /// Add the waiting angles, in order, to `sums`.
+    fn add_to(&mut self, sums: &mut EdgeSums) {
+        let kept = self.len.min(self.args.len());
+        for &args in self.args[..kept].iter().chain(&self.wide) {
+            sums.angle.0 += degrees_of(args);
+        }
+        sums.angle.1 += self.len;
+        self.len = 0;
+        self.wide.clear();
+    }
 }
 
 /// The faces of one edge as [`edge_sums`] finds them: how many, and the first two's normals,
@@ -510,7 +553,11 @@ mod tests {
         let mut tris: Vec<[u32; 3]> = (0..k)
             .flat_map(|c| s.triangles.iter().map(move |t| t.map(|v| v + c * n)))
             .collect();
-        tris.extend((0..k - 1).step_by(3).map(|c| [c * n, c * n + 1, (c + 1) * n]));
+        tris.extend(
+            (0..k - 1)
+                .step_by(3)
+                .map(|c| [c * n, c * n + 1, (c + 1) * n]),
+        );
         let tris: Vec<[u32; 3]> = tris.iter().map(|t| t.map(id)).collect();
         let t = Topology::build(total as usize, &tris).unwrap();
         let mut seen = vec![false; total as usize];
