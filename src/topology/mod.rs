@@ -327,11 +327,21 @@ impl Topology {
                     if is_degenerate(tri) {
                         continue;
                     }
+                    let t = (b * block_len + k) as u32;
+                    let c = tri[0] as usize / CHUNK;
+                    if tri.iter().all(|&v| v as usize / CHUNK == c) {
+                        // Nearly every face: its three places taken at once, rather than each
+                        // waiting for the piece to be shortened by the one before.
+                        let (head, tail) = std::mem::take(&mut pieces[c]).split_at_mut(3);
+                        head.fill(t);
+                        pieces[c] = tail;
+                        continue;
+                    }
                     for &v in tri {
                         let piece = &mut pieces[v as usize / CHUNK];
                         let (head, tail) =
                             std::mem::take(piece).split_first_mut().expect("counted");
-                        *head = (b * block_len + k) as u32;
+                        *head = t;
                         *piece = tail;
                     }
                 }
@@ -346,7 +356,8 @@ impl Topology {
         let mut vv_offsets: Buf<usize> = storage.zeroed(n_vertices + 1)?;
         let mut vv: Buf<u32> = storage.zeroed(total)?;
         let region_lens: Vec<usize> = region_start.windows(2).map(|w| w[1] - w[0]).collect();
-        let (found, misfits) = split_lens(&mut vf, &region_lens)
+        // Each chunk's stats, vertices with more or fewer neighbours than faces, and neighbours.
+        let found: Vec<(TopologyStats, usize, usize)> = split_lens(&mut vf, &region_lens)
             .into_par_iter()
             .zip(split_lens(&mut vv, &region_lens))
             .zip(vf_offsets[1..].par_chunks_mut(CHUNK))
@@ -361,12 +372,18 @@ impl Topology {
                     let mut st = TopologyStats::default();
                     let mut misfits = 0;
                     let mut start = 0;
+                    // The offsets in `vv` as if every vertex before had as many neighbours as
+                    // faces, as in a closed manifold; those of a mesh with misfits are shifted
+                    // below. So the offsets are summed here, in parallel, not in a sequential
+                    // pass after.
+                    let mut placed = region_start[c];
                     for (k, (deg, fix)) in degs.iter_mut().zip(fixed.iter_mut()).enumerate() {
                         let end = ends[k] - region_start[c];
                         let (b, c) = (&link.b[start..end], &link.c[start..end]);
-                        let a = analyse_vertex(lo + k as u32, b, c, scratch, &mut nbrs[start..end]);
+                        let a = analyse_vertex(lo + k as u32, b, c, scratch, &mut nbrs[start..]);
                         start = end;
-                        *deg = a.degree;
+                        placed += a.degree;
+                        *deg = placed;
                         misfits += (a.degree != b.len()) as usize;
                         st.edges += a.edges;
                         st.boundary_edges += a.boundary_edges;
@@ -386,16 +403,33 @@ impl Topology {
                         st.fixed_vertices += (*fix != 0) as usize;
                     }
                     meter.add(degs.len() as u64);
-                    (st, misfits)
+                    (st, misfits, placed - region_start[c])
                 },
             )
-            .reduce(
-                || (TopologyStats::default(), 0),
-                |a, b| (a.0.add(b.0), a.1 + b.1),
-            );
-        stats = stats.add(found);
-        for v in 0..n_vertices {
-            vv_offsets[v + 1] += vv_offsets[v];
+            .collect();
+        let mut misfits = 0;
+        for &(st, m, _) in &found {
+            stats = stats.add(st);
+            misfits += m;
+        }
+        if misfits > 0 {
+            // Shift each chunk's offsets by how much its neighbours' place in `vv` differs from
+            // its faces' in `vf` (the sums over the chunks before it).
+            let mut placed = 0usize;
+            let shifts: Vec<usize> = (found.iter().zip(&region_start))
+                .map(|(&(_, _, n), &start)| {
+                    let shift = placed.wrapping_sub(start);
+                    placed += n;
+                    shift
+                })
+                .collect();
+            vv_offsets[1..]
+                .par_chunks_mut(CHUNK)
+                .zip(shifts)
+                .filter(|(_, shift)| *shift != 0)
+                .for_each(|(offsets, shift)| {
+                    offsets.iter_mut().for_each(|o| *o = o.wrapping_add(shift));
+                });
         }
         if misfits == 0 {
             // The skipped pass 2, for the meter.
@@ -919,10 +953,13 @@ pub(crate) fn split_lens<'a, T>(mut data: &'a mut [T], lens: &[usize]) -> Vec<&'
 /// Count the corners of `block` (triangles `first..`) per chunk of vertices.
 fn count_block(first: usize, block: &[[u32; 3]], n_vertices: usize, chunks: usize) -> BlockCount {
     let mut count = BlockCount {
-        per_chunk: vec![0; chunks],
+        per_chunk: Vec::new(),
         degenerate: Vec::new(),
         out_of_range: None,
     };
+    // A count per corner of the triangle: the corners of a face are nearly always in one chunk,
+    // and one counter would make each of their increments wait for the one before.
+    let mut corners = vec![[0u32; 3]; chunks];
     for (k, tri) in block.iter().enumerate() {
         if tri.iter().any(|&v| v as usize >= n_vertices) {
             count.out_of_range = Some(first + k);
@@ -932,10 +969,11 @@ fn count_block(first: usize, block: &[[u32; 3]], n_vertices: usize, chunks: usiz
             count.degenerate.push((first + k) as u32);
             continue;
         }
-        for &v in tri {
-            count.per_chunk[v as usize / CHUNK] += 1;
+        for (j, &v) in tri.iter().enumerate() {
+            corners[v as usize / CHUNK][j] += 1;
         }
     }
+    count.per_chunk = corners.iter().map(|c| c.iter().sum()).collect();
     count
 }
 
@@ -959,7 +997,7 @@ fn sort_region(
     // entry's vertex from the first.
     ends.fill(0);
     let mut i = 0;
-    while let Some(&t) = s.faces.get(i) {
+    while let Some(&t) = region.get(i) {
         let k = triangles[t as usize].map(|u| u.wrapping_sub(lo));
         if k.iter().all(|&k| k < n) {
             // The common case, a face inside the chunk, without a branch per corner.
@@ -985,16 +1023,19 @@ fn sort_region(
     }
     s.b.resize(region.len(), 0);
     s.c.resize(region.len(), 0);
+    // Slices apart from `s`, so that the compiler need not reload where they are after each
+    // store.
+    let (faces, b, c) = (&s.faces[..], &mut s.b[..], &mut s.c[..]);
     let mut i = 0;
-    while let Some(&t) = s.faces.get(i) {
+    while let Some(&t) = faces.get(i) {
         let [x, y, z] = triangles[t as usize];
         let inside = [x, y, z].map(|u| u.wrapping_sub(lo) < n);
-        for ((u, b, c), inside) in [(x, y, z), (y, z, x), (z, x, y)].into_iter().zip(inside) {
+        for ((u, v, w), inside) in [(x, y, z), (y, z, x), (z, x, y)].into_iter().zip(inside) {
             if inside {
                 let e = &mut ends[(u - lo) as usize];
                 region[*e] = t;
-                s.b[*e] = b;
-                s.c[*e] = c;
+                b[*e] = v;
+                c[*e] = w;
                 *e += 1;
                 i += 1;
             }
@@ -1012,31 +1053,141 @@ const FAN_LIMIT: usize = 16;
 /// manifold, which is nearly every vertex of a scan. Then the b's are exactly the neighbours,
 /// each shared by two faces that traverse their edge in opposite directions, and the link is
 /// connected; so [`analyse_vertex`] can skip its sort and union-find.
-/// Returns the number of neighbours above `v` (its edges, each counted at its lower end); `None`
-/// for anything else (or more than [`FAN_LIMIT`] faces), which the general path handles.
+/// Returns the number of neighbours above `v` (its edges, each counted at its lower end) and
+/// writes the neighbours into the first d entries of `out` (it may write up to 8); `None` for
+/// anything else (or more than [`FAN_LIMIT`] faces), which the general path handles.
 #[inline]
-fn closed_fan(v: u32, b: &[u32], c: &[u32]) -> Option<usize> {
+fn closed_fan(v: u32, b: &[u32], c: &[u32], out: &mut [u32]) -> Option<usize> {
     let d = b.len();
-    if !(3..=FAN_LIMIT).contains(&d) {
-        return None;
+    if d < 3 {
+        None
+    } else if d <= 8 {
+        let mut keys = padded(b);
+        let lanes = Lanes::new(&keys);
+        // No hit is lane 8, past the faces.
+        let above = fan_walk(v, c, |u| {
+            (lanes.equal(u) | 1 << 8).trailing_zeros() as usize
+        })?;
+        // Most vertices have 6 faces or fewer: their lanes past 6 are padding, in place.
+        if d <= 6 {
+            sort6(&mut keys);
+        } else {
+            sort8(&mut keys);
+        }
+        // All 8 lanes when there is room: a copy of fixed length, not a call to copy d.
+        match out.get_mut(..8) {
+            Some(lanes) => lanes.copy_from_slice(&keys),
+            None => copy_rare(&keys[..d], out),
+        }
+        Some(above)
+    } else if d <= FAN_LIMIT {
+        let above = fan_walk(v, c, |u| {
+            b.iter().position(|&x| x == u).unwrap_or(FAN_LIMIT)
+        })?;
+        let out = &mut out[..d];
+        out.copy_from_slice(b);
+        insertion_sort(out);
+        Some(above)
+    } else {
+        None
     }
-    // Walk d steps from face 0: the face after face i is the first whose b is i's c. Seeing
-    // every face and ending at face 0 visits each once, each as the first face with its b: so
-    // the b's are distinct and the c's are the b's permuted, which also makes the c's met on
-    // the way the neighbours.
-    let (mut at, mut seen, mut above) = (0, 0u32, 0);
-    for _ in 0..d {
-        let want = c[at];
-        above += (want > v) as usize;
-        at = b.iter().position(|&x| x == want)?;
+}
+
+/// `x` into the first entries of `out`: out of line, so that the compiler does not merge it with
+/// the fixed-length copy of its caller into one call of variable length.
+#[cold]
+#[inline(never)]
+fn copy_rare(x: &[u32], out: &mut [u32]) {
+    out[..x.len()].copy_from_slice(x);
+}
+
+/// [`closed_fan`]'s test, with `first(u)` the first face whose b is u (at least d if none).
+///
+/// Walk d steps from face 0: the face after face i is the first whose b is i's c. Seeing every
+/// face and ending at face 0 visits each once, each as the first face with its b: so the b's are
+/// distinct and the c's are the b's permuted, which also makes the c's met on the way the
+/// neighbours. The face after each face is looked up first, for all faces, into 4 bits each of
+/// `next`: the lookups do not wait for one another, and the walk is a shift per step.
+#[inline(always)]
+fn fan_walk(v: u32, c: &[u32], first: impl Fn(u32) -> usize) -> Option<usize> {
+    let (mut next, mut found, mut above) = (0u64, true, 0);
+    for (i, &u) in c.iter().enumerate() {
+        above += (u > v) as usize;
+        let after = first(u);
+        found &= after < c.len();
+        next |= (after as u64 & 15) << (4 * i);
+    }
+    let (mut at, mut seen) = (0, 0u32);
+    for _ in 0..c.len() {
+        at = (next >> (4 * at)) as usize & 15;
         seen |= 1 << at;
     }
-    (at == 0 && seen == (1 << d) - 1).then_some(above)
+    (found && at == 0 && seen == (1 << c.len()) - 1).then_some(above)
+}
+
+/// `x` (at most 8 ids) in the first lanes of 8, the rest `u32::MAX`: an id no vertex has (ids
+/// are below it, so it matches no corner) and that sorts last.
+#[inline(always)]
+fn padded(x: &[u32]) -> [u32; 8] {
+    std::array::from_fn(|k| x.get(k).copied().unwrap_or(u32::MAX))
+}
+
+/// 8 ids, to find which of them equal a given one all at once: a search stopping at the match
+/// mispredicts its exit at nearly every face (most of [`fan_walk`]'s time, before).
+#[cfg(target_arch = "x86_64")]
+struct Lanes(std::arch::x86_64::__m128i, std::arch::x86_64::__m128i);
+
+#[cfg(target_arch = "x86_64")]
+impl Lanes {
+    #[inline(always)]
+    fn new(x: &[u32; 8]) -> Lanes {
+        use std::arch::x86_64::*;
+        let x = x.map(|x| x as i32);
+        // SAFETY: SSE2 is part of the x86_64 baseline. Set from the ids rather than loaded from
+        // `x`, which its stores have only just written (a wide load of narrow stores stalls).
+        unsafe {
+            Lanes(
+                _mm_set_epi32(x[3], x[2], x[1], x[0]),
+                _mm_set_epi32(x[7], x[6], x[5], x[4]),
+            )
+        }
+    }
+
+    /// The lanes equal to `u`, as the bits of a mask.
+    #[inline(always)]
+    fn equal(&self, u: u32) -> u32 {
+        use std::arch::x86_64::*;
+        // SAFETY: SSE2 is part of the x86_64 baseline.
+        unsafe {
+            let u = _mm_set1_epi32(u as i32);
+            let words = _mm_packs_epi32(_mm_cmpeq_epi32(self.0, u), _mm_cmpeq_epi32(self.1, u));
+            _mm_movemask_epi8(_mm_packs_epi16(words, words)) as u32 & 0xff
+        }
+    }
+}
+
+/// [`Lanes`] without x86_64's vector instructions.
+#[cfg(not(target_arch = "x86_64"))]
+struct Lanes([u32; 8]);
+
+#[cfg(not(target_arch = "x86_64"))]
+impl Lanes {
+    fn new(x: &[u32; 8]) -> Lanes {
+        Lanes(*x)
+    }
+
+    fn equal(&self, u: u32) -> u32 {
+        self.0
+            .iter()
+            .rev()
+            .fold(0, |m, &x| m << 1 | (x == u) as u32)
+    }
 }
 
 /// Classify vertex `v` from the link edges `(b[i], c[i])` of its (non-degenerate) faces; when
-/// it has as many neighbours as faces (`out.len()`), write them into `out`, ascending.
-/// O(d log d) in the degree d.
+/// it has as many neighbours as faces, write them into the first of `out`, ascending. `out` is
+/// the rest of its chunk's array, where the entries past v's are written later if at all: it
+/// may change up to 8 (see [`closed_fan`]). O(d log d) in the degree d.
 fn analyse_vertex(
     v: u32,
     b: &[u32],
@@ -1044,9 +1195,7 @@ fn analyse_vertex(
     s: &mut VertexScratch,
     out: &mut [u32],
 ) -> VertexAnalysis {
-    if let Some(edges) = closed_fan(v, b, c) {
-        // The b's are the neighbours (see `closed_fan`).
-        sort_small(b, out);
+    if let Some(edges) = closed_fan(v, b, c, out) {
         return VertexAnalysis {
             degree: b.len(),
             edges,
@@ -1059,8 +1208,8 @@ fn analyse_vertex(
         };
     }
     let a = analyse_general(v, b, c, s);
-    if a.degree == out.len() {
-        out.copy_from_slice(&s.corners);
+    if a.degree == b.len() {
+        out[..a.degree].copy_from_slice(&s.corners);
     }
     a
 }
@@ -1183,8 +1332,7 @@ fn sort_small(x: &[u32], out: &mut [u32]) {
         insertion_sort(out);
         return;
     }
-    // Padded with the largest id, which sorts last.
-    let mut a: [u32; 8] = std::array::from_fn(|k| x.get(k).copied().unwrap_or(u32::MAX));
+    let mut a = padded(x);
     sort8(&mut a);
     out.copy_from_slice(&a[..x.len()]);
 }
@@ -1212,6 +1360,24 @@ fn sort8(a: &mut [u32; 8]) {
     exchange(1, 2);
     exchange(3, 4);
     exchange(5, 6);
+}
+
+/// Sort the first 6 of 8 entries through a sorting network: the fewest comparators (12).
+#[inline]
+fn sort6(a: &mut [u32; 8]) {
+    let mut exchange = |i: usize, j: usize| (a[i], a[j]) = (a[i].min(a[j]), a[i].max(a[j]));
+    exchange(0, 5);
+    exchange(1, 3);
+    exchange(2, 4);
+    exchange(1, 2);
+    exchange(3, 4);
+    exchange(0, 3);
+    exchange(2, 5);
+    exchange(0, 1);
+    exchange(2, 3);
+    exchange(4, 5);
+    exchange(1, 2);
+    exchange(3, 4);
 }
 
 /// Sort a short slice ascending.
@@ -1549,14 +1715,15 @@ mod tests {
                     .iter()
                     .map(|&t| corners_after(tris[t as usize], v))
                     .unzip();
-                let mut out = vec![0; faces.len()];
+                // With room past the vertex's entries, as in the build.
+                let mut out = vec![0; faces.len() + 8];
                 let a = analyse_vertex(v, &b, &c, &mut s, &mut out);
-                if closed_fan(v, &b, &c).is_some() {
+                if closed_fan(v, &b, &c, &mut out.clone()).is_some() {
                     shortcuts += 1;
                     assert_eq!(a, analyse_general(v, &b, &c, &mut s), "{tris:?} at {v}");
                 }
                 if a.degree == faces.len() {
-                    assert_eq!(out, topo.neighbors(v), "{tris:?} at {v}");
+                    assert_eq!(out[..a.degree], *topo.neighbors(v), "{tris:?} at {v}");
                 }
                 let mut want: Vec<u32> = faces
                     .iter()
@@ -1637,6 +1804,163 @@ mod tests {
                 stats.boundary_edges > 0,
                 tris.len() < mesh.triangles.len() + 4
             );
+        }
+    }
+
+    /// The arrays and stats of a topology, to compare whole.
+    type Whole = (
+        Vec<usize>,
+        Vec<u32>,
+        Vec<usize>,
+        Vec<u32>,
+        Vec<u8>,
+        TopologyStats,
+    );
+
+    fn whole(t: &Topology) -> Whole {
+        let p = t.parts();
+        (
+            p.vv_offsets.to_vec(),
+            p.vv.to_vec(),
+            p.vf_offsets.to_vec(),
+            p.vf.to_vec(),
+            p.fixed.to_vec(),
+            t.stats,
+        )
+    }
+
+    /// The topology vertex by vertex, without the build's chunks, counting sorts, closed-fan
+    /// shortcut, 8-wide writes, offsets summed in chunks or pass 2: each vertex's faces from one
+    /// scan of the triangles, and its neighbours and flags from the general analysis.
+    fn reference(n: usize, tris: &[[u32; 3]]) -> Whole {
+        let mut stats = TopologyStats {
+            vertices: n,
+            triangles: tris.len(),
+            ..Default::default()
+        };
+        let mut faces_of = vec![Vec::new(); n];
+        let mut fixed = vec![0u8; n];
+        for (t, tri) in tris.iter().enumerate() {
+            if is_degenerate(tri) {
+                stats.degenerate_triangles += 1;
+                tri.iter().for_each(|&v| fixed[v as usize] = FIXED);
+                continue;
+            }
+            tri.iter()
+                .for_each(|&v| faces_of[v as usize].push(t as u32));
+        }
+        let (mut vv_offsets, mut vv, mut vf_offsets, mut vf) = (vec![0], vec![], vec![0], vec![]);
+        let mut s = VertexScratch::default();
+        for v in 0..n {
+            let (b, c): (Vec<u32>, Vec<u32>) = faces_of[v]
+                .iter()
+                .map(|&t| corners_after(tris[t as usize], v as u32))
+                .unzip();
+            let a = analyse_general(v as u32, &b, &c, &mut s);
+            vf.extend(&faces_of[v]);
+            vf_offsets.push(vf.len());
+            vv.extend(&s.corners);
+            vv_offsets.push(vv.len());
+            stats.edges += a.edges;
+            stats.boundary_edges += a.boundary_edges;
+            stats.non_manifold_edges += a.non_manifold_edges;
+            stats.non_manifold_vertices += a.non_manifold_vertex as usize;
+            stats.inconsistent_orientation_edges += a.inconsistent_edges;
+            stats.high_degree_vertices += (a.degree > MAX_FREE_DEGREE) as usize;
+            stats.unreferenced_vertices += (a.degree == 0) as usize;
+            if a.fixed {
+                fixed[v] = if a.loop_vertex && fixed[v] == 0 {
+                    FIXED | LOOP
+                } else {
+                    FIXED
+                };
+            }
+            stats.fixed_vertices += (fixed[v] != 0) as usize;
+        }
+        (vv_offsets, vv, vf_offsets, vf, fixed, stats)
+    }
+
+    #[test]
+    fn the_build_equals_a_vertex_by_vertex_reference_on_varied_meshes() {
+        let mut cases: Vec<(&str, usize, Vec<[u32; 3]>)> = Vec::new();
+        let sphere = crate::shapes::icosphere(6);
+        let n = sphere.positions.len();
+        let perm = crate::shapes::permutation(n, 7);
+        let shuffled: Vec<[u32; 3]> = sphere
+            .triangles
+            .iter()
+            .map(|t| t.map(|v| perm[v as usize]))
+            .collect();
+        cases.push(("sphere", n, sphere.triangles.to_vec()));
+        cases.push(("shuffled sphere", n, shuffled.clone()));
+        // Holes (so pass 2 and shifted offsets), flipped faces, degenerate faces, a duplicated
+        // face and a fin (non-manifold edges), unreferenced vertices.
+        let mut rough = shuffled.clone();
+        for k in (0..rough.len()).step_by(997) {
+            rough[k].swap(1, 2);
+        }
+        for k in [80_000, 50_000, 50_001, 12_345, 3] {
+            rough.remove(k);
+        }
+        rough.insert(17, [perm[5], perm[5], perm[9]]);
+        rough.insert(40_000, [perm[1], perm[2], perm[1]]);
+        rough.push(rough[1000]);
+        let [a, b, _] = rough[2000];
+        rough.push([a, b, n as u32]);
+        cases.push(("rough sphere", n + 3, rough));
+        // Two spheres sharing one vertex (a pinch, two closed fans at it), one of them
+        // inside out.
+        let mut pinched = shuffled.clone();
+        let other = |v: u32| if v == perm[0] { perm[0] } else { v + n as u32 };
+        pinched.extend(
+            shuffled
+                .iter()
+                .map(|t| [other(t[0]), other(t[2]), other(t[1])]),
+        );
+        cases.push(("pinched spheres", 2 * n, pinched));
+        // Closed bipyramids whose apexes have 3 to 20 faces: every path of the closed-fan test
+        // (up to 6, 8 and 16 faces) and the general analysis beyond, each also with a face
+        // flipped and with a face gone.
+        let mut cones = Vec::new();
+        let mut base = 0;
+        for d in 3..=20u32 {
+            for variant in 0..3 {
+                let (apex, other_apex) = (base + d, base + d + 1);
+                let mut fan = Vec::new();
+                for k in 0..d {
+                    fan.push([apex, base + k, base + (k + 1) % d]);
+                    fan.push([other_apex, base + (k + 1) % d, base + k]);
+                }
+                match variant {
+                    1 => fan[2].swap(1, 2),
+                    2 => drop(fan.remove(2)),
+                    _ => {}
+                }
+                cones.extend(fan);
+                base += d + 2;
+            }
+        }
+        cases.push(("bipyramids", base as usize, cones));
+        let bunny =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/stanford-bunny.ply");
+        let scan = crate::io::read_mesh(&bunny).unwrap();
+        let n = scan.positions.len();
+        let perm = crate::shapes::permutation(n, 11);
+        let tris: Vec<[u32; 3]> = scan.triangles.to_vec();
+        cases.push(("scan", n, tris.clone()));
+        let shuffled = tris.iter().map(|t| t.map(|v| perm[v as usize])).collect();
+        cases.push(("shuffled scan", n, shuffled));
+
+        for (name, n, tris) in &cases {
+            let want = reference(*n, tris);
+            for threads in [1, 2, 3] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                let topo = pool.install(|| Topology::build(*n, tris)).unwrap();
+                assert!(whole(&topo) == want, "{name} on {threads} threads");
+            }
         }
     }
 }
