@@ -1443,6 +1443,19 @@ mod tests {
     }
 
     #[test]
+    fn the_sorting_networks_sort_every_input() {
+        // A comparator network sorts every input if it sorts every input of zeros and ones.
+        for bits in 0u32..256 {
+            let mut a: [u32; 8] = std::array::from_fn(|k| bits >> k & 1);
+            sort8(&mut a);
+            assert!(a.is_sorted(), "sort8 {bits:08b}");
+            let mut a: [u32; 8] = std::array::from_fn(|k| if k < 6 { bits >> k & 1 } else { 9 });
+            sort6(&mut a);
+            assert!(a.is_sorted(), "sort6 {bits:06b}");
+        }
+    }
+
+    #[test]
     fn closed_octahedron_has_no_fixed_vertex() {
         let t = Topology::build(6, &octahedron()).unwrap();
         assert_eq!(t.stats.edges, 12);
