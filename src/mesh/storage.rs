@@ -185,6 +185,17 @@ impl Storage {
         })
     }
 
+    /// A zero-filled working array that is dropped soon after use: on the heap, an anonymous
+    /// mapping ([`Buf::sparse`]) whose pages go back to the system when it is dropped. A freed heap
+    /// block below glibc's mapping threshold (up to 32 MiB) stays with the process for reuse, and
+    /// so counts in the run's peak to its end. In scratch storage, as [`Storage::zeroed`].
+    pub fn working<T: Pod>(&self, len: usize) -> Result<Buf<T>> {
+        match self.scratch {
+            Some(_) => self.zeroed(len),
+            None => Buf::sparse(len),
+        }
+    }
+
     /// An empty heap vector with room for `len` elements, or the error saying how much was needed.
     /// `len` zeros on the heap, from the allocator's zeroed memory: large arrays come as fresh
     /// pages that are zero already, so nothing is written until the array is used (by the threads
@@ -624,6 +635,22 @@ pub fn format_size(bytes: u64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn working_arrays_are_mappings_given_back_when_dropped() {
+        // On the heap an anonymous mapping (not a heap block glibc would keep), zero-filled and
+        // writable; in scratch storage a scratch file, counted as one.
+        let mut a: Buf<u32> = Storage::heap().working(100_000).unwrap();
+        assert!(a.is_mapped() && a.iter().all(|&x| x == 0));
+        a[99_999] = 7;
+        assert_eq!(a.iter().map(|&x| x as u64).sum::<u64>(), 7);
+        let dir = tempfile::tempdir().unwrap();
+        let s = Storage::scratch(dir.path()).unwrap();
+        let b: Buf<u32> = s.working(1000).unwrap();
+        assert!(b.is_mapped());
+        assert_eq!(s.mapped_bytes(), 4000);
+        assert!(Storage::heap().working::<u32>(0).unwrap().is_empty());
+    }
 
     #[test]
     fn mapped_arrays_work_like_heap_ones_and_leave_no_file() {

@@ -224,13 +224,14 @@ fn bounding((lo, hi): (DVec3, DVec3)) -> (DVec3, DVec3) {
 
 /// Connected components over the adjacency, counting only vertices with a neighbour: a
 /// union–find over the edges, in parallel on the current pool (a count, the same for any order
-/// of the unions). Its forest, one entry per vertex, is placed as `storage` says (a scratch file
-/// for a mesh larger than the memory budget).
+/// of the unions). Its forest, one entry per vertex, is a working array of `storage`
+/// ([`Storage::working`]: a scratch file for a mesh larger than the memory budget, else memory
+/// given back when the count is done).
 fn components(topo: &Topology, storage: &Storage) -> Result<usize> {
     // Vertices per work item: enough to make scheduling negligible.
     const GRAIN: usize = 1 << 14;
     let n = topo.len();
-    let mut forest = storage.zeroed::<u32>(n)?;
+    let mut forest = storage.working::<u32>(n)?;
     forest
         .par_chunks_mut(GRAIN)
         .enumerate()
