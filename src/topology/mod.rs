@@ -130,6 +130,26 @@ pub struct TopologyStats {
 }
 
 impl TopologyStats {
+    /// Count vertex `v`'s analysis `a`, and set its entry `fix` of the fixed mask (which
+    /// degenerate triangles at `v` may have set before: then it is not a loop vertex).
+    fn count(&mut self, a: &VertexAnalysis, fix: &mut u8) {
+        self.edges += a.edges;
+        self.boundary_edges += a.boundary_edges;
+        self.non_manifold_edges += a.non_manifold_edges;
+        self.non_manifold_vertices += a.non_manifold_vertex as usize;
+        self.inconsistent_orientation_edges += a.inconsistent_edges;
+        self.high_degree_vertices += (a.degree > MAX_FREE_DEGREE) as usize;
+        self.unreferenced_vertices += (a.degree == 0) as usize;
+        if a.fixed {
+            *fix = if a.loop_vertex && *fix == 0 {
+                FIXED | LOOP
+            } else {
+                FIXED
+            };
+        }
+        self.fixed_vertices += (*fix != 0) as usize;
+    }
+
     fn add(mut self, o: TopologyStats) -> TopologyStats {
         self.edges += o.edges;
         self.boundary_edges += o.boundary_edges;
@@ -385,22 +405,7 @@ impl Topology {
                         placed += a.degree;
                         *deg = placed;
                         misfits += (a.degree != b.len()) as usize;
-                        st.edges += a.edges;
-                        st.boundary_edges += a.boundary_edges;
-                        st.non_manifold_edges += a.non_manifold_edges;
-                        st.non_manifold_vertices += a.non_manifold_vertex as usize;
-                        st.inconsistent_orientation_edges += a.inconsistent_edges;
-                        st.high_degree_vertices += (a.degree > MAX_FREE_DEGREE) as usize;
-                        st.unreferenced_vertices += (a.degree == 0) as usize;
-                        if a.fixed {
-                            // Degenerate triangles at v fixed it before: then not a loop vertex.
-                            *fix = if a.loop_vertex && *fix == 0 {
-                                FIXED | LOOP
-                            } else {
-                                FIXED
-                            };
-                        }
-                        st.fixed_vertices += (*fix != 0) as usize;
+                        st.count(&a, fix);
                     }
                     meter.add(degs.len() as u64);
                     (st, misfits, placed - region_start[c])
@@ -1874,21 +1879,7 @@ mod tests {
             vf_offsets.push(vf.len());
             vv.extend(&s.corners);
             vv_offsets.push(vv.len());
-            stats.edges += a.edges;
-            stats.boundary_edges += a.boundary_edges;
-            stats.non_manifold_edges += a.non_manifold_edges;
-            stats.non_manifold_vertices += a.non_manifold_vertex as usize;
-            stats.inconsistent_orientation_edges += a.inconsistent_edges;
-            stats.high_degree_vertices += (a.degree > MAX_FREE_DEGREE) as usize;
-            stats.unreferenced_vertices += (a.degree == 0) as usize;
-            if a.fixed {
-                fixed[v] = if a.loop_vertex && fixed[v] == 0 {
-                    FIXED | LOOP
-                } else {
-                    FIXED
-                };
-            }
-            stats.fixed_vertices += (fixed[v] != 0) as usize;
+            stats.count(&a, &mut fixed[v]);
         }
         (vv_offsets, vv, vf_offsets, vf, fixed, stats)
     }
