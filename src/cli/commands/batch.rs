@@ -24,7 +24,7 @@ use crate::modes::batch::{self as core, Marker, MarkerCheck, MeshRow};
 /// `vcsmooth batch --summary OUTDIR [--inputs LIST_OR_DIR] [--json FILE|-]`
 #[derive(Debug, Clone, ClapArgs)]
 pub struct BatchArgs {
-    /// A directory (its .ply/.obj/.off/.stl files, sorted by name) or a file listing one mesh per line (relative to the list's directory; blank lines and #comments skipped).
+    /// A directory (its .ply/.obj/.off/.stl/.gltf/.glb files, sorted by name) or a file listing one mesh per line (relative to the list's directory; blank lines and #comments skipped).
     #[arg(value_name = "LIST_OR_DIR", required_unless_present = "summary")]
     pub inputs: Option<PathBuf>,
     /// Directory of the outputs (<stem>.<format>) and the success markers (.done/<stem>.json); created if missing.
