@@ -279,6 +279,40 @@ fn gltf_with_an_external_bin_writes_its_own_bin() {
     check_smoothed(&json2, &bin, &after, &bin_after);
 }
 
+/// `batch` takes a directory's `.gltf` and `.glb` files like its other meshes, written in the
+/// batch's format (PLY by default); the inputs and their buffer stay as they were.
+#[test]
+fn batch_smooths_a_directorys_gltf_and_glb_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let (inputs, outdir) = (dir.path().join("in"), dir.path().join("out"));
+    std::fs::create_dir(&inputs).unwrap();
+    let (mut json, bin) = sphere();
+    std::fs::write(inputs.join("blob.glb"), glb(&json, &bin)).unwrap();
+    json["buffers"][0]["uri"] = json!("scan.bin");
+    let text = serde_json::to_vec(&json).unwrap();
+    std::fs::write(inputs.join("scan.gltf"), &text).unwrap();
+    std::fs::write(inputs.join("scan.bin"), &bin).unwrap();
+    ok(vcsmooth([
+        "batch".as_ref(),
+        inputs.as_os_str(),
+        outdir.as_os_str(),
+    ]));
+    for (name, input) in [("blob", "blob.glb"), ("scan", "scan.gltf")] {
+        let out = outdir.join(format!("{name}.ply"));
+        let back = io::read_mesh(&out).unwrap();
+        assert_eq!(
+            back.positions.len(),
+            json["accessors"][0]["count"],
+            "{name}"
+        );
+        let (v0, v1) = (volume(&inputs.join(input)), volume(&out));
+        assert!(((v1 - v0) / v0).abs() < 1e-6, "{name}: volume {v0} -> {v1}");
+    }
+    assert_eq!(std::fs::read(inputs.join("scan.gltf")).unwrap(), text);
+    assert_eq!(std::fs::read(inputs.join("scan.bin")).unwrap(), bin);
+    assert_eq!(std::fs::read_dir(&inputs).unwrap().count(), 3);
+}
+
 /// The files around a `.gltf` are never written over: not another buffer of the input (one
 /// named like the output's buffer), not a file the user has, not one named by a side file; a run
 /// again replaces its own earlier buffer instead of leaving it behind.
