@@ -1089,9 +1089,7 @@ fn closed_fan(v: u32, b: &[u32], c: &[u32], out: &mut [u32]) -> Option<usize> {
         let above = fan_walk(v, c, |u| {
             b.iter().position(|&x| x == u).unwrap_or(FAN_LIMIT)
         })?;
-        let out = &mut out[..d];
-        out.copy_from_slice(b);
-        insertion_sort(out);
+        sort_small(b, &mut out[..d]);
         Some(above)
     } else {
         None
