@@ -8,7 +8,7 @@ use super::output::stdout_error;
 use super::report::fixed;
 use crate::error::Result;
 use crate::multires::{DEFAULT_LEVELS, MAX_LEVELS, MultiresOptions, Transfer};
-use crate::smooth::Method;
+use crate::smooth::{Control, Method};
 
 /// Multiresolution flags of `smooth`.
 #[derive(Debug, Clone, ClapArgs)]
@@ -116,12 +116,12 @@ pub fn print_multires(
     out.write_all(text.as_bytes()).map_err(stdout_error)
 }
 
-/// Only the Jacobi methods make sense on the fine level (the point of the mode is to avoid the
-/// stencil methods there).
+/// Only the methods made for the fine level (cheap Jacobi ones: the point of the mode is to avoid
+/// the stencil methods there).
 fn fine_method(s: &str) -> std::result::Result<Method, String> {
-    match s {
-        "laplacian" => Ok(Method::Laplacian),
-        "taubin" => Ok(Method::Taubin),
-        _ => Err("expected laplacian or taubin".into()),
-    }
+    let fine: Vec<Method> = Method::accepting(Control::MultiresFine).collect();
+    fine.iter().copied().find(|m| m.name() == s).ok_or_else(|| {
+        let names: Vec<&str> = fine.iter().map(|m| m.name()).collect();
+        format!("expected {}", names.join(" or "))
+    })
 }

@@ -39,16 +39,26 @@ pub fn write_volume_plot(path: &Path, title: &str, curves: &[Curve]) -> Result<(
     atomic_write(path, svg.as_bytes())
 }
 
-/// A fixed colour per method, so every figure uses the same one.
-fn colour(m: Method) -> RGBColor {
-    match m {
-        Method::Laplacian => RGBColor(214, 39, 40),
-        Method::Taubin => RGBColor(255, 127, 14),
-        Method::Lem => RGBColor(44, 160, 44),
-        Method::Vcs => RGBColor(31, 119, 180),
-        Method::VcsTriangle => RGBColor(148, 103, 189),
-        Method::VcsLowpass => RGBColor(140, 86, 75),
-    }
+/// The line of each method by its place in the registry ([`Method::ALL`]), so every figure
+/// draws a method the same way: a colour, and whether the line is dashed (the fifth method's
+/// curve usually coincides with the fourth's: dashed, both stay visible).
+const PALETTE: [(RGBColor, bool); 10] = [
+    (RGBColor(214, 39, 40), false),
+    (RGBColor(255, 127, 14), false),
+    (RGBColor(44, 160, 44), false),
+    (RGBColor(31, 119, 180), false),
+    (RGBColor(148, 103, 189), true),
+    (RGBColor(140, 86, 75), false),
+    (RGBColor(227, 119, 194), false),
+    (RGBColor(127, 127, 127), false),
+    (RGBColor(188, 189, 34), false),
+    (RGBColor(23, 190, 207), false),
+];
+
+/// The colour and dash of method `m`'s line.
+fn line(m: Method) -> (RGBColor, bool) {
+    let at = Method::ALL.iter().position(|&x| x == m).unwrap_or(0);
+    PALETTE[at % PALETTE.len()]
 }
 
 /// The y range to show: every value and 100 %, padded; at least ±0.5 % around a flat line.
@@ -104,7 +114,7 @@ fn render(title: &str, curves: &[Curve]) -> std::result::Result<String, String> 
             .draw()
             .map_err(|e| e.to_string())?;
         for c in curves {
-            let col = colour(c.method);
+            let (col, dashed) = line(c.method);
             let points: Vec<(u32, f64)> = c
                 .volume_pct
                 .iter()
@@ -113,8 +123,7 @@ fn render(title: &str, curves: &[Curve]) -> std::result::Result<String, String> 
                 .map(|(i, &v)| (i as u32, v))
                 .collect();
             let style = col.stroke_width(2);
-            // vcs and vcs-triangle usually coincide: dash the second so that both stay visible.
-            let series = if c.method == Method::VcsTriangle {
+            let series = if dashed {
                 chart.draw_series(DashedLineSeries::new(points.iter().copied(), 9, 6, style))
             } else {
                 chart.draw_series(LineSeries::new(points.iter().copied(), style))

@@ -9,7 +9,7 @@ use clap::{Args as ClapArgs, ValueEnum};
 
 use crate::engine::{EngineSettings, Statistics};
 use crate::error::{Error, Result};
-use crate::smooth::{Boundary, Method, Options};
+use crate::smooth::{Boundary, Control, Method, Options};
 
 /// `IN OUT` of the commands that turn one mesh file into another (`smooth`, `subdivide`, `refine`).
 #[derive(Debug, Clone, ClapArgs)]
@@ -100,14 +100,20 @@ fn iterations(s: &str) -> std::result::Result<Iterations, String> {
 /// Step sizes and stencil options shared by `smooth` and `curves`.
 #[derive(Debug, Clone, ClapArgs)]
 pub struct MethodParams {
-    /// Laplacian step size λ, in (0, 1] (laplacian, and the first step of taubin and vcs-lowpass).
-    #[arg(long, value_name = "X", default_value_t = 0.5, value_parser = step_lambda, allow_hyphen_values = true)]
+    /// Laplacian step size λ, in (0, 1].
+    #[arg(long, value_name = "X", default_value_t = 0.5, value_parser = step_lambda, allow_hyphen_values = true,
+          help = used_by("Laplacian step size λ, in (0, 1]", Control::Lambda, ""))]
     pub lambda: f64,
-    /// Taubin's second step size μ, in [-1, 0) (taubin and vcs-lowpass).
-    #[arg(long, value_name = "Y", default_value_t = -0.53, value_parser = step_mu, allow_hyphen_values = true)]
+    /// Taubin's second step size μ, in [-1, 0).
+    #[arg(long, value_name = "Y", default_value_t = -0.53, value_parser = step_mu, allow_hyphen_values = true,
+          help = used_by("Taubin's second step size μ, in [-1, 0)", Control::Mu, ""))]
     pub mu: f64,
-    /// Skip a stencil whose result has a higher stencil energy than before (lem, vcs, vcs-triangle) [default: off].
-    #[arg(long)]
+    /// Skip a stencil whose result has a higher stencil energy than before.
+    #[arg(long, help = used_by(
+        "Skip a stencil whose result has a higher stencil energy than before",
+        Control::RejectEnergyIncrease,
+        " [default: off]"
+    ))]
     pub reject_energy_increase: bool,
     /// Creases: edges whose two faces' normals differ by more than DEG degrees, in (0, 180), on the input; their vertices stay where they are, corners included (every method) [default: none].
     #[arg(long, value_name = "DEG", value_parser = crease_angle, allow_hyphen_values = true)]
@@ -115,9 +121,26 @@ pub struct MethodParams {
     /// No vertex ends farther than D (model units, > 0) from its input position: the stencil methods skip a stencil that would move one farther (the volume stays exact); laplacian and taubin clamp each vertex (they do not keep the volume) [default: none].
     #[arg(long, value_name = "D", value_parser = length, allow_hyphen_values = true)]
     pub max_deviation: Option<f64>,
-    /// Boundary loops of open meshes: fixed, or smooth (every method but laplacian and taubin: each loop is smoothed as a curve; all but lem keep each hole's size exactly).
-    #[arg(long, value_enum, value_name = "MODE", default_value_t = Boundary::Fixed)]
+    /// Boundary loops of open meshes: fixed, or smooth (each loop is smoothed as a curve).
+    #[arg(long, value_enum, value_name = "MODE", default_value_t = Boundary::Fixed, help = boundary_help())]
     pub boundary: Boundary,
+}
+
+/// A flag's help line, `what`, with the methods that take `control` in parentheses, then `tail`.
+fn used_by(what: &str, control: Control, tail: &str) -> String {
+    format!("{what} ({}){tail}", Method::names_accepting(control))
+}
+
+/// `--boundary`'s help line: which methods smooth the loops, and which keep the holes' sizes.
+fn boundary_help() -> String {
+    let smooth: Vec<Method> = Method::accepting(Control::SmoothBoundary).collect();
+    let names = |ms: &[Method]| ms.iter().map(|m| m.name()).collect::<Vec<_>>().join(", ");
+    let keep: Vec<Method> = smooth.iter().copied().filter(|m| m.keeps_volume()).collect();
+    format!(
+        "Boundary loops of open meshes: fixed, or smooth ({}: each loop is smoothed as a curve; {} keep each hole's size exactly)",
+        names(&smooth),
+        names(&keep)
+    )
 }
 
 impl MethodParams {
@@ -334,17 +357,7 @@ impl ValueEnum for Method {
     }
 
     fn to_possible_value(&self) -> Option<PossibleValue> {
-        let help = match self {
-            Method::Laplacian => "umbrella Laplacian, p += λ L(p) (shrinks)",
-            Method::Taubin => "λ|μ: a λ step then a μ step (Taubin 1995)",
-            Method::Lem => "local energy minimisation on edge stencils, no volume constraint",
-            Method::Vcs => "volume-constrained smoothing on edge stencils (Liu et al. 2002)",
-            Method::VcsTriangle => "volume-constrained smoothing on triangle stencils",
-            Method::VcsLowpass => {
-                "Taubin's λ|μ displacement, volume restored exactly on 2-ring stencils"
-            }
-        };
-        Some(PossibleValue::new(self.name()).help(help))
+        Some(PossibleValue::new(self.name()).help(self.unit().help()))
     }
 }
 

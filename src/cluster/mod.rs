@@ -182,11 +182,11 @@ pub fn run_file(
         input_stats: engine.with_stats.then(|| doc.input_stats.clone()).flatten(),
         output_stats,
         plan: pool.install(|| {
-            let (colours, halo) = if opts.method == crate::smooth::Method::VcsLowpass {
-                (&doc.ring_colours, &doc.ring_halo)
-            } else {
-                (&doc.colours, &doc.halo)
-            };
+            let (colours, halo) = engine::plan::footprint_colouring(
+                opts.method.unit().schedule(opts).footprint(),
+                (&doc.colours, &doc.halo),
+                (&doc.ring_colours, &doc.ring_halo),
+            );
             PlanStats::new(
                 doc.key.patch_size,
                 colours.len(),
@@ -287,7 +287,7 @@ fn ensure_plan(
     };
     // A resumed run measures the input again: a deviation bound, the automatic stop's replay,
     // the hole areas that smooth boundaries keep.
-    let keep_input = opts.max_deviation.is_some() || opts.auto_stop || !loops.is_empty();
+    let keep_input = opts.keeps_input() || opts.auto_stop || !loops.is_empty();
     work.write_plan(&new_plan, key, input_stats, keep_input, &loops)
 }
 
@@ -579,7 +579,7 @@ impl<'a> RankRun<'a> {
         let [mut pos, mut scratch, mut prev] = arrays;
         let n = self.plan.doc.vertices;
         // Only the region's pages of the input are ever read (the free vertices' entries).
-        let input = match opts.max_deviation.is_some() || (opts.auto_stop && self.state.done > 0) {
+        let input = match opts.keeps_input() || (opts.auto_stop && self.state.done > 0) {
             true => Some(self.work.map_input(n)?),
             false => None,
         };
@@ -632,9 +632,9 @@ impl<'a> RankRun<'a> {
             auto.resume(mesh.topo, &removed, stopped, &mut self);
         }
         let first = self.state.done + 1;
-        let mut counts: Buf<u8> = match opts.method {
-            crate::smooth::Method::VcsLowpass => Buf::sparse(n)?,
-            _ => Buf::default(),
+        let mut counts: Buf<u8> = match opts.method.unit().needs().counts {
+            true => Buf::sparse(n)?,
+            false => Buf::default(),
         };
         let buffers = Buffers {
             pos: &mut pos,
@@ -643,7 +643,7 @@ impl<'a> RankRun<'a> {
             counts: &mut counts,
             input: input
                 .as_deref()
-                .filter(|_| opts.max_deviation.is_some())
+                .filter(|_| opts.keeps_input())
                 .unwrap_or(&[]),
             auto: auto.as_mut(),
         };

@@ -40,7 +40,8 @@ use super::reduce::{self, Fixed};
 use super::share::{Share, on_pool};
 use crate::error::Result;
 use crate::mesh::{Buf, Storage};
-use crate::smooth::{Method, Options, noise};
+use crate::smooth::method::StopRule;
+use crate::smooth::{Options, noise};
 use crate::topology::Topology;
 
 /// Seed of the white-noise sample ε.
@@ -121,10 +122,9 @@ impl AutoStop {
         [base, field, spare]: [Buf<f64>; 3],
         opts: &Options,
     ) -> AutoStop {
-        let factors = match opts.method {
-            Method::Laplacian => vec![opts.lambda],
-            Method::Taubin | Method::VcsLowpass => vec![opts.lambda, opts.mu],
-            Method::Lem | Method::Vcs | Method::VcsTriangle => Vec::new(),
+        let factors = match opts.method.unit().stop_rule(opts) {
+            StopRule::Filter(factors) => factors,
+            StopRule::Settle => Vec::new(),
         };
         AutoStop {
             normals,

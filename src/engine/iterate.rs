@@ -1,24 +1,22 @@
 //! The one iteration loop. Every run smooths through [`iterate`]: in-memory meshes, file runs in
 //! memory or in scratch files, multiresolution levels, benchmarks and the ranks of the cluster
-//! engine, which plug in through [`Share`].
+//! engine, which plug in through [`Share`]. The loop never names a method: it runs the
+//! [`Schedule`] the method's unit ([`Smoother`]) declares.
 //!
 //! Order contract (part of the result's definition, so runs are reproducible):
-//! - `lem`, `vcs`, `vcs-triangle`: Gauss–Seidel, colour after colour of the plan's schedule; within
-//!   a colour the patches run in parallel (they touch disjoint data), each applying the stencils
-//!   it owns in ascending order: edge stencils `(i, j)`, `i < j`, by `(i, j)`; triangle stencils in
-//!   the plan's triangle order.
-//! - `boundary: smooth` (the stencil methods): the loops' normals are measured before the sweep;
-//!   an edge that is a boundary stencil ([`crate::smooth::boundary`]) is applied in its place in
-//!   the edge order, a `vcs-triangle` patch applies its boundary stencils after its triangles,
-//!   ascending, and `vcs-lowpass` applies them after its ring stencils in a pass of their own over
-//!   the edge colouring, each patch's ascending; after the last colour, [`Loops::restore`] walks
-//!   every loop in order.
-//! - `vcs-lowpass`: first the step-1 shares of every vertex, Jacobi (a λ|μ pair from the
-//!   iteration's start, see [`lowpass::shares_into`]); then Gauss–Seidel as above over the ring
-//!   stencils (one per owned movable vertex, ascending), colour after colour of the plan's
-//!   ring colouring ([`crate::schedule::Schedule::ring_colours`]).
-//! - `laplacian`, `taubin`: Jacobi (every vertex from the previous positions), so the order is
-//!   irrelevant: the output is bit-identical for any thread count and tile size.
+//! - [`Schedule::Stencils`]: Gauss–Seidel, colour after colour of the plan's colouring for the
+//!   method's footprint; within a colour the patches run in parallel (they touch disjoint data),
+//!   each applying the stencils it owns in the unit's fixed order ([`Smoother::sweep_patch`];
+//!   edge stencils `(i, j)`, `i < j`, ascending by `(i, j)`; triangle stencils in the plan's
+//!   triangle order; ring stencils by ascending vertex). Before each sweep, the unit's
+//!   [`Smoother::prepare`] (neighbour sums, or a method's own Jacobi passes).
+//! - `boundary: smooth`: the loops' normals are measured before the sweep; a unit applies its
+//!   boundary stencils inside its patch sweep, or (when [`Smoother::boundary_pass`] says so) in
+//!   a pass of their own over the edge colouring after its stencils, each patch's ascending;
+//!   after the last colour, [`Loops::restore`] walks every loop in order.
+//! - [`Schedule::Umbrella`] and [`Schedule::TwoPass`]: Jacobi (every vertex from the previous
+//!   positions), so the order is irrelevant: the output is bit-identical for any thread count
+//!   and tile size.
 //!
 //! With [`Options::auto_stop`] the loop asks its [`AutoStop`] after every iteration whether to go
 //! on (see [`super::auto`]); its measurements are reductions over fixed chunks, so the iteration
@@ -38,13 +36,13 @@ pub use super::share::{Alone, Share};
 use crate::error::{Error, Result};
 use crate::metrics;
 use crate::partition::Patch;
-use crate::schedule::{Prefetch, SharedField};
+use crate::schedule::Prefetch;
 use crate::smooth::boundary::{self, Loops};
 use crate::smooth::laplacian::{self, Previous, StepStats};
-use crate::smooth::lowpass;
+use crate::smooth::method::{Exec, Footprint, PassFields, PatchMesh, Schedule};
 use crate::smooth::stencil::{self, StencilParams};
 use crate::smooth::tiled::{Measure, TilePlan};
-use crate::smooth::{Method, Options, SweepStats};
+use crate::smooth::{Options, SharedField, Smoother, SweepStats};
 use crate::topology::Topology;
 
 /// What the percentages of the records are relative to: the input's centroid (a fixed point, so
@@ -85,8 +83,7 @@ pub struct Sweep<'a> {
     pub tris: &'a [[u32; 3]],
     pub patches: &'a [Patch],
     pub colours: &'a [Vec<u32>],
-    /// The colours of `vcs-lowpass`'s wider stencils (see [`crate::schedule`]); may be empty
-    /// where that method is refused.
+    /// The colours of the wider ring stencils ([`Footprint::Ring`], see [`crate::schedule`]).
     pub ring_colours: &'a [Vec<u32>],
     /// Read-ahead hints for memory-mapped arrays (the next colour's patches).
     pub prefetch: Option<&'a Prefetch>,
@@ -97,20 +94,32 @@ pub struct Sweep<'a> {
     pub loops: Option<&'a Loops>,
 }
 
+impl Sweep<'_> {
+    /// The colouring of stencils with `footprint`.
+    fn colours(&self, footprint: Footprint) -> &[Vec<u32>] {
+        match footprint {
+            Footprint::Edge => self.colours,
+            Footprint::Ring => self.ring_colours,
+        }
+    }
+}
+
 /// The arrays the loop works in, one entry per vertex each (a rank touches only its region).
 pub struct Buffers<'b> {
     /// The positions: smoothed in place.
     pub pos: &'b mut [DVec3],
-    /// Neighbour sums of the stencil methods, the step-1 shares of `vcs-lowpass`, or the second
-    /// buffer of the Jacobi steps.
+    /// What the stencils read beside the positions ([`Smoother::prepare`]: neighbour sums), or
+    /// the second buffer of the Jacobi steps.
     pub scratch: &'b mut [DVec3],
-    /// The stencil methods' copy before a measured sweep (may be empty for Jacobi methods).
+    /// The stencil methods' copy before a measured sweep (and the spare buffer of their
+    /// preparation), or the auxiliary field of a [`Schedule::TwoPass`] method; may be empty for
+    /// [`Schedule::Umbrella`].
     pub prev: &'b mut [DVec3],
-    /// `vcs-lowpass`'s stencil sizes (see [`lowpass::counts_into`]), counted by the loop before
-    /// its first iteration; empty for the other methods.
+    /// The method's byte field ([`Needs::counts`](crate::smooth::method::Needs)), filled by the
+    /// loop before its first iteration; empty when the method has none.
     pub counts: &'b mut [u8],
-    /// The input positions, read when the options bound the deviation (`max_deviation`);
-    /// empty otherwise.
+    /// The input positions, read when the options keep them ([`Options::keeps_input`]); empty
+    /// otherwise.
     pub input: &'b [DVec3],
     /// The automatic stop's state, required when the options ask for it (`auto_stop`); a run
     /// that resumes after iteration 1 passes it started and resumed.
@@ -201,10 +210,11 @@ impl<'r, 'a> Run<'r, 'a> {
                 return Ok(self.records);
             }
         }
-        if self.opts.method.is_jacobi() {
-            self.jacobi(buf, first)?;
-        } else {
-            self.stencils(buf, first)?;
+        let unit = self.opts.method.unit();
+        match unit.schedule(self.opts) {
+            Schedule::Umbrella(factors) => self.jacobi(buf, first, &factors)?,
+            Schedule::TwoPass => self.two_pass(unit, buf, first)?,
+            Schedule::Stencils(footprint) => self.stencils(unit, footprint, buf, first)?,
         }
         Ok(self.records)
     }
@@ -226,7 +236,13 @@ struct Run<'r, 'a> {
 
 impl Run<'_, '_> {
     /// Gauss–Seidel sweeps of a stencil method, colour after colour.
-    fn stencils(&mut self, buf: Buffers, first: usize) -> Result<()> {
+    fn stencils(
+        &mut self,
+        unit: &dyn Smoother,
+        footprint: Footprint,
+        buf: Buffers,
+        first: usize,
+    ) -> Result<()> {
         let Buffers {
             pos,
             scratch: sums,
@@ -244,36 +260,24 @@ impl Run<'_, '_> {
                 .unwrap_or_else(|| Loops::find(mesh.topo, mesh.tris))
         });
         let total = self.opts.iterations;
-        let lowpass = self.opts.method == Method::VcsLowpass;
-        let colours = if lowpass {
-            mesh.ring_colours
-        } else {
-            mesh.colours
-        };
+        let colours = mesh.colours(footprint);
         if let Some(loops) = &loops {
             // Each process holds every loop vertex from here on: the restoring pass that ends
             // each iteration leaves them the same in all.
             self.share.gather(pos, loops.vertices());
         }
-        if lowpass {
-            let topo = mesh.topo;
-            let first = owned.start;
-            on_pool(&*self.share, || {
-                reduce::for_chunks_mut(&mut counts[owned.clone()], |at, out| {
-                    lowpass::counts_into(topo, out, first + at)
-                })
-            });
+        if unit.needs().counts {
+            unit.start(mesh.topo, &mut self.exec(), counts);
         }
         for it in first..=total {
             let wanted = self.when.wanted(it, total);
-            // An automatically stopped run measures every displacement (the rule of lem, vcs and
-            // vcs-triangle reads it).
+            // An automatically stopped run measures every displacement (the rule of the methods
+            // without a scalar analogue reads it).
             let measure = wanted || auto.is_some();
             let start = Instant::now();
-            if lowpass {
-                // `prev` holds the λ|μ pair's result until the shares are taken from it.
-                self.lowpass_shares(pos, sums, prev, counts);
-            }
+            // `prev` is the preparation's spare buffer until the positions are copied into it.
+            let opts = self.opts;
+            unit.prepare(mesh.topo, opts, &mut self.exec(), pos, sums, prev, counts);
             if measure {
                 let now = &pos[owned.clone()];
                 on_pool(&*self.share, || {
@@ -282,32 +286,25 @@ impl Run<'_, '_> {
                     })
                 });
             }
-            if !lowpass {
-                on_pool(&*self.share, || {
-                    reduce::neighbor_sums(mesh.topo, pos, sums, owned.clone())
-                });
-                for &v in self.share.halo_sums() {
-                    let v = v as usize;
-                    crate::smooth::neighbor_sums_into(mesh.topo, pos, &mut sums[v..v + 1], v);
-                }
-            }
             if let Some(loops) = &mut loops {
                 loops.measure(pos);
             }
-            let params = stencil_params(self.opts, input);
+            let params = stencil_params(unit, self.opts, input);
             let mut sweep = SweepStats::default();
-            let method = self.opts.method;
+            let in_sweep = loops.as_ref().filter(|_| !unit.boundary_pass());
             sweep.add(&self.sweep_colours(
                 colours,
-                Pass::Stencils(method),
+                Pass::Stencils(unit),
                 pos,
                 sums,
                 params,
-                loops.as_ref(),
+                in_sweep,
             ));
-            if lowpass && let Some(loops) = &loops {
-                // The boundary stencils of `vcs-lowpass` run after its ring stencils, in the edge
-                // colouring (they are edge stencils); the shares they write are not read again.
+            if unit.boundary_pass()
+                && let Some(loops) = &loops
+            {
+                // The boundary stencils run after the method's, in the edge colouring (they are
+                // edge stencils); what they write into `sums` is not read again.
                 sweep.add(&self.sweep_colours(
                     mesh.colours,
                     Pass::Boundaries,
@@ -344,6 +341,14 @@ impl Run<'_, '_> {
         Ok(())
     }
 
+    /// The loop's side of a method's passes ([`Exec`]), on the share's threads.
+    fn exec(&mut self) -> ShareExec<'_> {
+        ShareExec {
+            topo: self.mesh.topo,
+            share: &mut *self.share,
+        }
+    }
+
     /// One Gauss–Seidel pass of `pass` over `colours`, colour after colour, each colour's patches
     /// in parallel, the changes exchanged after each colour.
     fn sweep_colours(
@@ -373,9 +378,9 @@ impl Run<'_, '_> {
                 .collect();
             self.share.colour_start(pos, sums);
             // SAFETY: the views are used only by the patches of this colour, which touch
-            // disjoint positions and sums (the colouring invariant of `schedule`; for
-            // `vcs-lowpass`'s ring stencils, `sums` holds the shares, which every patch only
-            // reads); `pos` and `sums` are not used otherwise while the views live.
+            // disjoint positions and sums (the colouring invariant of `schedule` for the
+            // method's footprint; a ring stencil only reads `sums`); `pos` and `sums` are not
+            // used otherwise while the views live.
             let (pv, sv) = unsafe { (SharedField::new(pos), SharedField::new(sums)) };
             let done = on_pool(&*self.share, || {
                 sweep_patches(mesh, pv, sv, &mine, pass, params, loops)
@@ -401,46 +406,8 @@ impl Run<'_, '_> {
             .is_some()
     }
 
-    /// `vcs-lowpass`'s step-1 shares into `shares` (see [`lowpass::shares_into`]): a λ|μ pair
-    /// from `pos` through `shares` into `pair`, each step exchanged, then the shares from `pos`
-    /// and `pair`. Every entry depends only on `pos`, so any split gives the same bits.
-    fn lowpass_shares(
-        &mut self,
-        pos: &[DVec3],
-        shares: &mut [DVec3],
-        pair: &mut [DVec3],
-        counts: &[u8],
-    ) {
-        let topo = self.mesh.topo;
-        let owned = self.share.owned();
-        let (lambda, mu) = (self.opts.lambda, self.opts.mu);
-        let first = owned.start;
-        on_pool(&*self.share, || {
-            reduce::for_chunks_mut(&mut shares[owned.clone()], |at, out| {
-                laplacian::jacobi_step(topo, pos, out, first + at, lambda);
-            })
-        });
-        self.share.step_end(shares);
-        let half: &[DVec3] = shares;
-        on_pool(&*self.share, || {
-            reduce::for_chunks_mut(&mut pair[owned.clone()], |at, out| {
-                laplacian::jacobi_step(topo, half, out, first + at, mu);
-            })
-        });
-        self.share.step_end(pair);
-        let pair: &[DVec3] = pair;
-        on_pool(&*self.share, || {
-            reduce::for_chunks_mut(&mut shares[owned.clone()], |at, out| {
-                let counts = &counts[first + at..first + at + out.len()];
-                lowpass::shares_into(topo, pos, pair, counts, out, first + at)
-            })
-        });
-        // A stencil of an owned vertex reaches two rings out, whose shares other processes own.
-        self.share.step_end(shares);
-    }
-
-    /// `laplacian` and `taubin`: rounds of Jacobi steps, ping-ponging between `pos` and
-    /// `scratch` (the result ends in `pos`).
+    /// [`Schedule::Umbrella`]: rounds of Jacobi steps with `factors` per iteration,
+    /// ping-ponging between `pos` and `scratch` (the result ends in `pos`).
     ///
     /// With a [`TilePlan`] (when the mesh may hold one, and as long as every tile can be planned)
     /// a round runs several iterations in one pass over memory: up to the plan's depth in steps,
@@ -448,7 +415,7 @@ impl Run<'_, '_> {
     /// the round). The iterations of a round share its time equally in their records; the first
     /// round also plans the tiles. Without a plan every iteration is one or two plain steps over
     /// the owned vertices, each followed by the exchange. Both give bit-identical positions.
-    fn jacobi(&mut self, buf: Buffers, first_iteration: usize) -> Result<()> {
+    fn jacobi(&mut self, buf: Buffers, first_iteration: usize, factors: &[f64]) -> Result<()> {
         let Buffers {
             pos,
             scratch,
@@ -460,21 +427,8 @@ impl Run<'_, '_> {
         let clamp = self.opts.max_deviation.map(|limit| (input, limit));
         let mesh = self.mesh;
         let total = self.opts.iterations;
-        let factors: &[f64] = if self.opts.method == Method::Taubin {
-            &[self.opts.lambda, self.opts.mu]
-        } else {
-            &[self.opts.lambda]
-        };
         let owned = self.share.owned();
-        let fixed = mesh.topo.fixed_mask()[owned.clone()]
-            .iter()
-            .filter(|&&f| f != 0)
-            .count() as u64;
-        let sweep = SweepStats {
-            applied: (owned.len() as u64 - fixed) * factors.len() as u64,
-            skipped_fixed: fixed * factors.len() as u64,
-            ..Default::default()
-        };
+        let sweep = self.vertex_counts(factors.len() as u64);
         let mut start = Instant::now();
         // Planned tile by tile by the first round (see `TilePlan::new`); dropped if a tile cannot be.
         // Only a process that owns every vertex: a round writes all of `dst` and exchanges nothing.
@@ -543,6 +497,85 @@ impl Run<'_, '_> {
             }
             first = last + 1;
             start = Instant::now();
+        }
+        if in_scratch {
+            pos[owned.clone()].copy_from_slice(&scratch[owned]);
+        }
+        Ok(())
+    }
+
+    /// The counts of a Jacobi iteration that updates every owned vertex `steps` times.
+    fn vertex_counts(&self, steps: u64) -> SweepStats {
+        let owned = self.share.owned();
+        let fixed = self.mesh.topo.fixed_mask()[owned.clone()]
+            .iter()
+            .filter(|&&f| f != 0)
+            .count() as u64;
+        SweepStats {
+            applied: (owned.len() as u64 - fixed) * steps,
+            skipped_fixed: fixed * steps,
+            ..Default::default()
+        }
+    }
+
+    /// [`Schedule::TwoPass`]: per iteration the unit's pass 0 into the auxiliary field `prev`,
+    /// then its pass 1 into the new positions, each exchanged, ping-ponging between `pos` and
+    /// `scratch` (the result ends in `pos`).
+    fn two_pass(&mut self, unit: &dyn Smoother, buf: Buffers, first: usize) -> Result<()> {
+        let Buffers {
+            pos,
+            scratch,
+            prev: aux,
+            input,
+            mut auto,
+            ..
+        } = buf;
+        let (topo, opts) = (self.mesh.topo, self.opts);
+        let total = opts.iterations;
+        let owned = self.share.owned();
+        let sweep = self.vertex_counts(1);
+        let limit = opts.max_deviation;
+        let mut in_scratch = false;
+        for it in first..=total {
+            let wanted = self.when.wanted(it, total);
+            let start = Instant::now();
+            let (src, dst): (&mut [DVec3], &mut [DVec3]) = if in_scratch {
+                (&mut *scratch, &mut *pos)
+            } else {
+                (&mut *pos, &mut *scratch)
+            };
+            let src: &[DVec3] = src;
+            let fields = PassFields {
+                pos: src,
+                input,
+                aux: &[],
+                limit,
+            };
+            self.exec().vertex_pass(aux, &|first, out| {
+                unit.pass(0, topo, opts, fields, first, out);
+            });
+            let fields = PassFields { aux, ..fields };
+            let out = &mut dst[owned.clone()];
+            let offset = owned.start;
+            let moved = on_pool(&*self.share, || {
+                reduce::map_fold_mut(
+                    out,
+                    |at, out| unit.pass(1, topo, opts, fields, offset + at, out),
+                    StepStats::default(),
+                    StepStats::then,
+                )
+            });
+            self.share.step_end(dst);
+            in_scratch = !in_scratch;
+            let seconds = start.elapsed().as_secs_f64();
+            let stop = self.stop_after(auto.as_deref_mut(), dst, Some(src));
+            let measured = (wanted || auto.is_some()).then_some(moved);
+            let record = self.record(it, dst, measured, wanted || stop, sweep, seconds)?;
+            let stats = auto.as_deref().map(AutoStop::stats);
+            self.keep(&record, dst, stop || it == total, stats.as_ref())?;
+            if stop {
+                break;
+            }
         }
         if in_scratch {
             pos[owned.clone()].copy_from_slice(&scratch[owned]);
@@ -678,11 +711,11 @@ impl Run<'_, '_> {
     }
 }
 
-/// The stencil kernel's parameters for `opts`; `input`: the input positions, read when
-/// `opts.max_deviation` bounds the deviation.
-fn stencil_params<'a>(opts: &Options, input: &'a [DVec3]) -> StencilParams<'a> {
+/// The stencil kernel's parameters for `unit` with `opts`; `input`: the input positions, read
+/// when `opts.max_deviation` bounds the deviation.
+fn stencil_params<'a>(unit: &dyn Smoother, opts: &Options, input: &'a [DVec3]) -> StencilParams<'a> {
     StencilParams {
-        volume: matches!(opts.method, Method::Vcs | Method::VcsTriangle),
+        volume: unit.stencil_volume(),
         reject_energy_increase: opts.reject_energy_increase,
         deviation: opts
             .max_deviation
@@ -708,31 +741,15 @@ fn sweep_patches(
         .map(|patch| {
             let (mut pv, mut sv) = (pos, sums);
             match (pass, loops) {
-                (Pass::Stencils(Method::VcsLowpass), _) => {
-                    let owned = patch.vertices.clone();
-                    lowpass::sweep_rings(topo, tris, &mut pv, &sv, owned, params.deviation)
-                }
-                (Pass::Stencils(Method::VcsTriangle), _) => {
-                    let faces = patch.triangles.clone();
-                    let mut st =
-                        stencil::sweep_triangles(topo, tris, &mut pv, &mut sv, faces, params);
-                    if let Some(loops) = loops {
-                        // After the patch's triangles, its boundary edges, ascending.
-                        let edges = patch.edges(topo);
-                        st.add(&boundary::sweep_edges(
-                            topo, tris, &mut pv, &mut sv, edges, params, loops, false,
-                        ));
-                    }
-                    st
-                }
-                (Pass::Stencils(_), Some(loops)) => {
-                    let edges = patch.edges(topo);
-                    boundary::sweep_edges(topo, tris, &mut pv, &mut sv, edges, params, loops, true)
-                }
-                (Pass::Stencils(_), None) => {
-                    let edges = patch.edges(topo);
-                    stencil::sweep_edges(topo, tris, &mut pv, &mut sv, edges, params)
-                }
+                (Pass::Stencils(unit), _) => unit.sweep_patch(
+                    PatchMesh { topo, tris },
+                    patch.vertices.clone(),
+                    patch.triangles.clone(),
+                    &mut pv,
+                    &mut sv,
+                    params,
+                    loops,
+                ),
                 (Pass::Boundaries, Some(loops)) => {
                     let edges = patch.edges(topo);
                     boundary::sweep_edges(topo, tris, &mut pv, &mut sv, edges, params, loops, false)
@@ -747,12 +764,47 @@ fn sweep_patches(
 }
 
 /// What a sweep over patches applies: the method's stencils (with its boundary stencils in
-/// place when the loops are smoothed), or the boundary stencils alone (`vcs-lowpass`'s pass
-/// after its ring stencils).
+/// place when the loops are smoothed), or the boundary stencils alone (the pass after the
+/// method's, for a unit whose [`Smoother::boundary_pass`] says so).
 #[derive(Clone, Copy)]
-enum Pass {
-    Stencils(Method),
+enum Pass<'u> {
+    Stencils(&'u dyn Smoother),
     Boundaries,
+}
+
+/// The loop's side of a method's passes: chunks of the owned vertices on the share's threads,
+/// each pass exchanged.
+struct ShareExec<'s> {
+    topo: &'s Topology,
+    share: &'s mut dyn Share,
+}
+
+impl Exec for ShareExec<'_> {
+    fn vertex_pass(&mut self, field: &mut [DVec3], f: &(dyn Fn(usize, &mut [DVec3]) + Sync)) {
+        let owned = self.share.owned();
+        let first = owned.start;
+        on_pool(&*self.share, || {
+            reduce::for_chunks_mut(&mut field[owned], |at, out| f(first + at, out))
+        });
+        self.share.step_end(field);
+    }
+
+    fn vertex_pass_u8(&mut self, field: &mut [u8], f: &(dyn Fn(usize, &mut [u8]) + Sync)) {
+        let owned = self.share.owned();
+        let first = owned.start;
+        on_pool(&*self.share, || {
+            reduce::for_chunks_mut(&mut field[owned], |at, out| f(first + at, out))
+        });
+    }
+
+    fn neighbor_sums(&mut self, pos: &[DVec3], sums: &mut [DVec3]) {
+        let (topo, owned) = (self.topo, self.share.owned());
+        on_pool(&*self.share, || reduce::neighbor_sums(topo, pos, sums, owned));
+        for &v in self.share.halo_sums() {
+            let v = v as usize;
+            crate::smooth::neighbor_sums_into(topo, pos, &mut sums[v..v + 1], v);
+        }
+    }
 }
 
 // A tile holds whole chunks, so that a round sums the displacement chunk by chunk as plain steps do.

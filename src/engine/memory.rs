@@ -97,11 +97,11 @@ pub fn in_core_bytes_of_file(size: u64) -> u64 {
 }
 
 /// [`in_core_bytes_of_file`] of a run with `opts`: [`DEVIATION_BYTES_PER_TRIANGLE`] more when it
-/// keeps the input positions for a deviation bound, [`AUTO_BYTES_PER_TRIANGLE`] more when it
+/// keeps the input positions ([`crate::Options::keeps_input`]), [`AUTO_BYTES_PER_TRIANGLE`] more when it
 /// stops automatically.
 pub fn in_core_bytes_of_file_with(size: u64, opts: &crate::Options) -> u64 {
     let mut per_triangle = HEAP_BYTES_PER_TRIANGLE;
-    if opts.max_deviation.is_some() {
+    if opts.keeps_input() {
         per_triangle += DEVIATION_BYTES_PER_TRIANGLE;
     }
     if opts.auto_stop {

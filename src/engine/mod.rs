@@ -164,14 +164,17 @@ impl Plan {
             ..
         } = self;
         let n = reordered.positions.len();
-        let mut prev: Buf<DVec3> = storage.zeroed(if opts.method.is_jacobi() { 0 } else { n })?;
+        let (schedule_of, needs) = (opts.method.unit().schedule(opts), opts.method.unit().needs());
+        let sized = |wanted: bool| if wanted { n } else { 0 };
+        let mut prev: Buf<DVec3> =
+            storage.zeroed(sized(!schedule_of.is_jacobi() || needs.aux))?;
         let mut scratch: Buf<DVec3> = storage.zeroed(n)?;
-        let lowpass = opts.method == crate::smooth::Method::VcsLowpass;
-        let mut counts: Buf<u8> = storage.zeroed(if lowpass { n } else { 0 })?;
-        // The input positions, for a deviation bound: in the plan's storage (scratch out of core).
-        let input: Buf<DVec3> = match opts.max_deviation {
-            Some(_) => storage.copy_of(&reordered.positions)?,
-            None => Buf::default(),
+        let mut counts: Buf<u8> = storage.zeroed(sized(needs.counts))?;
+        // The input positions, for a deviation bound or a method that reads them: in the plan's
+        // storage (scratch out of core).
+        let input: Buf<DVec3> = match opts.keeps_input() {
+            true => storage.copy_of(&reordered.positions)?,
+            false => Buf::default(),
         };
         let mut auto = match opts.auto_stop {
             true => Some(auto::AutoStop::new(storage, n, opts)?),

@@ -11,6 +11,7 @@ use rayon::prelude::*;
 use super::observer::{Meter, Observer, Phase, Quiet, metered};
 use super::reduce;
 use crate::Method;
+use crate::smooth::method::Footprint;
 use crate::error::{Error, Result};
 use crate::mesh::Storage;
 use crate::partition::{self, Patch, Reordered};
@@ -260,13 +261,14 @@ impl Plan {
     }
 
     /// The decomposition's figures for reports, with the colouring and halo `method` runs on
-    /// (`vcs-lowpass` has its own, see [`Schedule::ring_colours`]).
+    /// (its footprint's, see [`Schedule::ring_colours`]).
     pub fn stats(&self, method: Method) -> PlanStats {
-        let (colours, halo) = if method == Method::VcsLowpass {
-            (&self.schedule.ring_colours, &self.schedule.ring_halo)
-        } else {
-            (&self.schedule.colours, &self.schedule.halo)
-        };
+        let footprint = method.unit().schedule(&Default::default()).footprint();
+        let (colours, halo) = footprint_colouring(
+            footprint,
+            (&self.schedule.colours, &self.schedule.halo),
+            (&self.schedule.ring_colours, &self.schedule.ring_halo),
+        );
         let patch_size = match self.layout {
             Layout::Patches(size) => size,
             Layout::Whole => self.len(),
@@ -280,6 +282,19 @@ impl Plan {
                 .map(|p| p.crossing_edges(&self.topology))
                 .sum(),
         )
+    }
+}
+
+/// Of an edge colouring and a ring colouring (each colours and halo counts), the one for stencils
+/// of `footprint`.
+pub fn footprint_colouring<'a>(
+    footprint: Footprint,
+    edge: (&'a [Vec<u32>], &'a [u32]),
+    ring: (&'a [Vec<u32>], &'a [u32]),
+) -> (&'a [Vec<u32>], &'a [u32]) {
+    match footprint {
+        Footprint::Edge => edge,
+        Footprint::Ring => ring,
     }
 }
 

@@ -35,7 +35,7 @@ use crate::engine::{
 use crate::error::{Error, Result};
 use crate::mesh::{Buf, Storage};
 use crate::metrics;
-use crate::smooth::{Method, Options};
+use crate::smooth::{Control, Method, Options};
 pub use transfer::Transfer;
 
 /// Default number of levels, the input included: the input and one coarse level with about
@@ -114,6 +114,12 @@ pub struct MultiresStats {
     pub seconds: f64,
 }
 
+/// The methods that take `control`, as "a or b".
+fn or_list(control: Control) -> String {
+    let names: Vec<&str> = Method::accepting(control).map(Method::name).collect();
+    names.join(" or ")
+}
+
 /// Check that `opts` and `m` make a multiresolution run.
 pub fn validate(opts: &Options, m: &MultiresOptions) -> Result<()> {
     if opts.auto_stop {
@@ -134,19 +140,25 @@ pub fn validate(opts: &Options, m: &MultiresOptions) -> Result<()> {
             "is not supported in multiresolution mode yet (its coarse levels are not bounded)",
         ));
     }
-    if !matches!(opts.method, Method::Vcs | Method::VcsTriangle) {
+    if !opts.method.unit().accepts(Control::MultiresCoarse) {
         return Err(Error::parameter(
             "multires",
             format!(
-                "runs vcs or vcs-triangle on the coarse levels, not {} (the fine level runs laplacian or taubin)",
-                opts.method
+                "runs {} on the coarse levels, not {} (the fine level runs {})",
+                or_list(Control::MultiresCoarse),
+                opts.method,
+                or_list(Control::MultiresFine)
             ),
         ));
     }
-    if !matches!(m.fine_method, Method::Laplacian | Method::Taubin) {
+    if !m.fine_method.unit().accepts(Control::MultiresFine) {
         return Err(Error::parameter(
             "fine_method",
-            format!("must be laplacian or taubin, not {}", m.fine_method),
+            format!(
+                "must be {}, not {}",
+                or_list(Control::MultiresFine),
+                m.fine_method
+            ),
         ));
     }
     if !(2..=MAX_LEVELS).contains(&m.levels) {

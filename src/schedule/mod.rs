@@ -25,15 +25,12 @@
 //! from one breadth-first walk of 5 rings per patch.
 
 use std::collections::HashSet;
-use std::marker::PhantomData;
 
-use glam::DVec3;
 use petgraph::graph::UnGraph;
 use rayon::prelude::*;
 
 use crate::meter::Meter;
 use crate::partition::Patch;
-use crate::smooth::Field;
 use crate::topology::Topology;
 
 /// Rings around a patch's owned range within which another patch's owned vertices conflict.
@@ -224,58 +221,6 @@ pub fn with_prefetch<R>(
         drop(prefetch); // closes the channel, so the prefetch thread ends
         result
     })
-}
-
-/// A per-vertex array shared by the threads that run the patches of one colour.
-///
-/// Each thread gets its own copy and accesses the array through raw pointers; soundness rests on
-/// the schedule: no element is touched by two threads when one of them writes.
-#[derive(Clone, Copy)]
-pub struct SharedField<'a> {
-    ptr: *mut DVec3,
-    len: usize,
-    _borrow: PhantomData<&'a mut [DVec3]>,
-}
-
-// SAFETY: access is through `Field` only, whose users (see `SharedField::new`) guarantee that
-// threads touch disjoint elements.
-unsafe impl Send for SharedField<'_> {}
-unsafe impl Sync for SharedField<'_> {}
-
-impl<'a> SharedField<'a> {
-    /// Share `data` between threads.
-    ///
-    /// # Safety
-    /// While any copy of the view is in use from several threads, no element may be accessed by
-    /// two threads where one of them writes (the colouring of [`schedule`] guarantees this for
-    /// the stencils of the patches of one colour), and `data` is not used except through the view.
-    /// Every vertex passed to `get`/`add` must be below `data.len()`: the kernels take vertices
-    /// from a [`Topology`] of `data.len()` vertices, whose build rejects out-of-range indices.
-    pub unsafe fn new(data: &'a mut [DVec3]) -> Self {
-        SharedField {
-            ptr: data.as_mut_ptr(),
-            len: data.len(),
-            _borrow: PhantomData,
-        }
-    }
-}
-
-impl Field for SharedField<'_> {
-    #[inline]
-    fn get(&self, v: u32) -> DVec3 {
-        debug_assert!((v as usize) < self.len, "vertex {v} out of range");
-        // SAFETY: in bounds and no concurrent writer, by the contract of `new`.
-        unsafe { self.ptr.add(v as usize).read() }
-    }
-    #[inline]
-    fn add(&mut self, v: u32, d: DVec3) {
-        debug_assert!((v as usize) < self.len, "vertex {v} out of range");
-        // SAFETY: in bounds, and this thread is the only one touching element v (contract of `new`).
-        unsafe {
-            let p = self.ptr.add(v as usize);
-            p.write(p.read() + d);
-        }
-    }
 }
 
 #[cfg(test)]

@@ -1,19 +1,25 @@
-//! Pure smoothing kernels. No I/O, no threads: each function works on a [`Topology`] and position
-//! slices, so the same kernel smooths a whole mesh or one patch (with local ids and halo).
+//! Pure smoothing kernels and the methods made of them. No I/O, no threads: each kernel works on
+//! a [`Topology`] and position slices, so the same kernel smooths a whole mesh or one patch (with
+//! local ids and halo).
+//!
+//! A method is one unit: a type implementing [`Smoother`] (see [`method`]), listed once in the
+//! registry below ([`Method`], [`Method::unit`]). Everything else (the engine, the cluster, the
+//! command line, Python) asks the unit what it needs and never names a method.
 //!
 //! | method | what | reference |
 //! |---|---|---|
-//! | [`Method::Laplacian`] | umbrella Laplacian, forward Euler `p += λ L(p)`, Jacobi | Liu et al. 2002, eq. 3–6 |
-//! | [`Method::Taubin`] | a λ step then a μ step per iteration | Taubin 1995 |
-//! | [`Method::Lem`] | local energy minimisation on edge stencils | Liu et al. §2.3, eq. 7–9 |
-//! | [`Method::Vcs`] | edge stencils + 2-step volume restoration | Liu et al. §3, §3.1 |
-//! | [`Method::VcsTriangle`] | the same on triangle stencils | Liu et al. §3.2 |
-//! | [`Method::VcsLowpass`] | Taubin's λ\|μ displacement + exact volume restoration on 2-ring stencils | [`lowpass`], docs/quality-research.md |
+//! | `laplacian` | umbrella Laplacian, forward Euler `p += λ L(p)`, Jacobi | Liu et al. 2002, eq. 3–6 |
+//! | `taubin` | a λ step then a μ step per iteration | Taubin 1995 |
+//! | `lem` | local energy minimisation on edge stencils | Liu et al. §2.3, eq. 7–9 |
+//! | `vcs` | edge stencils + 2-step volume restoration | Liu et al. §3, §3.1 |
+//! | `vcs-triangle` | the same on triangle stencils | Liu et al. §3.2 |
+//! | `vcs-lowpass` | Taubin's λ\|μ displacement + exact volume restoration on 2-ring stencils | [`lowpass`], docs/quality-research.md |
 //!
 //! Umbrella operator: `L(v) = (1/deg v) Σ_{u∈N(v)} p_u − p_v`. Fixed vertices (see
 //! [`crate::topology`]) never move; a stencil with a fixed free vertex is skipped and counted.
 
 use std::fmt;
+use std::marker::PhantomData;
 use std::str::FromStr;
 
 use glam::DVec3;
@@ -21,40 +27,31 @@ use glam::DVec3;
 pub mod boundary;
 pub mod laplacian;
 pub mod lowpass;
+pub mod method;
+mod methods;
 pub mod noise;
 pub mod stencil;
 pub mod tiled;
 
 pub use crate::topology::Topology;
+pub use method::{Control, Smoother};
 
-/// A smoothing method, selectable by name (`laplacian`, `taubin`, `lem`, `vcs`, `vcs-triangle`,
-/// `vcs-lowpass`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
-#[serde(rename_all = "kebab-case")]
+/// A smoothing method, selectable by name: the registry of the methods' units ([`Method::unit`]).
+/// `Method::ALL` lists them in documentation order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Method {
     Laplacian,
     Taubin,
     Lem,
     Vcs,
     VcsTriangle,
-    /// Taubin's λ|μ displacement spread over 2-ring stencils, each restoring its faces' volume
-    /// exactly (see [`lowpass`]). The default: it keeps the volume as `vcs` does and the detail as
-    /// `taubin` does (docs/quality-research.md).
+    /// The default: it keeps the volume as `vcs` does and the detail as `taubin` does
+    /// (docs/quality-research.md).
     #[default]
     VcsLowpass,
 }
 
 impl Method {
-    /// `laplacian` and `taubin`: Jacobi steps over all vertices, no stencils.
-    pub fn is_jacobi(self) -> bool {
-        matches!(self, Method::Laplacian | Method::Taubin)
-    }
-
-    /// `vcs`, `vcs-triangle` and `vcs-lowpass`: every stencil restores its local volume exactly.
-    pub fn keeps_volume(self) -> bool {
-        matches!(self, Method::Vcs | Method::VcsTriangle | Method::VcsLowpass)
-    }
-
     /// Every method, in documentation order.
     pub const ALL: [Method; 6] = [
         Method::Laplacian,
@@ -65,30 +62,65 @@ impl Method {
         Method::VcsLowpass,
     ];
 
+    /// The method's unit: everything the engine, the command line and Python need of it.
+    pub fn unit(self) -> &'static dyn Smoother {
+        match self {
+            Method::Laplacian => &methods::Laplacian,
+            Method::Taubin => &methods::Taubin,
+            Method::Lem => &methods::Lem,
+            Method::Vcs => &methods::Vcs,
+            Method::VcsTriangle => &methods::VcsTriangle,
+            Method::VcsLowpass => &methods::VcsLowpass,
+        }
+    }
+
     /// The method's command-line name.
     pub fn name(self) -> &'static str {
-        match self {
-            Method::Laplacian => "laplacian",
-            Method::Taubin => "taubin",
-            Method::Lem => "lem",
-            Method::Vcs => "vcs",
-            Method::VcsTriangle => "vcs-triangle",
-            Method::VcsLowpass => "vcs-lowpass",
-        }
+        self.unit().name()
+    }
+
+    /// Vertex-wise Jacobi steps over all vertices, no stencils.
+    pub fn is_jacobi(self) -> bool {
+        self.unit().schedule(&Options::default()).is_jacobi()
     }
 
     /// Whether the method works stencil by stencil (Gauss–Seidel) rather than vertex-wise (Jacobi).
     pub fn is_stencil(self) -> bool {
-        matches!(
-            self,
-            Method::Lem | Method::Vcs | Method::VcsTriangle | Method::VcsLowpass
-        )
+        !self.is_jacobi()
+    }
+
+    /// Every stencil restores its local volume exactly.
+    pub fn keeps_volume(self) -> bool {
+        self.unit().keeps_volume()
+    }
+
+    /// The methods that accept `control`, in documentation order.
+    pub fn accepting(control: Control) -> impl Iterator<Item = Method> {
+        Method::ALL
+            .into_iter()
+            .filter(move |m| m.unit().accepts(control))
+    }
+
+    /// [`Method::accepting`] as a list in prose: "a, b and c".
+    pub fn names_accepting(control: Control) -> String {
+        let names: Vec<&str> = Method::accepting(control).map(Method::name).collect();
+        match names.split_last() {
+            None => String::new(),
+            Some((last, [])) => last.to_string(),
+            Some((last, rest)) => format!("{} and {last}", rest.join(", ")),
+        }
     }
 }
 
 impl fmt::Display for Method {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(self.name())
+    }
+}
+
+impl serde::Serialize for Method {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(self.name())
     }
 }
 
@@ -204,6 +236,12 @@ impl FromStr for Boundary {
 }
 
 impl Options {
+    /// Whether a run keeps the input positions beside the working ones: for a deviation bound,
+    /// or because the method reads them ([`method::Needs::input`]).
+    pub fn keeps_input(&self) -> bool {
+        self.max_deviation.is_some() || self.method.unit().needs().input
+    }
+
     /// Check the options: the step sizes in their ranges (see [`check_step`]).
     pub fn check(&self) -> crate::Result<()> {
         check_step("lambda", self.lambda)?;
@@ -216,11 +254,13 @@ impl Options {
                 ));
             }
         }
-        if self.boundary == Boundary::Smooth && self.method.is_jacobi() {
+        if self.boundary == Boundary::Smooth && !self.method.unit().accepts(Control::SmoothBoundary)
+        {
             return Err(crate::Error::parameter(
                 "boundary",
                 format!(
-                    "smooth works with lem, vcs, vcs-triangle and vcs-lowpass, not {}",
+                    "smooth works with {}, not {}",
+                    Method::names_accepting(Control::SmoothBoundary),
                     self.method
                 ),
             ));
@@ -336,7 +376,7 @@ impl SweepStats {
 }
 
 /// Per-vertex vector storage as the stencil kernels see it: a plain slice for one thread, or a
-/// shared view (see [`crate::schedule::SharedField`]) when patches of one colour run in parallel.
+/// shared view ([`SharedField`]) when patches of one colour run in parallel.
 pub trait Field {
     /// The value at vertex `v`.
     fn get(&self, v: u32) -> DVec3;
@@ -352,6 +392,58 @@ impl Field for [DVec3] {
     #[inline]
     fn add(&mut self, v: u32, d: DVec3) {
         self[v as usize] += d;
+    }
+}
+
+/// A per-vertex array shared by the threads that run the patches of one colour.
+///
+/// Each thread gets its own copy and accesses the array through raw pointers; soundness rests on
+/// the schedule: no element is touched by two threads when one of them writes.
+#[derive(Clone, Copy)]
+pub struct SharedField<'a> {
+    ptr: *mut DVec3,
+    len: usize,
+    _borrow: PhantomData<&'a mut [DVec3]>,
+}
+
+// SAFETY: access is through `Field` only, whose users (see `SharedField::new`) guarantee that
+// threads touch disjoint elements.
+unsafe impl Send for SharedField<'_> {}
+unsafe impl Sync for SharedField<'_> {}
+
+impl<'a> SharedField<'a> {
+    /// Share `data` between threads.
+    ///
+    /// # Safety
+    /// While any copy of the view is in use from several threads, no element may be accessed by
+    /// two threads where one of them writes (the colouring of [`crate::schedule`] guarantees this for
+    /// the stencils of the patches of one colour), and `data` is not used except through the view.
+    /// Every vertex passed to `get`/`add` must be below `data.len()`: the kernels take vertices
+    /// from a [`Topology`] of `data.len()` vertices, whose build rejects out-of-range indices.
+    pub unsafe fn new(data: &'a mut [DVec3]) -> Self {
+        SharedField {
+            ptr: data.as_mut_ptr(),
+            len: data.len(),
+            _borrow: PhantomData,
+        }
+    }
+}
+
+impl Field for SharedField<'_> {
+    #[inline]
+    fn get(&self, v: u32) -> DVec3 {
+        debug_assert!((v as usize) < self.len, "vertex {v} out of range");
+        // SAFETY: in bounds and no concurrent writer, by the contract of `new`.
+        unsafe { self.ptr.add(v as usize).read() }
+    }
+    #[inline]
+    fn add(&mut self, v: u32, d: DVec3) {
+        debug_assert!((v as usize) < self.len, "vertex {v} out of range");
+        // SAFETY: in bounds, and this thread is the only one touching element v (contract of `new`).
+        unsafe {
+            let p = self.ptr.add(v as usize);
+            p.write(p.read() + d);
+        }
     }
 }
 

@@ -1,0 +1,227 @@
+//! What the engine asks of a smoothing method: the [`Smoother`] trait, which every method
+//! implements once in its own type, and [`Exec`], what a method's iteration may ask of the process
+//! that runs it.
+//!
+//! The engine, the cluster, the command line and the Python binding never name a method: they
+//! take its unit from the registry ([`Method::unit`](super::Method::unit)) and ask it. A method
+//! says how its iterations are scheduled ([`Schedule`]: Jacobi steps over all vertices, or
+//! Gauss–Seidel stencils over a [`Footprint`] of rings, for the conflict colouring), which
+//! per-vertex buffers it needs beside the positions ([`Needs`]), whether it keeps the volume,
+//! its automatic-stop rule ([`StopRule`]), the controls it accepts ([`Control`]), and its name
+//! and help line. Another executor of the kernels (a GPU one) would be another implementation of
+//! [`Exec`] and of the engine's loop over the same trait, not a fork of either.
+
+use std::ops::Range;
+
+use glam::DVec3;
+
+use super::boundary::Loops;
+use super::laplacian::StepStats;
+use super::stencil::StencilParams;
+use super::{Options, SharedField, SweepStats, Topology};
+
+/// How the iterations of a method are scheduled.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Schedule {
+    /// Umbrella steps `p += f L(p)`, Jacobi (every vertex from the previous positions), one per
+    /// factor per iteration: the order of work is irrelevant, and the engine may run several
+    /// steps in one pass over memory (tiles).
+    Umbrella(Vec<f64>),
+    /// Two Jacobi passes of the method's own per iteration ([`Smoother::pass`]): the first from
+    /// the positions into the auxiliary field, the second from both into the new positions.
+    TwoPass,
+    /// Stencils applied one after another, each seeing the latest positions, colour after colour
+    /// of the plan's colouring for this footprint ([`Smoother::sweep_patch`]).
+    Stencils(Footprint),
+}
+
+impl Schedule {
+    /// Whether every vertex is updated from the previous positions (no colouring needed).
+    pub fn is_jacobi(&self) -> bool {
+        !matches!(self, Schedule::Stencils(_))
+    }
+
+    /// The colouring the plan's figures are reported for: a Jacobi method's are those of the
+    /// edge stencils.
+    pub fn footprint(&self) -> Footprint {
+        match self {
+            Schedule::Stencils(f) => *f,
+            _ => Footprint::Edge,
+        }
+    }
+}
+
+/// How far a stencil reads and writes around its free vertices, for the conflict colouring of
+/// the patches (see [`crate::schedule`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Footprint {
+    /// Edge and triangle stencils: they write their free vertices and the neighbour sums of one
+    /// ring, and read two rings.
+    Edge,
+    /// Vertex-ring stencils of radius [`super::lowpass::RING_RADIUS`]: wider, their own colouring.
+    Ring,
+}
+
+/// The per-vertex buffers a method needs besides the positions and the engine's second buffer.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Needs {
+    /// The input positions, whatever the options (a deviation bound keeps them anyway).
+    pub input: bool,
+    /// An auxiliary vector field ([`Schedule::TwoPass`]).
+    pub aux: bool,
+    /// A byte per vertex, filled once per run by [`Smoother::start`].
+    pub counts: bool,
+}
+
+/// What ends an automatically stopped run of the method (see [`crate::engine::auto`]).
+#[derive(Debug, Clone, PartialEq)]
+pub enum StopRule {
+    /// A low-pass filter with a scalar analogue: these umbrella step factors per iteration, run
+    /// on white noise, tell what the filter would remove from pure noise.
+    Filter(Vec<f64>),
+    /// No scalar analogue: stop when an iteration moves the vertices little, or when the
+    /// iterations together removed more than the noise.
+    Settle,
+}
+
+/// The controls a method may or may not accept; [`Options::check`] refuses the others.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Control {
+    /// `lambda`: a Laplacian step size.
+    Lambda,
+    /// `mu`: Taubin's second, inflating step size.
+    Mu,
+    /// `boundary: smooth`: boundary loops smoothed with boundary stencils.
+    SmoothBoundary,
+    /// `reject_energy_increase`: the stencils' energy test.
+    RejectEnergyIncrease,
+    /// The coarse levels of the multiresolution mode.
+    MultiresCoarse,
+    /// The fine level of the multiresolution mode.
+    MultiresFine,
+}
+
+/// The mesh and the stencils of one patch, as a method's sweep sees them.
+#[derive(Clone, Copy)]
+pub struct PatchMesh<'a> {
+    pub topo: &'a Topology,
+    /// The plan's triangles (consistently oriented): the stencils' volumes read them.
+    pub tris: &'a [[u32; 3]],
+}
+
+/// What the passes of a [`Schedule::TwoPass`] method read.
+#[derive(Clone, Copy)]
+pub struct PassFields<'a> {
+    /// The positions at the iteration's start.
+    pub pos: &'a [DVec3],
+    /// The input positions ([`Needs::input`]).
+    pub input: &'a [DVec3],
+    /// The auxiliary field: as the first pass wrote it (empty in the first pass).
+    pub aux: &'a [DVec3],
+    /// A deviation bound: the last pass keeps every vertex within this distance of its input
+    /// position.
+    pub limit: Option<f64>,
+}
+
+/// What a method's iteration asks of the process that runs it: passes over the vertices it owns,
+/// kept in step with the copies other processes hold (a single process owns everything).
+pub trait Exec {
+    /// `f(first, out)` over the owned entries of `field`, cut into fixed chunks that may run in
+    /// parallel (`out` holds vertices `first ..`); then the entries other processes hold are
+    /// brought up to date. Every entry must depend only on what `f` reads, never on the split.
+    fn vertex_pass(&mut self, field: &mut [DVec3], f: &(dyn Fn(usize, &mut [DVec3]) + Sync));
+    /// The same for a byte field only this process reads (no exchange).
+    fn vertex_pass_u8(&mut self, field: &mut [u8], f: &(dyn Fn(usize, &mut [u8]) + Sync));
+    /// The neighbour sums of `pos` ([`super::neighbor_sums`]) into `sums`, for the owned vertices
+    /// and those around them whose sums the owned stencils read.
+    fn neighbor_sums(&mut self, pos: &[DVec3], sums: &mut [DVec3]);
+}
+
+/// A smoothing method: everything the engine needs of it (see the module doc). Implemented once
+/// per method, in `smooth/`; listed in the registry, [`super::Method`].
+pub trait Smoother: Sync {
+    /// The command-line and Python name.
+    fn name(&self) -> &'static str;
+    /// One line for `--help` and the documentation.
+    fn help(&self) -> &'static str;
+    /// How its iterations are scheduled, with `opts`'s parameters.
+    fn schedule(&self, opts: &Options) -> Schedule;
+    /// Whether every stencil restores its local volume exactly.
+    fn keeps_volume(&self) -> bool;
+    /// Buffers beyond the positions and the second buffer.
+    fn needs(&self) -> Needs {
+        Needs::default()
+    }
+    /// The automatic stop's rule, with `opts`'s parameters.
+    fn stop_rule(&self, opts: &Options) -> StopRule;
+    /// Whether the method takes `control`.
+    fn accepts(&self, control: Control) -> bool;
+
+    /// Once per run, before the first iteration: fill the method's byte field ([`Needs::counts`]).
+    fn start(&self, _topo: &Topology, _exec: &mut dyn Exec, _counts: &mut [u8]) {}
+
+    /// [`Schedule::Stencils`]: before every sweep, what its stencils read beside the positions
+    /// into `sums` (by default the neighbour sums); `spare` is a buffer the method may use (it
+    /// is overwritten after), `counts` its byte field.
+    #[allow(clippy::too_many_arguments)]
+    fn prepare(
+        &self,
+        _topo: &Topology,
+        opts: &Options,
+        exec: &mut dyn Exec,
+        pos: &[DVec3],
+        sums: &mut [DVec3],
+        _spare: &mut [DVec3],
+        _counts: &[u8],
+    ) {
+        let _ = opts;
+        exec.neighbor_sums(pos, sums);
+    }
+
+    /// [`Schedule::Stencils`]: the stencils of one patch (the vertices `vertices` and triangles
+    /// `triangles` it owns), in their fixed ascending order, through views that the patches of
+    /// one colour share; with `loops` (`boundary: smooth`) the boundary stencils too, unless
+    /// [`Smoother::boundary_pass`] says they run after.
+    #[allow(clippy::too_many_arguments)]
+    fn sweep_patch(
+        &self,
+        _mesh: PatchMesh,
+        _vertices: Range<u32>,
+        _triangles: Range<u32>,
+        _pos: &mut SharedField,
+        _sums: &mut SharedField,
+        _params: StencilParams,
+        _loops: Option<&Loops>,
+    ) -> SweepStats {
+        unreachable!("{} has no stencils", self.name())
+    }
+
+    /// [`Schedule::Stencils`] with smoothed boundaries: whether the boundary stencils run in a
+    /// pass of their own after the method's, over the edge colouring (else inside
+    /// [`Smoother::sweep_patch`]).
+    fn boundary_pass(&self) -> bool {
+        false
+    }
+
+    /// [`Schedule::Stencils`]: whether the stencils restore their volume themselves through the
+    /// shared volume step ([`StencilParams::volume`]).
+    fn stencil_volume(&self) -> bool {
+        false
+    }
+
+    /// [`Schedule::TwoPass`]: pass `k` (0 or 1) for the vertices `first .. first + out.len()`.
+    /// Pass 0 writes the auxiliary field; pass 1 writes the new positions, fixed vertices copied
+    /// unchanged, and returns how far they moved from `fields.pos` (pass 0's figures are not
+    /// read). Each entry depends only on `fields`, so any split gives the same bits.
+    fn pass(
+        &self,
+        _k: usize,
+        _topo: &Topology,
+        _opts: &Options,
+        _fields: PassFields,
+        _first: usize,
+        _out: &mut [DVec3],
+    ) -> StepStats {
+        unreachable!("{} has no passes", self.name())
+    }
+}

@@ -1,0 +1,299 @@
+//! The methods of the design, one type each: what each is, in the terms of [`Smoother`]. Their
+//! kernels are in [`super::laplacian`], [`super::stencil`], [`super::boundary`] and
+//! [`super::lowpass`].
+
+use std::ops::Range;
+
+use glam::DVec3;
+
+use super::boundary::{self, Loops};
+use super::method::{Control, Exec, Footprint, Needs, PatchMesh, Schedule, Smoother, StopRule};
+use super::stencil::{self, StencilParams};
+use super::{Options, SharedField, SweepStats, Topology, laplacian, lowpass};
+
+/// Umbrella Laplacian, forward Euler `p += λ L(p)`, Jacobi (Liu et al. 2002, eq. 3–6). Shrinks.
+pub struct Laplacian;
+
+impl Smoother for Laplacian {
+    fn name(&self) -> &'static str {
+        "laplacian"
+    }
+    fn help(&self) -> &'static str {
+        "umbrella Laplacian, p += λ L(p) (shrinks)"
+    }
+    fn schedule(&self, opts: &Options) -> Schedule {
+        Schedule::Umbrella(vec![opts.lambda])
+    }
+    fn keeps_volume(&self) -> bool {
+        false
+    }
+    fn stop_rule(&self, opts: &Options) -> StopRule {
+        StopRule::Filter(vec![opts.lambda])
+    }
+    fn accepts(&self, control: Control) -> bool {
+        matches!(control, Control::Lambda | Control::MultiresFine)
+    }
+}
+
+/// Taubin's λ|μ: a λ step then a μ step per iteration (Taubin 1995).
+pub struct Taubin;
+
+impl Smoother for Taubin {
+    fn name(&self) -> &'static str {
+        "taubin"
+    }
+    fn help(&self) -> &'static str {
+        "λ|μ: a λ step then a μ step (Taubin 1995)"
+    }
+    fn schedule(&self, opts: &Options) -> Schedule {
+        Schedule::Umbrella(vec![opts.lambda, opts.mu])
+    }
+    fn keeps_volume(&self) -> bool {
+        false
+    }
+    fn stop_rule(&self, opts: &Options) -> StopRule {
+        StopRule::Filter(vec![opts.lambda, opts.mu])
+    }
+    fn accepts(&self, control: Control) -> bool {
+        matches!(
+            control,
+            Control::Lambda | Control::Mu | Control::MultiresFine
+        )
+    }
+}
+
+/// The edge stencils' sweep of a patch: its edges `(i, j)`, `i` in `vertices`, ascending; with
+/// `loops`, an edge that is a boundary stencil gets the boundary kernel in its place.
+fn sweep_edge_stencils(
+    mesh: PatchMesh,
+    vertices: Range<u32>,
+    pos: &mut SharedField,
+    sums: &mut SharedField,
+    params: StencilParams,
+    loops: Option<&Loops>,
+) -> SweepStats {
+    let edges = mesh.topo.edges_from(vertices);
+    match loops {
+        Some(loops) => {
+            boundary::sweep_edges(mesh.topo, mesh.tris, pos, sums, edges, params, loops, true)
+        }
+        None => stencil::sweep_edges(mesh.topo, mesh.tris, pos, sums, edges, params),
+    }
+}
+
+/// What the edge and triangle stencil methods accept.
+fn stencil_controls(control: Control) -> bool {
+    matches!(
+        control,
+        Control::SmoothBoundary | Control::RejectEnergyIncrease
+    )
+}
+
+/// Local energy minimisation on edge stencils, no volume constraint (Liu et al. §2.3, eq. 7–9).
+pub struct Lem;
+
+impl Smoother for Lem {
+    fn name(&self) -> &'static str {
+        "lem"
+    }
+    fn help(&self) -> &'static str {
+        "local energy minimisation on edge stencils, no volume constraint"
+    }
+    fn schedule(&self, _: &Options) -> Schedule {
+        Schedule::Stencils(Footprint::Edge)
+    }
+    fn keeps_volume(&self) -> bool {
+        false
+    }
+    fn stop_rule(&self, _: &Options) -> StopRule {
+        StopRule::Settle
+    }
+    fn accepts(&self, control: Control) -> bool {
+        stencil_controls(control)
+    }
+    fn sweep_patch(
+        &self,
+        mesh: PatchMesh,
+        vertices: Range<u32>,
+        _: Range<u32>,
+        pos: &mut SharedField,
+        sums: &mut SharedField,
+        params: StencilParams,
+        loops: Option<&Loops>,
+    ) -> SweepStats {
+        sweep_edge_stencils(mesh, vertices, pos, sums, params, loops)
+    }
+}
+
+/// Volume-constrained smoothing on edge stencils, the 2-step approximation (Liu et al. §3, §3.1).
+pub struct Vcs;
+
+impl Smoother for Vcs {
+    fn name(&self) -> &'static str {
+        "vcs"
+    }
+    fn help(&self) -> &'static str {
+        "volume-constrained smoothing on edge stencils (Liu et al. 2002)"
+    }
+    fn schedule(&self, _: &Options) -> Schedule {
+        Schedule::Stencils(Footprint::Edge)
+    }
+    fn keeps_volume(&self) -> bool {
+        true
+    }
+    fn stop_rule(&self, _: &Options) -> StopRule {
+        StopRule::Settle
+    }
+    fn accepts(&self, control: Control) -> bool {
+        stencil_controls(control) || control == Control::MultiresCoarse
+    }
+    fn stencil_volume(&self) -> bool {
+        true
+    }
+    fn sweep_patch(
+        &self,
+        mesh: PatchMesh,
+        vertices: Range<u32>,
+        _: Range<u32>,
+        pos: &mut SharedField,
+        sums: &mut SharedField,
+        params: StencilParams,
+        loops: Option<&Loops>,
+    ) -> SweepStats {
+        sweep_edge_stencils(mesh, vertices, pos, sums, params, loops)
+    }
+}
+
+/// Volume-constrained smoothing on triangle stencils, 3 free vertices (Liu et al. §3.2).
+pub struct VcsTriangle;
+
+impl Smoother for VcsTriangle {
+    fn name(&self) -> &'static str {
+        "vcs-triangle"
+    }
+    fn help(&self) -> &'static str {
+        "volume-constrained smoothing on triangle stencils"
+    }
+    fn schedule(&self, _: &Options) -> Schedule {
+        Schedule::Stencils(Footprint::Edge)
+    }
+    fn keeps_volume(&self) -> bool {
+        true
+    }
+    fn stop_rule(&self, _: &Options) -> StopRule {
+        StopRule::Settle
+    }
+    fn accepts(&self, control: Control) -> bool {
+        stencil_controls(control) || control == Control::MultiresCoarse
+    }
+    fn stencil_volume(&self) -> bool {
+        true
+    }
+    /// The patch's triangles in the plan's order, then (with `loops`) its boundary edges,
+    /// ascending.
+    fn sweep_patch(
+        &self,
+        mesh: PatchMesh,
+        vertices: Range<u32>,
+        triangles: Range<u32>,
+        pos: &mut SharedField,
+        sums: &mut SharedField,
+        params: StencilParams,
+        loops: Option<&Loops>,
+    ) -> SweepStats {
+        let (topo, tris) = (mesh.topo, mesh.tris);
+        let mut st = stencil::sweep_triangles(topo, tris, pos, sums, triangles, params);
+        if let Some(loops) = loops {
+            let edges = topo.edges_from(vertices);
+            st.add(&boundary::sweep_edges(
+                topo, tris, pos, sums, edges, params, loops, false,
+            ));
+        }
+        st
+    }
+}
+
+/// Taubin's λ|μ displacement spread over 2-ring stencils, each restoring its faces' volume
+/// exactly ([`lowpass`]): keeps the volume as `vcs` does and the detail as `taubin` does
+/// (docs/quality-research.md). The default method.
+pub struct VcsLowpass;
+
+impl Smoother for VcsLowpass {
+    fn name(&self) -> &'static str {
+        "vcs-lowpass"
+    }
+    fn help(&self) -> &'static str {
+        "Taubin's λ|μ displacement, volume restored exactly on 2-ring stencils"
+    }
+    fn schedule(&self, _: &Options) -> Schedule {
+        Schedule::Stencils(Footprint::Ring)
+    }
+    fn keeps_volume(&self) -> bool {
+        true
+    }
+    fn needs(&self) -> Needs {
+        Needs {
+            counts: true,
+            ..Needs::default()
+        }
+    }
+    fn stop_rule(&self, opts: &Options) -> StopRule {
+        StopRule::Filter(vec![opts.lambda, opts.mu])
+    }
+    fn accepts(&self, control: Control) -> bool {
+        matches!(
+            control,
+            Control::Lambda | Control::Mu | Control::SmoothBoundary
+        )
+    }
+    /// The stencil sizes, which depend on the topology alone.
+    fn start(&self, topo: &Topology, exec: &mut dyn Exec, counts: &mut [u8]) {
+        exec.vertex_pass_u8(counts, &|first, out| lowpass::counts_into(topo, out, first));
+    }
+    /// The step-1 shares into `sums` (see [`lowpass::shares_into`]): a λ|μ pair from `pos`
+    /// through `sums` into `spare`, each step exchanged, then the shares from `pos` and `spare`.
+    /// Every entry depends only on `pos`, so any split gives the same bits. A stencil of an owned
+    /// vertex reaches two rings out, whose shares other processes own: the last pass is
+    /// exchanged too.
+    fn prepare(
+        &self,
+        topo: &Topology,
+        opts: &Options,
+        exec: &mut dyn Exec,
+        pos: &[DVec3],
+        sums: &mut [DVec3],
+        spare: &mut [DVec3],
+        counts: &[u8],
+    ) {
+        let (lambda, mu) = (opts.lambda, opts.mu);
+        exec.vertex_pass(sums, &|first, out| {
+            laplacian::jacobi_step(topo, pos, out, first, lambda);
+        });
+        let half: &[DVec3] = sums;
+        exec.vertex_pass(spare, &|first, out| {
+            laplacian::jacobi_step(topo, half, out, first, mu);
+        });
+        let pair: &[DVec3] = spare;
+        exec.vertex_pass(sums, &|first, out| {
+            let counts = &counts[first..first + out.len()];
+            lowpass::shares_into(topo, pos, pair, counts, out, first)
+        });
+    }
+    /// The ring stencils of the patch's vertices, ascending; its boundary stencils run after
+    /// ([`Smoother::boundary_pass`]).
+    fn sweep_patch(
+        &self,
+        mesh: PatchMesh,
+        vertices: Range<u32>,
+        _: Range<u32>,
+        pos: &mut SharedField,
+        sums: &mut SharedField,
+        params: StencilParams,
+        _: Option<&Loops>,
+    ) -> SweepStats {
+        lowpass::sweep_rings(mesh.topo, mesh.tris, pos, sums, vertices, params.deviation)
+    }
+    fn boundary_pass(&self) -> bool {
+        true
+    }
+}
