@@ -1,0 +1,694 @@
+//! The CSR build: a mesh's triangles into the vertex → face and vertex → vertex arrays, the fixed
+//! mask and the counts, in parallel over blocks of triangles and chunks of vertices. Each chunk's
+//! result is placed by vertex id, so the topology does not depend on the number of threads; the
+//! tests hold it to a plain vertex-by-vertex reference.
+
+use rayon::prelude::*;
+
+use super::fans::{VertexScratch, analyse_vertex, write_neighbors};
+use super::{CHUNK, Topology, TopologyStats};
+use crate::error::{Error, Result};
+use crate::mesh::{Buf, Storage};
+use crate::meter::{Meter, Passes};
+
+/// Reusable per-thread buffers of a chunk of vertices in pass 1: a copy of its region of the
+/// vertex → face array while that is sorted by vertex, and the link edge `(b[i], c[i])` of
+/// each entry of the sorted region (its face runs v → b → c), so that the analysis reads no
+/// triangle again.
+#[derive(Default)]
+struct ChunkScratch {
+    faces: Vec<u32>,
+    b: Vec<u32>,
+    c: Vec<u32>,
+}
+
+impl Topology {
+    /// Build the adjacency of `n_vertices` vertices and `triangles`, on the heap.
+    ///
+    /// Fails only if a triangle indexes a vertex `>= n_vertices` (readers reject those first).
+    pub fn build(n_vertices: usize, triangles: &[[u32; 3]]) -> Result<Topology> {
+        Topology::build_in(&Storage::heap(), n_vertices, triangles)
+    }
+
+    /// Build as [`Topology::build`], placing the arrays as `storage` says. Parallel over vertices
+    /// on the current rayon pool; the result does not depend on the number of threads.
+    pub fn build_in(
+        storage: &Storage,
+        n_vertices: usize,
+        triangles: &[[u32; 3]],
+    ) -> Result<Topology> {
+        Topology::build_metered(storage, n_vertices, triangles, &Meter::default())
+    }
+
+    /// The passes [`Topology::build_metered`] counts: the corners counted and their faces placed
+    /// (triangles), the vertices analysed and their neighbours listed (vertices).
+    pub const BUILD_PASSES: Passes = Passes {
+        vertices: 2,
+        triangles: 2,
+    };
+
+    /// [`Topology::build_in`], counting its work into `meter` ([`Topology::BUILD_PASSES`] over
+    /// the mesh, once per block of triangles or chunk of vertices). The same topology.
+    pub fn build_metered(
+        storage: &Storage,
+        n_vertices: usize,
+        triangles: &[[u32; 3]],
+        meter: &Meter,
+    ) -> Result<Topology> {
+        if n_vertices > u32::MAX as usize || triangles.len() > u32::MAX as usize {
+            return Err(Error::topology(format!(
+                "{n_vertices} vertices / {} triangles exceed the 2^32 limit",
+                triangles.len()
+            )));
+        }
+        let mut stats = TopologyStats {
+            vertices: n_vertices,
+            triangles: triangles.len(),
+            ..Default::default()
+        };
+        let mut fixed: Buf<u8> = storage.zeroed(n_vertices)?;
+
+        // Vertex → face CSR, a counting sort in parallel: each block of triangles counts its
+        // corners per chunk of vertices, then scatters its triangle ids into the chunks' regions
+        // (block after block, so each region holds its triangles ascending); each chunk then sorts
+        // its region by vertex, stably, and analyses its vertices (pass 1).
+        let chunks = n_vertices.div_ceil(CHUNK);
+        let block_len = triangles.len().div_ceil(BLOCKS).max(1);
+        let counted: Vec<BlockCount> = triangles
+            .par_chunks(block_len)
+            .enumerate()
+            .map(|(b, block)| {
+                let count = count_block(b * block_len, block, n_vertices, chunks);
+                meter.add(block.len() as u64);
+                count
+            })
+            .collect();
+        if let Some(t) = counted.iter().find_map(|c| c.out_of_range) {
+            return Err(Error::topology(format!(
+                "triangle {t} indexes a vertex out of range (0..{n_vertices})"
+            )));
+        }
+        for &t in counted.iter().flat_map(|c| &c.degenerate) {
+            stats.degenerate_triangles += 1;
+            for &v in &triangles[t as usize] {
+                fixed[v as usize] = 1;
+            }
+        }
+        // Where each chunk's region starts in `vf`.
+        let mut region_start = Vec::with_capacity(chunks + 1);
+        let mut total = 0usize;
+        for c in 0..chunks {
+            region_start.push(total);
+            total += counted
+                .iter()
+                .map(|b| b.per_chunk[c] as usize)
+                .sum::<usize>();
+        }
+        region_start.push(total);
+        let mut vf: Buf<u32> = storage.zeroed(total)?;
+        // Each block's piece of each chunk's region, in chunk order.
+        let mut pieces: Vec<Vec<&mut [u32]>> = (0..counted.len())
+            .map(|_| Vec::with_capacity(chunks))
+            .collect();
+        let mut rest: &mut [u32] = &mut vf;
+        for c in 0..chunks {
+            for (b, count) in counted.iter().enumerate() {
+                let (piece, tail) =
+                    std::mem::take(&mut rest).split_at_mut(count.per_chunk[c] as usize);
+                pieces[b].push(piece);
+                rest = tail;
+            }
+        }
+        pieces
+            .into_par_iter()
+            .zip(triangles.par_chunks(block_len))
+            .enumerate()
+            .for_each(|(b, (mut pieces, block))| {
+                for (k, tri) in block.iter().enumerate() {
+                    if is_degenerate(tri) {
+                        continue;
+                    }
+                    let t = (b * block_len + k) as u32;
+                    let c = tri[0] as usize / CHUNK;
+                    if tri.iter().all(|&v| v as usize / CHUNK == c) {
+                        // Nearly every face: its three places taken at once, rather than each
+                        // waiting for the piece to be shortened by the one before.
+                        let (head, tail) = std::mem::take(&mut pieces[c]).split_at_mut(3);
+                        head.fill(t);
+                        pieces[c] = tail;
+                        continue;
+                    }
+                    for &v in tri {
+                        let piece = &mut pieces[v as usize / CHUNK];
+                        let (head, tail) =
+                            std::mem::take(piece).split_first_mut().expect("counted");
+                        *head = t;
+                        *piece = tail;
+                    }
+                }
+                meter.add(block.len() as u64);
+            });
+
+        // Pass 1, chunk by chunk: sort the region by vertex into `vf` and its offsets, then per
+        // vertex the number of distinct neighbours, edge counts and the fixed flag. The
+        // neighbours go to `vv` laid out as `vf`, which is their final place when every vertex
+        // has as many neighbours as faces (a closed manifold: no pass 2 then).
+        let mut vf_offsets: Buf<usize> = storage.zeroed(n_vertices + 1)?;
+        let mut vv_offsets: Buf<usize> = storage.zeroed(n_vertices + 1)?;
+        let mut vv: Buf<u32> = storage.zeroed(total)?;
+        let region_lens: Vec<usize> = region_start.windows(2).map(|w| w[1] - w[0]).collect();
+        // Each chunk's stats, vertices with more or fewer neighbours than faces, and neighbours.
+        let found: Vec<(TopologyStats, usize, usize)> = split_lens(&mut vf, &region_lens)
+            .into_par_iter()
+            .zip(split_lens(&mut vv, &region_lens))
+            .zip(vf_offsets[1..].par_chunks_mut(CHUNK))
+            .zip(vv_offsets[1..].par_chunks_mut(CHUNK))
+            .zip(fixed.par_chunks_mut(CHUNK))
+            .enumerate()
+            .map_init(
+                <(ChunkScratch, VertexScratch)>::default,
+                |(link, scratch), (c, ((((region, nbrs), ends), degs), fixed))| {
+                    let lo = (c * CHUNK) as u32;
+                    sort_region(lo, region, region_start[c], ends, triangles, link);
+                    let mut st = TopologyStats::default();
+                    let mut misfits = 0;
+                    let mut start = 0;
+                    // The offsets in `vv` as if every vertex before had as many neighbours as
+                    // faces, as in a closed manifold; those of a mesh with misfits are shifted
+                    // below. So the offsets are summed here, in parallel, not in a sequential
+                    // pass after.
+                    let mut placed = region_start[c];
+                    for (k, (deg, fix)) in degs.iter_mut().zip(fixed.iter_mut()).enumerate() {
+                        let end = ends[k] - region_start[c];
+                        let (b, c) = (&link.b[start..end], &link.c[start..end]);
+                        let a = analyse_vertex(lo + k as u32, b, c, scratch, &mut nbrs[start..]);
+                        start = end;
+                        placed += a.degree;
+                        *deg = placed;
+                        misfits += (a.degree != b.len()) as usize;
+                        st.count(&a, fix);
+                    }
+                    meter.add(degs.len() as u64);
+                    (st, misfits, placed - region_start[c])
+                },
+            )
+            .collect();
+        let mut misfits = 0;
+        for &(st, m, _) in &found {
+            stats = stats.add(st);
+            misfits += m;
+        }
+        if misfits > 0 {
+            // Shift each chunk's offsets by how much its neighbours' place in `vv` differs from
+            // its faces' in `vf` (the sums over the chunks before it).
+            let mut placed = 0usize;
+            let shifts: Vec<usize> = (found.iter().zip(&region_start))
+                .map(|(&(_, _, n), &start)| {
+                    let shift = placed.wrapping_sub(start);
+                    placed += n;
+                    shift
+                })
+                .collect();
+            vv_offsets[1..]
+                .par_chunks_mut(CHUNK)
+                .zip(shifts)
+                .filter(|(_, shift)| *shift != 0)
+                .for_each(|(offsets, shift)| {
+                    offsets.iter_mut().for_each(|o| *o = o.wrapping_add(shift));
+                });
+        }
+        if misfits == 0 {
+            // The skipped pass 2, for the meter.
+            meter.add(n_vertices as u64);
+        } else {
+            // Pass 1's array goes before pass 2's is made, so the two are never held at once.
+            drop(std::mem::take(&mut vv));
+            vv = pass_2(storage, &vv_offsets, &vf_offsets, &vf, triangles, meter)?;
+        }
+        Ok(Topology {
+            vv_offsets,
+            vv,
+            vf_offsets,
+            vf,
+            fixed,
+            stats,
+        })
+    }
+}
+
+/// Pass 2 of the build, for a mesh whose vertices do not all have as many neighbours as faces:
+/// the neighbour lists laid out by `vv_offsets`, each chunk of vertices into its own slice.
+fn pass_2(
+    storage: &Storage,
+    vv_offsets: &[usize],
+    vf_offsets: &[usize],
+    vf: &[u32],
+    triangles: &[[u32; 3]],
+    meter: &Meter,
+) -> Result<Buf<u32>> {
+    let n_vertices = vv_offsets.len() - 1;
+    let chunks = n_vertices.div_ceil(CHUNK);
+    let mut vv: Buf<u32> = storage.zeroed(vv_offsets[n_vertices])?;
+    let chunk_lens: Vec<usize> = (0..chunks)
+        .map(|c| {
+            let (lo, hi) = (c * CHUNK, ((c + 1) * CHUNK).min(n_vertices));
+            vv_offsets[hi] - vv_offsets[lo]
+        })
+        .collect();
+    split_lens(&mut vv, &chunk_lens)
+        .into_par_iter()
+        .enumerate()
+        .for_each_init(VertexScratch::default, |scratch, (c, out)| {
+            let range = c * CHUNK..((c + 1) * CHUNK).min(n_vertices);
+            let range_len = range.len() as u64;
+            let mut at = 0;
+            for v in range {
+                let faces = &vf[vf_offsets[v]..vf_offsets[v + 1]];
+                let deg = vv_offsets[v + 1] - vv_offsets[v];
+                write_neighbors(v as u32, faces, triangles, scratch, &mut out[at..at + deg]);
+                at += deg;
+            }
+            meter.add(range_len);
+        });
+    Ok(vv)
+}
+
+/// Blocks of triangles the vertex → face build counts and scatters in parallel (a work size
+/// only, like [`CHUNK`]).
+const BLOCKS: usize = 64;
+
+/// What one block of triangles holds for the vertex → face build.
+struct BlockCount {
+    /// Corners of the block's (non-degenerate) triangles in each chunk of [`CHUNK`] vertices.
+    per_chunk: Vec<u32>,
+    /// The block's degenerate triangles (a repeated corner), ascending.
+    degenerate: Vec<u32>,
+    /// The block's first triangle with a corner out of range.
+    out_of_range: Option<usize>,
+}
+
+/// `data` cut into consecutive slices of `lens` (which sum to at most its length).
+pub(crate) fn split_lens<'a, T>(mut data: &'a mut [T], lens: &[usize]) -> Vec<&'a mut [T]> {
+    lens.iter()
+        .map(|&n| {
+            let (head, tail) = std::mem::take(&mut data).split_at_mut(n);
+            data = tail;
+            head
+        })
+        .collect()
+}
+
+/// Count the corners of `block` (triangles `first..`) per chunk of vertices.
+fn count_block(first: usize, block: &[[u32; 3]], n_vertices: usize, chunks: usize) -> BlockCount {
+    let mut count = BlockCount {
+        per_chunk: Vec::new(),
+        degenerate: Vec::new(),
+        out_of_range: None,
+    };
+    // A count per corner of the triangle: the corners of a face are nearly always in one chunk,
+    // and one counter would make each of their increments wait for the one before.
+    let mut corners = vec![[0u32; 3]; chunks];
+    for (k, tri) in block.iter().enumerate() {
+        if tri.iter().any(|&v| v as usize >= n_vertices) {
+            count.out_of_range = Some(first + k);
+            break;
+        }
+        if is_degenerate(tri) {
+            count.degenerate.push((first + k) as u32);
+            continue;
+        }
+        for (j, &v) in tri.iter().enumerate() {
+            corners[v as usize / CHUNK][j] += 1;
+        }
+    }
+    count.per_chunk = corners.iter().map(|c| c.iter().sum()).collect();
+    count
+}
+
+/// Sort the region of `vf` of the chunk of vertices from `lo`, which holds the ids of the faces
+/// at its vertices ascending (a face once per corner in the chunk, in a row), by vertex, keeping
+/// each vertex's faces ascending, and the link edge of each sorted entry into `s.b`, `s.c`;
+/// `ends[k]` gets where vertex `lo + k`'s faces end in `vf` (the region starts at `start`).
+fn sort_region(
+    lo: u32,
+    region: &mut [u32],
+    start: usize,
+    ends: &mut [usize],
+    triangles: &[[u32; 3]],
+    s: &mut ChunkScratch,
+) {
+    let n = ends.len() as u32;
+    s.faces.clear();
+    s.faces.extend_from_slice(region);
+    // A counting sort in two sweeps over the region's faces, each taken once for all its
+    // corners in the chunk; the second reads the triangles again rather than keep each
+    // entry's vertex from the first.
+    ends.fill(0);
+    let mut i = 0;
+    while let Some(&t) = region.get(i) {
+        let k = triangles[t as usize].map(|u| u.wrapping_sub(lo));
+        if k.iter().all(|&k| k < n) {
+            // The common case, a face inside the chunk, without a branch per corner.
+            for k in k {
+                ends[k as usize] += 1;
+            }
+            i += 3;
+            continue;
+        }
+        for k in k {
+            if k < n {
+                ends[k as usize] += 1;
+                i += 1;
+            }
+        }
+    }
+    // `ends` as starts within the region, then advanced past each placed face to the ends.
+    let mut at = 0;
+    for e in ends.iter_mut() {
+        let n = *e;
+        *e = at;
+        at += n;
+    }
+    s.b.resize(region.len(), 0);
+    s.c.resize(region.len(), 0);
+    // Slices apart from `s`, so that the compiler need not reload where they are after each
+    // store.
+    let (faces, b, c) = (&s.faces[..], &mut s.b[..], &mut s.c[..]);
+    let mut i = 0;
+    while let Some(&t) = faces.get(i) {
+        let [x, y, z] = triangles[t as usize];
+        let inside = [x, y, z].map(|u| u.wrapping_sub(lo) < n);
+        for ((u, v, w), inside) in [(x, y, z), (y, z, x), (z, x, y)].into_iter().zip(inside) {
+            if inside {
+                let e = &mut ends[(u - lo) as usize];
+                region[*e] = t;
+                b[*e] = v;
+                c[*e] = w;
+                *e += 1;
+                i += 1;
+            }
+        }
+    }
+    ends.iter_mut().for_each(|e| *e += start);
+}
+
+pub(super) fn is_degenerate(t: &[u32; 3]) -> bool {
+    t[0] == t[1] || t[1] == t[2] || t[0] == t[2]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::topology::MAX_FREE_DEGREE;
+    use crate::topology::corners_after;
+    use crate::topology::fans::analyse_general;
+    use crate::topology::masks::FIXED;
+
+    /// Octahedron: closed, 6 vertices of degree 4.
+    fn octahedron() -> Vec<[u32; 3]> {
+        crate::shapes::octahedron().triangles.to_vec()
+    }
+
+    #[test]
+    fn closed_octahedron_has_no_fixed_vertex() {
+        let t = Topology::build(6, &octahedron()).unwrap();
+        assert_eq!(t.stats.edges, 12);
+        assert_eq!(t.stats.boundary_edges, 0);
+        assert_eq!(t.stats.fixed_vertices, 0);
+        assert!((0..6).all(|v| t.deg(v) == 4 && t.faces_of(v).len() == 4));
+        assert_eq!(t.edges().count(), 12);
+        assert!(t.edges().all(|[i, j]| i < j));
+    }
+
+    #[test]
+    fn open_fan_fixes_its_rim_only() {
+        // Centre 0 with rim 1..=5 closed around it: the rim is boundary, the centre is interior.
+        let tris: Vec<[u32; 3]> = (1..=5).map(|k| [0, k, k % 5 + 1]).collect();
+        let t = Topology::build(6, &tris).unwrap();
+        assert!(!t.is_fixed(0));
+        assert!((1..=5).all(|v| t.is_fixed(v)));
+        assert_eq!(t.stats.boundary_edges, 5);
+    }
+
+    #[test]
+    fn non_manifold_edge_and_vertex_are_fixed() {
+        // Three triangles on edge (0,1).
+        let t = Topology::build(5, &[[0, 1, 2], [1, 0, 3], [0, 1, 4]]).unwrap();
+        assert_eq!(t.stats.non_manifold_edges, 1);
+        assert!(t.is_fixed(0) && t.is_fixed(1));
+
+        // Two closed octahedra sharing vertex 0 (a bow-tie of two closed fans): 0 is non-manifold.
+        let mut tris = octahedron();
+        let shift = |v: u32| if v == 0 { 0 } else { v + 5 };
+        tris.extend(octahedron().iter().map(|t| t.map(shift)));
+        let t = Topology::build(11, &tris).unwrap();
+        assert_eq!(t.stats.non_manifold_vertices, 1);
+        assert!(t.is_fixed(0));
+        assert_eq!(t.stats.fixed_vertices, 1);
+    }
+
+    #[test]
+    fn degenerate_and_unreferenced_vertices_are_fixed_and_counted() {
+        let mut tris = octahedron();
+        tris.push([0, 0, 1]);
+        let t = Topology::build(7, &tris).unwrap();
+        assert_eq!(t.stats.degenerate_triangles, 1);
+        assert_eq!(t.stats.unreferenced_vertices, 1);
+        assert!(t.is_fixed(0) && t.is_fixed(1) && t.is_fixed(6) && !t.is_fixed(2));
+    }
+
+    #[test]
+    fn out_of_range_index_is_an_error() {
+        assert!(Topology::build(3, &[[0, 1, 3]]).is_err());
+    }
+
+    #[test]
+    fn hubs_above_the_degree_limit_are_fixed_and_counted() {
+        // A closed bipyramid: two apexes over a rim of `d` vertices.
+        for (d, hub_fixed) in [(MAX_FREE_DEGREE, false), (MAX_FREE_DEGREE + 1, true)] {
+            let d = d as u32;
+            let mut tris = Vec::new();
+            for k in 0..d {
+                tris.push([d, k, (k + 1) % d]);
+                tris.push([d + 1, (k + 1) % d, k]);
+            }
+            let t = Topology::build(d as usize + 2, &tris).unwrap();
+            assert_eq!(t.stats.boundary_edges, 0);
+            assert_eq!(t.is_fixed(d), hub_fixed);
+            assert_eq!(t.stats.high_degree_vertices, 2 * hub_fixed as usize);
+            assert_eq!(t.stats.fixed_vertices, 2 * hub_fixed as usize);
+            assert!(!t.is_fixed(0));
+        }
+    }
+
+    #[test]
+    fn the_parallel_build_gives_the_plain_adjacency_for_any_thread_count() {
+        // Over several chunks and blocks, in a shuffled vertex order (faces of a vertex scattered
+        // over the blocks), with degenerate triangles and unreferenced vertices; closed (the
+        // neighbours placed in pass 1) and with holes (placed by pass 2).
+        let mesh = crate::shapes::icosphere(6);
+        let n = mesh.positions.len() + 5;
+        let perm = crate::shapes::permutation(n, 0x2545_f491_4f6c_dd1du64);
+        let mut closed: Vec<[u32; 3]> = mesh
+            .triangles
+            .iter()
+            .map(|t| t.map(|v| perm[v as usize]))
+            .collect();
+        for k in [0, 17, 5000, 40_000] {
+            closed.insert(k, [perm[k], perm[k], perm[k + 1]]);
+        }
+        let mut open = closed.clone();
+        for k in [70_000, 30_000, 30_001, 9] {
+            open.remove(k);
+        }
+        for tris in [closed, open] {
+            assert!(n > 4 * CHUNK && tris.len() > 4 * BLOCKS);
+            let mut faces_of: Vec<Vec<u32>> = vec![Vec::new(); n];
+            let mut nbrs: Vec<Vec<u32>> = vec![Vec::new(); n];
+            for (t, tri) in tris.iter().enumerate() {
+                if is_degenerate(tri) {
+                    continue;
+                }
+                for &v in tri {
+                    faces_of[v as usize].push(t as u32);
+                    nbrs[v as usize].extend(tri.iter().filter(|&&u| u != v));
+                }
+            }
+            nbrs.iter_mut().for_each(|l| {
+                l.sort_unstable();
+                l.dedup();
+            });
+            let mut first = None;
+            for threads in [1, 2, 3] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                let topo = pool.install(|| Topology::build(n, &tris)).unwrap();
+                for v in 0..n as u32 {
+                    assert_eq!(topo.faces_of(v), &faces_of[v as usize][..], "faces of {v}");
+                    assert_eq!(
+                        topo.neighbors(v),
+                        &nbrs[v as usize][..],
+                        "neighbours of {v}"
+                    );
+                }
+                assert_eq!(topo.stats.degenerate_triangles, 4);
+                assert_eq!(topo.stats.unreferenced_vertices, 5);
+                let fixed = topo.fixed_mask().to_vec();
+                match &first {
+                    None => first = Some((topo.stats, fixed)),
+                    Some((stats, mask)) => assert!(*stats == topo.stats && *mask == fixed),
+                }
+            }
+            let (stats, _) = first.unwrap();
+            assert_eq!(
+                stats.boundary_edges > 0,
+                tris.len() < mesh.triangles.len() + 4
+            );
+        }
+    }
+
+    /// The arrays and stats of a topology, to compare whole.
+    type Whole = (
+        Vec<usize>,
+        Vec<u32>,
+        Vec<usize>,
+        Vec<u32>,
+        Vec<u8>,
+        TopologyStats,
+    );
+
+    fn whole(t: &Topology) -> Whole {
+        let p = t.parts();
+        (
+            p.vv_offsets.to_vec(),
+            p.vv.to_vec(),
+            p.vf_offsets.to_vec(),
+            p.vf.to_vec(),
+            p.fixed.to_vec(),
+            t.stats,
+        )
+    }
+
+    /// The topology vertex by vertex, without the build's chunks, counting sorts, closed-fan
+    /// shortcut, 8-wide writes, offsets summed in chunks or pass 2: each vertex's faces from one
+    /// scan of the triangles, and its neighbours and flags from the general analysis.
+    fn reference(n: usize, tris: &[[u32; 3]]) -> Whole {
+        let mut stats = TopologyStats {
+            vertices: n,
+            triangles: tris.len(),
+            ..Default::default()
+        };
+        let mut faces_of = vec![Vec::new(); n];
+        let mut fixed = vec![0u8; n];
+        for (t, tri) in tris.iter().enumerate() {
+            if is_degenerate(tri) {
+                stats.degenerate_triangles += 1;
+                tri.iter().for_each(|&v| fixed[v as usize] = FIXED);
+                continue;
+            }
+            tri.iter()
+                .for_each(|&v| faces_of[v as usize].push(t as u32));
+        }
+        let (mut vv_offsets, mut vv, mut vf_offsets, mut vf) = (vec![0], vec![], vec![0], vec![]);
+        let mut s = VertexScratch::default();
+        for v in 0..n {
+            let (b, c): (Vec<u32>, Vec<u32>) = faces_of[v]
+                .iter()
+                .map(|&t| corners_after(tris[t as usize], v as u32))
+                .unzip();
+            let a = analyse_general(v as u32, &b, &c, &mut s);
+            vf.extend(&faces_of[v]);
+            vf_offsets.push(vf.len());
+            vv.extend(&s.corners);
+            vv_offsets.push(vv.len());
+            stats.count(&a, &mut fixed[v]);
+        }
+        (vv_offsets, vv, vf_offsets, vf, fixed, stats)
+    }
+
+    #[test]
+    fn the_build_equals_a_vertex_by_vertex_reference_on_varied_meshes() {
+        let mut cases: Vec<(&str, usize, Vec<[u32; 3]>)> = Vec::new();
+        let sphere = crate::shapes::icosphere(6);
+        let n = sphere.positions.len();
+        let perm = crate::shapes::permutation(n, 7);
+        let shuffled: Vec<[u32; 3]> = sphere
+            .triangles
+            .iter()
+            .map(|t| t.map(|v| perm[v as usize]))
+            .collect();
+        cases.push(("sphere", n, sphere.triangles.to_vec()));
+        cases.push(("shuffled sphere", n, shuffled.clone()));
+        // Holes (so pass 2 and shifted offsets), flipped faces, degenerate faces, a duplicated
+        // face and a fin (non-manifold edges), unreferenced vertices.
+        let mut rough = shuffled.clone();
+        for k in (0..rough.len()).step_by(997) {
+            rough[k].swap(1, 2);
+        }
+        for k in [80_000, 50_000, 50_001, 12_345, 3] {
+            rough.remove(k);
+        }
+        rough.insert(17, [perm[5], perm[5], perm[9]]);
+        rough.insert(40_000, [perm[1], perm[2], perm[1]]);
+        rough.push(rough[1000]);
+        let [a, b, _] = rough[2000];
+        rough.push([a, b, n as u32]);
+        cases.push(("rough sphere", n + 3, rough));
+        // Two spheres sharing one vertex (a pinch, two closed fans at it), one of them
+        // inside out.
+        let mut pinched = shuffled.clone();
+        let other = |v: u32| if v == perm[0] { perm[0] } else { v + n as u32 };
+        pinched.extend(
+            shuffled
+                .iter()
+                .map(|t| [other(t[0]), other(t[2]), other(t[1])]),
+        );
+        cases.push(("pinched spheres", 2 * n, pinched));
+        // Closed bipyramids whose apexes have 3 to 20 faces: every path of the closed-fan test
+        // (up to 6, 8 and 16 faces) and the general analysis beyond, each also with a face
+        // flipped and with a face gone.
+        let mut cones = Vec::new();
+        let mut base = 0;
+        for d in 3..=20u32 {
+            for variant in 0..3 {
+                let (apex, other_apex) = (base + d, base + d + 1);
+                let mut fan = Vec::new();
+                for k in 0..d {
+                    fan.push([apex, base + k, base + (k + 1) % d]);
+                    fan.push([other_apex, base + (k + 1) % d, base + k]);
+                }
+                match variant {
+                    1 => fan[2].swap(1, 2),
+                    2 => drop(fan.remove(2)),
+                    _ => {}
+                }
+                cones.extend(fan);
+                base += d + 2;
+            }
+        }
+        cases.push(("bipyramids", base as usize, cones));
+        let bunny =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/stanford-bunny.ply");
+        let scan = crate::io::read_mesh(&bunny).unwrap();
+        let n = scan.positions.len();
+        let perm = crate::shapes::permutation(n, 11);
+        let tris: Vec<[u32; 3]> = scan.triangles.to_vec();
+        cases.push(("scan", n, tris.clone()));
+        let shuffled = tris.iter().map(|t| t.map(|v| perm[v as usize])).collect();
+        cases.push(("shuffled scan", n, shuffled));
+
+        for (name, n, tris) in &cases {
+            let want = reference(*n, tris);
+            for threads in [1, 2, 3] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                let topo = pool.install(|| Topology::build(*n, tris)).unwrap();
+                assert!(whole(&topo) == want, "{name} on {threads} threads");
+            }
+        }
+    }
+}
