@@ -11,9 +11,10 @@ use vcsmooth::engine::{
     AutoStopStats, EngineSettings, Layout, Plan, Quiet, Statistics, StopReason, thread_pool,
 };
 use vcsmooth::mesh::Storage;
-use vcsmooth::smooth::lowpass;
+use vcsmooth::smooth::lowpass::RING_RADIUS;
 use vcsmooth::{Mesh, Method, Options, Report, Topology, shapes};
 
+use crate::oracles::lowpass;
 use crate::util::{
     cluster_settings, engine_settings, fails, generate_sphere, noisy_sphere, ok, read_json,
     read_scan, run_ranks, scan, vcsmooth,
@@ -240,7 +241,7 @@ fn the_engine_follows_the_prototype_rule() {
     let topo = Topology::build(p.len(), &tris).unwrap();
     let mut proto = lowpass::AutoStop::new(&topo, &tris, &p, 1);
     proto.tau = DETAIL_RATIO;
-    let stencils = lowpass::RingStencils::build(&topo, lowpass::RING_RADIUS);
+    let stencils = lowpass::RingStencils::build(&topo, RING_RADIUS);
     let (mut scratch, mut tmp) = (lowpass::Scratch::default(), Vec::new());
     let mut proto_stop = None;
     let mut ratios = Vec::new();

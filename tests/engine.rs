@@ -405,10 +405,11 @@ fn statistics_describe_the_output_as_written_for_any_thread_count() {
 
 /// `vcs-lowpass` on a closed scan with noise: the volume is kept to 1e-9 in f64 by the patched
 /// engine, 1 and 3 threads give the same bits, and in the input's own order (one patch, stencils
-/// in index order) the engine follows the sequential prototype of `smooth::lowpass` to rounding.
+/// in index order) the engine follows the sequential prototype (`oracles::lowpass`) to rounding.
 #[test]
 fn vcs_lowpass_keeps_volume_is_deterministic_and_follows_the_prototype() {
-    use vcsmooth::smooth::lowpass;
+    use crate::oracles::lowpass;
+    use vcsmooth::smooth::lowpass::RING_RADIUS;
     let mut input = read_scan("fertility-9k.ply");
     shapes::add_normal_noise(&mut input, 0.3, 1);
     let opts = Options {
@@ -467,7 +468,7 @@ fn vcs_lowpass_keeps_volume_is_deterministic_and_follows_the_prototype() {
     run(&mut whole, Method::VcsLowpass, opts.iterations);
     let tris = whole.triangles.to_vec();
     let topo = Topology::build(input.positions.len(), &tris).unwrap();
-    let stencils = lowpass::RingStencils::build(&topo, lowpass::RING_RADIUS);
+    let stencils = lowpass::RingStencils::build(&topo, RING_RADIUS);
     let mut proto = input.positions.to_vec();
     let mut scratch = lowpass::Scratch::default();
     for _ in 0..opts.iterations {

@@ -18,6 +18,7 @@ mod golden;
 mod hostile;
 mod layout;
 mod multires;
+mod oracles;
 mod patches;
 mod pins;
 mod progress;
