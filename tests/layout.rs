@@ -1,12 +1,18 @@
 //! The source tree keeps the shape of the design: modules in folders, data flowing one way
-//! (no two top-level modules import each other, directly or through others), and a library that
-//! speaks its own vocabulary (no string literal outside the command line names a flag).
+//! (no two top-level modules import each other, directly or through others, in the library and
+//! in the Python binding crate, `python/src`), and a library that speaks its own vocabulary (no
+//! string literal outside the command line names a flag).
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 fn src() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("src")
+}
+
+/// The sources of the Python binding crate (a crate of its own, see `python/Cargo.toml`).
+fn python_src() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("python/src")
 }
 
 fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
@@ -170,17 +176,18 @@ fn uses(code: &str, modules: &BTreeSet<String>) -> BTreeSet<String> {
     out
 }
 
-#[test]
-fn modules_import_each_other_in_one_direction() {
+/// Which top-level modules of the crate whose sources are `root` each one names through
+/// `crate::` (its unit tests left out).
+fn top_module_graph(root: &Path) -> BTreeMap<String, BTreeSet<String>> {
     let mut files = Vec::new();
-    rust_files(&src(), &mut files);
+    rust_files(root, &mut files);
     let modules: BTreeSet<String> = files
         .iter()
-        .filter_map(|f| top_module(f.strip_prefix(src()).unwrap()))
+        .filter_map(|f| top_module(f.strip_prefix(root).unwrap()))
         .collect();
     let mut graph: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
     for f in &files {
-        let rel = f.strip_prefix(src()).unwrap();
+        let rel = f.strip_prefix(root).unwrap();
         let Some(top) = top_module(rel) else { continue };
         if rel.file_name().is_some_and(|n| n == "tests.rs") {
             continue;
@@ -190,8 +197,30 @@ fn modules_import_each_other_in_one_direction() {
         used.remove(&top);
         graph.entry(top).or_default().extend(used);
     }
+    graph
+}
+
+#[test]
+fn modules_import_each_other_in_one_direction() {
+    let cycles = cycles(&top_module_graph(&src()));
+    assert!(
+        cycles.is_empty(),
+        "import circles among the modules of src/:\n{}",
+        cycles.join("\n")
+    );
+}
+
+#[test]
+fn binding_modules_import_each_other_in_one_direction() {
+    let graph = top_module_graph(&python_src());
+    // The binding's modules are found at all (a moved crate would pass for want of files).
+    assert!(graph.contains_key("options"), "python/src: {graph:?}");
     let cycles = cycles(&graph);
-    assert!(cycles.is_empty(), "import circles:\n{}", cycles.join("\n"));
+    assert!(
+        cycles.is_empty(),
+        "import circles among the modules of python/src/:\n{}",
+        cycles.join("\n")
+    );
 }
 
 /// The path of the module a file under `src/<top>/` defines, below `top`: `a.rs` → `[a]`,

@@ -9,7 +9,7 @@ use pyo3::exceptions::{
 use pyo3::prelude::*;
 use vcsmooth::Error;
 
-use crate::options::keyword;
+use crate::keywords::keyword;
 
 create_exception!(
     vcsmooth,

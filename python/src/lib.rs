@@ -7,6 +7,8 @@
 //!   `Options` and `EngineSettings`.
 //! - [`run`]: the library's work on a thread of its own without the GIL, stopped by Ctrl-C.
 //! - [`errors`]: the library's errors as Python exceptions, `vcsmooth.MeshError`.
+//! - [`keywords`]: the library's parameter names that Python callers know by another keyword
+//!   (`lambda` → `lam`), for the messages of errors.
 //!
 //! Every smoothing call goes through the library's engine (`vcsmooth::smooth_with`,
 //! `vcsmooth::engine::run_file`), so its results are the CLI's, bit for bit.
@@ -25,6 +27,7 @@ use vcsmooth::{Mesh, Method, Topology};
 
 mod arrays;
 mod errors;
+mod keywords;
 mod options;
 mod run;
 

@@ -1,11 +1,12 @@
 //! The keyword arguments of `smooth`, `smooth_report` and `smooth_file`: the one place that maps
-//! them to the library's [`Options`] and [`EngineSettings`], and the library's parameter names
-//! back to them for errors.
+//! them to the library's [`Options`] and [`EngineSettings`].
 //!
 //! They mirror `vcsmooth smooth`'s flags in snake_case (`--max-deviation` → `max_deviation`;
 //! `--lambda` → `lam`, as `lambda` is a Python keyword). A keyword that is not given keeps the
 //! library's default (`Options::default()`, `EngineSettings::default()`), so a default changed
-//! in the library changes here too. A new option is one entry of [`KWARGS`].
+//! in the library changes here too. A new option is one entry of [`KWARGS`] (and, when its keyword
+//! is not the library's name of the parameter, one line of `keywords::RENAMED`, which names it
+//! in errors).
 
 use std::path::PathBuf;
 
@@ -37,11 +38,9 @@ enum Scope {
     File,
 }
 
-/// One keyword argument: its name, the library's name of what it sets (as
-/// `vcsmooth::Error::Parameter` names it), who takes it, and how it sets it.
+/// One keyword argument: its name, who takes it, and how it sets it.
 struct Kwarg {
     name: &'static str,
-    library: &'static str,
     scope: Scope,
     set: fn(&Bound<'_, PyAny>, &mut Settings) -> PyResult<()>,
 }
@@ -51,24 +50,24 @@ use Scope::{File, Smoothing};
 /// Every keyword argument, in the order of `vcsmooth smooth --help`.
 #[rustfmt::skip]
 const KWARGS: &[Kwarg] = &[
-    Kwarg { name: "method", library: "method", scope: Smoothing, set: |v, s| { s.options.method = method(v)?; Ok(()) } },
-    Kwarg { name: "iterations", library: "iterations", scope: Smoothing, set: iterations },
-    Kwarg { name: "lam", library: "lambda", scope: Smoothing, set: |v, s| { s.options.lambda = v.extract()?; Ok(()) } },
-    Kwarg { name: "mu", library: "mu", scope: Smoothing, set: |v, s| { s.options.mu = v.extract()?; Ok(()) } },
-    Kwarg { name: "reject_energy_increase", library: "reject_energy_increase", scope: Smoothing, set: |v, s| { s.options.reject_energy_increase = v.extract()?; Ok(()) } },
-    Kwarg { name: "crease_angle", library: "crease_angle", scope: Smoothing, set: |v, s| { s.options.crease_angle = v.extract()?; Ok(()) } },
-    Kwarg { name: "max_deviation", library: "max_deviation", scope: Smoothing, set: |v, s| { s.options.max_deviation = v.extract()?; Ok(()) } },
-    Kwarg { name: "boundary", library: "boundary", scope: Smoothing, set: |v, s| { s.options.boundary = boundary(v)?; Ok(()) } },
-    Kwarg { name: "pinned", library: "pins", scope: Smoothing, set: |v, s| set_pins(s, arrays::pins(v)?) },
-    Kwarg { name: "pin", library: "pin", scope: File, set: |v, s| set_pins(s, Pins::File(v.extract()?)) },
-    Kwarg { name: "pin_property", library: "pin_property", scope: File, set: |v, s| set_pins(s, Pins::Property(v.extract()?)) },
-    Kwarg { name: "threads", library: "threads", scope: Smoothing, set: |v, s| { s.engine.threads = v.extract()?; Ok(()) } },
-    Kwarg { name: "patch_size", library: "patch_size", scope: Smoothing, set: |v, s| { s.engine.patch_size = patch_size(v)?; Ok(()) } },
-    Kwarg { name: "stats", library: "stats", scope: Smoothing, set: |v, s| { s.engine.statistics = stats(v)?; Ok(()) } },
-    Kwarg { name: "memory_budget", library: "memory_budget", scope: File, set: |v, s| { s.engine.memory_budget = memory_budget(v)?; Ok(()) } },
-    Kwarg { name: "scratch", library: "scratch", scope: File, set: |v, s| { s.engine.scratch = v.extract()?; Ok(()) } },
-    Kwarg { name: "report", library: "report", scope: File, set: |v, s| { s.report = v.extract()?; Ok(()) } },
-    Kwarg { name: "progress", library: "progress", scope: File, set: |v, s| { s.progress = v.extract()?; Ok(()) } },
+    Kwarg { name: "method", scope: Smoothing, set: |v, s| { s.options.method = method(v)?; Ok(()) } },
+    Kwarg { name: "iterations", scope: Smoothing, set: iterations },
+    Kwarg { name: "lam", scope: Smoothing, set: |v, s| { s.options.lambda = v.extract()?; Ok(()) } },
+    Kwarg { name: "mu", scope: Smoothing, set: |v, s| { s.options.mu = v.extract()?; Ok(()) } },
+    Kwarg { name: "reject_energy_increase", scope: Smoothing, set: |v, s| { s.options.reject_energy_increase = v.extract()?; Ok(()) } },
+    Kwarg { name: "crease_angle", scope: Smoothing, set: |v, s| { s.options.crease_angle = v.extract()?; Ok(()) } },
+    Kwarg { name: "max_deviation", scope: Smoothing, set: |v, s| { s.options.max_deviation = v.extract()?; Ok(()) } },
+    Kwarg { name: "boundary", scope: Smoothing, set: |v, s| { s.options.boundary = boundary(v)?; Ok(()) } },
+    Kwarg { name: "pinned", scope: Smoothing, set: |v, s| set_pins(s, arrays::pins(v)?) },
+    Kwarg { name: "pin", scope: File, set: |v, s| set_pins(s, Pins::File(v.extract()?)) },
+    Kwarg { name: "pin_property", scope: File, set: |v, s| set_pins(s, Pins::Property(v.extract()?)) },
+    Kwarg { name: "threads", scope: Smoothing, set: |v, s| { s.engine.threads = v.extract()?; Ok(()) } },
+    Kwarg { name: "patch_size", scope: Smoothing, set: |v, s| { s.engine.patch_size = patch_size(v)?; Ok(()) } },
+    Kwarg { name: "stats", scope: Smoothing, set: |v, s| { s.engine.statistics = stats(v)?; Ok(()) } },
+    Kwarg { name: "memory_budget", scope: File, set: |v, s| { s.engine.memory_budget = memory_budget(v)?; Ok(()) } },
+    Kwarg { name: "scratch", scope: File, set: |v, s| { s.engine.scratch = v.extract()?; Ok(()) } },
+    Kwarg { name: "report", scope: File, set: |v, s| { s.report = v.extract()?; Ok(()) } },
+    Kwarg { name: "progress", scope: File, set: |v, s| { s.progress = v.extract()?; Ok(()) } },
 ];
 
 impl Settings {
@@ -94,10 +93,10 @@ impl Settings {
                     ))
                 })?;
             // `None` is "not given" for the optional keywords; pins have no default to restore.
-            if value.is_none() && arg.library.starts_with("pin") {
+            if value.is_none() && arg.name.starts_with("pin") {
                 continue;
             }
-            if arg.library.starts_with("pin") {
+            if arg.name.starts_with("pin") {
                 if let Some(other) = pins_from.replace(arg.name) {
                     return Err(PyValueError::new_err(format!(
                         "{} and {other} cannot both be given",
@@ -120,15 +119,6 @@ impl Settings {
         }
         Ok(s)
     }
-}
-
-/// The keyword argument that sets the library's parameter `library` (as errors name it), or
-/// `library` itself when none does.
-pub fn keyword(library: &str) -> &str {
-    KWARGS
-        .iter()
-        .find(|k| k.library == library)
-        .map_or(library, |k| k.name)
 }
 
 fn set_pins(s: &mut Settings, pins: Pins) -> PyResult<()> {
