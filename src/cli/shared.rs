@@ -118,8 +118,8 @@ pub struct MethodParams {
     /// Creases: edges whose two faces' normals differ by more than DEG degrees, in (0, 180), on the input; their vertices stay where they are, corners included (every method) [default: none].
     #[arg(long, value_name = "DEG", value_parser = crease_angle, allow_hyphen_values = true)]
     pub crease_angle: Option<f64>,
-    /// No vertex ends farther than D (model units, > 0) from its input position: the stencil methods skip a stencil that would move one farther (the volume stays exact); laplacian and taubin clamp each vertex (they do not keep the volume) [default: none].
-    #[arg(long, value_name = "D", value_parser = length, allow_hyphen_values = true)]
+    /// No vertex ends farther than D (model units, > 0) from its input position.
+    #[arg(long, value_name = "D", value_parser = length, allow_hyphen_values = true, help = deviation_help())]
     pub max_deviation: Option<f64>,
     /// Boundary loops of open meshes: fixed, or smooth (each loop is smoothed as a curve).
     #[arg(long, value_enum, value_name = "MODE", default_value_t = Boundary::Fixed, help = boundary_help())]
@@ -129,6 +129,23 @@ pub struct MethodParams {
 /// A flag's help line, `what`, with the methods that take `control` in parentheses, then `tail`.
 fn used_by(what: &str, control: Control, tail: &str) -> String {
     format!("{what} ({}){tail}", Method::names_accepting(control))
+}
+
+/// `--max-deviation`'s help line: which methods skip stencils, which clamp vertices.
+fn deviation_help() -> String {
+    let names = |jacobi: bool| {
+        let ms: Vec<&str> = Method::ALL
+            .iter()
+            .filter(|m| m.is_jacobi() == jacobi)
+            .map(|m| m.name())
+            .collect();
+        ms.join(", ")
+    };
+    format!(
+        "No vertex ends farther than D (model units, > 0) from its input position: the stencil methods ({}) skip a stencil that would move one farther (the volume stays exact); {} clamp each vertex (they do not keep the volume) [default: none]",
+        names(false),
+        names(true)
+    )
 }
 
 /// `--boundary`'s help line: which methods smooth the loops, and which keep the holes' sizes.

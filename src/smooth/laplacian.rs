@@ -101,6 +101,19 @@ pub fn jacobi_step_clamped(
     }
 }
 
+/// `p` moved back onto the ball of radius `limit` around `origin` when it lies outside: the
+/// `max_deviation` bound of the Jacobi methods.
+#[inline]
+pub fn clamp_to_ball(p: DVec3, origin: DVec3, limit: f64) -> DVec3 {
+    let off = p - origin;
+    let length = off.length();
+    if length > limit {
+        origin + off * (limit / length)
+    } else {
+        p
+    }
+}
+
 const NO_MEASURE: u8 = 0;
 /// Measure against the vertex's position in `src`.
 const FROM_SRC: u8 = 1;
@@ -145,14 +158,7 @@ fn step<const MEASURE: u8, const CLAMP: bool>(
             }
             let new = p + lambda * (sum * inv_deg(nbrs.len()) - p);
             if CLAMP {
-                let origin = input[first + k];
-                let off = new - origin;
-                let length = off.length();
-                if length > limit {
-                    origin + off * (limit / length)
-                } else {
-                    new
-                }
+                clamp_to_ball(new, input[first + k], limit)
             } else {
                 new
             }
