@@ -118,9 +118,9 @@ fn smooth_arrays<'py>(
 ///
 /// Keyword arguments (those of ``vcsmooth smooth``, in snake_case):
 ///
-/// - ``method``: ``"vcs"``, ``"vcs-triangle"``, ``"vcs-lowpass"``, ``"lem"``, ``"laplacian"``
-///   or ``"taubin"``; default: the library's default method, ``vcsmooth.DEFAULT_METHOD``
-///   (currently ``"vcs-lowpass"``).
+/// - ``method``: one of ``vcsmooth.METHODS`` (``"laplacian"``, ``"taubin"``, ``"lem"``,
+///   ``"vcs"``, ``"vcs-triangle"``, ``"vcs-lowpass"``); default: the library's default
+///   method, ``vcsmooth.DEFAULT_METHOD`` (currently ``"vcs-lowpass"``).
 /// - ``iterations`` (10, or ``"auto"``: stop when the noise is gone, after at most 100), ``lam`` (0.5, the Laplacian step λ, in (0, 1]), ``mu`` (-0.53,
 ///   Taubin's second step, in [-1, 0)), ``reject_energy_increase`` (False).
 /// - ``crease_angle`` (None): vertices on edges whose faces' normals differ by more than this
@@ -303,6 +303,8 @@ fn info<'py>(
 fn _vcsmooth(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("DEFAULT_METHOD", Method::default().name())?;
+    let methods: Vec<&str> = Method::ALL.iter().map(|m| m.name()).collect();
+    m.add("METHODS", PyTuple::new(m.py(), methods)?)?;
     m.add("MeshError", m.py().get_type::<MeshError>())?;
     m.add_function(wrap_pyfunction!(smooth, m)?)?;
     m.add_function(wrap_pyfunction!(smooth_report, m)?)?;

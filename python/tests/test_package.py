@@ -34,6 +34,15 @@ def test_docstrings_and_markers():
         doc = getattr(vcsmooth, name).__doc__
         assert doc and len(doc) > 200, name
     assert vcsmooth.DEFAULT_METHOD == "vcs-lowpass"
+    assert vcsmooth.DEFAULT_METHOD in vcsmooth.METHODS
+
+
+def test_the_stub_lists_the_methods_of_the_registry():
+    stub = Path(vcsmooth.__file__).with_name("_vcsmooth.pyi")
+    tree = ast.parse(stub.read_text())
+    [literal] = [n.value for n in tree.body
+                 if isinstance(n, ast.Assign) and n.targets[0].id == "_Method"]
+    assert tuple(ast.literal_eval(e) for e in literal.slice.elts) == vcsmooth.METHODS
 
 
 def test_stubs_state_the_defaults(tmp_path, kitten, kitten_path):

@@ -1,7 +1,8 @@
 """vcsmooth: smooth triangle meshes without shrinking them.
 
 The volume-constrained stencil smoothing of Liu, Tang, Lu, Wang and Zheng (Graphical Models 64,
-2002), plus Laplacian, Taubin and local energy minimisation, on NumPy arrays or mesh files::
+2002), plus Laplacian, Taubin and local energy minimisation (``vcsmooth.METHODS``), on NumPy
+arrays or mesh files::
 
     import trimesh, vcsmooth
     mesh = trimesh.load("scan.ply", process=False)  # keep the file's vertices
@@ -19,6 +20,7 @@ The options are the command line's flags in snake_case (``lam`` for ``--lambda``
 
 from ._vcsmooth import (
     DEFAULT_METHOD,
+    METHODS,
     MeshError,
     __version__,
     info,
@@ -31,6 +33,7 @@ from ._vcsmooth import (
 
 __all__ = [
     "DEFAULT_METHOD",
+    "METHODS",
     "MeshError",
     "__version__",
     "info",

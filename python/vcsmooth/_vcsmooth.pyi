@@ -8,11 +8,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 _Path = Union[str, PathLike[str]]
-_Method = Literal["vcs", "vcs-triangle", "vcs-lowpass", "lem", "laplacian", "taubin"]
+_Method = Literal["laplacian", "taubin", "lem", "vcs", "vcs-triangle", "vcs-lowpass"]
 _Report = Dict[str, Any]
 
 __version__: str
 DEFAULT_METHOD: str
+METHODS: tuple[str, ...]
 
 class MeshError(ValueError): ...
 
