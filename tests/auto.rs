@@ -12,6 +12,7 @@ use vcsmooth::engine::{
 };
 use vcsmooth::mesh::Storage;
 use vcsmooth::smooth::lowpass::RING_RADIUS;
+use vcsmooth::smooth::method::StopRule;
 use vcsmooth::{Mesh, Method, Options, Report, Topology, shapes};
 
 use crate::oracles::lowpass;
@@ -133,7 +134,7 @@ fn the_reported_figures_follow_the_rule() {
         let (report, s) = run(&noisy, method);
         let k = report.iterations_run;
         let stop_at = |j: usize| -> Option<StopReason> {
-            if method.is_stencil() && method != Method::VcsLowpass {
+            if method.unit().stop_rule(&auto(method)) == StopRule::Settle {
                 let mean = report.records[j].mean_displacement;
                 if s.removed[j] > REMOVED_ENOUGH {
                     Some(StopReason::Detail)

@@ -31,6 +31,7 @@ fn any_number_of_ranks_gives_the_single_process_output_bit_for_bit() {
         (Method::VcsTriangle, 2),
         (Method::Lem, 2),
         (Method::Laplacian, 3),
+        (Method::Hc, 3),
     ] {
         let opts = Options {
             method,

@@ -69,6 +69,7 @@ fn mpi_ranks_1_2_3_are_bit_identical_to_one_process() {
         (&armadillo, three("vcs")),
         (&sphere, three("taubin")),
         (&sphere, three("vcs-triangle")),
+        (&sphere, three("hc")),
         (&bunny, auto),
     ] {
         let method = args.join(" ");

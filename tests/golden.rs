@@ -68,7 +68,7 @@ fn runs(sphere: &Path, torus: &Path, big: &Path) -> Vec<Run> {
             args,
         });
     }
-    let more: [(&'static str, &Path, &'static str, &'static [&'static str]); 19] = [
+    let more: [(&'static str, &Path, &'static str, &'static [&'static str]); 20] = [
         (
             "sphere4-vcs-reject",
             sphere,
@@ -214,6 +214,12 @@ fn runs(sphere: &Path, torus: &Path, big: &Path) -> Vec<Run> {
             &scan("demosthenes-17k.ply"),
             "ply",
             &["--method", "taubin", "--iterations", "9", "--stats", "last"],
+        ),
+        (
+            "demosthenes-hc-deviation",
+            &scan("demosthenes-17k.ply"),
+            "ply",
+            &["--method", "hc", "--iterations", "7", "--max-deviation", "0.002"],
         ),
         (
             "armadillo-multires",

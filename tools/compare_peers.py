@@ -7,7 +7,7 @@ The same noisy mesh and the same iteration count go through
   * Open3D     - Laplacian, Taubin
   * trimesh    - Laplacian (plain and with trimesh's default volume constraint), Taubin, Humphrey
   * VTK        - vtkSmoothPolyDataFilter (Laplacian), vtkWindowedSincPolyDataFilter
-  * vcsmooth   - laplacian, taubin, vcs (and optionally lem, vcs-triangle)
+  * vcsmooth   - laplacian, taubin, vcs (and optionally lem, vcs-triangle, vcs-lowpass, hc)
 
 and the script prints, side by side, the median time of the smoothing alone (no file or format
 conversion is timed), the volume change against the noisy input and the RMS distance to the clean
@@ -45,17 +45,20 @@ REPO = os.path.dirname(HERE)
 REQUIREMENTS = os.path.join(HERE, "requirements-peers.txt")
 
 PEERS = ["pymeshlab", "open3d", "trimesh", "vtk"]
-VCS_METHODS_ALL = ["laplacian", "taubin", "lem", "vcs", "vcs-triangle"]
+VCS_METHODS_ALL = ["laplacian", "taubin", "lem", "vcs", "vcs-triangle", "vcs-lowpass", "hc"]
 VCS_METHODS_DEFAULT = ["laplacian", "taubin", "vcs"]
 
 # Methods that are the same kind of filter, for the "x same-kind peer" column: a Laplacian is
 # compared with the Laplacians, Taubin's lambda|mu filter with Taubin and with VTK's windowed
-# sinc (Taubin, Zhang & Golub's generalisation of lambda|mu); the other methods have no
+# sinc (Taubin, Zhang & Golub's generalisation of lambda|mu), the HC Laplacian with MeshLab's and
+# trimesh's (filter_humphrey, the same filter under its author's name); the other methods have no
 # same-kind peer and are compared with the fastest peer of any method only.
 FAMILY = {
     "laplacian": "laplacian",
     "taubin": "taubin",
     "windowed-sinc": "taubin",
+    "hc": "hc",
+    "humphrey": "hc",
 }
 
 
@@ -764,7 +767,7 @@ def print_table(res):
           "only, as the peers compute none; and its topology build).")
     print("+setup s: peers build their adjacency inside the timed call; for vcsmooth this adds its topology "
           "build to the median, the same work.")
-    print("x same-kind: time / fastest peer of the same kind (laplacian; taubin or windowed-sinc); "
+    print("x same-kind: time / fastest peer of the same kind (laplacian; taubin or windowed-sinc; hc or humphrey); "
           f"x fastest peer: time / fastest peer of any method ({res['fastest_peer']}).")
     print("volume %: change vs the noisy input; RMS dist: per-vertex distance to the clean mesh "
           f"(RMS/edge: in mean edge lengths, {res['mean_edge_length']:.4g}).")

@@ -118,9 +118,9 @@ fn smooth_arrays<'py>(
 ///
 /// Keyword arguments (those of ``vcsmooth smooth``, in snake_case):
 ///
-/// - ``method``: one of ``vcsmooth.METHODS`` (``"laplacian"``, ``"taubin"``, ``"lem"``,
-///   ``"vcs"``, ``"vcs-triangle"``, ``"vcs-lowpass"``); default: the library's default
-///   method, ``vcsmooth.DEFAULT_METHOD`` (currently ``"vcs-lowpass"``).
+/// - ``method``: one of ``vcsmooth.METHODS`` (what each does: ``vcsmooth smooth --help``);
+///   default: the library's default method, ``vcsmooth.DEFAULT_METHOD`` (currently
+///   ``"vcs-lowpass"``).
 /// - ``iterations`` (10, or ``"auto"``: stop when the noise is gone, after at most 100), ``lam`` (0.5, the Laplacian step λ, in (0, 1]), ``mu`` (-0.53,
 ///   Taubin's second step, in [-1, 0)), ``reject_energy_increase`` (False).
 /// - ``crease_angle`` (None): vertices on edges whose faces' normals differ by more than this

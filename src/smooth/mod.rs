@@ -14,6 +14,7 @@
 //! | `vcs` | edge stencils + 2-step volume restoration | Liu et al. §3, §3.1 |
 //! | `vcs-triangle` | the same on triangle stencils | Liu et al. §3.2 |
 //! | `vcs-lowpass` | Taubin's λ\|μ displacement + exact volume restoration on 2-ring stencils | [`lowpass`], docs/quality-research.md |
+//! | `hc` | an umbrella average pushed back towards the input, two Jacobi passes | [`hc`], Vollmer et al. 1999 |
 //!
 //! Umbrella operator: `L(v) = (1/deg v) Σ_{u∈N(v)} p_u − p_v`. Fixed vertices (see
 //! [`crate::topology`]) never move; a stencil with a fixed free vertex is skipped and counted.
@@ -25,6 +26,7 @@ use std::str::FromStr;
 use glam::DVec3;
 
 pub mod boundary;
+pub mod hc;
 pub mod laplacian;
 pub mod lowpass;
 pub mod method;
@@ -49,17 +51,19 @@ pub enum Method {
     /// (docs/quality-research.md).
     #[default]
     VcsLowpass,
+    Hc,
 }
 
 impl Method {
     /// Every method, in documentation order.
-    pub const ALL: [Method; 6] = [
+    pub const ALL: [Method; 7] = [
         Method::Laplacian,
         Method::Taubin,
         Method::Lem,
         Method::Vcs,
         Method::VcsTriangle,
         Method::VcsLowpass,
+        Method::Hc,
     ];
 
     /// The method's unit: everything the engine, the command line and Python need of it.
@@ -71,6 +75,7 @@ impl Method {
             Method::Vcs => &methods::Vcs,
             Method::VcsTriangle => &methods::VcsTriangle,
             Method::VcsLowpass => &methods::VcsLowpass,
+            Method::Hc => &hc::Hc,
         }
     }
 
