@@ -423,6 +423,53 @@ fn curves_plot_names_every_method() {
     );
 }
 
+/// `curves` runs each method as `smooth` does: with the same flags (creases, deviation bound,
+/// patches), each curve is the volume column of `smooth`'s report, bit for bit.
+#[test]
+fn curves_take_every_control_as_smooth_does() {
+    let (dir, sphere) = noisy_sphere_file();
+    let plot = dir.path().join("curves.svg");
+    let controls = [
+        "--crease-angle",
+        "25",
+        "--max-deviation",
+        "0.01",
+        "--patch-size",
+        "512",
+    ];
+    let curve_of = |extra: &[&str]| -> Vec<Vec<f64>> {
+        let mut args = vec!["curves", sphere.to_str().unwrap(), "--methods", "vcs,laplacian,hc"];
+        args.extend(["--iterations", "4", "--plot", plot.to_str().unwrap(), "--json"]);
+        args.extend(extra);
+        let doc = json(&ok(vcsmooth(args)));
+        let pct = |c: &serde_json::Value| -> Vec<f64> {
+            let v = c["volume_pct"].as_array().unwrap();
+            v.iter().map(|x| x.as_f64().unwrap()).collect()
+        };
+        doc["curves"].as_array().unwrap().iter().map(pct).collect()
+    };
+    let with = curve_of(&controls);
+    for (method, curve) in ["vcs", "laplacian", "hc"].iter().zip(&with) {
+        let (out, report) = (dir.path().join("out.ply"), dir.path().join("r.json"));
+        let mut args = vec!["smooth", sphere.to_str().unwrap(), out.to_str().unwrap()];
+        args.extend(["--method", method, "--iterations", "4"]);
+        args.extend(["--report", report.to_str().unwrap()]);
+        args.extend(controls);
+        ok(vcsmooth(args));
+        let doc = read_json(&report);
+        let smooth: Vec<f64> = doc["iterations"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|r| r["volume_pct"].as_f64().unwrap())
+            .collect();
+        assert_eq!(curve[1..], smooth[..], "{method}");
+    }
+    // The creases fix most of the noisy sphere's vertices: the Laplacian shrinks it less.
+    let without = curve_of(&controls[2..]);
+    assert!(with[1][4] > without[1][4], "{} vs {}", with[1][4], without[1][4]);
+}
+
 #[test]
 fn missing_input_fails_cleanly_and_writes_nothing() {
     let dir = tempfile::tempdir().unwrap();

@@ -66,6 +66,11 @@ pub enum Command {
     /// Write a closed test mesh (icosphere or torus), optionally with Gaussian noise along normals.
     Generate(generate::GenerateArgs),
     /// Run several methods from the same input and plot volume % per iteration (the paper's Fig. 4).
+    #[command(
+        mut_arg("patch_size", |a| a.help("Vertices per patch: the stencils in the order of smooth's patches of this size [default: the input's order, the paper's sequential reference]")),
+        mut_arg("memory_budget", |a| a.help("Anonymous memory allowed for the iteration records, with K/M/G/T suffixes (binary units); curves holds the mesh in memory [default: 3/4 of available memory, or of a tighter cgroup limit or rlimit]")),
+        mut_arg("scratch", |a| a.hide(true)),
+    )]
     Curves(curves::CurvesArgs),
     /// Smooth a generated noisy sphere with every method and print volume and roughness per method.
     Demo(demo::DemoArgs),

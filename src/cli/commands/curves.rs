@@ -3,7 +3,6 @@
 
 use std::io::Write;
 use std::path::PathBuf;
-use std::time::Instant;
 
 use clap::Args as ClapArgs;
 use serde::Serialize;
@@ -14,7 +13,7 @@ use crate::cli::plot::{Curve, file_name, volume_curve, write_volume_plot};
 use crate::cli::progress::Progress;
 use crate::cli::report::{Tool, fixed};
 use crate::cli::shared::{EngineArgs, MethodParams, distinct};
-use crate::engine::EngineSettings;
+use crate::engine::{EngineSettings, Layout};
 use crate::engine::{self, IterationRecord};
 use crate::error::Result;
 use crate::smooth::{Method, Options};
@@ -54,6 +53,9 @@ pub struct CurvesConfig {
     /// Options shared by every method (`method` is replaced per run).
     pub options: Options,
     pub engine: EngineSettings,
+    /// The stencils' order: the input's (the paper's sequential reference), or the patches of
+    /// `--patch-size` when it is given.
+    pub layout: Layout,
     pub plot: PathBuf,
     pub json: bool,
 }
@@ -66,9 +68,15 @@ impl CurvesConfig {
         if methods.is_empty() {
             return Err(flags::parameter("methods", "names no method"));
         }
+        let engine = a.engine.resolve()?;
+        let layout = match a.engine.patch_size {
+            Some(_) => engine.layout(),
+            None => Layout::Whole,
+        };
         Ok(CurvesConfig {
             options: a.params.options(methods[0], a.iterations as usize),
-            engine: a.engine.resolve()?,
+            engine,
+            layout,
             input: a.input,
             methods,
             plot: a.plot,
@@ -100,7 +108,9 @@ pub struct CurvesDoc {
     pub curves: Vec<CurveDoc>,
 }
 
-/// `vcsmooth curves`: every method from the same input positions; the plot, then the table.
+/// `vcsmooth curves`: every method from the same input positions, each through the engine's
+/// in-memory run (so every option and engine flag reaches it as it reaches `smooth`); the plot,
+/// then the table.
 pub fn run(cfg: &CurvesConfig, progress: &mut Progress, out: &mut dyn Write) -> Result<()> {
     // Each method keeps one record per iteration: refuse counts the budget cannot hold first.
     let budget = cfg.engine.budget()?;
@@ -110,38 +120,26 @@ pub fn run(cfg: &CurvesConfig, progress: &mut Progress, out: &mut dyn Write) -> 
     )?;
     progress.phase(format!("reading {}", cfg.input.display()));
     let mesh = crate::io::read_mesh(&cfg.input)?;
-    progress.phase("building topology");
-    let pool = engine::thread_pool(cfg.engine.threads)?;
-    let storage = crate::mesh::Storage::heap();
-    // Every method from the input in its own order (the sequential reference order).
-    let mut plan = pool
-        .install(|| {
-            engine::Plan::new(
-                &storage,
-                &mesh.positions,
-                &mesh.triangles,
-                engine::Layout::Whole,
-            )
-        })
-        .map_err(|e| e.in_file(&cfg.input))?;
-
+    let settings = EngineSettings {
+        statistics: engine::Statistics::Every,
+        with_stats: false,
+        ..cfg.engine.clone()
+    };
     let mut docs = Vec::with_capacity(cfg.methods.len());
     for &method in &cfg.methods {
         let options = Options {
             method,
             ..cfg.options
         };
-        plan.set_positions_from_input(&mesh.positions);
+        let mut smoothed = mesh.clone();
         progress.iterations(method.name(), options.iterations);
-        let clock = Instant::now();
-        let records = pool
-            .install(|| plan.smooth(&storage, &options, engine::Statistics::Every, progress))
+        let report = engine::run::run_mesh(&mut smoothed, &options, &settings, cfg.layout, progress)
             .map_err(|e| e.in_file(&cfg.input))?;
         docs.push(CurveDoc {
             method,
-            volume_pct: volume_curve(&records),
-            seconds: clock.elapsed().as_secs_f64(),
-            iterations: records,
+            volume_pct: volume_curve(&report.records),
+            seconds: report.timings.smoothing,
+            iterations: report.records,
         });
     }
 
