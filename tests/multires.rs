@@ -30,7 +30,7 @@ fn run(
             Layout::Patches(patch),
         )
         .unwrap();
-        let (_, stats) = multires::smooth_plan(
+        let (_, _, stats) = multires::smooth_plan(
             &mut plan,
             &storage,
             opts,
@@ -316,6 +316,10 @@ fn usage_errors_are_one_line_and_write_nothing() {
         (vec!["--multires", "--levels", "1"], "--levels"),
         (vec!["--multires", "--cell-factor", "0.5"], "cell factor"),
         (vec!["--multires", "--transfer", "nearest"], "--transfer"),
+        (
+            vec!["--multires", "--boundary", "smooth"],
+            "runs laplacian or taubin, which keep the boundary fixed",
+        ),
     ] {
         let mut args = vec!["smooth", &input, &o];
         args.extend(&extra);
@@ -393,4 +397,92 @@ fn the_percentages_are_of_the_input() {
             );
         }
     }
+}
+
+/// The automatic stop with `--multires`: the input level stops when its noise is gone (before
+/// the cap), the coarse levels run their count, and the output is the same for any thread count.
+#[test]
+fn the_automatic_stop_ends_the_input_level() {
+    let mesh = noisy_sphere(5, 0.02, 3);
+    let auto = Options {
+        auto_stop: true,
+        iterations: 100,
+        ..opts(100)
+    };
+    let m = MultiresOptions::default();
+    let (one, stats) = run(&mesh, &auto, &m, 1, 1024);
+    let (two, _) = run(&mesh, &auto, &m, 2, 1024);
+    assert_eq!(one, two, "thread counts differ");
+    let fine = &stats.levels[0];
+    assert!(fine.iterations >= 1 && fine.iterations < 100, "{}", fine.iterations);
+    assert!(stats.levels[1..].iter().all(|l| l.iterations == 10));
+    assert!(stats.volume_error <= 1e-9);
+    // It ran what a fixed count of the same length runs.
+    let fixed = Options {
+        iterations: fine.iterations,
+        ..opts(fine.iterations)
+    };
+    let counted = MultiresOptions {
+        coarse_iterations: Some(10),
+        ..m
+    };
+    assert_eq!(run(&mesh, &fixed, &counted, 2, 1024).0, one);
+}
+
+/// `--max-deviation` with `--multires`: no vertex ends farther than the bound from its input
+/// position, whatever the coarse levels moved, and the final correction still restores the
+/// volume (the vertices the bound holds leave it to the others).
+#[test]
+fn the_deviation_bound_holds_and_the_volume_stays_exact() {
+    let mesh = noisy_sphere(5, 0.02, 4);
+    let origin = metrics::centroid(&mesh.positions);
+    let v_in = metrics::volume_about(&mesh.positions, &mesh.triangles, origin);
+    let m = MultiresOptions::default();
+    let (free, _) = run(&mesh, &opts(8), &m, 2, 1024);
+    let farthest = |out: &[DVec3]| {
+        out.iter()
+            .zip(mesh.positions.iter())
+            .map(|(p, q)| p.distance(*q))
+            .fold(0.0, f64::max)
+    };
+    let limit = 0.4 * farthest(&free);
+    let bounded = Options {
+        max_deviation: Some(limit),
+        ..opts(8)
+    };
+    let (out, stats) = run(&mesh, &bounded, &m, 2, 1024);
+    // The clamp puts a vertex on its ball up to rounding.
+    assert!(farthest(&out) <= limit * (1.0 + 1e-12), "{} > {limit}", farthest(&out));
+    let held = out
+        .iter()
+        .zip(mesh.positions.iter())
+        .filter(|(p, q)| p.distance(**q) > 0.999 * limit)
+        .count();
+    assert!(held > 0, "the bound holds no vertex: the test bounds nothing");
+    let v_out = metrics::volume_about(&out, &mesh.triangles, origin);
+    assert!(((v_out - v_in) / v_in).abs() <= 1e-9, "{v_out} vs {v_in}");
+    assert!(stats.volume_error <= 1e-9);
+    assert_eq!(run(&mesh, &bounded, &m, 1, 1024).0, out, "thread counts differ");
+}
+
+/// Creases with `--multires`: their vertices keep their input bytes (the coarse transfer and
+/// the final correction leave fixed vertices alone), and the rest is smoothed.
+#[test]
+fn crease_vertices_keep_their_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in.ply");
+    generate_sphere(&input, 4, Some(0.3), Some(5));
+    let out = dir.path().join("out.ply");
+    let report = dir.path().join("r.json");
+    let (i, o, r) = (input.display().to_string(), out.display().to_string(), report.display().to_string());
+    ok(vcsmooth([
+        "smooth", &i, &o, "--multires", "--crease-angle", "60", "--report", &r,
+    ]));
+    let doc = read_json(&report);
+    let creased = doc["input"]["stats"]["crease_vertices"].as_u64().unwrap();
+    let (a, b) = (io::read_mesh(&input).unwrap(), io::read_mesh(&out).unwrap());
+    let kept = a.positions.iter().zip(b.positions.iter()).filter(|(p, q)| p == q).count();
+    assert!(creased > 10, "{creased}");
+    assert!(kept as u64 >= creased, "{kept} unmoved, {creased} crease vertices");
+    assert!((kept as u64) < a.positions.len() as u64 / 2, "{kept} of {}", a.positions.len());
 }

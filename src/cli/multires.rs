@@ -20,7 +20,7 @@ pub struct MultiresArgs {
     #[arg(long, value_name = "K", requires = "multires", allow_negative_numbers = true,
           value_parser = clap::value_parser!(u32).range(2..=MAX_LEVELS as i64))]
     pub levels: Option<u32>,
-    /// Iterations of --method on each coarse level [default: --iterations].
+    /// Iterations of --method on each coarse level [default: --iterations; 10 with --iterations auto].
     #[arg(long, value_name = "N", requires = "multires", allow_negative_numbers = true,
           value_parser = super::shared::whole)]
     pub coarse_iterations: Option<usize>,

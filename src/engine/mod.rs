@@ -105,34 +105,25 @@ impl Plan {
         Ok((records, auto))
     }
 
-    /// [`Plan::smooth`] with the records' volumes and areas measured against `reference`
+    /// [`Plan::smooth_stopped`] with the records' volumes and areas measured against `reference`
     /// instead of the positions the smoothing starts from (the multiresolution mode's input
-    /// level, whose smoothing starts from the coarse levels' result). The reference's origin
-    /// must not change the result: no automatic stop.
+    /// level, whose smoothing starts from the coarse levels' result), and the deviation bound
+    /// measured from `input` (indexed like the plan's positions) when given. The automatic stop still
+    /// estimates the noise on the positions it starts from, and takes its offsets about the
+    /// reference's origin.
     pub(crate) fn smooth_against(
         &mut self,
         storage: &Storage,
         opts: &Options,
         when: Statistics,
         reference: Reference,
+        input: Option<&[DVec3]>,
         observer: &mut dyn Observer,
-    ) -> Result<Vec<IterationRecord>> {
-        if opts.auto_stop {
-            return Err(Error::parameter(
-                "auto_stop",
-                "measures against the positions it starts from",
-            ));
-        }
+    ) -> Result<(Vec<IterationRecord>, Option<AutoStopStats>)> {
         let mut records = Vec::new();
-        self.smooth_into(
-            storage,
-            opts,
-            when,
-            observer,
-            Some(&mut records),
-            Some(reference),
-        )?;
-        Ok(records)
+        let against = Some((reference, input));
+        let auto = self.smooth_into(storage, opts, when, observer, Some(&mut records), against)?;
+        Ok((records, auto))
     }
 
     /// [`Plan::smooth`] measuring only the last iteration and keeping no record: a step whose
@@ -152,8 +143,12 @@ impl Plan {
         when: Statistics,
         observer: &mut dyn Observer,
         records: Option<&mut Vec<IterationRecord>>,
-        reference: Option<Reference>,
+        against: Option<(Reference, Option<&[DVec3]>)>,
     ) -> Result<Option<AutoStopStats>> {
+        let (reference, input_positions) = match against {
+            Some((r, input)) => (Some(r), input),
+            None => (None, None),
+        };
         opts.check()?;
         let Plan {
             reordered,
@@ -173,7 +168,7 @@ impl Plan {
         // The input positions, for a deviation bound or a method that reads them: in the plan's
         // storage (scratch out of core).
         let input: Buf<DVec3> = match opts.keeps_input() {
-            true => storage.copy_of(&reordered.positions)?,
+            true => storage.copy_of(input_positions.unwrap_or(&reordered.positions))?,
             false => Buf::default(),
         };
         let mut auto = match opts.auto_stop {

@@ -15,6 +15,11 @@
 //! 4. A global volume correction (every movable vertex translated along its volume gradient by a
 //!    common factor, the global form of vcs's step 2) makes the output's volume the input's.
 //!
+//! Pins and creases fix vertices of level 0, which neither the transfer nor the correction moves.
+//! With the automatic stop level 0 stops when its noise is gone; with a deviation bound level 0
+//! stays within it of the input through the transfer, the fine method and the correction
+//! ([`transfer::restore_volume_within`]).
+//!
 //! Deterministic for any thread count and storage placement at a given patch size: clustering sorts
 //! unique keys and sums each cluster in a fixed order, every parallel sum uses fixed-size chunks,
 //! and the smoothing is the engine's.
@@ -30,7 +35,8 @@ use rayon::prelude::*;
 
 use crate::engine::reduce;
 use crate::engine::{
-    self, EngineSettings, IterationRecord, Layout, Observer, Plan, Report, Statistics,
+    self, AutoStopStats, EngineSettings, IterationRecord, Layout, Observer, Plan, Report,
+    Statistics,
 };
 use crate::error::{Error, Result};
 use crate::mesh::{Buf, Storage};
@@ -122,22 +128,13 @@ fn or_list(control: Control) -> String {
 
 /// Check that `opts` and `m` make a multiresolution run.
 pub fn validate(opts: &Options, m: &MultiresOptions) -> Result<()> {
-    if opts.auto_stop {
-        return Err(Error::parameter(
-            "auto_stop",
-            "is not supported in multiresolution mode yet (its levels run fixed iteration counts)",
-        ));
-    }
     if !opts.boundary.is_fixed() {
         return Err(Error::parameter(
             "boundary",
-            "smooth is not supported in multiresolution mode yet (clustering moves the loops)",
-        ));
-    }
-    if opts.max_deviation.is_some() {
-        return Err(Error::parameter(
-            "max_deviation",
-            "is not supported in multiresolution mode yet (its coarse levels are not bounded)",
+            format!(
+                "smooth cannot mean anything in multiresolution mode: the input level runs {}, which keep the boundary fixed, and the coarse levels' clusters do not follow the loops",
+                or_list(Control::MultiresFine)
+            ),
         ));
     }
     if !opts.method.unit().accepts(Control::MultiresCoarse) {
@@ -207,7 +204,9 @@ impl Level {
 
 /// Smooth the plan `plan` (level 0) in multiresolution (see the module doc), creating the coarse
 /// levels on `storage` with `patch_size`. Returns level 0's iteration records (the last includes
-/// the final volume correction) and the per-level statistics.
+/// the final volume correction), what its automatic stop measured (with `opts.auto_stop`: the
+/// input level stops when its noise is gone; the coarse levels run `coarse_iterations`, by
+/// default 10 then) and the per-level statistics.
 pub fn smooth_plan(
     plan: &mut Plan,
     storage: &Storage,
@@ -216,7 +215,7 @@ pub fn smooth_plan(
     patch_size: usize,
     when: Statistics,
     observer: &mut dyn Observer,
-) -> Result<(Vec<IterationRecord>, MultiresStats)> {
+) -> Result<(Vec<IterationRecord>, Option<AutoStopStats>, MultiresStats)> {
     validate(opts, m)?;
     let start = Instant::now();
     let origin = reduce::centroid(&plan.reordered.positions);
@@ -230,7 +229,17 @@ pub fn smooth_plan(
         volume: v0,
         area: a0,
     };
-    let coarse_iterations = m.coarse_iterations.unwrap_or(opts.iterations);
+    // The deviation bound holds against the input, whatever the coarse levels did to level 0.
+    let bound_input = match opts.max_deviation {
+        Some(_) => Some(storage.copy_of(&plan.reordered.positions)?),
+        None => None,
+    };
+    let bound = bound_input.as_deref().zip(opts.max_deviation);
+    let coarse_iterations = m.coarse_iterations.unwrap_or(match opts.auto_stop {
+        // `iterations` is then the input level's cap, not a count for the coarse levels.
+        true => Options::default().iterations,
+        false => opts.iterations,
+    });
 
     // 1. The hierarchy, finest to coarsest.
     let mut levels: Vec<Level> = Vec::new();
@@ -297,8 +306,12 @@ pub fn smooth_plan(
     }
 
     // 2. Coarse levels, coarsest first; `disp` is the total displacement of the level just done.
+    // The automatic stop judges the input level's noise; the coarse levels run their count, and
+    // their vertices are no input vertices to bound.
     let coarse_opts = Options {
         iterations: coarse_iterations,
+        auto_stop: false,
+        max_deviation: None,
         ..*opts
     };
     // Diffusing over about one cluster's width: the spread of k Jacobi steps grows like √k rings.
@@ -355,6 +368,12 @@ pub fn smooth_plan(
             m.transfer,
             passes,
         )?;
+        if let Some((input, limit)) = bound {
+            let pos = &mut plan.reordered.positions;
+            pos.par_iter_mut().zip(input.par_iter()).for_each(|(p, o)| {
+                *p = crate::smooth::laplacian::clamp_to_ball(*p, *o, limit);
+            });
+        }
     }
     drop(disp);
     fine.transfer_seconds = t.elapsed().as_secs_f64();
@@ -363,20 +382,29 @@ pub fn smooth_plan(
         method: m.fine_method,
         ..*opts
     };
-    let mut records = plan.smooth_against(storage, &fine_opts, when, input, observer)?;
+    let (mut records, auto) = plan.smooth_against(
+        storage,
+        &fine_opts,
+        when,
+        input,
+        bound_input.as_deref(),
+        observer,
+    )?;
     fine.smooth_seconds = t.elapsed().as_secs_f64();
+    fine.iterations = records.len();
 
     // 4. The final volume correction.
     let t = Instant::now();
     let r = &mut plan.reordered;
     let before = pct(reduce::volume(&r.positions, &r.triangles, origin));
-    let err = transfer::restore_volume(
+    let err = transfer::restore_volume_within(
         storage,
         &plan.topology,
         &r.triangles,
         &mut r.positions,
         v0,
         origin,
+        bound,
     )?;
     let (volume, area) = reduce::volume_area(&r.positions, &r.triangles, origin);
     if let Some(last) = records.last_mut() {
@@ -389,6 +417,7 @@ pub fn smooth_plan(
     all.extend(levels.into_iter().map(|l| l.stats));
     Ok((
         records,
+        auto,
         MultiresStats {
             options: *m,
             levels: all,
@@ -421,7 +450,7 @@ pub fn run_file(
         engine,
         observer,
         |plan, storage, obs| {
-            let (records, s) = smooth_plan(
+            let (records, auto, s) = smooth_plan(
                 plan,
                 storage,
                 opts,
@@ -432,7 +461,7 @@ pub fn run_file(
             )
             .map_err(|e| e.in_file(input))?;
             stats = Some(s);
-            Ok((records, None))
+            Ok((records, auto))
         },
     )?;
     // `run_file_with` returns Ok only after the closure above succeeded.

@@ -130,20 +130,44 @@ pub fn restore_volume(
     target: f64,
     origin: DVec3,
 ) -> Result<f64> {
+    restore_volume_within(storage, topo, triangles, pos, target, origin, None)
+}
+
+/// Rounds of [`restore_volume_within`] with a bound, beyond the two without: each round the
+/// vertices the translation took out of their balls are put back and hold still, and the others
+/// make up their share.
+const BOUNDED_ROUNDS: usize = 16;
+
+/// [`restore_volume`]; with `bound = Some((input, limit))` no vertex ends farther than `limit`
+/// from its `input` position (indexed like `pos`): a vertex a round takes farther is put back on
+/// its ball and moves no more, and the next round asks the volume of the others. The error
+/// returned is what is left after at most [`BOUNDED_ROUNDS`] + 2 rounds (not 0 when the bound
+/// holds every vertex still).
+pub fn restore_volume_within(
+    storage: &Storage,
+    topo: &Topology,
+    triangles: &[[u32; 3]],
+    pos: &mut [DVec3],
+    target: f64,
+    origin: DVec3,
+    bound: Option<(&[DVec3], f64)>,
+) -> Result<f64> {
     let n = pos.len();
     let scale = target.abs().max(f64::MIN_POSITIVE);
     let mut grad: Buf<DVec3> = storage.zeroed(n)?;
+    let mut held: Buf<u8> = storage.zeroed(if bound.is_some() { n } else { 0 })?;
+    let rounds = 2 + if bound.is_some() { BOUNDED_ROUNDS } else { 0 };
     let mut err = (reduce::volume(pos, triangles, origin) - target) / scale;
-    for _ in 0..2 {
+    for _ in 0..rounds {
         if err.abs() <= 1e-14 {
             break;
         }
         let fixed = topo.fixed_mask();
-        let src: &[DVec3] = pos;
+        let (src, still): (&[DVec3], &[u8]) = (pos, &held);
         grad.par_chunks_mut(CHUNK).enumerate().for_each(|(c, out)| {
             for (k, g) in out.iter_mut().enumerate() {
                 let v = (c * CHUNK + k) as u32;
-                *g = if fixed[v as usize] != 0 {
+                *g = if fixed[v as usize] != 0 || still.get(v as usize).is_some_and(|&h| h != 0) {
                     DVec3::ZERO
                 } else {
                     volume_gradient(topo, triangles, src, v, src[v as usize])
@@ -157,6 +181,20 @@ pub fn restore_volume(
         pos.par_chunks_mut(CHUNK)
             .zip(grad.par_chunks(CHUNK))
             .for_each(|(p, g)| p.iter_mut().zip(g).for_each(|(p, g)| *p += t * *g));
+        if let Some((input, limit)) = bound {
+            pos.par_chunks_mut(CHUNK)
+                .zip(held.par_chunks_mut(CHUNK))
+                .enumerate()
+                .for_each(|(c, (p, h))| {
+                    for (k, (p, h)) in p.iter_mut().zip(h).enumerate() {
+                        let inside = laplacian::clamp_to_ball(*p, input[c * CHUNK + k], limit);
+                        if inside != *p {
+                            *p = inside;
+                            *h = 1;
+                        }
+                    }
+                });
+        }
         err = (reduce::volume(pos, triangles, origin) - target) / scale;
     }
     Ok(err)
