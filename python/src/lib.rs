@@ -119,15 +119,14 @@ fn smooth_arrays<'py>(
 /// Keyword arguments (those of ``vcsmooth smooth``, in snake_case):
 ///
 /// - ``method``: one of ``vcsmooth.METHODS`` (what each does: ``vcsmooth smooth --help``);
-///   default: the library's default method, ``vcsmooth.DEFAULT_METHOD`` (currently
-///   ``"vcs-lowpass"``).
+///   default: the library's default method, ``vcsmooth.DEFAULT_METHOD``.
 /// - ``iterations`` (10, or ``"auto"``: stop when the noise is gone, after at most 100), ``lam`` (0.5, the Laplacian step λ, in (0, 1]), ``mu`` (-0.53,
 ///   Taubin's second step, in [-1, 0)), ``reject_energy_increase`` (False).
 /// - ``crease_angle`` (None): vertices on edges whose faces' normals differ by more than this
 ///   many degrees, in (0, 180), stay where they are.
 /// - ``max_deviation`` (None): no vertex ends farther than this from its input position.
 /// - ``boundary`` (``"fixed"``): ``"smooth"`` smooths each boundary loop keeping each hole's
-///   size (every method but laplacian and taubin).
+///   size (with the methods that take it, which ``vcsmooth smooth --help`` lists).
 /// - ``pinned`` (None): vertices that do not move: indices, or a boolean mask of length n.
 /// - ``threads`` (None: all cores), ``patch_size`` (16384: part of the result's definition).
 /// - ``stats`` (``"last"`` here): which iterations measure volume and area; the positions are

@@ -245,7 +245,7 @@ impl WorkDir {
         }
         self.write_state(&StateDoc::default())?;
         // The crossing edge stencils do not depend on the method.
-        let stats = made.stats(crate::Method::Vcs);
+        let stats = made.stats(crate::smooth::method::Footprint::Edge);
         let doc = PlanDoc {
             key,
             vertices: made.reordered.positions.len(),

@@ -10,7 +10,6 @@ use rayon::prelude::*;
 
 use super::observer::{Meter, Observer, Phase, Quiet, metered};
 use super::reduce;
-use crate::Method;
 use crate::smooth::method::Footprint;
 use crate::error::{Error, Result};
 use crate::mesh::Storage;
@@ -260,10 +259,9 @@ impl Plan {
         reduce::geometry_about(positions, triangles, &self.topology, origin)
     }
 
-    /// The decomposition's figures for reports, with the colouring and halo `method` runs on
-    /// (its footprint's, see [`Schedule::ring_colours`]).
-    pub fn stats(&self, method: Method) -> PlanStats {
-        let footprint = method.unit().schedule(&Default::default()).footprint();
+    /// The decomposition's figures for reports, with the colouring and halo of `footprint`
+    /// (see [`Schedule::ring_colours`]); a method's is `method.unit().schedule(opts).footprint()`.
+    pub fn stats(&self, footprint: Footprint) -> PlanStats {
         let (colours, halo) = footprint_colouring(
             footprint,
             (&self.schedule.colours, &self.schedule.halo),

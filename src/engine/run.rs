@@ -457,7 +457,7 @@ fn smooth_planned(
         auto_stop,
         input_stats,
         output_stats: None,
-        plan: plan.stats(opts.method),
+        plan: plan.stats(opts.method.unit().schedule(opts).footprint()),
     })
 }
 

@@ -137,7 +137,7 @@ impl Default for BenchSettings {
     fn default() -> Self {
         BenchSettings {
             sizes: vec![parse_size("1M").expect("valid size")],
-            methods: vec![Method::Laplacian, Method::Taubin, Method::Vcs],
+            methods: Method::BENCH.to_vec(),
             threads: default_threads(),
             iterations: 3,
             repeats: 3,
@@ -456,7 +456,7 @@ fn run_threads(
     phase(format!("{}: preparing on {threads} threads", size.label));
     let (mut plan, prepare) = pool.install(|| prepare(settings, &storage, mesh))?;
     // The edge colouring's figures (the sizes' table has one plan column for all methods).
-    let stats = plan.stats(Method::Vcs);
+    let stats = plan.stats(crate::smooth::method::Footprint::Edge);
     let triangles = mesh.triangles.len() as f64;
     let mut methods = Vec::with_capacity(settings.methods.len());
     for &method in &settings.methods {

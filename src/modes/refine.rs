@@ -371,9 +371,8 @@ impl Default for RefineOptions {
         RefineOptions {
             max_edge: 1.0,
             rounds: 2,
-            // The paper's refinement figures smooth with vcs (Fig. 5), as `refine --method` does.
             smoothing: Options {
-                method: crate::Method::Vcs,
+                method: crate::Method::REFINE,
                 iterations: 5,
                 ..Options::default()
             },

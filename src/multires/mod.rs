@@ -74,7 +74,7 @@ impl Default for MultiresOptions {
         MultiresOptions {
             levels: DEFAULT_LEVELS,
             coarse_iterations: None,
-            fine_method: Method::Laplacian,
+            fine_method: Method::MULTIRES_FINE,
             transfer: Transfer::Interpolate,
             cell_factor: DEFAULT_CELL_FACTOR,
         }

@@ -66,6 +66,18 @@ impl Method {
         Method::Hc,
     ];
 
+    /// The coarse levels' method of the multiresolution mode when none is named.
+    pub const MULTIRES_COARSE: Method = Method::Vcs;
+    /// The input level's method of the multiresolution mode when none is named: the cheapest
+    /// Jacobi filter.
+    pub const MULTIRES_FINE: Method = Method::Laplacian;
+    /// `refine`'s method between its rounds: the paper's refinement figures smooth with vcs (Fig. 5).
+    pub const REFINE: Method = Method::Vcs;
+    /// `curves`' methods when none are named: the paper's Fig. 4.
+    pub const CURVES: [Method; 3] = [Method::Vcs, Method::Lem, Method::Laplacian];
+    /// `bench`'s methods when none are named: the two Jacobi filters and the paper's method.
+    pub const BENCH: [Method; 3] = [Method::Laplacian, Method::Taubin, Method::Vcs];
+
     /// The method's unit: everything the engine, the command line and Python need of it.
     pub fn unit(self) -> &'static dyn Smoother {
         match self {

@@ -41,7 +41,7 @@ pub struct BenchArgs {
     pub sizes: Vec<core::SizeSpec>,
     /// Comma-separated methods to time.
     #[arg(long, value_enum, value_delimiter = ',', value_name = "M,M,...",
-          default_values_t = [Method::Laplacian, Method::Taubin, Method::Vcs])]
+          default_values_t = Method::BENCH)]
     pub methods: Vec<Method>,
     /// Comma-separated thread counts, each 1 to 4096 [default: 1 and all cores].
     #[arg(long, value_name = "N,...", value_delimiter = ',', allow_negative_numbers = true,

@@ -26,7 +26,7 @@ pub struct CurvesArgs {
     pub input: PathBuf,
     /// Comma-separated methods to run, each from the same input.
     #[arg(long, value_enum, value_delimiter = ',', value_name = "M,M,...",
-          default_values_t = [Method::Vcs, Method::Lem, Method::Laplacian])]
+          default_values_t = Method::CURVES)]
     pub methods: Vec<Method>,
     /// Iterations per method (at least 1).
     #[arg(long, value_name = "N", default_value_t = 10, allow_negative_numbers = true,

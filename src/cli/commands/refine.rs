@@ -34,7 +34,7 @@ pub struct RefineArgs {
     #[arg(long, value_name = "N", default_value_t = 5, allow_negative_numbers = true, value_parser = clap::value_parser!(u32).range(0..=100_000))]
     pub iterations: u32,
     /// Smoothing method (the paper uses vcs, Fig. 5, and vcs-triangle, Fig. 6).
-    #[arg(long, value_enum, default_value_t = Method::Vcs)]
+    #[arg(long, value_enum, default_value_t = Method::REFINE)]
     pub method: Method,
     /// Worker threads of the smoothing, 1 to 4096 [default: all cores].
     #[arg(long, value_name = "N", allow_negative_numbers = true, value_parser = clap::value_parser!(u32).range(1..=MAX_THREADS as i64))]

@@ -102,8 +102,8 @@ impl SmoothConfig {
         engine.statistics = a.stats;
         let mut options = a.smoothing.options();
         if a.multires.multires && a.smoothing.method.is_none() {
-            // Multiresolution runs a volume-constrained method on its coarse levels, vcs by default.
-            options.method = crate::Method::Vcs;
+            // Multiresolution runs a volume-constrained method on its coarse levels.
+            options.method = crate::Method::MULTIRES_COARSE;
         }
         let multires = a.multires.resolve(&options)?;
         if multires.is_some() && a.cluster.checkpoint.is_some() {
