@@ -1,4 +1,4 @@
-//! `--iterations auto` (issue #15, item 5; `Options::auto_stop`, `engine::auto`): where runs stop
+//! `--iterations auto` (`Options::auto_stop`, `engine::auto`): where runs stop
 //! on meshes of several noise levels, clean ones and the real scans; that the reported figures
 //! follow the documented rule; that the stop and the result are bit-identical for any thread
 //! count and storage; the reports; the command line, its errors and the modes that refuse it.
@@ -368,7 +368,7 @@ fn auto_out_of_core_equals_in_core() {
 }
 
 #[test]
-fn bad_values_and_modes_that_refuse_auto_are_one_line_errors() {
+fn bad_values_are_one_line_errors_and_multires_stops_too() {
     let dir = tempfile::tempdir().unwrap();
     let input = scan("fertility-9k.ply");
     let out = arg(&dir.path().join("out.ply"));
@@ -390,12 +390,19 @@ fn bad_values_and_modes_that_refuse_auto_are_one_line_errors() {
             ],
         );
     }
-    fails(
-        &smooth(&["--iterations", "auto", "--multires"]),
-        2,
-        &["--iterations auto", "multiresolution"],
-    );
     assert!(!dir.path().join("out.ply").exists());
+    // With --multires it is a run: the input level stops when its noise is gone.
+    let report = arg(&dir.path().join("r.json"));
+    ok(smooth(&[
+        "--iterations",
+        "auto",
+        "--multires",
+        "--report",
+        &report,
+    ]));
+    let doc = read_json(Path::new(&report));
+    assert!(doc["auto_stop"]["stopped_by"].is_string(), "{doc}");
+    assert!(doc["iterations_run"].as_u64().unwrap() < DEFAULT_CAP as u64);
 }
 
 /// The cluster engine stops where one process does, on any number of ranks, and a checkpointed

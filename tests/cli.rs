@@ -438,8 +438,19 @@ fn curves_take_every_control_as_smooth_does() {
         "512",
     ];
     let curve_of = |extra: &[&str]| -> Vec<Vec<f64>> {
-        let mut args = vec!["curves", sphere.to_str().unwrap(), "--methods", "vcs,laplacian,hc"];
-        args.extend(["--iterations", "4", "--plot", plot.to_str().unwrap(), "--json"]);
+        let mut args = vec![
+            "curves",
+            sphere.to_str().unwrap(),
+            "--methods",
+            "vcs,laplacian,hc",
+        ];
+        args.extend([
+            "--iterations",
+            "4",
+            "--plot",
+            plot.to_str().unwrap(),
+            "--json",
+        ]);
         args.extend(extra);
         let doc = json(&ok(vcsmooth(args)));
         let pct = |c: &serde_json::Value| -> Vec<f64> {
@@ -467,7 +478,12 @@ fn curves_take_every_control_as_smooth_does() {
     }
     // The creases fix most of the noisy sphere's vertices: the Laplacian shrinks it less.
     let without = curve_of(&controls[2..]);
-    assert!(with[1][4] > without[1][4], "{} vs {}", with[1][4], without[1][4]);
+    assert!(
+        with[1][4] > without[1][4],
+        "{} vs {}",
+        with[1][4],
+        without[1][4]
+    );
 }
 
 #[test]

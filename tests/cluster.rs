@@ -1,4 +1,4 @@
-//! The cluster engine (issue 7): one mesh over several ranks, with checkpoints. Ranks run here as
+//! The cluster engine: one mesh over several ranks, with checkpoints. Ranks run here as
 //! threads exchanging through `cluster::Local`, the same code path MPI ranks take; tests/engines.rs
 //! repeats the essentials with real OpenMPI processes.
 

@@ -1,4 +1,4 @@
-//! Against the real engines (issue 7): OpenMPI ranks and a Slurm cluster on this machine. Built
+//! Against the real engines: OpenMPI ranks and a Slurm cluster on this machine. Built
 //! only with `--features mpi` (Cargo.toml), which CI enables after installing OpenMPI and Slurm
 //! (`.ci/run`); these tests fail, never skip, when an engine is missing.
 

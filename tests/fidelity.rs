@@ -1,4 +1,4 @@
-//! Files keep everything they carried (issue 16): every attribute but positions and normals
+//! Files keep everything they carried: every attribute but positions and normals
 //! comes back byte- or value-identical after smoothing, the volume is kept, and `info` says what a
 //! file carries. One module a format.
 

@@ -219,7 +219,14 @@ fn runs(sphere: &Path, torus: &Path, big: &Path) -> Vec<Run> {
             "demosthenes-hc-deviation",
             &scan("demosthenes-17k.ply"),
             "ply",
-            &["--method", "hc", "--iterations", "7", "--max-deviation", "0.002"],
+            &[
+                "--method",
+                "hc",
+                "--iterations",
+                "7",
+                "--max-deviation",
+                "0.002",
+            ],
         ),
         (
             "armadillo-multires",

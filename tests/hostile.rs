@@ -1,4 +1,4 @@
-//! Hostile input and faults, end to end through the `vcsmooth` binary (issue 5, DESIGN invariants
+//! Hostile input and faults, end to end through the `vcsmooth` binary (DESIGN invariants
 //! 4 and 5).
 //!
 //! - `corpus_*`: every file of the generated corpus (`tests/corpus/cases.rs`) through `vcsmooth

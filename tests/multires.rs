@@ -1,4 +1,4 @@
-//! `smooth --multires` (issue #6): volume and roughness on the real scans, the hierarchy's
+//! `smooth --multires`: volume and roughness on the real scans, the hierarchy's
 //! sanity, bit-identical output for any thread count and between in-core and scratch storage,
 //! fixed vertices, and usage errors.
 
@@ -414,7 +414,11 @@ fn the_automatic_stop_ends_the_input_level() {
     let (two, _) = run(&mesh, &auto, &m, 2, 1024);
     assert_eq!(one, two, "thread counts differ");
     let fine = &stats.levels[0];
-    assert!(fine.iterations >= 1 && fine.iterations < 100, "{}", fine.iterations);
+    assert!(
+        fine.iterations >= 1 && fine.iterations < 100,
+        "{}",
+        fine.iterations
+    );
     assert!(stats.levels[1..].iter().all(|l| l.iterations == 10));
     assert!(stats.volume_error <= 1e-9);
     // It ran what a fixed count of the same length runs.
@@ -452,17 +456,28 @@ fn the_deviation_bound_holds_and_the_volume_stays_exact() {
     };
     let (out, stats) = run(&mesh, &bounded, &m, 2, 1024);
     // The clamp puts a vertex on its ball up to rounding.
-    assert!(farthest(&out) <= limit * (1.0 + 1e-12), "{} > {limit}", farthest(&out));
+    assert!(
+        farthest(&out) <= limit * (1.0 + 1e-12),
+        "{} > {limit}",
+        farthest(&out)
+    );
     let held = out
         .iter()
         .zip(mesh.positions.iter())
         .filter(|(p, q)| p.distance(**q) > 0.999 * limit)
         .count();
-    assert!(held > 0, "the bound holds no vertex: the test bounds nothing");
+    assert!(
+        held > 0,
+        "the bound holds no vertex: the test bounds nothing"
+    );
     let v_out = metrics::volume_about(&out, &mesh.triangles, origin);
     assert!(((v_out - v_in) / v_in).abs() <= 1e-9, "{v_out} vs {v_in}");
     assert!(stats.volume_error <= 1e-9);
-    assert_eq!(run(&mesh, &bounded, &m, 1, 1024).0, out, "thread counts differ");
+    assert_eq!(
+        run(&mesh, &bounded, &m, 1, 1024).0,
+        out,
+        "thread counts differ"
+    );
 }
 
 /// Creases with `--multires`: their vertices keep their input bytes (the coarse transfer and
@@ -474,15 +489,38 @@ fn crease_vertices_keep_their_bytes() {
     generate_sphere(&input, 4, Some(0.3), Some(5));
     let out = dir.path().join("out.ply");
     let report = dir.path().join("r.json");
-    let (i, o, r) = (input.display().to_string(), out.display().to_string(), report.display().to_string());
+    let (i, o, r) = (
+        input.display().to_string(),
+        out.display().to_string(),
+        report.display().to_string(),
+    );
     ok(vcsmooth([
-        "smooth", &i, &o, "--multires", "--crease-angle", "60", "--report", &r,
+        "smooth",
+        &i,
+        &o,
+        "--multires",
+        "--crease-angle",
+        "60",
+        "--report",
+        &r,
     ]));
     let doc = read_json(&report);
     let creased = doc["input"]["stats"]["crease_vertices"].as_u64().unwrap();
     let (a, b) = (io::read_mesh(&input).unwrap(), io::read_mesh(&out).unwrap());
-    let kept = a.positions.iter().zip(b.positions.iter()).filter(|(p, q)| p == q).count();
+    let kept = a
+        .positions
+        .iter()
+        .zip(b.positions.iter())
+        .filter(|(p, q)| p == q)
+        .count();
     assert!(creased > 10, "{creased}");
-    assert!(kept as u64 >= creased, "{kept} unmoved, {creased} crease vertices");
-    assert!((kept as u64) < a.positions.len() as u64 / 2, "{kept} of {}", a.positions.len());
+    assert!(
+        kept as u64 >= creased,
+        "{kept} unmoved, {creased} crease vertices"
+    );
+    assert!(
+        (kept as u64) < a.positions.len() as u64 / 2,
+        "{kept} of {}",
+        a.positions.len()
+    );
 }

@@ -1,4 +1,4 @@
-//! The patch-parallel engine (issue 3): determinism across threads and storage, no seams, volume
+//! The patch-parallel engine: determinism across threads and storage, no seams, volume
 //! preservation on many small patches, equality with the whole-mesh engine on one patch.
 
 use std::path::Path;

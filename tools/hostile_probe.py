@@ -17,7 +17,7 @@ kept, the radius range of a sphere, a crack counted as boundary).
     python3 tools/hostile_probe.py [--bin target/release/vcsmooth] [--only CLASS] [--list]
 
 prints one line per case that went wrong and, last, `N cases, M went wrong` (exit 1 if M > 0).
-The classes follow issue #17: paths, values, readers, geometry, memory, signals, batch, output,
+The classes: paths, values, readers, geometry, memory, signals, batch, output,
 and gltf (`.gltf` with external and `data:` buffers, `.glb`: what a glTF input may hold, where a
 glTF output's buffers go).
 Only the Python standard library is needed.

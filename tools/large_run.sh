@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The 103M-triangle run of issue #13's figures: the kitten scan of ../shared/meshes split into 4^6
+# The 103M-triangle run of docs/performance.md's figures: the kitten scan of ../shared/meshes split into 4^6
 # (103,407,616 triangles), noise 0.3 × mean edge length, vcs under a 1 GiB memory budget, through
 # tools/billion_run.sh (phases, peak RssAnon, scratch bytes, disk high-water mark). Needs about
 # 2 GB for the input, 2 GB for the output and 14 GB of scratch space in WORK_DIR.

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Screen first-step parameters of vcs-lowpass against the quality target (issue #15).
+"""Screen first-step parameters of vcs-lowpass against the quality target.
 
 For every scan x sigma x seed: the noisy mesh (`vcsmooth generate mesh ... --seed S`, as
 tools/quality_table.py makes it) and the baseline (`--method taubin --iterations 10`, the

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """The overhead of `vcsmooth.smooth` (arrays in memory) against the CLI's `vcsmooth smooth` (file
-to file), for issue 14's closing note. Interleaved rounds; wall and CPU seconds (CPU of all
+to file), for the Python binding's figures. Interleaved rounds; wall and CPU seconds (CPU of all
 threads; for the CLI, the child's), medians.
 
     vcsmooth generate torus /dev/shm/t6.ply --subdivisions 6 --noise 0.3 --seed 7   # 1,048,576 triangles

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Denoising quality of vcsmooth's methods on real scans (issue #15's target).
+"""Denoising quality of vcsmooth's methods on real scans.
 
 For every scan (PLY) in a folder and every noise level sigma (x mean edge length):
 

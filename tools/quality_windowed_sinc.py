@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Is a sharper low-pass filter than Taubin's λ|μ a better first step? (issue #15, research)
+"""Is a sharper low-pass filter than Taubin's λ|μ a better first step?
 
 VTK's windowed-sinc filter (Taubin, Zhang and Golub 1996: a Chebyshev polynomial of the umbrella
 operator with a sharper transition band than λ|μ) against `vcsmooth smooth --method taubin

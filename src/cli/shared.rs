@@ -14,7 +14,7 @@ use crate::smooth::{Boundary, Control, Method, Options};
 /// `IN OUT` of the commands that turn one mesh file into another (`smooth`, `subdivide`, `refine`).
 #[derive(Debug, Clone, ClapArgs)]
 pub struct InOut {
-    /// Input mesh (PLY, OBJ, OFF or STL).
+    /// Input mesh (PLY, OBJ, OFF, STL, glTF or GLB).
     #[arg(value_name = "IN")]
     pub input: PathBuf,
     /// Output mesh; .ply, .obj, .off, .stl, or .gltf/.glb for a glTF input. Written atomically, never on failure.
@@ -152,7 +152,11 @@ fn deviation_help() -> String {
 fn boundary_help() -> String {
     let smooth: Vec<Method> = Method::accepting(Control::SmoothBoundary).collect();
     let names = |ms: &[Method]| ms.iter().map(|m| m.name()).collect::<Vec<_>>().join(", ");
-    let keep: Vec<Method> = smooth.iter().copied().filter(|m| m.keeps_volume()).collect();
+    let keep: Vec<Method> = smooth
+        .iter()
+        .copied()
+        .filter(|m| m.keeps_volume())
+        .collect();
     format!(
         "Boundary loops of open meshes: fixed, or smooth ({}: each loop is smoothed as a curve; {} keep each hole's size exactly)",
         names(&smooth),

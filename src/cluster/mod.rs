@@ -16,7 +16,8 @@
 //! every region copy is brought up to date before the next colour, so each stencil sees exactly
 //! the values it sees in the single-process engine: **the output is bit-identical to
 //! `vcsmooth smooth` at the same `--patch-size`, for any number of ranks and threads.** Jacobi
-//! methods (laplacian, taubin) update owned vertices and exchange them after each step.
+//! methods (a [`crate::smooth::method::Schedule`] of Jacobi passes) update owned vertices and
+//! exchange them after each pass.
 //!
 //! Which values to send is decided once: rank `r`'s *border* `X_r` is its three outer rings plus
 //! the owned vertices within three rings of another rank; the vertices two regions share are
@@ -98,12 +99,15 @@ pub fn run_file(
         engine::thread_pool(engine.threads),
         "another rank could not start its threads",
     )?;
+    // As in the engine's run: the records take their share, the mesh decides heap or scratch in
+    // the rest.
+    let mesh_budget = budget.saturating_sub(memory::records_bytes(opts.iterations));
     let work = WorkDir::new(&cluster.work_dir);
     let mut t = PhaseTimings::default();
 
     // 1. The plan: rank 0 makes it unless a matching one is there; the others wait for it.
     let made = if comm.rank() == 0 {
-        pool.install(|| ensure_plan(&work, input, output, opts, engine, budget, &mut t))
+        pool.install(|| ensure_plan(&work, input, output, opts, engine, mesh_budget, &mut t))
     } else {
         Ok(())
     };
@@ -154,7 +158,7 @@ pub fn run_file(
     // 4. Rank 0 writes the output in the input's order.
     let clock = Instant::now();
     let written = if comm.rank() == 0 {
-        pool.install(|| write_output(&work, &plan, &state, input, output, engine, budget))
+        pool.install(|| write_output(&work, &plan, &state, input, output, engine, mesh_budget))
     } else {
         Ok(None)
     };

@@ -713,7 +713,11 @@ impl Run<'_, '_> {
 
 /// The stencil kernel's parameters for `unit` with `opts`; `input`: the input positions, read
 /// when `opts.max_deviation` bounds the deviation.
-fn stencil_params<'a>(unit: &dyn Smoother, opts: &Options, input: &'a [DVec3]) -> StencilParams<'a> {
+fn stencil_params<'a>(
+    unit: &dyn Smoother,
+    opts: &Options,
+    input: &'a [DVec3],
+) -> StencilParams<'a> {
     StencilParams {
         volume: unit.stencil_volume(),
         reject_energy_increase: opts.reject_energy_increase,
@@ -799,7 +803,9 @@ impl Exec for ShareExec<'_> {
 
     fn neighbor_sums(&mut self, pos: &[DVec3], sums: &mut [DVec3]) {
         let (topo, owned) = (self.topo, self.share.owned());
-        on_pool(&*self.share, || reduce::neighbor_sums(topo, pos, sums, owned));
+        on_pool(&*self.share, || {
+            reduce::neighbor_sums(topo, pos, sums, owned)
+        });
         for &v in self.share.halo_sums() {
             let v = v as usize;
             crate::smooth::neighbor_sums_into(topo, pos, &mut sums[v..v + 1], v);

@@ -159,10 +159,12 @@ impl Plan {
             ..
         } = self;
         let n = reordered.positions.len();
-        let (schedule_of, needs) = (opts.method.unit().schedule(opts), opts.method.unit().needs());
+        let (schedule_of, needs) = (
+            opts.method.unit().schedule(opts),
+            opts.method.unit().needs(),
+        );
         let sized = |wanted: bool| if wanted { n } else { 0 };
-        let mut prev: Buf<DVec3> =
-            storage.zeroed(sized(!schedule_of.is_jacobi() || needs.aux))?;
+        let mut prev: Buf<DVec3> = storage.zeroed(sized(!schedule_of.is_jacobi() || needs.aux))?;
         let mut scratch: Buf<DVec3> = storage.zeroed(n)?;
         let mut counts: Buf<u8> = storage.zeroed(sized(needs.counts))?;
         // The input positions, for a deviation bound or a method that reads them: in the plan's

@@ -10,11 +10,11 @@ use rayon::prelude::*;
 
 use super::observer::{Meter, Observer, Phase, Quiet, metered};
 use super::reduce;
-use crate::smooth::method::Footprint;
 use crate::error::{Error, Result};
 use crate::mesh::Storage;
 use crate::partition::{self, Patch, Reordered};
 use crate::schedule::{self, Schedule};
+use crate::smooth::method::Footprint;
 use crate::topology::Topology;
 
 /// How a plan orders and cuts the mesh. Part of the result's definition: the stencil methods

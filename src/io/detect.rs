@@ -119,8 +119,8 @@ pub(super) fn detect(head: &[u8], len: u64, path: &Path) -> Result<Format, Strin
         return Ok(Format::Stl);
     }
     Format::from_extension(path).ok_or_else(|| {
-        "unknown format: not PLY, OFF or STL by content, and the extension is not \
-         .ply, .obj, .off or .stl"
+        "unknown format: not PLY, GLB, OFF or STL by content, and the extension is not \
+         .ply, .obj, .off, .stl, .gltf or .glb"
             .into()
     })
 }

@@ -76,7 +76,7 @@ pub fn reorder_metered(
         0.0
     };
 
-    // Element-wise passes, cut into chunks only to count them: each item is computed as before.
+    // Element-wise passes, cut into chunks only to count them: each item is computed as in one pass.
     let mut keys: Buf<[u64; 2]> = storage.zeroed(n)?;
     keys.par_chunks_mut(STEP).enumerate().for_each(|(c, keys)| {
         for (k, key) in keys.iter_mut().enumerate() {

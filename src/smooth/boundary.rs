@@ -4,7 +4,8 @@
 //! A boundary stencil is a boundary edge `(i, j)` of two loop vertices ([`Topology::is_loop`]);
 //! along their loop it reads the chain `a₂ – a – i – j – b – b₂` (a: i's other loop neighbour, b:
 //! j's, a₂ and b₂ one further). Its free vertices are i and j; everything else stays where it is.
-//! Interior stencils treat loop vertices as fixed, so they keep their volumes exactly as before.
+//! Interior stencils treat loop vertices as fixed, so they keep their volumes exactly, as with
+//! fixed boundaries.
 //!
 //! - Step 1 (curve energy): with the curve umbrella `C(v) = ½ (p_prev + p_next) − p_v` on the
 //!   rows a, i, j, b (a row is left out when its vertex is not on exactly two boundary edges, or is

@@ -41,7 +41,13 @@ fn average(topo: &Topology, field: &[DVec3], v: u32) -> Option<DVec3> {
 
 /// Pass 0 for the vertices `first .. first + out.len()`: `b` from the positions `pos` and the
 /// input `input` (indexed like `pos`).
-pub fn differences(topo: &Topology, pos: &[DVec3], input: &[DVec3], out: &mut [DVec3], first: usize) {
+pub fn differences(
+    topo: &Topology,
+    pos: &[DVec3],
+    input: &[DVec3],
+    out: &mut [DVec3],
+    first: usize,
+) {
     let fixed = &topo.fixed_mask()[first..first + out.len()];
     for (k, b) in out.iter_mut().enumerate() {
         let v = first + k;
@@ -206,7 +212,10 @@ mod tests {
         let r0 = mean_radius(&input);
         let (shrink_hc, shrink_lap) = (r0 - mean_radius(&hc), r0 - mean_radius(&lap));
         assert!(shrink_lap > 0.0);
-        assert!(shrink_hc.abs() < 0.25 * shrink_lap, "{shrink_hc} vs {shrink_lap}");
+        assert!(
+            shrink_hc.abs() < 0.25 * shrink_lap,
+            "{shrink_hc} vs {shrink_lap}"
+        );
     }
 
     #[test]

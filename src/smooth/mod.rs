@@ -183,8 +183,9 @@ pub struct Options {
     pub iterations: usize,
     /// Stop early, after the iteration at which the noise is gone by the rule of
     /// [`crate::engine::auto`] (data-driven, from the input alone); the report says how many
-    /// ran and why they stopped. Not in the multiresolution mode.
-    /// Absent from JSON when false (reports and batch settings keys as before).
+    /// ran and why they stopped. In the multiresolution mode the input level stops so.
+    /// Absent from JSON when false, so that the reports and batch settings keys of runs without
+    /// it do not depend on it.
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub auto_stop: bool,
     /// Laplacian step size λ (`laplacian`, and the first step of `taubin`).

@@ -260,9 +260,9 @@ pub fn cases() -> Vec<Case> {
         // --- any format
         error("empty.ply", b"".to_vec(), "empty file"),
         error("empty.obj", b"".to_vec(), "empty file"),
-        error("unknown_format.dat", b"hello world\n".to_vec(), "unknown format: not PLY, OFF or STL by content, and the extension is not .ply, .obj, .off or .stl"),
+        error("unknown_format.dat", b"hello world\n".to_vec(), "unknown format: not PLY, GLB, OFF or STL by content, and the extension is not .ply, .obj, .off, .stl, .gltf or .glb"),
         error("unknown_format.ply", b"hello world\n".to_vec(), "not a PLY file (the first line is not 'ply')"),
-        error("unknown_format_binary.bin", vec![0x7f, b'E', b'L', b'F', 2, 1, 1, 0], "unknown format: not PLY, OFF or STL by content, and the extension is not .ply, .obj, .off or .stl"),
+        error("unknown_format_binary.bin", vec![0x7f, b'E', b'L', b'F', 2, 1, 1, 0], "unknown format: not PLY, GLB, OFF or STL by content, and the extension is not .ply, .obj, .off, .stl, .gltf or .glb"),
         // --- PLY header
         error("missing_end_header.ply", b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\n".to_vec(), "header: no end_header line (the file ends at line 5)"),
         error("missing_format.ply", b"ply\nelement vertex 0\nproperty float x\nend_header\n".to_vec(), "header: no format line"),

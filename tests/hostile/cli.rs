@@ -1,4 +1,4 @@
-//! Hostile command lines (issue 17): paths that would destroy a file, output locations that cannot
+//! Hostile command lines: paths that would destroy a file, output locations that cannot
 //! be written, undefined quantities, out-of-range values.
 //!
 //! - no side file (report, plot) may name an input, the output or another side file, however it

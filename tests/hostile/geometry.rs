@@ -1,4 +1,4 @@
-//! Geometry and topology that smoothing must survive (issue 17), end to end through the binary:
+//! Geometry and topology that smoothing must survive, end to end through the binary:
 //!
 //! - closed debris of a few vertices beside a real surface: its stencils are degenerate (a
 //!   triangle stencil collapses a tetrahedron to a point, where no translation restores the

@@ -13,15 +13,15 @@ use crate::cli::plot::{Curve, file_name, volume_curve, write_volume_plot};
 use crate::cli::progress::Progress;
 use crate::cli::report::{Tool, fixed};
 use crate::cli::shared::{EngineArgs, MethodParams, distinct};
-use crate::engine::{EngineSettings, Layout};
 use crate::engine::{self, IterationRecord};
+use crate::engine::{EngineSettings, Layout};
 use crate::error::Result;
 use crate::smooth::{Method, Options};
 
 /// `vcsmooth curves IN --plot FILE.svg ...`
 #[derive(Debug, Clone, ClapArgs)]
 pub struct CurvesArgs {
-    /// Input mesh (PLY, OBJ, OFF or STL).
+    /// Input mesh (PLY, OBJ, OFF, STL, glTF or GLB).
     #[arg(value_name = "IN")]
     pub input: PathBuf,
     /// Comma-separated methods to run, each from the same input.
@@ -133,8 +133,9 @@ pub fn run(cfg: &CurvesConfig, progress: &mut Progress, out: &mut dyn Write) -> 
         };
         let mut smoothed = mesh.clone();
         progress.iterations(method.name(), options.iterations);
-        let report = engine::run::run_mesh(&mut smoothed, &options, &settings, cfg.layout, progress)
-            .map_err(|e| e.in_file(&cfg.input))?;
+        let report =
+            engine::run::run_mesh(&mut smoothed, &options, &settings, cfg.layout, progress)
+                .map_err(|e| e.in_file(&cfg.input))?;
         docs.push(CurveDoc {
             method,
             volume_pct: volume_curve(&report.records),

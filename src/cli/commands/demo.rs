@@ -64,7 +64,6 @@ impl DemoConfig {
 
 /// `vcsmooth demo`.
 pub fn run(cfg: &DemoConfig, progress: &mut Progress, out: &mut dyn Write) -> Result<()> {
-    use crate::mesh::Storage;
     progress.phase(format!(
         "generating a noisy sphere (level {})",
         cfg.subdivisions
@@ -72,8 +71,6 @@ pub fn run(cfg: &DemoConfig, progress: &mut Progress, out: &mut dyn Write) -> Re
     let clean = shapes::icosphere(cfg.subdivisions);
     let mut noisy = clean.clone();
     shapes::add_normal_noise(&mut noisy, cfg.noise, 1);
-    let pool = engine::thread_pool(cfg.engine.threads)?;
-    let storage = Storage::heap();
     let clean_topo = Topology::build(clean.positions.len(), &clean.triangles)?;
     let rough_clean = metrics::roughness(&clean.positions, &clean.triangles, &clean_topo);
     let rough_noisy = metrics::roughness(&noisy.positions, &noisy.triangles, &clean_topo);
@@ -85,7 +82,7 @@ pub fn run(cfg: &DemoConfig, progress: &mut Progress, out: &mut dyn Write) -> Re
         noisy.triangles.len(),
         cfg.noise,
         cfg.iterations,
-        pool.current_num_threads(),
+        cfg.engine.threads.unwrap_or_else(rayon::current_num_threads),
         rough_clean,
         rough_noisy
     )
@@ -96,15 +93,12 @@ pub fn run(cfg: &DemoConfig, progress: &mut Progress, out: &mut dyn Write) -> Re
         "method", "volume %", "area %", "roughness °", "RMS to clean", "seconds"
     )
     .map_err(stdout_error)?;
-    // One plan for every method, each from the noisy positions.
-    let mut plan = pool.install(|| {
-        engine::Plan::new(
-            &storage,
-            &noisy.positions,
-            &noisy.triangles,
-            engine::Layout::Patches(cfg.engine.patch_size),
-        )
-    })?;
+    // Every method from the noisy positions, through the library's front door.
+    let settings = EngineSettings {
+        statistics: engine::Statistics::Every,
+        with_stats: false,
+        ..cfg.engine.clone()
+    };
     for method in Method::ALL {
         let opts = Options {
             method,
@@ -112,11 +106,9 @@ pub fn run(cfg: &DemoConfig, progress: &mut Progress, out: &mut dyn Write) -> Re
             ..Default::default()
         };
         progress.iterations(method.name(), cfg.iterations);
-        plan.set_positions_from_input(&noisy.positions);
-        let records =
-            pool.install(|| plan.smooth(&storage, &opts, engine::Statistics::Every, progress))?;
-        let mut positions = noisy.positions.clone();
-        plan.positions_in_input_order(&mut positions);
+        let mut smoothed = noisy.clone();
+        let records = crate::smooth_with(&mut smoothed, &opts, &settings, progress)?.records;
+        let positions = &smoothed.positions;
         let last = records.last().copied().unwrap_or_default();
         let rough = metrics::roughness(&positions, &noisy.triangles, &clean_topo);
         let rms = (positions
