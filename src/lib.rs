@@ -29,6 +29,8 @@
 //!   to file, the memory model.
 //! - [`multires`]: coarse levels smoothed with `vcs`, the fine level with Laplacian or Taubin.
 //! - [`cluster`]: the same loop over MPI ranks, with checkpoints.
+//! - [`report`]: the report model, what `smooth --report` and `info --json` write and Python
+//!   returns.
 //! - `modes`: `batch` (job arrays), `bench` (throughput), `refine` (subdivide and smooth).
 //! - `cli`: the `vcsmooth` command line: flags → config → run → output.
 //!
@@ -38,7 +40,9 @@
 //! Results are part of the contract: for given inputs and options the output is bit-identical for
 //! any thread count and memory budget (the golden test in `tests/golden.rs` holds it).
 
+// The CLI's doc comments are its --help text (with <placeholders>), not rustdoc.
 #[doc(hidden)]
+#[allow(rustdoc::invalid_html_tags)]
 pub mod cli;
 pub mod cluster;
 pub mod engine;
@@ -51,6 +55,7 @@ pub mod metrics;
 pub mod modes;
 pub mod multires;
 pub mod partition;
+pub mod report;
 pub mod schedule;
 pub mod shapes;
 #[doc(hidden)]

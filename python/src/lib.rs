@@ -19,9 +19,7 @@ use numpy::PyArray2;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 use serde::Serialize;
-use vcsmooth::cli::commands::info::InfoDoc;
-use vcsmooth::cli::commands::smooth::SmoothReport;
-use vcsmooth::cli::report::undefined_as_nan;
+use vcsmooth::report::{InfoDoc, SmoothReport, undefined_as_nan};
 use vcsmooth::engine::{self, Statistics};
 use vcsmooth::{Mesh, Method, Topology};
 

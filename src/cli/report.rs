@@ -1,75 +1,12 @@
-//! What several commands print and record: the tool that wrote a report, a mesh file's statistics,
-//! a run's totals, and the pieces of the human-readable tables.
+//! The pieces of the human-readable tables the commands print (the report model they render is
+//! [`crate::report`]).
 
 use std::io::Write;
-use std::path::Path;
-
-use serde::Serialize;
 
 use super::output::stdout_error;
-use crate::engine::{IterationRecord, Report};
+use crate::engine::Report;
 use crate::error::Result;
-use crate::io::Format;
-use crate::metrics::MeshInfo;
-use crate::smooth::{Options, SweepStats};
-
-/// The program that wrote a report.
-#[derive(Debug, Clone, Serialize)]
-pub struct Tool {
-    pub name: &'static str,
-    pub version: &'static str,
-}
-
-impl Tool {
-    pub fn this() -> Tool {
-        Tool {
-            name: env!("CARGO_PKG_NAME"),
-            version: env!("CARGO_PKG_VERSION"),
-        }
-    }
-}
-
-/// A mesh file and what was measured on it.
-#[derive(Debug, Clone, Serialize)]
-pub struct FileStats {
-    pub path: String,
-    /// `ply`, `obj`, `off`, `stl`; absent when unknown.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub format: Option<String>,
-    pub stats: MeshInfo,
-}
-
-impl FileStats {
-    pub fn new(path: &Path, format: Option<Format>, stats: MeshInfo) -> Self {
-        FileStats {
-            path: path.display().to_string(),
-            format: format.map(format_name),
-            stats: undefined_as_nan(&stats),
-        }
-    }
-}
-
-/// `info` with the figures that are not defined for its mesh set to NaN, which JSON writes as
-/// `null` and the tables as [`UNDEFINED`], and −0 as 0. The library reports them as 0: the
-/// bounding box of no vertices, the mean length of no edges, the roughness (a mean over interior
-/// manifold edges) of a mesh that has none.
-pub fn undefined_as_nan(info: &MeshInfo) -> MeshInfo {
-    let nan_if = |undefined: bool, x: f64| if undefined { f64::NAN } else { x + 0.0 };
-    let no_vertex = info.vertices == 0;
-    let interior = info
-        .edges
-        .saturating_sub(info.boundary_edges + info.non_manifold_edges);
-    MeshInfo {
-        volume: info.volume + 0.0,
-        area: info.area + 0.0,
-        bbox_min: info.bbox_min.map(|x| nan_if(no_vertex, x)),
-        bbox_max: info.bbox_max.map(|x| nan_if(no_vertex, x)),
-        bbox_diagonal: nan_if(no_vertex, info.bbox_diagonal),
-        mean_edge_length: nan_if(info.edges == 0, info.mean_edge_length),
-        roughness_deg: nan_if(interior == 0, info.roughness_deg),
-        ..info.clone()
-    }
-}
+use crate::smooth::Options;
 
 /// What the tables print for a quantity that is not defined (a ratio whose denominator is 0, a
 /// mean over nothing, a percentage of a zero volume): never NaN, inf, or a made-up 0 or 1. JSON
@@ -106,47 +43,6 @@ pub fn defined(x: Option<f64>, format: impl Fn(f64) -> String) -> String {
     }
 }
 
-/// Totals over all iterations of a run.
-#[derive(Debug, Clone, Copy, Serialize)]
-pub struct Summary {
-    /// Final volume and area as a percentage of the input's (100 after 0 iterations).
-    pub volume_pct: f64,
-    pub area_pct: f64,
-    pub stencils: SweepStats,
-    /// Sum of the per-iteration smoothing seconds.
-    pub seconds: f64,
-}
-
-impl Summary {
-    pub fn of(records: &[IterationRecord]) -> Summary {
-        let mut stencils = SweepStats::default();
-        for r in records {
-            stencils.add(&r.stencils);
-        }
-        Summary {
-            volume_pct: records.last().map_or(100.0, |r| r.volume_pct),
-            area_pct: records.last().map_or(100.0, |r| r.area_pct),
-            stencils,
-            // `+ 0.0`: an empty sum is −0.
-            seconds: records.iter().map(|r| r.seconds).sum::<f64>() + 0.0,
-        }
-    }
-
-    /// [`Summary::of`] a run's records; with `--multires`, the output's volume and area as the
-    /// run measured them after its final correction (the coarse levels move the mesh even when
-    /// the input level runs no iteration).
-    pub fn of_run(
-        records: &[IterationRecord],
-        multires: Option<&crate::multires::MultiresStats>,
-    ) -> Summary {
-        let mut s = Summary::of(records);
-        if let Some(m) = multires {
-            (s.volume_pct, s.area_pct) = (m.volume_pct, m.area_pct);
-        }
-        s
-    }
-}
-
 /// The iterations a run of `opts` ran, for people: `10 iterations`, or with the automatic stop
 /// `14 iterations (auto: why it stopped; noise estimate σ̂, cap N)`.
 pub fn iterations_run(opts: &Options, run: &Report) -> String {
@@ -160,11 +56,6 @@ pub fn iterations_run(opts: &Options, run: &Report) -> String {
         ),
         _ => count(opts.iterations, "iteration"),
     }
-}
-
-/// Lower-case name of a format, as in file extensions.
-pub fn format_name(f: Format) -> String {
-    format!("{f:?}").to_ascii_lowercase()
 }
 
 /// `n word` or `n words`.
@@ -229,21 +120,5 @@ mod tests {
         assert_eq!(defined(Some(1.5), |x| fixed(x, 2)), "1.50");
         assert!(percent_of(1.0, 0.0).is_nan());
         assert_eq!(percent_of(1.0, 4.0), 25.0);
-        let flat = MeshInfo {
-            vertices: 3,
-            edges: 3,
-            boundary_edges: 3,
-            volume: -0.0,
-            ..Default::default()
-        };
-        let f = undefined_as_nan(&flat);
-        assert!(f.roughness_deg.is_nan() && !f.mean_edge_length.is_nan());
-        assert!(f.volume.is_sign_positive() && !f.bbox_diagonal.is_nan());
-        let json = serde_json::to_string(&undefined_as_nan(&MeshInfo::default())).unwrap();
-        assert!(json.contains("\"bbox_min\":[null,null,null]"), "{json}");
-        assert!(
-            json.contains("\"roughness_deg\":null") && !json.contains("-0"),
-            "{json}"
-        );
     }
 }

@@ -141,7 +141,7 @@ const BOUNDED_ROUNDS: usize = 16;
 /// [`restore_volume`]; with `bound = Some((input, limit))` no vertex ends farther than `limit`
 /// from its `input` position (indexed like `pos`): a vertex a round takes farther is put back on
 /// its ball and moves no more, and the next round asks the volume of the others. The error
-/// returned is what is left after at most [`BOUNDED_ROUNDS`] + 2 rounds (not 0 when the bound
+/// returned is what is left after at most `BOUNDED_ROUNDS` (16) + 2 rounds (not 0 when the bound
 /// holds every vertex still).
 pub fn restore_volume_within(
     storage: &Storage,

@@ -255,7 +255,7 @@ impl<T> Slots<T> {
 /// of `0..out.len()` (a slot that no index names keeps its value). Each of a few ranges of `out`
 /// scans all of `index` for the slots in it: a sequential read of 4 bytes per item per range, far
 /// cheaper than the scattered writes it shares out, and no unsafe code. The ranges are at most
-/// [`SCATTER_RANGES`], so that the reading does not grow with the thread count of a large node.
+/// `SCATTER_RANGES`, so that the reading does not grow with the thread count of a large node.
 pub fn scatter<T: Send>(out: &mut [T], index: &[u32], value: impl Fn(usize) -> T + Sync) {
     scatter_metered(out, index, value, &Meter::default());
 }

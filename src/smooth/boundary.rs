@@ -139,7 +139,7 @@ fn next_along(topo: &Topology, triangles: &[[u32; 3]], v: u32, from: u32) -> Opt
 /// the neighbour-sum cache `sums`. Positions and sums are written only when the outcome is
 /// [`Outcome::Applied`]. Skipped as fixed when the edge is not a boundary stencil or its loop has
 /// fewer than 4 vertices (a triangular hole has no curve to smooth); skipped as degenerate when
-/// step 2 does not converge or the result would move a vertex farther than [`MAX_REACH`] radii.
+/// step 2 does not converge or the result would move a vertex farther than `MAX_REACH` radii.
 pub fn apply<P: Field + ?Sized, S: Field + ?Sized>(
     topo: &Topology,
     triangles: &[[u32; 3]],

@@ -264,8 +264,8 @@ pub fn shares_into(
 /// Apply the ring stencil of `v`: every `u ∈ F_v` moves by its share `shares[u]` (step 1) plus
 /// the common translation `w` that gives the faces touching `F_v` their volume back exactly
 /// (step 2). The volume change and gradient are those of the edge and triangle stencils, face by
-/// face through [`stencil::shared_face`] about the origin `p_v`, and `w` and the degenerate test
-/// are [`stencil::translation`]'s, so a ring stencil restores its volume with the same arithmetic
+/// face through `stencil::shared_face` about the origin `p_v`, and `w` and the degenerate test
+/// are `stencil::translation`'s, so a ring stencil restores its volume with the same arithmetic
 /// as `vcs`. With a `deviation` bound the stencil is skipped whole when it would leave a member
 /// farther than the limit from its input position (as `vcs`'s stencils are, so the volume stays
 /// exact). `ring` is scratch space. Writes only when the outcome is [`Outcome::Applied`].

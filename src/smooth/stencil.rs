@@ -70,7 +70,7 @@ pub(crate) const MAX_REACH: f64 = 16.0;
 /// Apply one stencil with free vertices `free` to `pos`, updating the neighbour-sum cache `sums`.
 /// It reads positions of F ∪ N(F) and sums of F ∪ N(F); it writes positions of F and sums of N(F).
 /// A stencil is skipped as degenerate when its system or volume gradient is nearly singular, or
-/// when its result would move a free vertex farther than [`MAX_REACH`] times the stencil's radius;
+/// when its result would move a free vertex farther than `MAX_REACH` times the stencil's radius;
 /// with a [`Deviation`] bound, it is skipped when its result (after the volume step) would leave
 /// a free vertex farther than the limit from its input position, so every applied stencil keeps
 /// its volume exactly.

@@ -9,11 +9,12 @@ use serde::Serialize;
 
 use crate::cli::output::{print_json, stdout_error};
 use crate::cli::progress::Progress;
-use crate::cli::report::{Tool, count, fixed};
+use crate::cli::report::{count, fixed};
 use crate::cli::shared::{MAX_THREADS, distinct};
 use crate::engine::memory::format_size;
 use crate::error::Result;
 use crate::modes::bench::{self as core, BenchReport, BenchSettings};
+use crate::report::Tool;
 use crate::smooth::Method;
 
 /// The long help of `vcsmooth bench`.

@@ -11,11 +11,12 @@ use crate::cli::flags;
 use crate::cli::output::{check_files, print_json, stdout_error, svg_output};
 use crate::cli::plot::{Curve, file_name, volume_curve, write_volume_plot};
 use crate::cli::progress::Progress;
-use crate::cli::report::{Tool, fixed};
+use crate::cli::report::fixed;
 use crate::cli::shared::{EngineArgs, MethodParams, distinct};
 use crate::engine::{self, IterationRecord};
 use crate::engine::{EngineSettings, Layout};
 use crate::error::Result;
+use crate::report::Tool;
 use crate::smooth::{Method, Options};
 
 /// `vcsmooth curves IN --plot FILE.svg ...`

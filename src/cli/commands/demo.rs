@@ -110,7 +110,7 @@ pub fn run(cfg: &DemoConfig, progress: &mut Progress, out: &mut dyn Write) -> Re
         let records = crate::smooth_with(&mut smoothed, &opts, &settings, progress)?.records;
         let positions = &smoothed.positions;
         let last = records.last().copied().unwrap_or_default();
-        let rough = metrics::roughness(&positions, &noisy.triangles, &clean_topo);
+        let rough = metrics::roughness(positions, &noisy.triangles, &clean_topo);
         let rms = (positions
             .iter()
             .zip(&clean.positions)

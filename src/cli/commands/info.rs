@@ -6,14 +6,14 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use clap::Args as ClapArgs;
-use serde::Serialize;
 
 use crate::cli::output::print_json;
 use crate::cli::progress::Progress;
-use crate::cli::report::{UNDEFINED, count, fixed, format_name, num, print_rows, undefined_as_nan};
+use crate::cli::report::{UNDEFINED, count, fixed, num, print_rows};
 use crate::error::Result;
 use crate::mesh::Carried;
 use crate::metrics::{self, MeshInfo};
+use crate::report::{InfoDoc, format_name, undefined_as_nan};
 use crate::topology::Topology;
 
 /// `vcsmooth info IN [--json]`
@@ -41,19 +41,6 @@ impl InfoConfig {
             json: a.json,
         })
     }
-}
-
-/// The JSON of `vcsmooth info --json`: the path, the format, every [`MeshInfo`] field (`null` for
-/// a figure the mesh does not define, see [`undefined_as_nan`]) and `carries`, what the file
-/// carries besides positions and faces (all `false` for a file whose reader kept no layout).
-#[derive(Debug, Clone, Serialize)]
-pub struct InfoDoc {
-    pub path: String,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub format: Option<String>,
-    #[serde(flatten)]
-    pub info: MeshInfo,
-    pub carries: Carried,
 }
 
 /// `vcsmooth info`.

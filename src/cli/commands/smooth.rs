@@ -6,19 +6,17 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use clap::Args as ClapArgs;
-use serde::Serialize;
 
 use crate::cli::flags;
 use crate::cli::multires::{MultiresArgs, print_multires};
-use crate::cli::output::{
-    check_files, mesh_output, output_format, stdout_error, svg_output, write_json,
-};
+use crate::cli::output::{check_files, mesh_output, stdout_error, svg_output, write_json};
 use crate::cli::plot::{Curve, file_name, volume_curve, write_volume_plot};
 use crate::cli::progress::Progress;
-use crate::cli::report::{FileStats, Summary, Tool, count, fixed, iterations_run};
+use crate::cli::report::{count, fixed, iterations_run};
 use crate::cli::shared::{InOut, PinArgs, SmoothingArgs};
 use crate::engine::{self, EngineSettings, IterationRecord, Statistics};
 use crate::error::{Error, Result};
+use crate::report::{SmoothReport, Summary};
 use crate::smooth::Options;
 
 /// `vcsmooth smooth IN OUT ...`
@@ -143,70 +141,6 @@ impl SmoothConfig {
             keep,
             checkpoint_every: self.checkpoint_every,
         })
-    }
-}
-
-/// The JSON report of `vcsmooth smooth --report FILE.json`.
-#[derive(Debug, Clone, Serialize)]
-pub struct SmoothReport {
-    pub tool: Tool,
-    pub command: &'static str,
-    /// The command line as given.
-    pub argv: Vec<String>,
-    pub options: Options,
-    pub engine: EngineSettings,
-    pub input: FileStats,
-    /// Statistics of the smoothed f64 positions (before the output format's rounding).
-    pub output: FileStats,
-    pub plan: crate::engine::PlanStats,
-    pub memory: crate::engine::MemoryStats,
-    pub timings: crate::engine::PhaseTimings,
-    /// Ranks, halo traffic and checkpoints, for runs of the cluster engine.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub cluster: Option<crate::engine::ClusterStats>,
-    pub summary: Summary,
-    /// Iterations that ran (fewer than `options.iterations` when the automatic stop ended the run).
-    pub iterations_run: usize,
-    /// With `--iterations auto`: what the stop rule measured and why the run ended.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub auto_stop: Option<crate::engine::AutoStopStats>,
-    /// One row per iteration (with `--multires`: of the input level).
-    pub iterations: Vec<IterationRecord>,
-    /// Per level of `--multires`: vertices, method, iterations, seconds.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub multires: Option<crate::multires::MultiresStats>,
-}
-
-impl SmoothReport {
-    /// The report of `run`, made by `argv` with `options` and `engine` from `files` (input,
-    /// output); statistics the run did not measure are empty.
-    pub fn new(
-        argv: Vec<String>,
-        options: Options,
-        settings: EngineSettings,
-        files: (&std::path::Path, &std::path::Path),
-        run: &engine::Report,
-        multires: Option<crate::multires::MultiresStats>,
-    ) -> SmoothReport {
-        let stats = |s: &Option<crate::metrics::MeshInfo>| s.clone().unwrap_or_default();
-        SmoothReport {
-            tool: Tool::this(),
-            command: "smooth",
-            argv,
-            options,
-            engine: settings,
-            input: FileStats::new(files.0, run.input_format, stats(&run.input_stats)),
-            output: FileStats::new(files.1, output_format(files.1), stats(&run.output_stats)),
-            plan: run.plan.clone(),
-            memory: run.memory.clone(),
-            timings: run.timings,
-            cluster: run.cluster.clone(),
-            summary: Summary::of_run(&run.records, multires.as_ref()),
-            iterations_run: run.iterations_run,
-            auto_stop: run.auto_stop.clone(),
-            iterations: run.records.clone(),
-            multires,
-        }
     }
 }
 
