@@ -1,6 +1,7 @@
-//! The methods of the design, one type each: what each is, in the terms of [`Smoother`]. Their
-//! kernels are in [`super::laplacian`], [`super::stencil`], [`super::boundary`] and
-//! [`super::lowpass`].
+//! The methods of the design, in the terms of [`Smoother`]: a type each, but one for the three
+//! stencil methods of Liu et al. ([`StencilMethod`]). Their kernels are in [`super::laplacian`],
+//! [`super::stencil`], [`super::boundary`] and [`super::lowpass`]; `hc`'s unit is beside its
+//! kernel, [`super::hc`].
 
 use std::ops::Range;
 
@@ -81,116 +82,78 @@ fn sweep_edge_stencils(
     }
 }
 
-/// What the edge and triangle stencil methods accept.
-fn stencil_controls(control: Control) -> bool {
-    matches!(
-        control,
-        Control::SmoothBoundary | Control::RejectEnergyIncrease
-    )
+/// The free vertices of a stencil of [`StencilMethod`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Free {
+    /// The two ends of an edge.
+    Edge,
+    /// The three corners of a triangle.
+    Triangle,
+}
+
+/// The stencil methods of Liu et al.: each stencil moved to its local energy minimum (§2.3,
+/// eq. 7–9), then, with `volume`, translated back to its volume (§3, the 2-step approximation
+/// of §3.1). `lem`, `vcs` and `vcs-triangle` are three values of it.
+pub struct StencilMethod {
+    pub name: &'static str,
+    pub help: &'static str,
+    pub free: Free,
+    pub volume: bool,
 }
 
 /// Local energy minimisation on edge stencils, no volume constraint (Liu et al. §2.3, eq. 7–9).
-pub struct Lem;
-
-impl Smoother for Lem {
-    fn name(&self) -> &'static str {
-        "lem"
-    }
-    fn help(&self) -> &'static str {
-        "local energy minimisation on edge stencils, no volume constraint"
-    }
-    fn schedule(&self, _: &Options) -> Schedule {
-        Schedule::Stencils(Footprint::Edge)
-    }
-    fn keeps_volume(&self) -> bool {
-        false
-    }
-    fn stop_rule(&self, _: &Options) -> StopRule {
-        StopRule::Settle
-    }
-    fn accepts(&self, control: Control) -> bool {
-        stencil_controls(control)
-    }
-    fn sweep_patch(
-        &self,
-        mesh: PatchMesh,
-        vertices: Range<u32>,
-        _: Range<u32>,
-        pos: &mut SharedField,
-        sums: &mut SharedField,
-        params: StencilParams,
-        loops: Option<&Loops>,
-    ) -> SweepStats {
-        sweep_edge_stencils(mesh, vertices, pos, sums, params, loops)
-    }
-}
+pub const LEM: StencilMethod = StencilMethod {
+    name: "lem",
+    help: "local energy minimisation on edge stencils, no volume constraint",
+    free: Free::Edge,
+    volume: false,
+};
 
 /// Volume-constrained smoothing on edge stencils, the 2-step approximation (Liu et al. §3, §3.1).
-pub struct Vcs;
-
-impl Smoother for Vcs {
-    fn name(&self) -> &'static str {
-        "vcs"
-    }
-    fn help(&self) -> &'static str {
-        "volume-constrained smoothing on edge stencils (Liu et al. 2002)"
-    }
-    fn schedule(&self, _: &Options) -> Schedule {
-        Schedule::Stencils(Footprint::Edge)
-    }
-    fn keeps_volume(&self) -> bool {
-        true
-    }
-    fn stop_rule(&self, _: &Options) -> StopRule {
-        StopRule::Settle
-    }
-    fn accepts(&self, control: Control) -> bool {
-        stencil_controls(control) || control == Control::MultiresCoarse
-    }
-    fn stencil_volume(&self) -> bool {
-        true
-    }
-    fn sweep_patch(
-        &self,
-        mesh: PatchMesh,
-        vertices: Range<u32>,
-        _: Range<u32>,
-        pos: &mut SharedField,
-        sums: &mut SharedField,
-        params: StencilParams,
-        loops: Option<&Loops>,
-    ) -> SweepStats {
-        sweep_edge_stencils(mesh, vertices, pos, sums, params, loops)
-    }
-}
+pub const VCS: StencilMethod = StencilMethod {
+    name: "vcs",
+    help: "volume-constrained smoothing on edge stencils (Liu et al. 2002)",
+    free: Free::Edge,
+    volume: true,
+};
 
 /// Volume-constrained smoothing on triangle stencils, 3 free vertices (Liu et al. §3.2).
-pub struct VcsTriangle;
+pub const VCS_TRIANGLE: StencilMethod = StencilMethod {
+    name: "vcs-triangle",
+    help: "volume-constrained smoothing on triangle stencils",
+    free: Free::Triangle,
+    volume: true,
+};
 
-impl Smoother for VcsTriangle {
+impl Smoother for StencilMethod {
     fn name(&self) -> &'static str {
-        "vcs-triangle"
+        self.name
     }
     fn help(&self) -> &'static str {
-        "volume-constrained smoothing on triangle stencils"
+        self.help
     }
     fn schedule(&self, _: &Options) -> Schedule {
         Schedule::Stencils(Footprint::Edge)
     }
     fn keeps_volume(&self) -> bool {
-        true
+        self.volume
     }
     fn stop_rule(&self, _: &Options) -> StopRule {
         StopRule::Settle
     }
+    /// The volume-keeping ones also run the coarse levels of the multiresolution mode.
     fn accepts(&self, control: Control) -> bool {
-        stencil_controls(control) || control == Control::MultiresCoarse
+        match control {
+            Control::SmoothBoundary | Control::RejectEnergyIncrease => true,
+            Control::MultiresCoarse => self.volume,
+            _ => false,
+        }
     }
     fn stencil_volume(&self) -> bool {
-        true
+        self.volume
     }
-    /// The patch's triangles in the plan's order, then (with `loops`) its boundary edges,
-    /// ascending.
+    /// Edge stencils: [`sweep_edge_stencils`]. Triangle stencils: the patch's triangles in the
+    /// plan's order, then (with `loops`) its boundary edges, ascending.
     fn sweep_patch(
         &self,
         mesh: PatchMesh,
@@ -202,14 +165,19 @@ impl Smoother for VcsTriangle {
         loops: Option<&Loops>,
     ) -> SweepStats {
         let (topo, tris) = (mesh.topo, mesh.tris);
-        let mut st = stencil::sweep_triangles(topo, tris, pos, sums, triangles, params);
-        if let Some(loops) = loops {
-            let edges = topo.edges_from(vertices);
-            st.add(&boundary::sweep_edges(
-                topo, tris, pos, sums, edges, params, loops, false,
-            ));
+        match self.free {
+            Free::Edge => sweep_edge_stencils(mesh, vertices, pos, sums, params, loops),
+            Free::Triangle => {
+                let mut st = stencil::sweep_triangles(topo, tris, pos, sums, triangles, params);
+                if let Some(loops) = loops {
+                    let edges = topo.edges_from(vertices);
+                    st.add(&boundary::sweep_edges(
+                        topo, tris, pos, sums, edges, params, loops, false,
+                    ));
+                }
+                st
+            }
         }
-        st
     }
 }
 

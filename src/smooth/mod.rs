@@ -83,9 +83,9 @@ impl Method {
         match self {
             Method::Laplacian => &methods::Laplacian,
             Method::Taubin => &methods::Taubin,
-            Method::Lem => &methods::Lem,
-            Method::Vcs => &methods::Vcs,
-            Method::VcsTriangle => &methods::VcsTriangle,
+            Method::Lem => &methods::LEM,
+            Method::Vcs => &methods::VCS,
+            Method::VcsTriangle => &methods::VCS_TRIANGLE,
             Method::VcsLowpass => &methods::VcsLowpass,
             Method::Hc => &hc::Hc,
         }
