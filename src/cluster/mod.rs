@@ -45,7 +45,7 @@ use crate::engine::auto::AutoStop;
 use crate::engine::iterate::{Buffers, Reference, Share, Sweep, iterate};
 use crate::engine::{
     self, ClusterStats, EngineSettings, IterationRecord, Layout, MemoryStats, Observer,
-    PhaseTimings, PlanStats, Report, Statistics, memory, reduce,
+    PhaseTimings, PlanStats, Report, Statistics, memory,
 };
 use crate::error::{Error, Result};
 use crate::mesh::Buf;
@@ -326,9 +326,9 @@ fn write_output(
     Ok(stats)
 }
 
-/// The statistics of the output as stored, as a single-process run gives them: the final
-/// positions (`last`, in plan order) rounded as [`io::Stored`] says the write stores `mesh`,
-/// measured over the plan's triangles in parallel; the counts are the input's.
+/// The statistics of the output as stored, as a single-process run gives them
+/// ([`engine::run::stored_output_stats`]), from a copy of the final positions (`last`, in plan
+/// order, mapped read-only).
 fn output_stats(
     plan: &StoredPlan,
     storage: &crate::mesh::Storage,
@@ -336,26 +336,19 @@ fn output_stats(
     mesh: &crate::Mesh,
     last: &[DVec3],
 ) -> Result<Option<metrics::MeshInfo>> {
-    let (Some(mut info), Some(stored)) =
-        (plan.doc.input_stats.clone(), io::Stored::of(output, mesh))
-    else {
-        // An output that write_mesh refuses has no statistics; its error is the write's.
+    let Some(info) = plan.doc.input_stats.clone() else {
         return Ok(None);
     };
-    let origin = DVec3::from(info.volume_origin);
-    let geometry = if stored.is_exact() {
-        reduce::geometry_about(last, &plan.triangles, &plan.topology, origin)
-    } else {
-        let mut rounded: Buf<DVec3> = storage.zeroed(last.len())?;
-        reduce::for_chunks_mut(&mut rounded, |first, chunk| {
-            for (p, &q) in chunk.iter_mut().zip(&last[first..]) {
-                *p = stored.round(q);
-            }
-        });
-        reduce::geometry_about(&rounded, &plan.triangles, &plan.topology, origin)
-    };
-    info.set_geometry(geometry);
-    Ok(Some(info))
+    let mut positions = storage.copy_of(last)?;
+    let (tris, topo) = (&plan.triangles, &plan.topology);
+    Ok(engine::run::stored_output_stats(
+        info,
+        output,
+        mesh,
+        &mut positions,
+        tris,
+        topo,
+    ))
 }
 
 /// A rank's share of the plan and what it exchanges with whom.

@@ -337,15 +337,38 @@ fn output_stats(
     mesh: &Mesh,
     smoothed: &Smoothed,
 ) -> Option<MeshInfo> {
-    let mut info = smoothed.input_stats.clone()?;
-    // An output that write_mesh refuses has no statistics; its error is the write's.
+    let r = &mut plan.reordered;
+    let info = smoothed.input_stats.clone()?;
+    stored_output_stats(
+        info,
+        output,
+        mesh,
+        &mut r.positions,
+        &r.triangles,
+        &plan.topology,
+    )
+}
+
+/// `info`, the input's statistics, with the geometry of `positions` (plan order, over the plan's
+/// `triangles` and `topo`) as the write stores them in `output`: rounded here in place as
+/// [`io::Stored`] says. `None` for an output that `write_mesh` refuses (its error is the
+/// write's). The engine's and the cluster's writes measure their outputs so.
+pub(crate) fn stored_output_stats(
+    mut info: MeshInfo,
+    output: &Path,
+    mesh: &Mesh,
+    positions: &mut [glam::DVec3],
+    triangles: &[[u32; 3]],
+    topo: &crate::Topology,
+) -> Option<MeshInfo> {
     let stored = io::Stored::of(output, mesh)?;
     if !stored.is_exact() {
-        reduce::for_chunks_mut(&mut plan.reordered.positions, |_, chunk| {
+        reduce::for_chunks_mut(positions, |_, chunk| {
             chunk.iter_mut().for_each(|p| *p = stored.round(*p))
         });
     }
-    info.set_geometry(plan.geometry_about(glam::DVec3::from(info.volume_origin)));
+    let origin = glam::DVec3::from(info.volume_origin);
+    info.set_geometry(reduce::geometry_about(positions, triangles, topo, origin));
     Some(info)
 }
 
