@@ -7,7 +7,7 @@ use std::path::Path;
 use glam::DVec3;
 use vcsmooth::engine::{Layout, Plan, Quiet, Statistics, thread_pool};
 use vcsmooth::mesh::Storage;
-use vcsmooth::multires::{self, MultiresOptions, Transfer, cluster};
+use vcsmooth::multires::{self, MultiresOptions, Transfer, clustering};
 use vcsmooth::{Mesh, Method, Options, Topology, io, metrics, shapes};
 
 use crate::util::{generate_sphere, noisy_sphere, ok, read_json, read_scan, scans, vcsmooth};
@@ -103,7 +103,7 @@ fn hierarchy_maps_every_fine_vertex_to_a_valid_coarse_one() {
     let mesh = noisy_sphere(5, 0.3, 3);
     let topo = Topology::build(mesh.positions.len(), &mesh.triangles).unwrap();
     let edge = metrics::mean_edge_length(&mesh.positions, &topo);
-    let c = cluster::cluster(
+    let c = clustering::cluster(
         &Storage::heap(),
         &mesh.positions,
         &mesh.triangles,

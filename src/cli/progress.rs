@@ -19,14 +19,14 @@ pub struct Progress {
     bar: Option<ProgressBar>,
     /// The iteration bar that [`Progress::smoothing`] or [`Progress::iterations`] asked for, drawn
     /// again when a run's smoothing phase begins (the phases before it take the bar over).
-    iterations: Option<Iterations>,
+    iterations: Option<IterationBar>,
     /// Copies the current phase's meter into the bar.
     ticker: Option<Ticker>,
 }
 
 /// An iteration bar: its label, its length, whether the run stops by itself before it.
 #[derive(Clone)]
-struct Iterations {
+struct IterationBar {
     label: String,
     total: usize,
     auto_stop: bool,
@@ -111,7 +111,7 @@ impl Progress {
 
     /// Start a bar of `total` iterations labelled `label` (e.g. the method's name).
     pub fn iterations(&mut self, label: &str, total: usize) {
-        self.iterations = Some(Iterations {
+        self.iterations = Some(IterationBar {
             label: label.to_string(),
             total,
             auto_stop: false,
@@ -122,7 +122,7 @@ impl Progress {
     /// Start the display of a run of `opts`: a bar of its iterations, or, when it stops
     /// automatically, a counter that shows the cap as a cap (the run may end long before it).
     pub fn smoothing(&mut self, opts: &Options) {
-        self.iterations = Some(Iterations {
+        self.iterations = Some(IterationBar {
             label: opts.method.name().to_string(),
             total: opts.iterations,
             auto_stop: opts.auto_stop,
@@ -138,7 +138,7 @@ impl Progress {
     }
 
     /// Draw an iteration bar.
-    fn draw(&mut self, it: &Iterations) {
+    fn draw(&mut self, it: &IterationBar) {
         let style = if it.auto_stop {
             ProgressStyle::with_template(
                 "{prefix}: iteration {pos} (stops when the noise is gone, at most {len}) {msg} [{elapsed}]",
@@ -220,7 +220,7 @@ impl Observer for Progress {
         }
         // The iterations report themselves (`iteration`), on the bar the command asked for, or
         // on a plain one.
-        let it = self.iterations.clone().unwrap_or_else(|| Iterations {
+        let it = self.iterations.clone().unwrap_or_else(|| IterationBar {
             label: phase.name().to_string(),
             total: meter.total() as usize,
             auto_stop: false,

@@ -237,12 +237,12 @@ pub(crate) fn metered<T>(
 
 /// The smoothing step's observer: counts the iterations into the [`Phase::Smooth`] meter and
 /// passes them and `interrupted` on to the run's observer (no phase: phases do not nest).
-pub(crate) struct Iterations<'a> {
+pub(crate) struct IterationMeter<'a> {
     pub inner: &'a mut dyn Observer,
     pub meter: &'a Meter,
 }
 
-impl Observer for Iterations<'_> {
+impl Observer for IterationMeter<'_> {
     fn iteration(&mut self, record: &IterationRecord, total: usize) {
         self.meter.reach(record.iteration as u64);
         self.inner.iteration(record, total);

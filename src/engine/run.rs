@@ -6,7 +6,9 @@ use std::time::Instant;
 
 use super::auto::AutoStopStats;
 use super::memory::{self, Budget, BudgetSource, PeakSampler};
-use super::observer::{IterationRecord, Iterations, Meter, Observer, Phase, Statistics, metered};
+use super::observer::{
+    IterationMeter, IterationRecord, Meter, Observer, Phase, Statistics, metered,
+};
 use super::pins::Pins;
 use super::plan::{DEFAULT_PATCH_SIZE, Layout, Plan, PlanStats, PrepTimings};
 use super::reduce;
@@ -462,7 +464,7 @@ fn smooth_planned(
     let clock = Instant::now();
     let meter = Arc::new(Meter::new(opts.iterations as u64));
     observer.phase_start(Phase::Smooth, &meter);
-    let counted = &mut Iterations {
+    let counted = &mut IterationMeter {
         inner: &mut *observer,
         meter: &meter,
     };

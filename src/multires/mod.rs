@@ -2,7 +2,7 @@
 //! al. 2002 (§4): the volume constraint matters on coarse meshes and hardly on dense ones, so run
 //! `vcs` where the mesh is coarse and a cheap Jacobi filter where it is dense.
 //!
-//! 1. **Hierarchy** ([`cluster`]): level 0 is the input on the patch engine ([`Plan`]); level
+//! 1. **Hierarchy** ([`clustering`]): level 0 is the input on the patch engine ([`Plan`]); level
 //!    k + 1 clusters level k's vertices into grid cubes of `cell_factor` × level k's mean edge
 //!    length, with quadric placement, and is then given level 0's volume back
 //!    ([`transfer::restore_volume`]). Every level is a [`Plan`] on the same [`Storage`]
@@ -24,7 +24,7 @@
 //! unique keys and sums each cluster in a fixed order, every parallel sum uses fixed-size chunks,
 //! and the smoothing is the engine's.
 
-pub mod cluster;
+pub mod clustering;
 pub mod transfer;
 
 use std::path::Path;
@@ -256,7 +256,7 @@ pub fn smooth_plan(
             break;
         }
         let cell = m.cell_factor * edge;
-        let c = cluster::cluster(storage, pos, tris, topo, cell)?;
+        let c = clustering::cluster(storage, pos, tris, topo, cell)?;
         // A level that does not shrink (or has nothing left to smooth) ends the hierarchy.
         if c.triangles.is_empty() || 2 * c.positions.len() > pos.len() {
             break;
