@@ -128,7 +128,7 @@ pub struct MethodParams {
 
 /// A flag's help line, `what`, with the methods that take `control` in parentheses, then `tail`.
 fn used_by(what: &str, control: Control, tail: &str) -> String {
-    format!("{what} ({}){tail}", Method::names_accepting(control))
+    format!("{what} ({}){tail}", Method::names_accepting(control, "and"))
 }
 
 /// `--max-deviation`'s help line: which methods skip stencils, which clamp vertices.

@@ -120,12 +120,6 @@ pub struct MultiresStats {
     pub seconds: f64,
 }
 
-/// The methods that take `control`, as "a or b".
-fn or_list(control: Control) -> String {
-    let names: Vec<&str> = Method::accepting(control).map(Method::name).collect();
-    names.join(" or ")
-}
-
 /// Check that `opts` and `m` make a multiresolution run.
 pub fn validate(opts: &Options, m: &MultiresOptions) -> Result<()> {
     if !opts.boundary.is_fixed() {
@@ -133,7 +127,7 @@ pub fn validate(opts: &Options, m: &MultiresOptions) -> Result<()> {
             "boundary",
             format!(
                 "smooth cannot mean anything in multiresolution mode: the input level runs {}, which keep the boundary fixed, and the coarse levels' clusters do not follow the loops",
-                or_list(Control::MultiresFine)
+                Method::names_accepting(Control::MultiresFine, "or")
             ),
         ));
     }
@@ -142,9 +136,9 @@ pub fn validate(opts: &Options, m: &MultiresOptions) -> Result<()> {
             "multires",
             format!(
                 "runs {} on the coarse levels, not {} (the fine level runs {})",
-                or_list(Control::MultiresCoarse),
+                Method::names_accepting(Control::MultiresCoarse, "or"),
                 opts.method,
-                or_list(Control::MultiresFine)
+                Method::names_accepting(Control::MultiresFine, "or")
             ),
         ));
     }
@@ -153,7 +147,7 @@ pub fn validate(opts: &Options, m: &MultiresOptions) -> Result<()> {
             "fine_method",
             format!(
                 "must be {}, not {}",
-                or_list(Control::MultiresFine),
+                Method::names_accepting(Control::MultiresFine, "or"),
                 m.fine_method
             ),
         ));

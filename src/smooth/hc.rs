@@ -20,7 +20,7 @@ use glam::DVec3;
 
 use super::laplacian::{StepStats, clamp_to_ball};
 use super::method::{Control, Needs, PassFields, Schedule, Smoother, StopRule};
-use super::{Options, Topology, inv_deg};
+use super::{Options, Topology, inv_deg, neighbor_sum};
 
 /// α, the weight of the input position in `b`: the value the paper's figures and trimesh's
 /// `filter_humphrey` use.
@@ -35,8 +35,7 @@ fn average(topo: &Topology, field: &[DVec3], v: u32) -> Option<DVec3> {
     if nbrs.is_empty() {
         return None;
     }
-    let sum = nbrs.iter().fold(DVec3::ZERO, |s, &u| s + field[u as usize]);
-    Some(sum * inv_deg(nbrs.len()))
+    Some(neighbor_sum(topo, field, v) * inv_deg(nbrs.len()))
 }
 
 /// Pass 0 for the vertices `first .. first + out.len()`: `b` from the positions `pos` and the
@@ -59,7 +58,8 @@ pub fn differences(
 }
 
 /// Pass 1 for the vertices `first .. first + out.len()`: the new positions from `pos` and the
-/// differences `b` of pass 0; with `limit`, each ends within that distance of its `input`
+/// differences `b` of pass 0 (`p_v` is averaged again, with the same bits, rather than kept from
+/// pass 0 in a third vector per vertex); with `limit`, each ends within that distance of its `input`
 /// position. Returns how far the vertices moved from `pos`.
 pub fn corrected(
     topo: &Topology,

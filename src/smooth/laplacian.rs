@@ -2,7 +2,7 @@
 
 use glam::DVec3;
 
-use super::{Topology, inv_deg};
+use super::{Topology, inv_deg, neighbor_sum};
 
 /// Umbrella Laplacian `L(v) = (1/deg v) Σ_{u∈N(v)} p_u − p_v`; zero for an isolated vertex.
 #[inline]
@@ -11,8 +11,7 @@ pub fn umbrella(topo: &Topology, pos: &[DVec3], v: u32) -> DVec3 {
     if nbrs.is_empty() {
         return DVec3::ZERO;
     }
-    let sum = nbrs.iter().fold(DVec3::ZERO, |s, &u| s + pos[u as usize]);
-    sum * inv_deg(nbrs.len()) - pos[v as usize]
+    neighbor_sum(topo, pos, v) * inv_deg(nbrs.len()) - pos[v as usize]
 }
 
 /// One Jacobi step `p' = p + λ L(p)` for the vertices `first .. first + dst.len()`, reading only `src`.

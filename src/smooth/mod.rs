@@ -118,13 +118,13 @@ impl Method {
             .filter(move |m| m.unit().accepts(control))
     }
 
-    /// [`Method::accepting`] as a list in prose: "a, b and c".
-    pub fn names_accepting(control: Control) -> String {
+    /// [`Method::accepting`] as a list in prose ending in `conjunction`: "a, b and c", "a or b".
+    pub fn names_accepting(control: Control, conjunction: &str) -> String {
         let names: Vec<&str> = Method::accepting(control).map(Method::name).collect();
         match names.split_last() {
             None => String::new(),
             Some((last, [])) => last.to_string(),
-            Some((last, rest)) => format!("{} and {last}", rest.join(", ")),
+            Some((last, rest)) => format!("{} {conjunction} {last}", rest.join(", ")),
         }
     }
 }
@@ -278,7 +278,7 @@ impl Options {
                 "boundary",
                 format!(
                     "smooth works with {}, not {}",
-                    Method::names_accepting(Control::SmoothBoundary),
+                    Method::names_accepting(Control::SmoothBoundary, "and"),
                     self.method
                 ),
             ));
@@ -498,12 +498,16 @@ pub fn neighbor_sums(topo: &Topology, pos: &[DVec3]) -> Vec<DVec3> {
 /// [`neighbor_sums`] for the vertices `first .. first + out.len()`, into `out`.
 pub fn neighbor_sums_into(topo: &Topology, pos: &[DVec3], out: &mut [DVec3], first: usize) {
     for (k, s) in out.iter_mut().enumerate() {
-        let v = (first + k) as u32;
-        *s = topo
-            .neighbors(v)
-            .iter()
-            .fold(DVec3::ZERO, |s, &u| s + pos[u as usize]);
+        *s = neighbor_sum(topo, pos, (first + k) as u32);
     }
+}
+
+/// `Σ_{u∈N(v)} field_u`, summed in the neighbour order (every kernel's order, so their bits agree).
+#[inline]
+pub(crate) fn neighbor_sum(topo: &Topology, field: &[DVec3], v: u32) -> DVec3 {
+    topo.neighbors(v)
+        .iter()
+        .fold(DVec3::ZERO, |s, &u| s + field[u as usize])
 }
 
 #[cfg(test)]

@@ -52,7 +52,7 @@ pub fn normal_laplacian_into(
         *o = if ns.is_empty() {
             0.0
         } else {
-            let sum = ns.iter().fold(DVec3::ZERO, |s, &u| s + pos[u as usize]);
+            let sum = super::neighbor_sum(topo, pos, v as u32);
             (sum * inv_deg(ns.len()) - pos[v]).dot(normals[v])
         };
     }
