@@ -44,8 +44,8 @@ use store::{PlanKey, StateDoc, StoredPlan, WorkDir};
 use crate::engine::auto::AutoStop;
 use crate::engine::iterate::{Buffers, Reference, Share, Sweep, iterate};
 use crate::engine::{
-    self, ClusterStats, EngineSettings, IterationRecord, Layout, MemoryStats, Observer,
-    PhaseTimings, PlanStats, Report, Statistics, memory,
+    self, ClusterStats, EngineSettings, IterationRecord, MemoryStats, Observer, PhaseTimings,
+    PlanStats, Report, Statistics, memory, run,
 };
 use crate::error::{Error, Result};
 use crate::mesh::Buf;
@@ -79,35 +79,21 @@ pub fn run_file(
     cluster: &ClusterSettings,
     observer: &mut dyn Observer,
 ) -> Result<Report> {
-    opts.check()?;
     if cluster.checkpoint_every == 0 {
         return Err(Error::parameter("checkpoint_every", "must be at least 1"));
     }
-    let start = Instant::now();
-    let sampler = memory::PeakSampler::start(std::time::Duration::from_millis(20));
-    let memory::Budget {
-        bytes: budget,
-        source: budget_source,
-    } = engine.budget_and_source()?;
-    agree(
+    let start = agree(
         comm,
-        memory::check_records(opts.iterations, budget),
-        "another rank's memory budget cannot hold one record per iteration",
+        run::Start::new(opts, engine),
+        "another rank could not start (its options, memory budget or threads)",
     )?;
-    let pool = agree(
-        comm,
-        engine::thread_pool(engine.threads),
-        "another rank could not start its threads",
-    )?;
-    // As in the engine's run: the records take their share, the mesh decides heap or scratch in
-    // the rest.
-    let mesh_budget = budget.saturating_sub(memory::records_bytes(opts.iterations));
+    let pool = &start.pool;
     let work = WorkDir::new(&cluster.work_dir);
     let mut t = PhaseTimings::default();
 
     // 1. The plan: rank 0 makes it unless a matching one is there; the others wait for it.
     let made = if comm.rank() == 0 {
-        pool.install(|| ensure_plan(&work, input, output, opts, engine, mesh_budget, &mut t))
+        ensure_plan(&work, input, output, opts, engine, &start, &mut t, observer)
     } else {
         Ok(())
     };
@@ -138,7 +124,7 @@ pub fn run_file(
     let resumed_after = state.done;
     let rank = RankRun {
         comm,
-        pool: &pool,
+        pool,
         plan: &plan,
         part: &part,
         work: &work,
@@ -156,15 +142,22 @@ pub fn run_file(
     drop(smoothing_sampler);
 
     // 4. Rank 0 writes the output in the input's order.
-    let clock = Instant::now();
     let written = if comm.rank() == 0 {
-        pool.install(|| write_output(&work, &plan, &state, input, output, engine, mesh_budget))
+        write_output(
+            &work,
+            &plan,
+            &state,
+            (input, output),
+            engine,
+            &start,
+            &mut t,
+            observer,
+        )
     } else {
         Ok(None)
     };
     let output_stats = agree(comm, written, "rank 0 could not write the output")?;
-    t.write = clock.elapsed().as_secs_f64();
-    t.total = start.elapsed().as_secs_f64();
+    t.total = start.clock.elapsed().as_secs_f64();
 
     // 5. Figures of all ranks.
     let iterations_run = (state.done - resumed_after).max(1) as f64;
@@ -172,7 +165,7 @@ pub fn run_file(
     let region = (part.owned.len() + part.rings.iter().map(Vec::len).sum::<usize>()) as f64;
     let values = traffic.values as f64 / iterations_run;
     let bytes = traffic.bytes as f64 / iterations_run;
-    let peak = sampler.peak() as f64;
+    let peak = start.sampler.peak() as f64;
     let maxima = comm.max(&[owned, -owned, region, bytes, peak, smoothing_peak]);
     let sums = comm.sum(&[values]);
     let doc = &plan.doc;
@@ -199,8 +192,8 @@ pub fn run_file(
             )
         }),
         memory: MemoryStats {
-            budget,
-            budget_source,
+            budget: start.budget.bytes,
+            budget_source: start.budget.source,
             storage: "cluster",
             scratch_bytes: 0,
             scratch_peak_bytes: 0,
@@ -246,15 +239,17 @@ fn agree<T>(comm: &dyn Comm, r: Result<T>, other: &str) -> Result<T> {
 }
 
 /// Rank 0: reuse the plan in the work directory if it was made from the same input, options and
-/// patch size; otherwise read the input and prepare it there.
+/// patch size; otherwise prepare it as the engine's run does ([`run::prepare`]) and store it there.
+#[allow(clippy::too_many_arguments)]
 fn ensure_plan(
     work: &WorkDir,
     input: &Path,
     output: &Path,
     opts: &Options,
     engine: &EngineSettings,
-    budget: u64,
+    start: &run::Start,
     t: &mut PhaseTimings,
+    observer: &mut dyn Observer,
 ) -> Result<()> {
     let key = PlanKey::of(input, opts, engine.patch_size, &engine.pins)?;
     if let Some(doc) = work.read_plan_doc()?
@@ -262,52 +257,57 @@ fn ensure_plan(
     {
         return Ok(());
     }
-    let clock = Instant::now();
-    let storage = engine::storage_for(input, output, engine, budget, opts)?;
-    let mesh = io::read_mesh_in(input, &storage)?;
-    engine::check_in_memory_budget(input, &storage, &mesh, budget)?;
-    let pins = engine.pins.resolve(&mesh, Some(input))?.unwrap_or_default();
-    t.ingest = clock.elapsed().as_secs_f64();
-    let mut new_plan = engine::Plan::new(
-        &storage,
-        &mesh.positions,
-        &mesh.triangles,
-        Layout::Patches(engine.patch_size),
-    )
-    .map_err(|e| e.in_file(input))?;
-    // Pinned vertices are fixed in the stored topology (`fixed.u8`), which every rank maps.
-    new_plan.pin(&pins);
-    new_plan.crease(opts.crease_angle);
-    t.add_preparation(&new_plan.timings);
-    // Measured always: a resumed run may ask for a report that the first run did not.
-    let input_stats = Some(new_plan.info(&mesh.source, &storage)?);
-    drop(mesh);
-    // The ranks find the loops of `boundary: smooth` here rather than each reading every face.
-    let loops = match opts.boundary {
-        crate::smooth::Boundary::Smooth => {
-            boundary::boundary_edges(&new_plan.topology, &new_plan.reordered.triangles)
-        }
-        crate::smooth::Boundary::Fixed => Vec::new(),
-    };
-    // A resumed run measures the input again: a deviation bound, the automatic stop's replay,
-    // the hole areas that smooth boundaries keep.
-    let keep_input = opts.keeps_input() || opts.auto_stop || !loops.is_empty();
-    work.write_plan(&new_plan, key, input_stats, keep_input, &loops)
+    // Pinned vertices and creases are fixed in the stored topology (`fixed.u8`), which every rank
+    // maps.
+    let run::Prepared {
+        storage,
+        mesh,
+        plan,
+        ..
+    } = run::prepare(input, output, opts, engine, start, t, observer)?;
+    t.add_preparation(&plan.timings);
+    start.pool.install(|| {
+        // Measured always: a resumed run may ask for a report that the first run did not.
+        let input_stats = Some(plan.info(&mesh.source, &storage)?);
+        drop(mesh);
+        // The ranks find the loops of `boundary: smooth` here rather than each reading every face.
+        let loops = match opts.boundary {
+            crate::smooth::Boundary::Smooth => {
+                boundary::boundary_edges(&plan.topology, &plan.reordered.triangles)
+            }
+            crate::smooth::Boundary::Fixed => Vec::new(),
+        };
+        // A resumed run measures the input again: a deviation bound, the automatic stop's replay,
+        // the hole areas that smooth boundaries keep.
+        let keep_input = opts.keeps_input() || opts.auto_stop || !loops.is_empty();
+        work.write_plan(&plan, key, input_stats, keep_input, &loops)
+    })
 }
 
-/// Rank 0: the input with the final positions, written atomically; output statistics if asked.
+/// Rank 0: the input with the final positions, written as the engine's run writes
+/// ([`run::write_measured`]); output statistics if asked.
+#[allow(clippy::too_many_arguments)]
 fn write_output(
     work: &WorkDir,
     plan: &StoredPlan,
     state: &StateDoc,
-    input: &Path,
-    output: &Path,
+    (input, output): (&Path, &Path),
     engine: &EngineSettings,
-    budget: u64,
+    start: &run::Start,
+    t: &mut PhaseTimings,
+    observer: &mut dyn Observer,
 ) -> Result<Option<metrics::MeshInfo>> {
     // Assembling the output keeps no per-run arrays beside the mesh: the default options' model.
-    let storage = engine::storage_for(input, output, engine, budget, &Options::default())?;
+    let storage = engine::storage_for(
+        input,
+        output,
+        engine,
+        start.mesh_budget,
+        &Options::default(),
+    )?;
+    let clock = Instant::now();
     let mut mesh = io::read_mesh_in(input, &storage)?;
+    t.ingest += clock.elapsed().as_secs_f64();
     if mesh.positions.len() != plan.doc.vertices || mesh.triangles.len() != plan.doc.triangles {
         return Err(Error::invalid(
             input,
@@ -318,12 +318,11 @@ fn write_output(
     for (new, &old) in plan.order.iter().enumerate() {
         mesh.positions[old as usize] = last[new];
     }
-    let stats = match engine.with_stats {
-        true => output_stats(plan, &storage, output, &mesh, &last)?,
-        false => None,
-    };
-    io::write_mesh(output, &mesh)?;
-    Ok(stats)
+    let bytes_read = std::fs::metadata(input).map_or(0, |m| m.len());
+    let measure = engine
+        .with_stats
+        .then_some(|| output_stats(plan, &storage, output, &mesh, &last));
+    run::write_measured(&start.pool, output, &mesh, bytes_read, t, observer, measure)
 }
 
 /// The statistics of the output as stored, as a single-process run gives them

@@ -32,7 +32,7 @@ pub use observer::{IterationRecord, Meter, Observer, Phase, Quiet, Statistics, U
 pub use pins::{PinSet, Pins};
 pub use plan::{DEFAULT_PATCH_SIZE, Layout, Plan, PlanStats, PrepTimings};
 pub use run::{ClusterStats, EngineSettings, MemoryStats, PhaseTimings, Report, run_file};
-pub(crate) use run::{check_in_memory_budget, run_file_with, storage_for};
+pub(crate) use run::{run_file_with, storage_for};
 
 use crate::error::{Error, Result};
 use crate::mesh::{Buf, Mesh, Storage};

@@ -198,44 +198,17 @@ pub(crate) fn run_file_with(
     observer: &mut dyn Observer,
     smooth: impl FnOnce(&mut Plan, &Storage, &mut dyn Observer) -> Result<Stopped> + Send,
 ) -> Result<Report> {
-    opts.check()?;
-    let start = Instant::now();
-    let sampler = PeakSampler::start(std::time::Duration::from_millis(20));
-    let budget = engine.budget_and_source()?;
-    memory::check_records(opts.iterations, budget.bytes)?;
-    let pool = super::thread_pool(engine.threads)?;
+    let start = Start::new(opts, engine)?;
     let mut t = PhaseTimings::default();
+    let Prepared {
+        storage,
+        mut mesh,
+        kept,
+        mut plan,
+        bytes_read,
+    } = prepare(input, output, opts, engine, &start, &mut t, observer)?;
 
-    let bytes_read = std::fs::metadata(input)
-        .map_err(|e| Error::io(input, e))?
-        .len();
-    // The records take their share of the budget; the mesh decides heap or scratch in the rest.
-    let mesh_budget = budget
-        .bytes
-        .saturating_sub(memory::records_bytes(opts.iterations));
-    let storage = storage_for(input, output, engine, mesh_budget, opts)?;
-
-    let clock = Instant::now();
-    let (mut mesh, kept) = metered(observer, Phase::Read, bytes_read, |m| {
-        io::read_mesh_kept(input, &storage, m)
-    })?;
-    t.ingest = clock.elapsed().as_secs_f64();
-    if mesh.triangles.is_empty() && opts.iterations > 0 {
-        return Err(Error::invalid(
-            input,
-            "no triangles to smooth (a point cloud or an empty mesh)",
-        ));
-    }
-    check_in_memory_budget(input, &storage, &mesh, mesh_budget)?;
-    let pins = engine.pins.resolve(&mesh, Some(input))?;
-
-    let (plan, mut smoothed) = pool.install(|| -> Result<_> {
-        let layout = engine.layout();
-        let mut plan =
-            Plan::new_observed(&storage, &mesh.positions, &mesh.triangles, layout, observer)
-                .map_err(|e| e.in_file(input))?;
-        plan.pin(&pins.unwrap_or_default());
-        plan.crease(opts.crease_angle);
+    let mut smoothed = start.pool.install(|| -> Result<_> {
         // The plan holds its own (reordered) copy: the input-order positions are not needed until
         // the write, so their memory is given back while smoothing (the peak of an in-core run).
         // Out of core (the triangles in a scratch file) the input's triangles go too, and the
@@ -280,40 +253,26 @@ pub(crate) fn run_file_with(
             plan.positions_in_input_order_metered(&mut positions, m);
             Ok(positions)
         })?;
-        Ok((plan, smoothed))
+        Ok(smoothed)
     })?;
 
-    // The plan is kept past the write only to measure the output as written, which runs beside
-    // the (sequential) write.
-    let plan = engine.with_stats.then_some(plan);
-    let expected = expected_output_bytes(bytes_read, output, &mesh);
-    let meter = Arc::new(Meter::new(expected));
-    observer.phase_start(Phase::Write, &meter);
-    let (written, output_stats) = pool.install(|| {
-        rayon::join(
-            || {
-                let clock = Instant::now();
-                io::write_mesh_metered(output, &mesh, &meter)
-                    .map(|()| clock.elapsed().as_secs_f64())
-            },
-            || {
-                let clock = Instant::now();
-                let stats = plan.map(|plan| output_stats(plan, output, &mesh, &smoothed));
-                (stats, clock.elapsed().as_secs_f64())
-            },
-        )
-    });
-    // The output's statistics run beside the write, inside its phase.
-    observer.phase_end(Phase::Write);
-    t.write = written?;
-    if let (Some(stats), seconds) = output_stats {
-        smoothed.output_stats = stats;
-        t.metrics += seconds;
-    }
-    t.total = start.elapsed().as_secs_f64();
+    // The plan is kept past the write only to measure the output as written.
+    let measure = engine
+        .with_stats
+        .then_some(|| Ok(output_stats(plan, output, &mesh, &smoothed)));
+    smoothed.output_stats = write_measured(
+        &start.pool,
+        output,
+        &mesh,
+        bytes_read,
+        &mut t,
+        observer,
+        measure,
+    )?;
+    t.total = start.clock.elapsed().as_secs_f64();
     let memory = MemoryStats {
-        budget: budget.bytes,
-        budget_source: budget.source,
+        budget: start.budget.bytes,
+        budget_source: start.budget.source,
         storage: if storage.is_mapped() {
             "scratch"
         } else {
@@ -321,11 +280,144 @@ pub(crate) fn run_file_with(
         },
         scratch_bytes: storage.mapped_bytes(),
         scratch_peak_bytes: storage.peak_mapped_bytes(),
-        peak_anon: sampler.peak(),
+        peak_anon: start.sampler.peak(),
         bytes_read,
         bytes_written: std::fs::metadata(output).map(|m| m.len()).unwrap_or(0),
     };
-    Ok(smoothed.report(&mesh, pool.current_num_threads(), memory, t))
+    Ok(smoothed.report(&mesh, start.pool.current_num_threads(), memory, t))
+}
+
+/// What every file run sets up first, once: the options checked, the memory budget parsed and
+/// checked against the iteration records, the thread pool, the clock and the memory sampler.
+pub(crate) struct Start {
+    pub clock: Instant,
+    pub sampler: PeakSampler,
+    pub budget: Budget,
+    /// The budget less the iteration records: the mesh decides heap or scratch in it.
+    pub mesh_budget: u64,
+    pub pool: rayon::ThreadPool,
+}
+
+impl Start {
+    pub(crate) fn new(opts: &Options, engine: &EngineSettings) -> Result<Start> {
+        opts.check()?;
+        let clock = Instant::now();
+        let sampler = PeakSampler::start(std::time::Duration::from_millis(20));
+        let budget = engine.budget_and_source()?;
+        memory::check_records(opts.iterations, budget.bytes)?;
+        let pool = super::thread_pool(engine.threads)?;
+        let mesh_budget = budget
+            .bytes
+            .saturating_sub(memory::records_bytes(opts.iterations));
+        Ok(Start {
+            clock,
+            sampler,
+            budget,
+            mesh_budget,
+            pool,
+        })
+    }
+}
+
+/// A read input and its plan, pinned and creased, ready to smooth.
+pub(crate) struct Prepared {
+    pub storage: Storage,
+    pub mesh: Mesh,
+    /// The input held open for a second read (see [`io::read_mesh_kept`]).
+    pub kept: Option<io::Kept>,
+    pub plan: Plan,
+    pub bytes_read: u64,
+}
+
+/// Read `input` into the storage its size asks for within `start`'s budget (heap or scratch),
+/// resolve the pins and make the plan on `start`'s pool; reading timed into `t`, the plan's
+/// phases told to `observer`.
+pub(crate) fn prepare(
+    input: &Path,
+    output: &Path,
+    opts: &Options,
+    engine: &EngineSettings,
+    start: &Start,
+    t: &mut PhaseTimings,
+    observer: &mut dyn Observer,
+) -> Result<Prepared> {
+    let bytes_read = std::fs::metadata(input)
+        .map_err(|e| Error::io(input, e))?
+        .len();
+    let storage = storage_for(input, output, engine, start.mesh_budget, opts)?;
+    let clock = Instant::now();
+    let (mesh, kept) = metered(observer, Phase::Read, bytes_read, |m| {
+        io::read_mesh_kept(input, &storage, m)
+    })?;
+    t.ingest += clock.elapsed().as_secs_f64();
+    if mesh.triangles.is_empty() && opts.iterations > 0 {
+        return Err(Error::invalid(
+            input,
+            "no triangles to smooth (a point cloud or an empty mesh)",
+        ));
+    }
+    check_in_memory_budget(input, &storage, &mesh, start.mesh_budget)?;
+    let pins = engine.pins.resolve(&mesh, Some(input))?.unwrap_or_default();
+    let plan = start.pool.install(|| -> Result<_> {
+        let mut plan = Plan::new_observed(
+            &storage,
+            &mesh.positions,
+            &mesh.triangles,
+            engine.layout(),
+            observer,
+        )
+        .map_err(|e| e.in_file(input))?;
+        plan.pin(&pins);
+        plan.crease(opts.crease_angle);
+        Ok(plan)
+    })?;
+    Ok(Prepared {
+        storage,
+        mesh,
+        kept,
+        plan,
+        bytes_read,
+    })
+}
+
+/// Write `mesh` to `output` (atomically, see [`io::write_mesh`]) on `pool`, its progress told to
+/// `observer` against the size it should have; `measure`, if given, measures the output beside
+/// the (sequential) write, inside its phase. Seconds go into `t`; returns what `measure` gave
+/// (`None` without it).
+pub(crate) fn write_measured(
+    pool: &rayon::ThreadPool,
+    output: &Path,
+    mesh: &Mesh,
+    input_bytes: u64,
+    t: &mut PhaseTimings,
+    observer: &mut dyn Observer,
+    measure: Option<impl FnOnce() -> Result<Option<MeshInfo>> + Send>,
+) -> Result<Option<MeshInfo>> {
+    let meter = Arc::new(Meter::new(expected_output_bytes(input_bytes, output, mesh)));
+    observer.phase_start(Phase::Write, &meter);
+    let (written, measured) = pool.install(|| {
+        rayon::join(
+            || {
+                let clock = Instant::now();
+                io::write_mesh_metered(output, mesh, &meter).map(|()| clock.elapsed().as_secs_f64())
+            },
+            || {
+                let clock = Instant::now();
+                let stats = measure.map(|f| f());
+                (stats, clock.elapsed().as_secs_f64())
+            },
+        )
+    });
+    observer.phase_end(Phase::Write);
+    t.write = written?;
+    let (stats, seconds) = measured;
+    match stats {
+        Some(stats) => {
+            t.metrics += seconds;
+            stats
+        }
+        None => Ok(None),
+    }
 }
 
 /// The statistics of the output file as stored (rounded to its coordinate type: `float`, or
@@ -555,12 +647,7 @@ pub(crate) fn storage_for(
 
 /// Only binary PLY decodes straight into scratch; other formats land on the heap. Refuse to go on
 /// rather than silently exceed the budget.
-pub(crate) fn check_in_memory_budget(
-    input: &Path,
-    storage: &Storage,
-    mesh: &Mesh,
-    budget: u64,
-) -> Result<()> {
+fn check_in_memory_budget(input: &Path, storage: &Storage, mesh: &Mesh, budget: u64) -> Result<()> {
     let heap = memory::mesh_bytes(mesh.positions.len() as u64, mesh.triangles.len() as u64);
     if storage.is_mapped() && !mesh.positions.is_mapped() && heap > budget {
         return Err(Error::resource(format!(
