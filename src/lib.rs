@@ -65,6 +65,13 @@ pub mod smooth;
 pub mod topology;
 
 pub use engine::{EngineSettings, Report, smooth, smooth_with};
+
+/// The version of the results: bumped by every change to the bytes a run writes (a release may
+/// change them when a change needs it, never by accident; `CHANGELOG.md` says what changed and
+/// why). Within one results version an output is the same for any thread count, memory budget
+/// and rank count. Reports (`results_version`) and batch markers carry it, and a rerun of a batch
+/// redoes what an earlier results version made.
+pub const RESULTS_VERSION: u32 = 2;
 pub use error::{Error, Result};
 pub use mesh::Mesh;
 

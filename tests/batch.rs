@@ -280,3 +280,32 @@ fn slurm_script_has_array_mem_and_dependent_summary() {
     let o = Command::new("bash").arg("-n").arg(&path).output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 }
+
+/// A marker certifies the results version of its output: a rerun redoes an input whose marker was
+/// made by another results version, or before they were recorded, and says why; the others stay.
+#[test]
+fn a_marker_of_another_results_version_is_redone() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = meshes(dir.path());
+    let out = dir.path().join("out");
+    ok(run_task(&input, &out, 0, 1));
+    let m = read_json(&marker(&out, 0));
+    assert_eq!(m["results_version"], vcsmooth::RESULTS_VERSION);
+    let mut old = m.clone();
+    old["results_version"] = (vcsmooth::RESULTS_VERSION - 1).into();
+    std::fs::write(marker(&out, 0), old.to_string()).unwrap();
+    let mut before = m;
+    before.as_object_mut().unwrap().remove("results_version");
+    std::fs::write(marker(&out, 1), before.to_string()).unwrap();
+    let text = ok(run_task(&input, &out, 0, 1));
+    assert_eq!(text.matches("\ndone ").count(), 2, "{text}");
+    assert_eq!(text.matches("\nskipped ").count(), MESHES - 2, "{text}");
+    let now = vcsmooth::RESULTS_VERSION;
+    for was in [now - 1, 1] {
+        assert!(
+            text.contains(&format!("results version {was}, this is {now}")),
+            "{text}"
+        );
+    }
+    assert_eq!(read_json(&marker(&out, 1))["results_version"], now);
+}

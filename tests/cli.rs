@@ -151,6 +151,7 @@ fn smooth_with_each_method_writes_mesh_report_and_plot() {
         assert_eq!(r["options"]["method"], method);
         assert_eq!(r["options"]["iterations"], iterations);
         assert!(r["tool"]["version"].is_string());
+        assert_eq!(r["results_version"], vcsmooth::RESULTS_VERSION);
         assert_eq!(r["input"]["stats"]["vertices"], 642);
         assert_eq!(r["output"]["stats"]["vertices"], 642);
         assert_eq!(r["output"]["stats"]["closed"], true);

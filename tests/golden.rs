@@ -1,7 +1,8 @@
 //! Results are a contract: the output bytes of a fixed set of runs are hashed and compared with
 //! `tests/golden/hashes.txt`. A refactor or an optimisation changes none of them. A change that
-//! must change a result re-records the file on purpose and says why in its commit:
-//! `VCSMOOTH_GOLDEN=record cargo test golden` rewrites it.
+//! must change a result bumps `vcsmooth::RESULTS_VERSION`, says why in `CHANGELOG.md` and its
+//! commit, and re-records the file on purpose: `VCSMOOTH_GOLDEN=record cargo test golden`
+//! rewrites it, and refuses to while the results version is the one the hashes were recorded at.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -383,6 +384,9 @@ fn runs(sphere: &Path, torus: &Path, big: &Path) -> Vec<Run> {
     runs
 }
 
+/// The line of `hashes.txt` that names the results version the hashes were recorded at.
+const VERSION_KEY: &str = "results_version";
+
 fn read_expected() -> BTreeMap<String, String> {
     let text = std::fs::read_to_string(hashes_file()).unwrap_or_default();
     text.lines()
@@ -486,10 +490,25 @@ fn golden_outputs_are_unchanged() {
         hash_file(&name, &out);
     }
 
+    let mut expected = read_expected();
+    let recorded_version = expected.remove(VERSION_KEY);
+    let version = vcsmooth::RESULTS_VERSION.to_string();
     if std::env::var("VCSMOOTH_GOLDEN").as_deref() == Ok("record") {
+        // A change of results comes with a new results version, never silently.
+        let changed: Vec<&String> = got
+            .iter()
+            .filter(|(name, hash)| expected.get(*name).is_some_and(|e| e != *hash))
+            .map(|(name, _)| name)
+            .collect();
+        assert!(
+            changed.is_empty() || recorded_version.as_ref() != Some(&version),
+            "these runs change at the recorded results version {version}: {changed:?}; bump \
+             vcsmooth::RESULTS_VERSION and say why in CHANGELOG.md before re-recording"
+        );
         let mut text = String::from(
             "# Output hashes (64-bit FNV-1a of the file bytes) of the runs in tests/golden.rs.\n# Re-record only on purpose: VCSMOOTH_GOLDEN=record cargo test golden\n",
         );
+        text.push_str(&format!("{VERSION_KEY} {version}\n"));
         for (name, hash) in &got {
             text.push_str(&format!("{name} {hash}\n"));
         }
@@ -513,7 +532,11 @@ fn golden_outputs_are_unchanged() {
         assert_eq!(got[a], got[b], "{a} and {b} differ");
     }
 
-    let expected = read_expected();
+    assert_eq!(
+        recorded_version.as_ref(),
+        Some(&version),
+        "the hashes were recorded at another results version: re-record them"
+    );
     let mut wrong = Vec::new();
     for (name, hash) in &got {
         match expected.get(name) {

@@ -299,6 +299,7 @@ fn info<'py>(
 #[pymodule]
 fn _vcsmooth(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add("RESULTS_VERSION", vcsmooth::RESULTS_VERSION)?;
     m.add("DEFAULT_METHOD", Method::default().name())?;
     let methods: Vec<&str> = Method::ALL.iter().map(|m| m.name()).collect();
     m.add("METHODS", PyTuple::new(m.py(), methods)?)?;

@@ -12,6 +12,7 @@ arrays or mesh files::
 - ``smooth_report(vertices, faces, **options)``: the positions and the run's report.
 - ``smooth_file(input, output, **options)``: file to file, as ``vcsmooth smooth`` (same bytes).
 - ``read_mesh(path)``, ``write_mesh(path, vertices, faces)``, ``info(vertices, faces)``.
+- ``RESULTS_VERSION``: bumped by every change to the bytes a run writes (see ``CHANGELOG.md``).
 - ``MeshError``: a file that is not a readable mesh (a ``ValueError``).
 
 The options are the command line's flags in snake_case (``lam`` for ``--lambda``); see
@@ -21,6 +22,7 @@ The options are the command line's flags in snake_case (``lam`` for ``--lambda``
 from ._vcsmooth import (
     DEFAULT_METHOD,
     METHODS,
+    RESULTS_VERSION,
     MeshError,
     __version__,
     info,
@@ -34,6 +36,7 @@ from ._vcsmooth import (
 __all__ = [
     "DEFAULT_METHOD",
     "METHODS",
+    "RESULTS_VERSION",
     "MeshError",
     "__version__",
     "info",

@@ -12,6 +12,7 @@ _Method = Literal["laplacian", "taubin", "lem", "vcs", "vcs-triangle", "vcs-lowp
 _Report = Dict[str, Any]
 
 __version__: str
+RESULTS_VERSION: int
 DEFAULT_METHOD: str
 METHODS: tuple[str, ...]
 

@@ -148,7 +148,7 @@ pub fn run_file(
             &plan,
             &state,
             (input, output),
-            engine,
+            (opts, engine),
             &start,
             &mut t,
             observer,
@@ -292,7 +292,7 @@ fn write_output(
     plan: &StoredPlan,
     state: &StateDoc,
     (input, output): (&Path, &Path),
-    engine: &EngineSettings,
+    (opts, engine): (&Options, &EngineSettings),
     start: &run::Start,
     t: &mut PhaseTimings,
     observer: &mut dyn Observer,
@@ -314,7 +314,16 @@ fn write_output(
             "changed since the plan was made (vertex or triangle count differs)",
         ));
     }
-    let last = work.map_positions(state.slot, plan.doc.vertices)?;
+    let mut last = work.map_positions(state.slot, plan.doc.vertices)?;
+    // The deviation bound holds in the file as written, as in one process.
+    if let (Some(limit), Some(stored)) = (opts.max_deviation, io::Stored::of(output, &mesh)) {
+        let input = work.map_input(plan.doc.vertices)?;
+        let mut rounded = storage.copy_of(&last)?;
+        start
+            .pool
+            .install(|| engine::within_as_stored(&mut rounded, &input, limit, &stored));
+        last = rounded;
+    }
     for (new, &old) in plan.order.iter().enumerate() {
         mesh.positions[old as usize] = last[new];
     }

@@ -156,6 +156,7 @@ impl Plan {
             patches,
             schedule,
             in_memory,
+            stored,
             ..
         } = self;
         let n = reordered.positions.len();
@@ -224,8 +225,29 @@ impl Plan {
                 ),
             }
         })?;
+        if let (Some(limit), Some(stored)) = (opts.max_deviation, stored) {
+            within_as_stored(pos, &input, limit, stored);
+        }
         Ok(auto.map(|a| a.stats()))
     }
+}
+
+/// `pos` rounded as `stored` keeps them, each within `limit` of its `input` position (see
+/// [`crate::io::Stored::round_within`]): the deviation bound, held in the file as written.
+pub(crate) fn within_as_stored(
+    pos: &mut [DVec3],
+    input: &[DVec3],
+    limit: f64,
+    stored: &crate::io::Stored,
+) {
+    if stored.is_exact() {
+        return;
+    }
+    reduce::for_chunks_mut(pos, |start, chunk| {
+        for (p, o) in chunk.iter_mut().zip(&input[start..]) {
+            *p = stored.round_within(*p, *o, limit);
+        }
+    });
 }
 
 /// The most worker threads a pool may have: far beyond any machine's cores, and small enough

@@ -54,6 +54,9 @@ pub struct Plan {
     /// Whether its arrays are on the heap (else in memory-mapped scratch files): the smoothing
     /// then holds its tile plans and buffers in memory too.
     pub in_memory: bool,
+    /// How the smoothed positions will be stored (a file run's output; `None`: as they are):
+    /// a deviation bound then holds for the stored values (see [`crate::io::Stored::round_within`]).
+    pub stored: Option<crate::io::Stored>,
     /// Seconds spent in each preparation phase.
     pub timings: PrepTimings,
 }
@@ -167,6 +170,7 @@ impl Plan {
             schedule,
             layout,
             in_memory: !storage.is_mapped(),
+            stored: None,
             timings: PrepTimings {
                 reorder,
                 topology: topology_s,

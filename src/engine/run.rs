@@ -369,6 +369,7 @@ pub(crate) fn prepare(
         .map_err(|e| e.in_file(input))?;
         plan.pin(&pins);
         plan.crease(opts.crease_angle);
+        plan.stored = io::Stored::of(output, &mesh);
         Ok(plan)
     })?;
     Ok(Prepared {

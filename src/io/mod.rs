@@ -387,6 +387,81 @@ impl Stored {
         let [a, b, c] = self.0;
         glam::DVec3::new(axis(a, p.x), axis(b, p.y), axis(c, p.z))
     }
+
+    /// `p` as it reads back, kept within `limit` of `origin` when `p` is (the deviation bound
+    /// must hold in the file as written, not only in `f64`): the nearest stored value when it is
+    /// within the bound; else each axis that rounding moved away from `origin` takes the stored
+    /// neighbour on `origin`'s side of `p` instead, so that no axis lies farther from `origin`
+    /// than `p`'s does (when `origin` is itself stored exactly, as an input written back in its
+    /// own type is); then, while still beyond (`p` itself may lie beyond by an `f64` rounding),
+    /// the axis whose step toward `origin` shortens the distance most steps, a few times at most.
+    pub fn round_within(&self, p: glam::DVec3, origin: glam::DVec3, limit: f64) -> glam::DVec3 {
+        let mut r = self.round(p);
+        if self.is_exact() || r.distance(origin) <= limit {
+            return r;
+        }
+        for i in 0..3 {
+            if (r[i] - origin[i]).abs() > (p[i] - origin[i]).abs() {
+                r[i] = self.step_toward(i, r[i], origin[i]);
+            }
+        }
+        for _ in 0..4 {
+            if r.distance(origin) <= limit {
+                break;
+            }
+            let shortest = (0..3)
+                .map(|i| {
+                    let mut q = r;
+                    q[i] = self.step_toward(i, r[i], origin[i]);
+                    q
+                })
+                .min_by(|a, b| a.distance(origin).total_cmp(&b.distance(origin)));
+            match shortest {
+                Some(q) if q != r => r = q,
+                _ => break,
+            }
+        }
+        r
+    }
+
+    /// The stored value of axis `i` next to the stored value `x`, on `toward`'s side; `x` when no
+    /// stored value lies closer to `toward`.
+    fn step_toward(&self, i: usize, x: f64, toward: f64) -> f64 {
+        if x == toward {
+            return x;
+        }
+        let up = toward > x;
+        let next = match self.0[i] {
+            Axis::Binary(ply::Scalar::F64) => return x,
+            Axis::Binary(t) if t.int_range().is_some() => x + if up { 1.0 } else { -1.0 },
+            // `x` reads back from an `f32` (its text, for text), which it rounds to again.
+            Axis::Binary(_) | Axis::SingleText => {
+                let f = x as f32;
+                f64::from(next_f32(f, up))
+            }
+        };
+        let mut one = *self;
+        one.0 = [self.0[i]; 3];
+        let stepped = one.round(glam::DVec3::splat(next)).x;
+        // Past `toward`, the step is kept only if it ends nearer.
+        match (stepped - toward).abs() < (x - toward).abs() {
+            true => stepped,
+            false => x,
+        }
+    }
+}
+
+/// The `f32` next to the finite `f`, above it when `up`, else below (`f32::next_up` and
+/// `next_down` are younger than the crate's minimum Rust version).
+fn next_f32(f: f32, up: bool) -> f32 {
+    if f == 0.0 {
+        let tiny = f32::from_bits(1);
+        return if up { tiny } else { -tiny };
+    }
+    // Away from zero the magnitude's bits grow by one, toward zero they shrink by one.
+    let away = (f > 0.0) == up;
+    let bits = f.to_bits();
+    f32::from_bits(if away { bits + 1 } else { bits - 1 })
 }
 
 /// Recognises and decodes an opened regular file of `len` bytes: its first bytes are read and

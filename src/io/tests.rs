@@ -1536,3 +1536,51 @@ fn integer_normals_are_written_as_normalized_integers() {
         "{want:?}"
     );
 }
+
+/// Points on (and, by an `f64` rounding, just beyond) the sphere of radius `limit` about an
+/// origin stored exactly: each rounded as every stored type keeps it, within the bound and a
+/// stored value itself.
+#[test]
+fn round_within_keeps_the_bound_for_every_stored_type() {
+    use ply::Scalar::{F32, I16, U8};
+    let types = [
+        (
+            Stored([Axis::Binary(F32); 3]),
+            1e-4,
+            DVec3::new(60.123, -20.5, 3.25),
+        ),
+        (
+            Stored([Axis::SingleText; 3]),
+            1e-4,
+            DVec3::new(-8.2311, 0.0039, 21.47),
+        ),
+        (
+            Stored([Axis::Binary(U8); 3]),
+            2.5,
+            DVec3::new(100.0, 7.0, 250.0),
+        ),
+        (
+            Stored([Axis::Binary(I16); 3]),
+            3.7,
+            DVec3::new(-300.0, 12.0, 0.0),
+        ),
+    ];
+    let mut moved = 0;
+    for (stored, limit, origin) in types {
+        let origin = stored.round(origin);
+        for k in 0..2000 {
+            // Directions spread over the sphere (a spiral), at the bound and one ulp beyond.
+            let z = 1.0 - 2.0 * (k as f64 + 0.5) / 2000.0;
+            let a = k as f64 * 2.399963;
+            let r = (1.0 - z * z).sqrt();
+            let dir = DVec3::new(r * a.cos(), r * a.sin(), z);
+            let p = origin + dir * limit * (1.0 + f64::EPSILON * (k % 2) as f64);
+            let q = stored.round_within(p, origin, limit);
+            assert!(q.distance(origin) <= limit, "{stored:?} {p} -> {q}");
+            assert_eq!(stored.round(q), q, "{stored:?}: {q} is not a stored value");
+            moved += usize::from(stored.round(p) != q);
+        }
+    }
+    // The nearest stored value is beyond the bound for many of them: the rule did work.
+    assert!(moved > 1000, "{moved}");
+}

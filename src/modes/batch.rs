@@ -241,6 +241,8 @@ pub struct MeshRow {
 pub struct Marker<'a> {
     pub format: &'static str,
     pub version: &'static str,
+    /// [`crate::RESULTS_VERSION`] of the output it certifies.
+    pub results_version: u32,
     #[serde(flatten)]
     pub row: MeshRow,
     pub certifies: Certificate,
@@ -400,9 +402,16 @@ fn settings_change(then: &str, now: &str) -> String {
 #[derive(Debug, Clone, Deserialize)]
 struct MarkerHead {
     format: String,
+    /// Absent before results versions were recorded: results version 1.
+    #[serde(default = "first_results_version")]
+    results_version: u32,
     #[serde(flatten)]
     row: MeshRow,
     certifies: Option<Certificate>,
+}
+
+fn first_results_version() -> u32 {
+    1
 }
 
 /// Read a marker's summary row.
@@ -456,6 +465,13 @@ pub fn check_marker(marker: &Path, input: Option<&Path>, settings: Option<&str>)
     let Some(cert) = &head.certifies else {
         return MarkerCheck::Stale("the marker certifies no input and output".into());
     };
+    if head.results_version != crate::RESULTS_VERSION {
+        return MarkerCheck::Stale(format!(
+            "made by results version {}, this is {} (see CHANGELOG.md)",
+            head.results_version,
+            crate::RESULTS_VERSION
+        ));
+    }
     let input_now = match input {
         Some(p) => Some(FileId::of(p).map_err(|e| e.to_string())),
         None => {

@@ -121,6 +121,9 @@ pub fn format_name(f: Format) -> String {
 #[derive(Debug, Clone, Serialize)]
 pub struct SmoothReport {
     pub tool: Tool,
+    /// [`crate::RESULTS_VERSION`]: the same options on the same input give the same output
+    /// bytes within one results version.
+    pub results_version: u32,
     pub command: &'static str,
     /// The command line as given.
     pub argv: Vec<String>,
@@ -162,6 +165,7 @@ impl SmoothReport {
         let stats = |s: &Option<crate::metrics::MeshInfo>| s.clone().unwrap_or_default();
         SmoothReport {
             tool: Tool::this(),
+            results_version: crate::RESULTS_VERSION,
             command: "smooth",
             argv,
             options,

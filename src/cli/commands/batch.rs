@@ -202,6 +202,7 @@ fn run_share(
                 let doc = Marker {
                     format: core::MARKER_FORMAT,
                     version: env!("CARGO_PKG_VERSION"),
+                    results_version: crate::RESULTS_VERSION,
                     row,
                     certifies: core::Certificate {
                         input: input_id,
