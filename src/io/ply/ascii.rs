@@ -9,7 +9,7 @@
 
 use std::io::{self, Write};
 
-use super::{Element, Kind, Property, Scalar, walk_record};
+use super::header::{Element, Kind, Property, Scalar, walk_record};
 use crate::io::{F32, F64, show, tokens};
 
 /// Parses the body that starts on line `first_line` into each element's little-endian records.

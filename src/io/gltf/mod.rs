@@ -1,0 +1,151 @@
+//! glTF 2.0: binary `.glb` and JSON `.gltf` whose buffers are external files or embedded
+//! `data:` URIs.
+//!
+//! # What is read
+//!
+//! Every triangle primitive (`mode` 4, the default) of every mesh: its `POSITION` accessor (float
+//! `VEC3`) and its indices (`u8`/`u16`/`u32`, or none: consecutive triples). The engine sees one
+//! mesh, the concatenation of the distinct `POSITION` accessors in order of first use: a
+//! primitive's vertices are its own (nothing is merged across primitives), except that primitives
+//! naming the same `POSITION` accessor share those vertices, as the file says. Primitives of other
+//! modes (points, lines, strips, fans) are left untouched and not smoothed.
+//!
+//! Node transforms are ignored: a mesh is smoothed in its own local space, once, however many
+//! nodes place it (scaled or mirrored instances all receive the same smoothed mesh).
+//!
+//! # What is written
+//!
+//! Only to the input's own kind: a GLB input as `.glb`, a `.gltf` input as `.gltf`; a mesh that
+//! was not read from glTF is refused (glTF output keeps a glTF input's scene; a glTF input can be
+//! written to PLY, OBJ, OFF or STL as a plain mesh). The JSON and every buffer are carried
+//! through: the smoothed positions overwrite the `POSITION` data in place (same accessor, buffer
+//! view and byte layout), `NORMAL` data is recomputed from them (area-weighted, normalised), and
+//! the `POSITION` accessors' `min`/`max` (and a `NORMAL` accessor's, if it has them) are updated.
+//! Everything else — other attributes, materials, images, nodes, extras, extensions — keeps its
+//! bytes and values (the JSON is re-serialised, so key order and spacing may change). A changed
+//! buffer is written as the GLB's binary chunk, re-encoded into its `data:` URI, or, when it was
+//! an external file, written beside the output as `<output stem>.bin` (`<stem>-1.bin`, … for
+//! more than one) and its `uri` updated: the input's files are never overwritten. Unchanged
+//! external files (textures, other buffers) keep their relative URIs, so they must be beside the
+//! output too. Tangents (`TANGENT`) and morph targets are carried as they were.
+//!
+//! # Refused
+//!
+//! Sparse accessors on positions or indices, Draco (`KHR_draco_mesh_compression`) and meshopt
+//! (`EXT_meshopt_compression`) compression, non-float positions (`KHR_mesh_quantization`),
+//! missing buffers, accessors and indices out of range, truncated GLB chunks, NaN or infinite
+//! positions, and external buffers when the file's directory is unknown (bytes not read from a
+//! file).
+
+use std::fmt;
+use std::path::PathBuf;
+
+use serde_json::Value;
+
+use crate::mesh::{Carried, FileLayout};
+
+mod read;
+mod uri;
+mod write;
+
+pub(super) use read::read;
+pub(crate) use write::{buffer_name_of, referenced_files};
+pub(super) use write::{check_writable, write};
+
+/// A GLB starts with these four bytes.
+pub(super) fn has_magic(head: &[u8]) -> bool {
+    head.starts_with(b"glTF")
+}
+
+const CHUNK_JSON: u32 = 0x4E4F_534A;
+const CHUNK_BIN: u32 = 0x004E_4942;
+const FLOAT: u64 = 5126;
+const COMPRESSIONS: [&str; 2] = ["KHR_draco_mesh_compression", "EXT_meshopt_compression"];
+
+/// What a glTF input holds beyond the mesh: its JSON, the buffers the geometry lives in, and where
+/// each vertex range and normal array sits in them.
+pub struct GltfLayout {
+    json: Value,
+    binary: bool,
+    /// The buffers the geometry uses (index = the JSON's buffer index); `None` for the others.
+    buffers: Vec<Option<Loaded>>,
+    /// Each distinct `POSITION` accessor and its first vertex in the mesh.
+    positions: Vec<(Span, usize)>,
+    /// Each `NORMAL` accessor of a triangle primitive and the first vertex of its positions.
+    normals: Vec<(Span, usize)>,
+    vertices: usize,
+    triangles: usize,
+    carried: Carried,
+    /// The directory the input's external files are relative to, when it came from a file.
+    dir: Option<PathBuf>,
+}
+
+/// One buffer's bytes and where they came from.
+struct Loaded {
+    bytes: Vec<u8>,
+    origin: Origin,
+}
+
+enum Origin {
+    /// The GLB's binary chunk.
+    Chunk,
+    /// A `data:` URI; the text before its comma (`data:…;base64`).
+    Data(String),
+    /// An external file, as resolved against the input's directory.
+    File(PathBuf),
+}
+
+/// Where a float `VEC3` accessor's elements are: `count` elements of 12 bytes every `stride`
+/// bytes from `offset` in buffer `buffer`.
+#[derive(Debug, Clone, Copy)]
+struct Span {
+    accessor: usize,
+    buffer: usize,
+    offset: usize,
+    stride: usize,
+    count: usize,
+}
+
+// By hand: the buffers hold megabytes that a `{:?}` must not dump.
+impl fmt::Debug for GltfLayout {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("GltfLayout")
+            .field("binary", &self.binary)
+            .field("positions", &self.positions.len())
+            .field("normals", &self.normals.len())
+            .field("vertices", &self.vertices)
+            .field("triangles", &self.triangles)
+            .finish()
+    }
+}
+
+impl FileLayout for GltfLayout {
+    fn as_any(&self) -> &dyn std::any::Any {
+        self
+    }
+    fn carries(&self) -> Carried {
+        self.carried.clone()
+    }
+}
+
+/// The array under `key`, or none.
+fn array<'a>(v: &'a Value, key: &str) -> &'a [Value] {
+    v.get(key)
+        .and_then(Value::as_array)
+        .map_or(&[], Vec::as_slice)
+}
+
+fn index(v: &Value) -> Option<usize> {
+    v.as_u64().and_then(|i| usize::try_from(i).ok())
+}
+
+/// A non-negative integer field, `default` when absent.
+fn field(v: &Value, key: &str, default: Option<usize>) -> std::result::Result<usize, String> {
+    match v.get(key) {
+        None => default.ok_or_else(|| format!("no {key}")),
+        Some(x) => index(x).ok_or_else(|| format!("{key} is not a non-negative integer")),
+    }
+}
+
+#[cfg(test)]
+mod tests;
