@@ -78,6 +78,19 @@ pub struct SmoothConfig {
 impl SmoothConfig {
     /// Resolve and check the flags; `argv` is the command line, kept for the report.
     pub fn from_args(a: SmoothArgs, argv: Vec<String>) -> Result<SmoothConfig> {
+        // Multiresolution runs a volume-constrained method on its coarse levels.
+        let default = match a.multires.multires {
+            true => crate::Method::MULTIRES_COARSE,
+            false => crate::Method::default(),
+        };
+        let options = a.smoothing.options(default)?;
+        let multires = a.multires.resolve(&options)?;
+        if multires.is_some() && a.cluster.checkpoint.is_some() {
+            return Err(flags::parameter(
+                "multires",
+                "cannot be combined with --checkpoint (it runs in one process)",
+            ));
+        }
         mesh_output(&a.files.output)?;
         if let Some(p) = &a.plot {
             svg_output(p)?;
@@ -98,18 +111,6 @@ impl SmoothConfig {
         engine.pins = a.pins.resolve()?;
         engine.with_stats = a.report.is_some();
         engine.statistics = a.stats;
-        let mut options = a.smoothing.options();
-        if a.multires.multires && a.smoothing.method.is_none() {
-            // Multiresolution runs a volume-constrained method on its coarse levels.
-            options.method = crate::Method::MULTIRES_COARSE;
-        }
-        let multires = a.multires.resolve(&options)?;
-        if multires.is_some() && a.cluster.checkpoint.is_some() {
-            return Err(flags::parameter(
-                "multires",
-                "cannot be combined with --checkpoint (it runs in one process)",
-            ));
-        }
         Ok(SmoothConfig {
             multires,
             options,
