@@ -132,3 +132,111 @@ fn inconsistent_options_are_one_usage_line_for_every_command() {
     ]);
     ok(o);
 }
+
+// ---------------------------------------------------------------------------------------------
+// The checkpoint directory
+
+#[test]
+fn checkpoint_directory_never_takes_a_file_place_nor_holds_one() {
+    let (dir, s, _) = fixture();
+    let d = dir.path();
+    let before = std::fs::read(&s).unwrap();
+    let smooth = |out: &Path, extra: &[&OsStr]| {
+        let mut args: Vec<&OsStr> = vec!["smooth".as_ref(), s.as_os_str(), out.as_os_str()];
+        args.extend_from_slice(&["--iterations".as_ref(), "1".as_ref()]);
+        args.extend_from_slice(extra);
+        run(&args)
+    };
+    let out = d.join("o.ply");
+    let sub = d.join("sub");
+    std::fs::create_dir(&sub).unwrap();
+    let spelled = sub.join("..").join("o.ply");
+    let link = d.join("link.ply");
+    std::os::unix::fs::symlink(&s, &link).unwrap();
+    let cases: Vec<(PathBuf, Vec<OsString>, &str)> = vec![
+        (
+            out.clone(),
+            vec![],
+            "--checkpoint names the same path as OUT",
+        ),
+        (spelled, vec![], "--checkpoint names the same path as OUT"),
+        (out.join("work"), vec![], "--checkpoint is inside OUT"),
+        (
+            out.join("a").join("b"),
+            vec![],
+            "--checkpoint is inside OUT",
+        ),
+        (s.clone(), vec![], "--checkpoint names the same path as IN"),
+        (
+            link.clone(),
+            vec![],
+            "--checkpoint names the same path as IN",
+        ),
+        (s.join("w"), vec![], "--checkpoint is inside IN"),
+        (
+            d.join("r.json"),
+            vec!["--report".into(), d.join("r.json").into()],
+            "--checkpoint names the same path as --report",
+        ),
+        (
+            d.join("p.svg").join("w"),
+            vec!["--plot".into(), d.join("p.svg").into()],
+            "--checkpoint is inside --plot",
+        ),
+    ];
+    for (ck, extra, says) in &cases {
+        let mut args: Vec<&OsStr> = vec!["--checkpoint".as_ref(), ck.as_os_str()];
+        args.extend(extra.iter().map(|a| a.as_os_str()));
+        let o = smooth(&out, &args);
+        fails(&o, 2, &[says, "the work directory would take its place"]);
+        assert!(!out.exists(), "{}: output written", ck.display());
+        assert!(!d.join("r.json").exists() && !d.join("p.svg").exists());
+    }
+    assert_eq!(std::fs::read(&s).unwrap(), before);
+    assert!(std::fs::symlink_metadata(&link).unwrap().is_symlink());
+
+    // A file where the directory or a folder above it would be.
+    let file = d.join("f.txt");
+    std::fs::write(&file, b"keep").unwrap();
+    let o = smooth(&out, &["--checkpoint".as_ref(), file.as_os_str()]);
+    fails(&o, 2, &["--checkpoint exists and is not a directory"]);
+    let o = smooth(&out, &["--checkpoint".as_ref(), file.join("w").as_os_str()]);
+    fails(
+        &o,
+        2,
+        &["--checkpoint cannot be made", "is not a directory"],
+    );
+    assert_eq!(std::fs::read(&file).unwrap(), b"keep");
+
+    // A side file that is one of the files the run keeps in the directory.
+    let ck = d.join("ck");
+    ok(smooth(&out, &["--checkpoint".as_ref(), ck.as_os_str()]));
+    let state = std::fs::read(ck.join("state.json")).unwrap();
+    for (flag, name) in [("--report", "state.json"), ("--report", "plan.json")] {
+        for side in [ck.join(name), sub.join("..").join("ck").join(name)] {
+            let o = smooth(
+                &out,
+                &[
+                    "--checkpoint".as_ref(),
+                    ck.as_os_str(),
+                    flag.as_ref(),
+                    side.as_os_str(),
+                ],
+            );
+            fails(&o, 2, &["names a file of the --checkpoint directory"]);
+        }
+    }
+    assert_eq!(std::fs::read(ck.join("state.json")).unwrap(), state);
+    // Any other file in it is the user's to choose.
+    let report = ck.join("mine.json");
+    ok(smooth(
+        &out,
+        &[
+            "--checkpoint".as_ref(),
+            ck.as_os_str(),
+            "--report".as_ref(),
+            report.as_os_str(),
+        ],
+    ));
+    json(&std::fs::read_to_string(&report).unwrap());
+}

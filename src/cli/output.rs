@@ -139,6 +139,71 @@ pub fn check_files(reads: &[Named], output: Option<Named>, sides: &[Named]) -> R
     Ok(())
 }
 
+/// Check, before any work, the directory a run keeps its work in (`--checkpoint DIR`, named
+/// `dir`) against every file the command reads or writes (`files`), by the identity of
+/// [`check_files`]: neither the directory nor a missing folder above it that the run would create
+/// is one of those files (a directory would take its place), and none of them is a file the run
+/// keeps in it ([`crate::cluster::store::FILES`]); the directory exists as one or can be created.
+pub fn check_work_dir(dir: Named, files: &[Named]) -> Result<()> {
+    let (flag, dir) = dir;
+    let absolute = std::path::absolute(dir).map_err(|e| Error::io(dir, e))?;
+    // The directory, then each folder above it, up to the first that exists.
+    for (k, folder) in absolute.ancestors().enumerate() {
+        let id = Identity::of(folder);
+        if let Some((name, _)) = files.iter().find(|(_, f)| Identity::of(f) == id) {
+            let what = match k {
+                0 => format!("{flag} names the same path as {name}"),
+                _ => format!("{flag} is inside {name}"),
+            };
+            return Err(Error::invalid(
+                dir,
+                format!("{what}: the work directory would take its place"),
+            ));
+        }
+        match std::fs::metadata(folder) {
+            Ok(m) if m.is_dir() => break,
+            Ok(_) if k == 0 => {
+                return Err(Error::invalid(
+                    dir,
+                    format!("{flag} exists and is not a directory"),
+                ));
+            }
+            Ok(_) => {
+                return Err(Error::invalid(
+                    dir,
+                    format!(
+                        "{flag} cannot be made: '{}' is not a directory",
+                        folder.display()
+                    ),
+                ));
+            }
+            Err(_) => {}
+        }
+    }
+    let id = Identity::of(&absolute);
+    for &(name, path) in files {
+        let inside = path
+            .file_name()
+            .and_then(|f| f.to_str())
+            .is_some_and(|f| crate::cluster::store::FILES.contains(&f))
+            && Identity::of(folder(path)) == id;
+        if inside {
+            return Err(Error::invalid(
+                path,
+                format!("{name} names a file of the {flag} directory: it would be overwritten"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The folder a file `path` is in (`.` for a bare name).
+fn folder(path: &Path) -> &Path {
+    path.parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."))
+}
+
 /// What makes two paths the same file (see [`check_files`]).
 #[derive(Debug, PartialEq, Eq)]
 pub(crate) enum Identity {
@@ -195,10 +260,7 @@ pub fn writable(path: &Path) -> Result<()> {
         ));
     }
     parent_exists(path)?;
-    let dir = path
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
+    let dir = folder(path);
     let Some(name) = path.file_name() else {
         return Err(Error::invalid(path, "the output path names no file"));
     };

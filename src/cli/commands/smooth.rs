@@ -9,7 +9,9 @@ use clap::Args as ClapArgs;
 
 use crate::cli::flags;
 use crate::cli::multires::{MultiresArgs, print_multires};
-use crate::cli::output::{check_files, mesh_output, stdout_error, svg_output, write_json};
+use crate::cli::output::{
+    check_files, check_work_dir, mesh_output, stdout_error, svg_output, write_json,
+};
 use crate::cli::plot::{Curve, file_name, volume_curve, write_volume_plot};
 use crate::cli::progress::Progress;
 use crate::cli::report::{count, fixed, iterations_run};
@@ -107,6 +109,12 @@ impl SmoothConfig {
         let mut reads = vec![("IN", a.files.input.as_path())];
         reads.extend(a.pins.pin.as_deref().map(|p| ("--pin", p)));
         check_files(&reads, Some(("OUT", &a.files.output)), &sides)?;
+        if let Some(dir) = &a.cluster.checkpoint {
+            let mut files = reads.clone();
+            files.push(("OUT", &a.files.output));
+            files.extend(&sides);
+            check_work_dir(("--checkpoint", dir), &files)?;
+        }
         let mut engine = a.smoothing.engine.resolve()?;
         engine.pins = a.pins.resolve()?;
         engine.with_stats = a.report.is_some();
