@@ -240,3 +240,187 @@ fn checkpoint_directory_never_takes_a_file_place_nor_holds_one() {
     ));
     json(&std::fs::read_to_string(&report).unwrap());
 }
+
+// ---------------------------------------------------------------------------------------------
+// Files written through links, devices and descriptors
+
+/// The first JSON value of `bytes` and the text after it.
+fn json_then_text(bytes: &[u8]) -> (serde_json::Value, String) {
+    let mut values = serde_json::Deserializer::from_slice(bytes).into_iter::<serde_json::Value>();
+    let value = values
+        .next()
+        .unwrap_or_else(|| panic!("no JSON in {:?}", String::from_utf8_lossy(bytes)))
+        .unwrap();
+    let rest = String::from_utf8_lossy(&bytes[values.byte_offset()..]).into_owned();
+    (value, rest)
+}
+
+fn is_link(p: &Path) -> bool {
+    std::fs::symlink_metadata(p).is_ok_and(|m| m.file_type().is_symlink())
+}
+
+#[test]
+fn side_files_through_links_land_in_the_target_and_keep_the_link() {
+    let (dir, s, inputs) = fixture();
+    let d = dir.path();
+    let elsewhere = d.join("elsewhere");
+    std::fs::create_dir(&elsewhere).unwrap();
+    let links = d.join("links");
+    std::fs::create_dir(&links).unwrap();
+    std::fs::write(elsewhere.join("r.json"), b"old").unwrap();
+    // An absolute link, a relative one, a chain, and one whose target does not exist yet.
+    let report = links.join("r.json");
+    std::os::unix::fs::symlink(elsewhere.join("r.json"), &report).unwrap();
+    let plot = links.join("p.svg");
+    std::os::unix::fs::symlink("../elsewhere/p.svg", &plot).unwrap();
+    let chained = links.join("chain.json");
+    std::os::unix::fs::symlink("r.json", &chained).unwrap();
+    let out = d.join("o.ply");
+    let o = run(&[
+        "smooth".as_ref(),
+        s.as_os_str(),
+        out.as_os_str(),
+        "--iterations".as_ref(),
+        "2".as_ref(),
+        "--report".as_ref(),
+        report.as_os_str(),
+        "--plot".as_ref(),
+        plot.as_os_str(),
+    ]);
+    ok(o);
+    assert!(is_link(&report) && is_link(&plot));
+    let doc = json(&std::fs::read_to_string(elsewhere.join("r.json")).unwrap());
+    assert_eq!(doc["command"], "smooth");
+    let svg = std::fs::read_to_string(elsewhere.join("p.svg")).unwrap();
+    assert!(svg.contains("<svg"), "{svg}");
+    // Only the links where they were, no temporary file beside them or their targets.
+    let names = |p: &Path| crate::util::listing(p);
+    assert_eq!(names(&links), ["chain.json", "p.svg", "r.json"]);
+    assert_eq!(names(&elsewhere), ["p.svg", "r.json"]);
+
+    // The main output through a link: the target is smoothed in place, the link stays.
+    let target = elsewhere.join("mesh.ply");
+    std::fs::copy(&s, &target).unwrap();
+    let link = links.join("mesh.ply");
+    std::os::unix::fs::symlink(&target, &link).unwrap();
+    let before = std::fs::read(&target).unwrap();
+    ok(run(&[
+        "smooth".as_ref(),
+        link.as_os_str(),
+        link.as_os_str(),
+        "--iterations".as_ref(),
+        "2".as_ref(),
+    ]));
+    assert!(is_link(&link));
+    assert_ne!(std::fs::read(&target).unwrap(), before);
+    assert_eq!(
+        std::fs::read(&target).unwrap(),
+        std::fs::read(&out).unwrap()
+    );
+
+    // batch --summary --json through a chain of links.
+    let outdir = d.join("out");
+    ok(run(&[
+        "batch".as_ref(),
+        inputs.as_os_str(),
+        outdir.as_os_str(),
+        "--iterations".as_ref(),
+        "1".as_ref(),
+    ]));
+    ok(run(&[
+        "batch".as_ref(),
+        "--summary".as_ref(),
+        outdir.as_os_str(),
+        "--json".as_ref(),
+        chained.as_os_str(),
+    ]));
+    assert!(is_link(&chained) && is_link(&report));
+    let summary = json(&std::fs::read_to_string(elsewhere.join("r.json")).unwrap());
+    assert_eq!(
+        summary["meshes"].as_array().map(Vec::len),
+        Some(2),
+        "{summary}"
+    );
+}
+
+#[test]
+fn side_files_through_devices_and_stdout_are_streams() {
+    let (dir, s, inputs) = fixture();
+    let d = dir.path();
+    let out = d.join("o.ply");
+    // Links of our own: a regression replaces them, never the system's /dev/stdout.
+    let stdout_link = d.join("stdout.json");
+    std::os::unix::fs::symlink("/dev/stdout", &stdout_link).unwrap();
+    let fd_link = d.join("fd1.json");
+    std::os::unix::fs::symlink("/proc/self/fd/1", &fd_link).unwrap();
+    let null_link = d.join("null.json");
+    std::os::unix::fs::symlink("/dev/null", &null_link).unwrap();
+    let smooth = |report: &Path| {
+        let mut cmd = command();
+        cmd.args([
+            "smooth".as_ref(),
+            s.as_os_str(),
+            out.as_os_str(),
+            "--iterations".as_ref(),
+            "2".as_ref(),
+            "--report".as_ref(),
+            report.as_os_str(),
+        ]);
+        cmd
+    };
+    // stdout a pipe: the report, then the table.
+    for link in [&stdout_link, &fd_link] {
+        let o = smooth(link).output().unwrap();
+        assert!(o.status.success(), "{}", stderr(&o));
+        let (doc, rest) = json_then_text(&o.stdout);
+        assert_eq!(doc["command"], "smooth", "{doc}");
+        assert!(rest.contains(" -> ") && rest.contains("seconds:"), "{rest}");
+        assert!(is_link(link));
+    }
+    // stdout a file: the same, in the file, the table after the report (not over it).
+    let captured = d.join("captured.txt");
+    let file = std::fs::File::create(&captured).unwrap();
+    let o = smooth(&stdout_link).stdout(file).output().unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (doc, rest) = json_then_text(&std::fs::read(&captured).unwrap());
+    assert_eq!(doc["command"], "smooth");
+    assert!(rest.contains("seconds:"), "{rest}");
+    assert!(is_link(&stdout_link));
+    // A character device.
+    ok(smooth(&null_link).output().unwrap());
+    assert!(is_link(&null_link));
+    // batch --summary --json to stdout through a link: JSON, then the table.
+    let outdir = d.join("out");
+    ok(run(&[
+        "batch".as_ref(),
+        inputs.as_os_str(),
+        outdir.as_os_str(),
+        "--iterations".as_ref(),
+        "1".as_ref(),
+    ]));
+    let o = run(&[
+        "batch".as_ref(),
+        "--summary".as_ref(),
+        outdir.as_os_str(),
+        "--json".as_ref(),
+        stdout_link.as_os_str(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (doc, rest) = json_then_text(&o.stdout);
+    assert_eq!(doc["meshes"].as_array().map(Vec::len), Some(2), "{doc}");
+    assert!(rest.contains("total (2)"), "{rest}");
+    assert!(is_link(&stdout_link));
+    // The output mesh itself is replaced by renaming: a device there is refused, link kept.
+    let mesh_link = d.join("null.ply");
+    std::os::unix::fs::symlink("/dev/null", &mesh_link).unwrap();
+    let o = run(&["smooth".as_ref(), s.as_os_str(), mesh_link.as_os_str()]);
+    fails(&o, 2, &["is not a regular file"]);
+    assert!(is_link(&mesh_link));
+    // Links the run cannot follow are one line each, nothing written.
+    let looped = d.join("loop.json");
+    std::os::unix::fs::symlink("loop.json", &looped).unwrap();
+    std::fs::remove_file(&out).unwrap();
+    let o = smooth(&looped).output().unwrap();
+    fails(&o, 2, &["symbolic links"]);
+    assert!(!out.exists());
+}

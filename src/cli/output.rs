@@ -133,8 +133,11 @@ pub fn check_files(reads: &[Named], output: Option<Named>, sides: &[Named]) -> R
         }
         taken.push((name.to_string(), id));
     }
-    for (_, path) in output.iter().chain(sides) {
+    if let Some((_, path)) = output {
         writable(path)?;
+    }
+    for (_, path) in sides {
+        side_writable(path)?;
     }
     Ok(())
 }
@@ -248,11 +251,26 @@ fn resolved(path: &Path) -> std::path::PathBuf {
     out
 }
 
-/// Check that a file can be written at `path`, before any work: its directory exists, is a
-/// directory and lets us create files (tried with an empty file named as the atomic writer's
-/// temporary files, `.<name>.tmp-<pid>-<n>`, removed at once), and `path` itself is not a
-/// directory or another non-regular file (a device, a pipe) that the final rename would replace.
+/// Check that the output `path` can be written, before any work (see [`check_writable`]): it is
+/// replaced by renaming, so what it leads to must be a regular file or nothing yet.
 pub fn writable(path: &Path) -> Result<()> {
+    check_writable(path, false)
+}
+
+/// Check that the side file `path` (a report, a plot, a summary) can be written, before any work
+/// (see [`check_writable`]): it may also lead to a character device, a pipe or a descriptor of
+/// this process (`/dev/stdout`), written through as a stream.
+pub fn side_writable(path: &Path) -> Result<()> {
+    check_writable(path, true)
+}
+
+/// Check that a file can be written at `path`, before any work. `path` is written where it leads
+/// ([`crate::io::destination`]: a symbolic link's target, a device or pipe as a stream, never
+/// by replacing the link or the device node); a file there to replace must have its directory,
+/// which lets us create files (tried with an empty file named as the atomic writer's temporary
+/// files, `.<name>.tmp-<pid>-<n>`, removed at once), and not be a directory; a stream is refused
+/// unless `stream` (an output mesh is replaced by renaming, never half-written).
+fn check_writable(path: &Path, stream: bool) -> Result<()> {
     if path.as_os_str().as_encoded_bytes().ends_with(b"/") {
         return Err(Error::invalid(
             path,
@@ -260,20 +278,25 @@ pub fn writable(path: &Path) -> Result<()> {
         ));
     }
     parent_exists(path)?;
-    let dir = folder(path);
-    let Some(name) = path.file_name() else {
-        return Err(Error::invalid(path, "the output path names no file"));
-    };
-    if let Ok(m) = std::fs::metadata(path) {
-        if m.is_dir() {
-            return Err(Error::invalid(path, "is a directory, not a file"));
-        }
-        if !m.is_file() {
+    let real = match crate::io::destination(path).map_err(|e| Error::io(path, e))? {
+        crate::io::Destination::Replace(real) => real,
+        _ if stream => return Ok(()),
+        _ => {
             return Err(Error::invalid(
                 path,
                 "exists and is not a regular file (vcsmooth replaces its output by renaming)",
             ));
         }
+    };
+    if real != path {
+        parent_exists(&real)?;
+    }
+    let dir = folder(&real);
+    let Some(name) = real.file_name() else {
+        return Err(Error::invalid(path, "the output path names no file"));
+    };
+    if std::fs::metadata(&real).is_ok_and(|m| m.is_dir()) {
+        return Err(Error::invalid(path, "is a directory, not a file"));
     }
     // Numbers counted down from the top, so that they never meet the atomic writer's (counted up
     // from 0) in the same process.
@@ -304,7 +327,8 @@ pub fn writable(path: &Path) -> Result<()> {
 }
 
 /// Write `bytes` to `path` through a temporary file beside it, renamed into place when complete:
-/// a reader never sees a half-written file under `path`, and a failure leaves no file behind.
+/// a reader never sees a half-written file under `path`, and a failure leaves no file behind (a
+/// path that leads to a stream is written through, see [`crate::io::destination`]).
 pub fn atomic_write(path: &Path, bytes: &[u8]) -> Result<()> {
     crate::io::write_atomically(path, |w| w.write_all(bytes))
 }
