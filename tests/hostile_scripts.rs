@@ -424,3 +424,316 @@ fn side_files_through_devices_and_stdout_are_streams() {
     fails(&o, 2, &["symbolic links"]);
     assert!(!out.exists());
 }
+
+// ---------------------------------------------------------------------------------------------
+// The Slurm script
+
+/// Names that would run code or break lines if a script took them as text: the issue's, and one
+/// with every shell metacharacter, a CR, a here-document's end marker and bytes that are not
+/// UTF-8.
+fn hostile_names() -> Vec<OsString> {
+    let mut all = b"a'b\"c $(touch PWNED) `touch PWNED` ;touch PWNED& |x \\ #y\rtouch PWNED\n\
+                    VCSMOOTH_EOF\ntouch PWNED\n%z "
+        .to_vec();
+    all.extend_from_slice(b"\xff\xfe\x1b[2J");
+    // One a list file (UTF-8 lines) can name.
+    let listable = b"l $(touch PWNED) `touch PWNED` 'q\" #h ;& \\ \x1b".to_vec();
+    vec![
+        OsString::from("in\ntouch PWNED #"),
+        OsString::from_vec(all),
+        OsString::from_vec(listable),
+    ]
+}
+
+/// A folder `bin` in `dir` with a fake `sbatch` that logs its arguments and answers a job id.
+fn fake_sbatch(dir: &Path) -> PathBuf {
+    let bin = dir.join("bin");
+    std::fs::create_dir(&bin).unwrap();
+    let log = dir.join("sbatch.log");
+    let script = format!(
+        "#!/bin/sh\nprintf '%s\\n' \"$*\" >> '{}'\necho 42\n",
+        log.display()
+    );
+    let sbatch = bin.join("sbatch");
+    std::fs::write(&sbatch, script).unwrap();
+    let mut perms = std::fs::metadata(&sbatch).unwrap().permissions();
+    std::os::unix::fs::PermissionsExt::set_mode(&mut perms, 0o755);
+    std::fs::set_permissions(&sbatch, perms).unwrap();
+    bin
+}
+
+/// Runs `bash SCRIPT ARGS` in `cwd` with `bin` first on PATH and `env` set.
+fn bash(script: &Path, cwd: &Path, bin: &Path, env: &[(&str, &str)]) -> Output {
+    let path = std::env::var_os("PATH").unwrap_or_default();
+    let mut paths = vec![bin.to_path_buf()];
+    paths.extend(std::env::split_paths(&path));
+    let mut cmd = Command::new("bash");
+    cmd.arg(script)
+        .current_dir(cwd)
+        .env("PATH", std::env::join_paths(paths).unwrap())
+        .stdin(Stdio::null());
+    for v in [
+        "SLURM_ARRAY_TASK_ID",
+        "SLURM_ARRAY_TASK_COUNT",
+        "SLURM_ARRAY_TASK_MIN",
+        "SLURM_ARRAY_TASK_MAX",
+    ] {
+        cmd.env_remove(v);
+    }
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
+    cmd.output().unwrap()
+}
+
+/// Every file named PWNED under `dir`.
+fn pwned(dir: &Path) -> Vec<PathBuf> {
+    let mut found = Vec::new();
+    let mut todo = vec![dir.to_path_buf()];
+    while let Some(d) = todo.pop() {
+        for e in std::fs::read_dir(&d).unwrap().flatten() {
+            let p = e.path();
+            if e.file_name() == "PWNED" {
+                found.push(p.clone());
+            }
+            if e.file_type().unwrap().is_dir() {
+                todo.push(p);
+            }
+        }
+    }
+    found
+}
+
+#[test]
+fn slurm_script_runs_no_text_of_a_file_name_and_its_jobs_do_the_batch() {
+    for (k, name) in hostile_names().into_iter().enumerate() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let cwd = d.join("cwd");
+        std::fs::create_dir(&cwd).unwrap();
+        let bin = fake_sbatch(d);
+        // The input folder, the meshes in it and the executable's folder all carry the name.
+        let inputs = d.join(&name);
+        std::fs::create_dir(&inputs).unwrap();
+        let mut mesh = name.clone();
+        mesh.push(".ply");
+        let mesh = OsString::from_vec(
+            mesh.into_vec()
+                .into_iter()
+                .map(|b| if b == b'/' { b'_' } else { b })
+                .collect(),
+        );
+        generate_sphere(&d.join("m.ply"), 1, Some(0.2), Some(1));
+        std::fs::rename(d.join("m.ply"), inputs.join(&mesh)).unwrap();
+        generate_sphere(&d.join("plain.ply"), 0, Some(0.1), Some(2));
+        std::fs::rename(d.join("plain.ply"), inputs.join("plain.ply")).unwrap();
+        let exe_dir = d.join(&name).join("bin");
+        std::fs::create_dir(&exe_dir).unwrap();
+        let exe = exe_dir.join("vcsmooth");
+        std::os::unix::fs::symlink(BIN, &exe).unwrap();
+        let outdir = d.join("out");
+        for list_mode in [false, true] {
+            let source = if list_mode {
+                // A list file whose own name is hostile, naming the meshes.
+                let mut list_name = name.clone();
+                list_name.push(".txt");
+                let list = d.join(list_name);
+                let mut text = inputs.join(&mesh).into_os_string().into_vec();
+                text.push(b'\n');
+                // A list is UTF-8 lines: names with a line break or other bytes have none.
+                if text[..text.len() - 1].contains(&b'\n') || std::str::from_utf8(&text).is_err() {
+                    continue;
+                }
+                std::fs::write(&list, text).unwrap();
+                list
+            } else {
+                inputs.clone()
+            };
+            let o = run(&[
+                "slurm-script".as_ref(),
+                source.as_os_str(),
+                outdir.as_os_str(),
+                "--iterations".as_ref(),
+                "2".as_ref(),
+                "--vcsmooth".as_ref(),
+                exe.as_os_str(),
+                "--max-array-size".as_ref(),
+                "2".as_ref(),
+            ]);
+            assert!(o.status.success(), "{k}: {}", stderr(&o));
+            let script = d.join("submit.sh");
+            std::fs::write(&script, &o.stdout).unwrap();
+            let text = String::from_utf8(o.stdout.clone()).expect("the script is UTF-8");
+            assert!(
+                !text.contains("\ntouch") && !text.contains('\r') && !text.contains('\u{1b}'),
+                "{k}: a name's line break or control character reached the script:\n{text}"
+            );
+            let syntax = Command::new("bash")
+                .arg("-n")
+                .arg(&script)
+                .output()
+                .unwrap();
+            assert!(syntax.status.success(), "{k}: {}", stderr(&syntax));
+
+            let submitted = bash(&script, &cwd, &bin, &[]);
+            assert!(submitted.status.success(), "{k}: {}", stderr(&submitted));
+            assert!(
+                String::from_utf8_lossy(&submitted.stdout).contains("array job 42, summary job 42")
+            );
+            assert_eq!(pwned(d), Vec::<PathBuf>::new(), "{k}: injected code ran");
+            let log = std::fs::read_to_string(d.join("sbatch.log")).unwrap();
+            assert!(
+                log.contains("array.sbatch") && log.contains("summary.sbatch"),
+                "{log}"
+            );
+
+            // The jobs, run as Slurm would (one task each), smooth every input and gather them.
+            let jobs = outdir.join(".slurm");
+            let tasks: &[&str] = if list_mode { &["0"] } else { &["0", "1"] };
+            for task in tasks {
+                let o = bash(
+                    &jobs.join("array.sbatch"),
+                    &cwd,
+                    &bin,
+                    &[("SLURM_ARRAY_TASK_ID", task)],
+                );
+                assert!(o.status.success(), "{k} task {task}: {}", stderr(&o));
+            }
+            let o = bash(&jobs.join("summary.sbatch"), &cwd, &bin, &[]);
+            assert!(o.status.success(), "{k} summary: {}", stderr(&o));
+            let summary = json(&std::fs::read_to_string(outdir.join("summary.json")).unwrap());
+            let expected = if list_mode { 1 } else { 2 };
+            assert_eq!(
+                summary["meshes"].as_array().map(Vec::len),
+                Some(expected),
+                "{summary}"
+            );
+            // batch names outputs by the input's stem, lossily: count them.
+            let outputs = crate::util::listing(&outdir)
+                .into_iter()
+                .filter(|f| f.ends_with(".ply"))
+                .count();
+            assert_eq!(
+                outputs,
+                expected,
+                "{k}: {:?}",
+                crate::util::listing(&outdir)
+            );
+            assert_eq!(pwned(d), Vec::<PathBuf>::new(), "{k}: injected code ran");
+            std::fs::remove_dir_all(&outdir).unwrap();
+        }
+    }
+}
+
+#[test]
+fn slurm_script_flags_reach_batch_as_their_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let bin = fake_sbatch(d);
+    let inputs = d.join("in");
+    std::fs::create_dir(&inputs).unwrap();
+    generate_sphere(&inputs.join("a.ply"), 0, None, None);
+    // A fake vcsmooth that records its arguments, NUL-separated.
+    let args_file = d.join("args");
+    let fake = d.join("fake-vcsmooth");
+    std::fs::write(
+        &fake,
+        format!(
+            "#!/bin/sh\nprintf '%s\\0' \"$@\" > '{}'\n",
+            args_file.display()
+        ),
+    )
+    .unwrap();
+    let mut perms = std::fs::metadata(&fake).unwrap().permissions();
+    std::os::unix::fs::PermissionsExt::set_mode(&mut perms, 0o755);
+    std::fs::set_permissions(&fake, perms).unwrap();
+    for name in hostile_names() {
+        let scratch = d.join(&name);
+        std::fs::create_dir_all(&scratch).unwrap();
+        let property = OsString::from_vec(
+            name.as_bytes()
+                .iter()
+                .copied()
+                .filter(|&b| b < 0x80)
+                .collect(),
+        );
+        let outdir = d.join("out");
+        let o = run(&[
+            "slurm-script".as_ref(),
+            inputs.as_os_str(),
+            outdir.as_os_str(),
+            "--vcsmooth".as_ref(),
+            fake.as_os_str(),
+            "--scratch".as_ref(),
+            scratch.as_os_str(),
+            "--pin-property".as_ref(),
+            property.as_os_str(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let script = d.join("submit.sh");
+        std::fs::write(&script, &o.stdout).unwrap();
+        assert!(bash(&script, d, &bin, &[]).status.success());
+        assert_eq!(pwned(d), Vec::<PathBuf>::new(), "injected code ran");
+        let jobs = outdir.join(".slurm");
+        let o = bash(
+            &jobs.join("array.sbatch"),
+            d,
+            &bin,
+            &[("SLURM_ARRAY_TASK_ID", "0")],
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+        let recorded = std::fs::read(&args_file).unwrap();
+        let args: Vec<&[u8]> = recorded.split(|&b| b == 0).collect();
+        let after = |flag: &str| {
+            let i = args.iter().position(|a| *a == flag.as_bytes()).unwrap();
+            args[i + 1]
+        };
+        assert_eq!(args[0], b"batch");
+        assert_eq!(args[1], inputs.as_os_str().as_bytes());
+        assert_eq!(args[2], outdir.as_os_str().as_bytes());
+        assert_eq!(after("--scratch"), scratch.as_os_str().as_bytes());
+        assert_eq!(after("--pin-property"), property.as_bytes());
+        assert_eq!(after("--task-index"), b"0");
+        std::fs::remove_dir_all(&outdir).unwrap();
+        std::fs::remove_file(&args_file).unwrap();
+    }
+}
+
+#[test]
+fn slurm_script_refuses_what_sbatch_would_read_otherwise() {
+    let (dir, _, inputs) = fixture();
+    let d = dir.path();
+    let outdir = d.join("out");
+    let script = |extra: &[&OsStr], outdir: &Path| {
+        let mut args: Vec<&OsStr> = vec![
+            "slurm-script".as_ref(),
+            inputs.as_os_str(),
+            outdir.as_os_str(),
+        ];
+        args.extend_from_slice(extra);
+        run(&args)
+    };
+    for (flag, value) in [
+        ("--partition", "debug#x"),
+        ("--partition", "a\\b"),
+        ("--time", "1:00\n#SBATCH --x"),
+        ("--job-name", "a\u{1b}b"),
+        ("--job-name", "it's"),
+        ("--job-name", ""),
+    ] {
+        let o = script(&[flag.as_ref(), value.as_ref()], &outdir);
+        fails(&o, 2, &[flag, "must be one word"]);
+        assert!(o.stdout.is_empty());
+        assert!(
+            !stderr(&o).contains('\u{1b}'),
+            "a control character printed raw"
+        );
+    }
+    for bad in ["o#ut", "o\\ut", "o%ut", "o ut", "o\nut"] {
+        let o = script(&[], &d.join(bad));
+        fails(&o, 1, &["OUTDIR must be UTF-8 without whitespace"]);
+        assert!(o.stdout.is_empty());
+    }
+    let o = script(&[], &d.join(OsStr::from_bytes(b"o\xffut")));
+    fails(&o, 1, &["OUTDIR must be UTF-8"]);
+}
