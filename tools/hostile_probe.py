@@ -18,8 +18,9 @@ kept, the radius range of a sphere, a crack counted as boundary).
 
 prints one line per case that went wrong and, last, `N cases, M went wrong` (exit 1 if M > 0).
 The classes: paths, values, readers, geometry, memory, signals, batch, output,
-and gltf (`.gltf` with external and `data:` buffers, `.glb`: what a glTF input may hold, where a
-glTF output's buffers go).
+gltf (`.gltf` with external and `data:` buffers, `.glb`: what a glTF input may hold, where a
+glTF output's buffers go), and hostile_scripts (the Slurm script against hostile file names, side
+files through links and devices, the checkpoint directory, option combinations).
 Only the Python standard library is needed.
 """
 
@@ -1428,6 +1429,220 @@ def cases_gltf():
     return out
 
 
+# ---------------------------------------------------------------------------------------------
+# Scripts, links, checkpoints and option combinations (what a run writes around its output)
+
+# Names that run code if a script takes them as text; non-UTF-8 bytes travel as surrogates.
+HOSTILE_NAMES = [
+    ("newline", "in\ntouch PWNED #"),
+    ("CR", "in\rtouch PWNED\r#"),
+    ("$()", "in $(touch PWNED) x"),
+    ("backticks", "in `touch PWNED` x"),
+    ("quotes", "in'\"; touch PWNED; echo \"'x"),
+    ("here-doc end", "in\nVCSMOOTH_EOF\ntouch PWNED\n#"),
+    ("non-UTF-8", os.fsdecode(b"in\xff\xfe\n touch PWNED #")),
+]
+
+
+def fake_sbatch(d):
+    """A folder with an `sbatch` that records its arguments and answers a job id."""
+    bin_dir = os.path.join(d, ".fakebin")
+    os.makedirs(bin_dir, exist_ok=True)
+    sbatch = os.path.join(bin_dir, "sbatch")
+    with open(sbatch, "w") as fh:
+        fh.write("#!/bin/sh\necho \"$*\" >> \"$(dirname \"$0\")/log\"\necho 42\n")
+    os.chmod(sbatch, 0o755)
+    return bin_dir
+
+
+def pwned(d):
+    return [os.path.join(r, n) for r, _, names in os.walk(d) for n in names if n == "PWNED"]
+
+
+def script_runs_clean(task=True):
+    """Check of a `slurm-script` case: the script, run with a fake sbatch, runs no injected
+    command, and its array task (run as Slurm would) does the batch."""
+    def check(d, code, out, err):
+        if code != 0:
+            return f"refused: {err.strip()[:200]}"
+        script = os.path.join(d, ".submit.sh")
+        with open(script, "w") as fh:
+            fh.write(out)
+        env = dict(os.environ, PATH=fake_sbatch(d) + os.pathsep + os.environ.get("PATH", ""))
+        for v in ["SLURM_ARRAY_TASK_ID", "SLURM_ARRAY_TASK_COUNT", "SLURM_ARRAY_TASK_MIN",
+                  "SLURM_ARRAY_TASK_MAX"]:
+            env.pop(v, None)
+        p = subprocess.run(["bash", script], cwd=d, env=env, capture_output=True, timeout=TIMEOUT)
+        if pwned(d):
+            return "injected code ran when the script was run"
+        if p.returncode != 0:
+            return "the script fails: " + p.stderr.decode(errors="replace")[:200]
+        if not task:
+            return None
+        p = subprocess.run(["bash", os.path.join(d, "out", ".slurm", "array.sbatch")], cwd=d,
+                           env=dict(env, SLURM_ARRAY_TASK_ID="0"), capture_output=True,
+                           timeout=TIMEOUT)
+        if pwned(d):
+            return "injected code ran in the array task"
+        if p.returncode != 0:
+            return "the array task fails: " + p.stderr.decode(errors="replace")[:200]
+        if not any(n.endswith(".ply") for n in os.listdir(os.path.join(d, "out"))):
+            return "the array task wrote no output"
+        return None
+    return check
+
+
+def is_link_to_json(link, target=None, stdout=False):
+    def check(d, code, out, err):
+        p = os.path.join(d, link)
+        if not os.path.islink(p):
+            return f"{link} is no longer a symbolic link"
+        try:
+            if stdout:
+                json.JSONDecoder().raw_decode(out)
+            elif target:
+                with open(os.path.join(d, target)) as fh:
+                    text = fh.read()
+                if not text.lstrip().startswith("<"):
+                    json.loads(text)
+        except (OSError, ValueError) as e:
+            return f"no content where {link} leads: {e}"
+        return None
+    return check
+
+
+def usage_line(line):
+    def check(d, code, out, err):
+        if code != 2:
+            return f"exit {code}, not the usage error's 2"
+        if err.strip() != "vcsmooth: error: " + line:
+            return f"not the same line as everywhere: {err.strip()!r}"
+        if out:
+            return "printed something before refusing"
+        return None
+    return check
+
+
+def cases_hostile_scripts():
+    out = []
+    cls = "hostile_scripts"
+    # The Slurm script: file names, list files, the executable's path, flag values.
+    for what, name in HOSTILE_NAMES:
+        def folder(d, name=name):
+            os.makedirs(os.path.join(d, name))
+            write(os.path.join(name, "s.ply"), SPHERE_PLY)(d)
+        out.append(Case(cls, f"slurm-script over a folder named with {what}", folder,
+                        ["slurm-script", name, "out", "--iterations", "1"],
+                        expect="ok", check=script_runs_clean()))
+        mesh_name = name.replace("/", "_") + ".ply"
+
+        def largest(d, mesh_name=mesh_name):
+            os.makedirs(os.path.join(d, "in"))
+            write(os.path.join("in", mesh_name), SPHERE_PLY)(d)
+        out.append(Case(cls, f"slurm-script whose largest input is named with {what}", largest,
+                        ["slurm-script", "in", "out", "--iterations", "1"],
+                        expect="ok", check=script_runs_clean()))
+
+        def exe(d, name=name):
+            folder(d, name)
+            os.symlink(BIN, os.path.join(d, name, "vcsmooth"))
+        out.append(Case(cls, f"slurm-script --vcsmooth in a folder named with {what}", exe,
+                        ["slurm-script", name, "out", "--iterations", "1", "--vcsmooth",
+                         os.path.join(name, "vcsmooth")],
+                        expect="ok", check=script_runs_clean()))
+        # A flag value is UTF-8 (clap refuses the rest).
+        utf8 = name.encode(errors="surrogateescape").decode("utf-8", errors="ignore") == name
+        out.append(Case(cls, f"slurm-script --pin-property named with {what}", largest,
+                        ["slurm-script", "in", "out", "--pin-property", name],
+                        expect="ok" if utf8 else "error",
+                        check=script_runs_clean(task=False) if utf8 else None))
+    for flag, value in [("--partition", "debug#x"), ("--time", "1:00\n#SBATCH --x"),
+                        ("--job-name", "a\\b"), ("--job-name", "a\x1bb")]:
+        def setup(d):
+            os.makedirs(os.path.join(d, "in"))
+            write("in/s.ply", SPHERE_PLY)(d)
+        out.append(Case(cls, f"slurm-script {flag} {value!r}", setup,
+                        ["slurm-script", "in", "out", flag, value], expect="error"))
+    # Side files through links, devices and descriptors: written where they lead.
+    mesh = write("scan.ply", SPHERE_PLY)
+    for flag, link, target in [("--report", "r.json", "real/r.json"),
+                               ("--plot", "p.svg", "real/p.svg")]:
+        def setup(d, link=link, target=target):
+            mesh(d)
+            os.makedirs(os.path.join(d, "real"))
+            os.symlink(target, os.path.join(d, link))
+        out.append(Case(cls, f"smooth {flag} through a link", setup,
+                        ["smooth", "scan.ply", "out.ply", "--iterations", "2", flag, link],
+                        expect="ok", output="out.ply", check=is_link_to_json(link, target)))
+    for name, to in [("null", "/dev/null"), ("stdout", "/dev/stdout"), ("fd1", "/proc/self/fd/1")]:
+        def setup(d, to=to):
+            mesh(d)
+            os.symlink(to, os.path.join(d, "r.json"))
+        out.append(Case(cls, f"smooth --report through a link to {to}", setup,
+                        ["smooth", "scan.ply", "out.ply", "--iterations", "2", "--report", "r.json"],
+                        expect="ok", output="out.ply",
+                        check=is_link_to_json("r.json", stdout=name != "null")))
+
+    def summary(d):
+        os.makedirs(os.path.join(d, "in"))
+        write("in/a.ply", SPHERE_PLY)(d)
+        subprocess.run([BIN, "batch", "in", "out", "--iterations", "1"], cwd=d, check=True,
+                       capture_output=True)
+        os.symlink("/dev/stdout", os.path.join(d, "s.json"))
+    out.append(Case(cls, "batch --summary --json through a link to /dev/stdout", summary,
+                    ["batch", "--summary", "out", "--json", "s.json"], expect="ok",
+                    check=is_link_to_json("s.json", stdout=True)))
+
+    def linked_output(d):
+        mesh(d)
+        shutil.copy(os.path.join(d, "scan.ply"), os.path.join(d, "real.ply"))
+        os.symlink("real.ply", os.path.join(d, "out.ply"))
+    out.append(Case(cls, "smooth into a link to a mesh", linked_output,
+                    ["smooth", "scan.ply", "out.ply", "--iterations", "2"], expect="ok",
+                    output="out.ply", replaces=("real.ply",),
+                    check=lambda d, c, o, e: None if os.path.islink(os.path.join(d, "out.ply"))
+                    else "the link was replaced"))
+
+    def output_to_device(d):
+        mesh(d)
+        os.symlink("/dev/null", os.path.join(d, "out.ply"))
+    out.append(Case(cls, "smooth into a link to /dev/null", output_to_device,
+                    ["smooth", "scan.ply", "out.ply"], expect="error"))
+    # The checkpoint directory against the run's files.
+    for ck, extra in [("out.ply", []), ("out.ply/w", []), ("./sub/../out.ply", []),
+                      ("scan.ply", []), ("r.json", ["--report", "r.json"]),
+                      ("ck", ["--report", "ck/state.json"])]:
+        def setup(d, ck=ck):
+            mesh(d)
+            os.makedirs(os.path.join(d, "sub"))
+            if ck == "ck":
+                subprocess.run([BIN, "smooth", "scan.ply", "o.ply", "--iterations", "1",
+                                "--checkpoint", "ck"], cwd=d, check=True, capture_output=True)
+        out.append(Case(cls, f"smooth --checkpoint {ck} {' '.join(extra)}".strip(), setup,
+                        ["smooth", "scan.ply", "out.ply", "--iterations", "1", "--checkpoint", ck]
+                        + extra, expect="error",
+                        check=lambda d, c, o, e: "the output was written"
+                        if os.path.exists(os.path.join(d, "out.ply")) else None))
+    # Option combinations no run can make: one line, exit 2, for every command.
+    line = ("--boundary smooth works with lem, vcs, vcs-triangle and vcs-lowpass, not laplacian")
+    bad = ["--method", "laplacian", "--boundary", "smooth"]
+
+    def inputs(d):
+        mesh(d)
+        os.makedirs(os.path.join(d, "in"))
+        write("in/a.ply", SPHERE_PLY)(d)
+        write("in/b.ply", OCTA_PLY)(d)
+    for cmd in [["smooth", "scan.ply", "out.ply"], ["smooth", "scan.ply", "out.ply", "--multires"],
+                ["smooth", "scan.ply", "out.ply", "--iterations", "auto"],
+                ["batch", "in", "out"], ["slurm-script", "in", "out"]]:
+        out.append(Case(cls, " ".join(cmd + bad), inputs, cmd + bad, expect="error",
+                        check=usage_line(line)))
+    out.append(Case(cls, "curves --methods vcs,laplacian --boundary smooth", inputs,
+                    ["curves", "scan.ply", "--plot", "p.svg", "--methods", "vcs,laplacian",
+                     "--boundary", "smooth"], expect="error", check=usage_line(line)))
+    return out
+
+
 CLASSES = {
     "paths": cases_paths,
     "values": cases_values,
@@ -1438,6 +1653,7 @@ CLASSES = {
     "batch": cases_batch,
     "output": cases_output,
     "gltf": cases_gltf,
+    "hostile_scripts": cases_hostile_scripts,
 }
 
 

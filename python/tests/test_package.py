@@ -56,6 +56,7 @@ def test_stubs_state_the_defaults(tmp_path, kitten, kitten_path):
     a, ra = vcsmooth.smooth_report(v, f, **report)
     b, rb = vcsmooth.smooth_report(v, f)
     assert np.array_equal(a, b) and ra["options"] == rb["options"] and ra["engine"] == rb["engine"]
+    assert ra["results_version"] == vcsmooth.RESULTS_VERSION >= 2
     files = stub_defaults(stubs["smooth_file"])
     ra = vcsmooth.smooth_file(kitten_path, tmp_path / "a.ply", **files)
     rb = vcsmooth.smooth_file(kitten_path, tmp_path / "b.ply")

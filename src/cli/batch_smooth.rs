@@ -67,11 +67,12 @@ impl BatchSmooth {
                     .into(),
             });
         }
+        let options = a.smoothing.options(crate::Method::default())?;
         let mut engine = a.smoothing.engine.resolve()?;
         engine.with_stats = true;
         engine.pins = a.pins.resolve();
         Ok(BatchSmooth {
-            options: a.smoothing.options(),
+            options,
             engine,
             format: a.format.into(),
             args: a,

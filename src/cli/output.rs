@@ -133,10 +133,78 @@ pub fn check_files(reads: &[Named], output: Option<Named>, sides: &[Named]) -> R
         }
         taken.push((name.to_string(), id));
     }
-    for (_, path) in output.iter().chain(sides) {
+    if let Some((_, path)) = output {
         writable(path)?;
     }
+    for (_, path) in sides {
+        side_writable(path)?;
+    }
     Ok(())
+}
+
+/// Check, before any work, the directory a run keeps its work in (`--checkpoint DIR`, named
+/// `dir`) against every file the command reads or writes (`files`), by the identity of
+/// [`check_files`]: neither the directory nor a missing folder above it that the run would create
+/// is one of those files (a directory would take its place), and none of them is a file the run
+/// keeps in it ([`crate::cluster::store::FILES`]); the directory exists as one or can be created.
+pub fn check_work_dir(dir: Named, files: &[Named]) -> Result<()> {
+    let (flag, dir) = dir;
+    let absolute = std::path::absolute(dir).map_err(|e| Error::io(dir, e))?;
+    // The directory, then each folder above it, up to the first that exists.
+    for (k, folder) in absolute.ancestors().enumerate() {
+        let id = Identity::of(folder);
+        if let Some((name, _)) = files.iter().find(|(_, f)| Identity::of(f) == id) {
+            let what = match k {
+                0 => format!("{flag} names the same path as {name}"),
+                _ => format!("{flag} is inside {name}"),
+            };
+            return Err(Error::invalid(
+                dir,
+                format!("{what}: the work directory would take its place"),
+            ));
+        }
+        match std::fs::metadata(folder) {
+            Ok(m) if m.is_dir() => break,
+            Ok(_) if k == 0 => {
+                return Err(Error::invalid(
+                    dir,
+                    format!("{flag} exists and is not a directory"),
+                ));
+            }
+            Ok(_) => {
+                return Err(Error::invalid(
+                    dir,
+                    format!(
+                        "{flag} cannot be made: '{}' is not a directory",
+                        folder.display()
+                    ),
+                ));
+            }
+            Err(_) => {}
+        }
+    }
+    let id = Identity::of(&absolute);
+    for &(name, path) in files {
+        let inside = path
+            .file_name()
+            .and_then(|f| f.to_str())
+            .is_some_and(|f| crate::cluster::store::FILES.contains(&f))
+            && Identity::of(folder(path)) == id;
+        if inside {
+            return Err(Error::invalid(
+                path,
+                format!("{name} names a file of the {flag} directory: it would be overwritten"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The folder a file `path` is in (`.` for a bare name).
+fn folder(path: &Path) -> &Path {
+    path.parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."))
 }
 
 /// What makes two paths the same file (see [`check_files`]).
@@ -183,11 +251,26 @@ fn resolved(path: &Path) -> std::path::PathBuf {
     out
 }
 
-/// Check that a file can be written at `path`, before any work: its directory exists, is a
-/// directory and lets us create files (tried with an empty file named as the atomic writer's
-/// temporary files, `.<name>.tmp-<pid>-<n>`, removed at once), and `path` itself is not a
-/// directory or another non-regular file (a device, a pipe) that the final rename would replace.
+/// Check that the output `path` can be written, before any work (see [`check_writable`]): it is
+/// replaced by renaming, so what it leads to must be a regular file or nothing yet.
 pub fn writable(path: &Path) -> Result<()> {
+    check_writable(path, false)
+}
+
+/// Check that the side file `path` (a report, a plot, a summary) can be written, before any work
+/// (see [`check_writable`]): it may also lead to a character device, a pipe or a descriptor of
+/// this process (`/dev/stdout`), written through as a stream.
+pub fn side_writable(path: &Path) -> Result<()> {
+    check_writable(path, true)
+}
+
+/// Check that a file can be written at `path`, before any work. `path` is written where it leads
+/// ([`crate::io::destination`]: a symbolic link's target, a device or pipe as a stream, never
+/// by replacing the link or the device node); a file there to replace must have its directory,
+/// which lets us create files (tried with an empty file named as the atomic writer's temporary
+/// files, `.<name>.tmp-<pid>-<n>`, removed at once), and not be a directory; a stream is refused
+/// unless `stream` (an output mesh is replaced by renaming, never half-written).
+fn check_writable(path: &Path, stream: bool) -> Result<()> {
     if path.as_os_str().as_encoded_bytes().ends_with(b"/") {
         return Err(Error::invalid(
             path,
@@ -195,23 +278,25 @@ pub fn writable(path: &Path) -> Result<()> {
         ));
     }
     parent_exists(path)?;
-    let dir = path
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let Some(name) = path.file_name() else {
-        return Err(Error::invalid(path, "the output path names no file"));
-    };
-    if let Ok(m) = std::fs::metadata(path) {
-        if m.is_dir() {
-            return Err(Error::invalid(path, "is a directory, not a file"));
-        }
-        if !m.is_file() {
+    let real = match crate::io::destination(path).map_err(|e| Error::io(path, e))? {
+        crate::io::Destination::Replace(real) => real,
+        _ if stream => return Ok(()),
+        _ => {
             return Err(Error::invalid(
                 path,
                 "exists and is not a regular file (vcsmooth replaces its output by renaming)",
             ));
         }
+    };
+    if real != path {
+        parent_exists(&real)?;
+    }
+    let dir = folder(&real);
+    let Some(name) = real.file_name() else {
+        return Err(Error::invalid(path, "the output path names no file"));
+    };
+    if std::fs::metadata(&real).is_ok_and(|m| m.is_dir()) {
+        return Err(Error::invalid(path, "is a directory, not a file"));
     }
     // Numbers counted down from the top, so that they never meet the atomic writer's (counted up
     // from 0) in the same process.
@@ -242,7 +327,8 @@ pub fn writable(path: &Path) -> Result<()> {
 }
 
 /// Write `bytes` to `path` through a temporary file beside it, renamed into place when complete:
-/// a reader never sees a half-written file under `path`, and a failure leaves no file behind.
+/// a reader never sees a half-written file under `path`, and a failure leaves no file behind (a
+/// path that leads to a stream is written through, see [`crate::io::destination`]).
 pub fn atomic_write(path: &Path, bytes: &[u8]) -> Result<()> {
     crate::io::write_atomically(path, |w| w.write_all(bytes))
 }

@@ -55,17 +55,18 @@ pub struct SmoothingArgs {
 }
 
 impl SmoothingArgs {
-    /// The smoothing these flags ask for.
-    pub fn options(&self) -> Options {
-        let method = self.method.unwrap_or_default();
+    /// The smoothing these flags ask for, `default` the method without `--method` (checked as
+    /// [`MethodParams::options`] checks it).
+    pub fn options(&self, default: Method) -> Result<Options> {
+        let method = self.method.unwrap_or(default);
         match self.iterations {
             Iterations::Count(n) => self.params.options(method, n),
-            Iterations::Auto => Options {
+            Iterations::Auto => Ok(Options {
                 auto_stop: true,
                 ..self
                     .params
-                    .options(method, crate::engine::auto::DEFAULT_CAP)
-            },
+                    .options(method, crate::engine::auto::DEFAULT_CAP)?
+            }),
         }
     }
 }
@@ -165,9 +166,12 @@ fn boundary_help() -> String {
 }
 
 impl MethodParams {
-    /// `iterations` of `method` with these parameters.
-    pub fn options(&self, method: Method, iterations: usize) -> Options {
-        Options {
+    /// `iterations` of `method` with these parameters, checked ([`Options::check`]): every
+    /// command that smooths resolves its flags through here while it parses them, so a
+    /// combination no run could make (`--boundary smooth` with a method that keeps its boundary
+    /// fixed) is the same usage error, the same line, before any work, whatever the command.
+    pub fn options(&self, method: Method, iterations: usize) -> Result<Options> {
+        let options = Options {
             method,
             iterations,
             auto_stop: false,
@@ -177,7 +181,9 @@ impl MethodParams {
             crease_angle: self.crease_angle,
             max_deviation: self.max_deviation,
             boundary: self.boundary,
-        }
+        };
+        options.check()?;
+        Ok(options)
     }
 }
 

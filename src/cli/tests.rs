@@ -50,10 +50,13 @@ fn defaults_match_the_contract() {
     };
     let s = s.smoothing;
     assert_eq!(s.method, None);
-    assert_eq!(s.options().method, Method::VcsLowpass);
+    assert_eq!(
+        s.options(Method::default()).unwrap().method,
+        Method::VcsLowpass
+    );
     assert_eq!(s.iterations, crate::cli::shared::Iterations::Count(10));
-    assert_eq!(s.options().iterations, 10);
-    assert!(!s.options().auto_stop);
+    assert_eq!(s.options(Method::default()).unwrap().iterations, 10);
+    assert!(!s.options(Method::default()).unwrap().auto_stop);
     assert_eq!(s.params.lambda, 0.5);
     assert_eq!(s.params.mu, -0.53);
     assert!(!s.params.reject_energy_increase);

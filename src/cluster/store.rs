@@ -35,6 +35,24 @@ const STATE: &str = "state.json";
 const INPUT: &str = "input.f64";
 const LOOPS: &str = "loops.u32";
 
+/// Every file a run writes in its work directory (and removes from it after a run without
+/// `--checkpoint`): no other file of the run may be one of them.
+pub const FILES: [&str; 13] = [
+    PLAN,
+    STATE,
+    "order.u32",
+    "triangles.u32",
+    "vv_offsets.u64",
+    "vv.u32",
+    "vf_offsets.u64",
+    "vf.u32",
+    "fixed.u8",
+    "positions-0.f64",
+    "positions-1.f64",
+    INPUT,
+    LOOPS,
+];
+
 /// What a plan was made from; a plan is reused only when all of it matches.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PlanKey {
@@ -366,21 +384,7 @@ impl WorkDir {
     /// Remove the plan and checkpoint files (after a successful run without `--checkpoint`), and
     /// the directory if nothing else is in it.
     pub fn remove(&self) {
-        for name in [
-            PLAN,
-            STATE,
-            "order.u32",
-            "triangles.u32",
-            "vv_offsets.u64",
-            "vv.u32",
-            "vf_offsets.u64",
-            "vf.u32",
-            "fixed.u8",
-            "positions-0.f64",
-            "positions-1.f64",
-            INPUT,
-            LOOPS,
-        ] {
+        for name in FILES {
             let _ = fs::remove_file(self.path(name));
         }
         let _ = fs::remove_dir(&self.dir);

@@ -5,6 +5,14 @@
 //! The temporary file is `.<name>.tmp-<pid>-<n>`, registered with [`crate::signals`] while it
 //! exists, so that SIGINT, SIGTERM and SIGHUP remove it. What a SIGKILL or a power cut leaves is
 //! removed by the next write of the same target, once the process named in it is gone.
+//!
+//! A path is written where it leads ([`destination`]): a symbolic link stays a link, its target
+//! (at the end of the chain) is replaced atomically; a path that leads to a character device or a
+//! pipe (`/dev/null`, a FIFO) is written through as a stream, and one that leads to a descriptor
+//! of this process (`/dev/stdout`, `/dev/fd/N`, `/proc/self/fd/N`) is written to that descriptor,
+//! after what the process wrote there. Renaming over such a path would replace the link or the
+//! device node itself (as root, `/dev/stdout`). A stream cannot be staged: what fails mid-write
+//! has gone out.
 
 use std::fs::{self, File, OpenOptions};
 use std::io::{self, BufWriter};
@@ -23,41 +31,182 @@ pub(crate) fn write_atomically(
     stage(target, write)?.commit()
 }
 
-/// A complete temporary file, on disk, waiting to be renamed over its target: several files that
-/// belong together (a `.gltf` and its buffers) are all staged before any is committed, so that a
-/// failure while writing any of them changes none. Dropped uncommitted, the file is removed.
-pub(crate) struct Staged {
-    temp: Temporary,
-    target: PathBuf,
+/// Where the bytes written for a path go (see the module doc).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) enum Destination {
+    /// A regular file, or nothing yet: replaced atomically at this path, the end of the path's
+    /// chain of symbolic links.
+    Replace(PathBuf),
+    /// A character device or a pipe (or a link to one): opened and written through.
+    Stream(PathBuf),
+    /// An open descriptor of this process: written at its offset, which the process's own writes
+    /// to it share (a reopened file would start again at 0 and overwrite them).
+    Descriptor(i32),
 }
 
-/// Writes `write`'s bytes to a temporary file beside `target`, synced, for [`Staged::commit`].
+/// Symbolic links followed before giving up, as the kernel's limit.
+const MAX_LINKS: usize = 40;
+
+/// Where writing `path` goes: its symbolic links followed one by one (a relative target against
+/// the link's folder), up to a regular file or nothing ([`Destination::Replace`]), a character
+/// device or a pipe ([`Destination::Stream`]) or a descriptor of this process
+/// ([`Destination::Descriptor`]). A directory is a `Replace` that the rename refuses; a block
+/// device or a socket is an error: nothing a command writes belongs there.
+pub(crate) fn destination(path: &Path) -> io::Result<Destination> {
+    let mut at = path.to_path_buf();
+    for _ in 0..MAX_LINKS {
+        let meta = match fs::symlink_metadata(&at) {
+            Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(Destination::Replace(at)),
+            m => m?,
+        };
+        let kind = meta.file_type();
+        if kind.is_symlink() {
+            if let Some(d) = magic_link(&at)? {
+                return Ok(d);
+            }
+            let to = fs::read_link(&at)?;
+            at = match at.parent() {
+                Some(dir) => dir.join(to),
+                None => to,
+            };
+            continue;
+        }
+        if kind.is_file() || kind.is_dir() {
+            return Ok(Destination::Replace(at));
+        }
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::FileTypeExt;
+            if kind.is_char_device() || kind.is_fifo() {
+                return Ok(Destination::Stream(at));
+            }
+        }
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            format!(
+                "leads to '{}', a block device or a socket: not a file to write",
+                at.display()
+            ),
+        ));
+    }
+    Err(io::Error::new(
+        io::ErrorKind::InvalidInput,
+        "too many levels of symbolic links",
+    ))
+}
+
+/// A symbolic link of procfs is the kernel's link to an open file, not a path: its text
+/// (`pipe:[123]`, or the name of a file that may since be gone) must not be followed. This
+/// process's descriptors (`/proc/self/fd/N`, which `/dev/stdout` and `/dev/fd/N` lead to) are
+/// written to as descriptors; another process's are opened through the kernel, as streams.
+#[cfg(target_os = "linux")]
+fn magic_link(link: &Path) -> io::Result<Option<Destination>> {
+    let Some(folder) = link.parent().filter(|d| !d.as_os_str().is_empty()) else {
+        return Ok(None);
+    };
+    let folder = fs::canonicalize(folder)?;
+    if !folder.starts_with("/proc") {
+        return Ok(None);
+    }
+    let own = Path::new("/proc").join(std::process::id().to_string());
+    let own_fd_folder = folder == own.join("fd")
+        || (folder.file_name().is_some_and(|f| f == "fd")
+            && folder.parent().and_then(Path::parent) == Some(&own.join("task")));
+    let fd = link
+        .file_name()
+        .and_then(|n| n.to_str())
+        .filter(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()))
+        .and_then(|n| n.parse::<i32>().ok());
+    Ok(Some(match fd {
+        Some(fd) if own_fd_folder => Destination::Descriptor(fd),
+        _ => Destination::Stream(link.to_path_buf()),
+    }))
+}
+
+#[cfg(not(target_os = "linux"))]
+fn magic_link(_: &Path) -> io::Result<Option<Destination>> {
+    Ok(None)
+}
+
+/// This process's descriptor `fd`, duplicated (the duplicate shares its offset).
+#[cfg(unix)]
+fn duplicate(fd: i32) -> io::Result<File> {
+    use std::os::fd::BorrowedFd;
+    // SAFETY: the borrow lives only for the duplication, and `fd` was just seen open under
+    // /proc/self/fd; were it closed since, duplicating it fails with EBADF.
+    let owned = unsafe { BorrowedFd::borrow_raw(fd) }.try_clone_to_owned()?;
+    Ok(File::from(owned))
+}
+
+#[cfg(not(unix))]
+fn duplicate(_: i32) -> io::Result<File> {
+    Err(io::Error::from(io::ErrorKind::Unsupported))
+}
+
+/// A complete temporary file, on disk, waiting to be renamed over its target: several files that
+/// belong together (a `.gltf` and its buffers) are all staged before any is committed, so that a
+/// failure while writing any of them changes none. Dropped uncommitted, the file is removed. A
+/// stream (not a [`Destination::Replace`]) has no temporary file: it is written when staged.
+pub(crate) struct Staged {
+    /// The temporary file and the file it replaces; `None` for a stream, already written.
+    pending: Option<(Temporary, PathBuf)>,
+    /// The path as the caller named it, for messages.
+    named: PathBuf,
+}
+
+/// Writes `write`'s bytes to a temporary file beside where `target` leads ([`destination`]),
+/// synced, for [`Staged::commit`]; or through the stream it leads to.
 pub(crate) fn stage(
     target: &Path,
     write: impl FnOnce(&mut BufWriter<File>) -> io::Result<()>,
 ) -> Result<Staged> {
-    remove_stale_temps(target);
-    let (temp, file) = create_temp(target).map_err(|e| Error::io(target, e))?;
-    let mut out = BufWriter::with_capacity(1 << 20, file);
-    write(&mut out).map_err(|e| Error::io(target, e))?;
-    let file = out
-        .into_inner()
-        .map_err(|e| Error::io(target, e.into_error()))?;
-    // The data must be on disk before the rename makes it visible, or a power cut could leave a
-    // renamed but empty file.
-    file.sync_all().map_err(|e| Error::io(target, e))?;
+    let named = target.to_path_buf();
+    let fail = |e: io::Error| Error::io(target, e);
+    let file = match destination(target).map_err(fail)? {
+        Destination::Replace(real) => {
+            remove_stale_temps(&real);
+            let (temp, file) = create_temp(&real).map_err(fail)?;
+            let file = write_all(file, write).map_err(fail)?;
+            // The data must be on disk before the rename makes it visible, or a power cut could
+            // leave a renamed but empty file.
+            file.sync_all().map_err(fail)?;
+            return Ok(Staged {
+                pending: Some((temp, real)),
+                named,
+            });
+        }
+        Destination::Stream(path) => OpenOptions::new()
+            .write(true)
+            .truncate(true)
+            .open(path)
+            .map_err(fail)?,
+        Destination::Descriptor(fd) => duplicate(fd).map_err(fail)?,
+    };
+    write_all(file, write).map_err(fail)?;
     Ok(Staged {
-        temp,
-        target: target.to_path_buf(),
+        pending: None,
+        named,
     })
 }
 
+/// `write`'s bytes into `file`, through a buffer, flushed.
+fn write_all(
+    file: File,
+    write: impl FnOnce(&mut BufWriter<File>) -> io::Result<()>,
+) -> io::Result<File> {
+    let mut out = BufWriter::with_capacity(1 << 20, file);
+    write(&mut out)?;
+    out.into_inner().map_err(|e| e.into_error())
+}
+
 impl Staged {
-    /// Renames the file over its target.
+    /// Renames the file over its target (a stream has nothing left to do).
     pub(crate) fn commit(self) -> Result<()> {
-        let Staged { temp, target } = self;
-        temp.rename_to(&target).map_err(|e| Error::io(&target, e))?;
-        sync_directory(&target);
+        let Staged { pending, named } = self;
+        if let Some((temp, real)) = pending {
+            temp.rename_to(&real).map_err(|e| Error::io(&named, e))?;
+            sync_directory(&real);
+        }
         Ok(())
     }
 }
@@ -143,6 +292,7 @@ fn sync_directory(target: &Path) {
 #[cfg(test)]
 mod tests {
     use std::io::Write;
+    use std::os::unix::fs::FileTypeExt;
 
     use super::*;
 
@@ -226,6 +376,92 @@ mod tests {
         }
         left.sort();
         assert_eq!(names(dir.path()), left);
+    }
+
+    #[test]
+    fn a_link_stays_a_link_and_its_target_gets_the_bytes() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        fs::create_dir(d.join("sub")).unwrap();
+        fs::write(d.join("real.json"), b"old").unwrap();
+        // A chain: absolute link -> relative link in another folder -> the file.
+        std::os::unix::fs::symlink("../real.json", d.join("sub/rel")).unwrap();
+        std::os::unix::fs::symlink(d.join("sub/rel"), d.join("abs")).unwrap();
+        assert_eq!(
+            destination(&d.join("abs")).unwrap(),
+            Destination::Replace(d.join("sub").join("../real.json"))
+        );
+        write_atomically(&d.join("abs"), |w| w.write_all(b"new")).unwrap();
+        assert_eq!(fs::read(d.join("real.json")).unwrap(), b"new");
+        for link in ["abs", "sub/rel"] {
+            assert!(fs::symlink_metadata(d.join(link)).unwrap().is_symlink());
+        }
+        // A dangling link: the file is made where it points.
+        std::os::unix::fs::symlink("made.json", d.join("dangling")).unwrap();
+        write_atomically(&d.join("dangling"), |w| w.write_all(b"made")).unwrap();
+        assert_eq!(fs::read(d.join("made.json")).unwrap(), b"made");
+        assert!(
+            fs::symlink_metadata(d.join("dangling"))
+                .unwrap()
+                .is_symlink()
+        );
+        // A loop is an error, not a hang.
+        std::os::unix::fs::symlink("b", d.join("a")).unwrap();
+        std::os::unix::fs::symlink("a", d.join("b")).unwrap();
+        let e = write_atomically(&d.join("a"), |w| w.write_all(b"x")).unwrap_err();
+        assert!(e.to_string().contains("symbolic links"), "{e}");
+    }
+
+    #[test]
+    fn devices_pipes_and_descriptors_are_written_through() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let null = d.join("null");
+        std::os::unix::fs::symlink("/dev/null", &null).unwrap();
+        assert_eq!(
+            destination(&null).unwrap(),
+            Destination::Stream("/dev/null".into())
+        );
+        write_atomically(&null, |w| w.write_all(b"gone")).unwrap();
+        assert!(fs::symlink_metadata(&null).unwrap().is_symlink());
+        assert_eq!(names(d), ["null"]);
+        // A pipe, read by another thread.
+        let fifo = d.join("fifo");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        if made.is_ok_and(|s| s.success()) {
+            let reader = {
+                let fifo = fifo.clone();
+                std::thread::spawn(move || fs::read(fifo).unwrap())
+            };
+            write_atomically(&fifo, |w| w.write_all(b"through")).unwrap();
+            assert_eq!(reader.join().unwrap(), b"through");
+            assert!(fs::symlink_metadata(&fifo).unwrap().file_type().is_fifo());
+        }
+        #[cfg(target_os = "linux")]
+        {
+            let out = d.join("out");
+            std::os::unix::fs::symlink("/proc/self/fd/2", &out).unwrap();
+            assert_eq!(destination(&out).unwrap(), Destination::Descriptor(2));
+            // Written at the descriptor's offset, between what the process writes before and
+            // after (a reopened file would start again at 0).
+            use std::os::fd::AsRawFd;
+            let mut file = File::create(d.join("log")).unwrap();
+            file.write_all(b"before ").unwrap();
+            let fd = file.as_raw_fd();
+            let by_fd = PathBuf::from(format!("/dev/fd/{fd}"));
+            assert_eq!(destination(&by_fd).unwrap(), Destination::Descriptor(fd));
+            write_atomically(&by_fd, |w| w.write_all(b"report ")).unwrap();
+            file.write_all(b"after").unwrap();
+            assert_eq!(fs::read(d.join("log")).unwrap(), b"before report after");
+            // Another process's descriptor is opened through the kernel, never followed by name.
+            let other = Path::new("/proc/1/fd/1");
+            if fs::symlink_metadata(other).is_ok() {
+                assert_eq!(
+                    destination(other).unwrap(),
+                    Destination::Stream(other.into())
+                );
+            }
+        }
     }
 
     #[test]

@@ -106,7 +106,7 @@ mod ply;
 mod stl;
 mod stream;
 
-pub(crate) use atomic::write_atomically;
+pub(crate) use atomic::{Destination, destination, write_atomically};
 pub(crate) use gltf::{buffer_name_of, referenced_files};
 
 use std::fmt;

@@ -147,6 +147,17 @@ impl Default for BenchSettings {
     }
 }
 
+impl BenchSettings {
+    /// The options `method` is timed with: its defaults, `iterations` of them.
+    pub fn options(&self, method: Method) -> Options {
+        Options {
+            method,
+            iterations: self.iterations,
+            ..Default::default()
+        }
+    }
+}
+
 /// One thread, and all cores (just `[1]` on one core).
 pub fn default_threads() -> Vec<usize> {
     let cores = cores();
@@ -295,6 +306,9 @@ pub fn check(settings: &BenchSettings) -> Result<()> {
         if empty {
             return Err(Error::parameter(name, "must name at least one value"));
         }
+    }
+    for &method in &settings.methods {
+        settings.options(method).check()?;
     }
     if settings.threads.contains(&0) {
         return Err(Error::parameter("threads", "must be at least 1"));
@@ -464,11 +478,7 @@ fn run_threads(
             "{}: {method} on {threads} threads, {} × {} iterations",
             size.label, settings.repeats, settings.iterations
         ));
-        let opts = Options {
-            method,
-            iterations: settings.iterations,
-            ..Default::default()
-        };
+        let opts = settings.options(method);
         let mut seconds = Vec::with_capacity(settings.repeats * settings.iterations);
         let mut stencils = 0;
         let mut volume_pct = 100.0;

@@ -12,7 +12,7 @@ use clap::Args as ClapArgs;
 use crate::cli::batch_smooth::{BatchSmooth, BatchSmoothArgs, batch_inputs};
 use crate::cli::flags;
 use crate::cli::output::{
-    Identity, one_line, parent_exists, print_error, print_json, stdout_error, write_json,
+    Identity, one_line, print_error, print_json, side_writable, stdout_error, write_json,
 };
 use crate::cli::progress::Progress;
 use crate::engine;
@@ -70,7 +70,7 @@ impl BatchConfig {
     pub fn from_args(a: BatchArgs) -> Result<BatchConfig> {
         if let Some(outdir) = a.summary {
             if let Some(j) = a.json.as_deref().filter(|j| j.as_os_str() != "-") {
-                parent_exists(j)?;
+                side_writable(j)?;
             }
             return Ok(BatchConfig::Summary {
                 outdir,

@@ -63,19 +63,25 @@ pub struct CurvesConfig {
 
 impl CurvesConfig {
     pub fn from_args(a: CurvesArgs) -> Result<CurvesConfig> {
-        svg_output(&a.plot)?;
-        check_files(&[("IN", &a.input)], None, &[("--plot", &a.plot)])?;
         let methods = distinct(a.methods);
         if methods.is_empty() {
             return Err(flags::parameter("methods", "names no method"));
         }
+        // Every method runs with the same parameters: each must accept them.
+        let iterations = a.iterations as usize;
+        for &method in &methods {
+            a.params.options(method, iterations)?;
+        }
+        let options = a.params.options(methods[0], iterations)?;
+        svg_output(&a.plot)?;
+        check_files(&[("IN", &a.input)], None, &[("--plot", &a.plot)])?;
         let engine = a.engine.resolve()?;
         let layout = match a.engine.patch_size {
             Some(_) => engine.layout(),
             None => Layout::Whole,
         };
         Ok(CurvesConfig {
-            options: a.params.options(methods[0], a.iterations as usize),
+            options,
             engine,
             layout,
             input: a.input,

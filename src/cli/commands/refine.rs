@@ -64,6 +64,7 @@ impl RefineConfig {
         };
         options.smoothing.method = a.method;
         options.smoothing.iterations = a.iterations as usize;
+        options.smoothing.check()?;
         Ok(RefineConfig {
             input: a.files.input,
             output: a.files.output,

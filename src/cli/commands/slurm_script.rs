@@ -2,6 +2,7 @@
 //! array job running `batch` over the inputs and a dependent summary job. The script is the
 //! template `slurm_script.sh.in` with its `@name@` placeholders filled in.
 
+use std::ffi::{OsStr, OsString};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -70,13 +71,13 @@ impl SlurmScriptConfig {
             ("job_name", &Some(a.job_name.clone())),
         ] {
             if let Some(v) = v {
-                if v.is_empty()
-                    || v.chars()
-                        .any(|c| c.is_whitespace() || c == '\'' || c == '"')
-                {
+                if !sbatch_value(v, &[]) {
                     return Err(flags::parameter(
                         name,
-                        format!("'{v}' must be one word without quotes"),
+                        format!(
+                            "{} must be one word without quotes, backslashes, '#' or control characters",
+                            comment_text(v.as_ref())
+                        ),
                     ));
                 }
             }
@@ -109,16 +110,15 @@ pub fn run(cfg: &SlurmScriptConfig, out: &mut dyn Write) -> Result<()> {
     }
     let list = absolute(&cfg.inputs)?;
     let outdir = absolute(&cfg.outdir)?;
-    let outdir_text = outdir.display().to_string();
-    if outdir_text
-        .chars()
-        .any(|c| c.is_whitespace() || c == '%' || c == '\'' || c == '"')
-    {
+    // OUTDIR names the job logs in #SBATCH lines, which sbatch reads itself ('%' starts its
+    // file name patterns).
+    let Some(outdir_text) = outdir.to_str().filter(|o| sbatch_value(o, &['%'])) else {
         return Err(Error::invalid(
-            &outdir,
-            "a Slurm job's OUTDIR must not contain whitespace, quotes or '%' (it names the job logs)",
+            comment_text(outdir.as_os_str()),
+            "a Slurm job's OUTDIR must be UTF-8 without whitespace, quotes, backslashes, '#', '%' or control characters (it names the job logs)",
         ));
-    }
+    };
+    let outdir_text = outdir_text.to_string();
     let exe = match &cfg.vcsmooth {
         Some(p) => absolute(p)?,
         None => std::env::current_exe().map_err(|e| Error::io("vcsmooth", e))?,
@@ -136,100 +136,141 @@ pub fn run(cfg: &SlurmScriptConfig, out: &mut dyn Write) -> Result<()> {
     let cpus = cfg.cpus.or(a.engine.threads).unwrap_or(1);
 
     // The flags of `batch`, repeated.
-    let mut flags: Vec<String> = vec![
+    let mut flags: Vec<OsString> = vec![
         "--method".into(),
         cfg.smooth.options.method.name().into(),
         "--iterations".into(),
-        a.iterations.to_string(),
+        a.iterations.to_string().into(),
         "--lambda".into(),
-        a.params.lambda.to_string(),
+        a.params.lambda.to_string().into(),
         "--mu".into(),
-        a.params.mu.to_string(),
+        a.params.mu.to_string().into(),
     ];
     if a.params.reject_energy_increase {
         flags.push("--reject-energy-increase".into());
     }
     if let Some(a) = a.params.crease_angle {
-        flags.extend(["--crease-angle".into(), a.to_string()]);
+        flags.extend(["--crease-angle".into(), a.to_string().into()]);
     }
     if let Some(d) = a.params.max_deviation {
-        flags.extend(["--max-deviation".into(), d.to_string()]);
+        flags.extend(["--max-deviation".into(), d.to_string().into()]);
     }
     if !a.params.boundary.is_fixed() {
         flags.extend(["--boundary".into(), a.params.boundary.name().into()]);
     }
-    flags.extend(["--threads".into(), cpus.to_string()]);
+    flags.extend(["--threads".into(), cpus.to_string().into()]);
     if let Some(p) = a.engine.patch_size {
-        flags.extend(["--patch-size".into(), p.to_string()]);
+        flags.extend(["--patch-size".into(), p.to_string().into()]);
     }
     let budget = a
         .engine
         .memory_budget
         .map_or_else(|| format!("{}M", mem / 4 * 3), |b| b.to_string());
-    flags.extend(["--memory-budget".into(), budget]);
+    flags.extend(["--memory-budget".into(), budget.into()]);
     if let Some(s) = &a.engine.scratch {
-        flags.extend(["--scratch".into(), absolute(s)?.display().to_string()]);
+        flags.extend(["--scratch".into(), absolute(s)?.into_os_string()]);
     }
     if let Some(name) = &cfg.smooth.args.pins.pin_property {
-        flags.extend(["--pin-property".into(), name.clone()]);
+        flags.extend(["--pin-property".into(), name.into()]);
     }
     flags.extend(["--format".into(), core::extension(cfg.smooth.format).into()]);
-    let flags: Vec<String> = flags.iter().map(|f| quote(f)).collect();
 
     let jobs = format!("{outdir_text}/.slurm");
-    let partition_line = cfg
-        .partition
-        .as_ref()
-        .map_or(String::new(), |p| format!("#SBATCH --partition={p}\n"));
-    let time_line = cfg
-        .time
-        .as_ref()
-        .map_or(String::new(), |t| format!("#SBATCH --time={t}\n"));
-    let summary_time_line = if cfg.time.is_some() {
-        "#SBATCH --time=0:10:00\n"
-    } else {
-        ""
-    };
+    let mut sbatch = Vec::new();
+    sbatch.extend(cfg.time.iter().map(|t| ("time", t.clone())));
+    sbatch.extend(cfg.partition.iter().map(|p| ("partition", p.clone())));
+    let mut summary_sbatch = Vec::new();
+    if cfg.time.is_some() {
+        summary_sbatch.push(("time", "0:10:00".to_string()));
+    }
+    summary_sbatch.extend(cfg.partition.iter().map(|p| ("partition", p.clone())));
+    let text = |t: &dyn std::fmt::Display| Value::Text(t.to_string().into());
+    let word = |w: &OsStr| Value::Words(vec![w.to_os_string()]);
     let script = fill(
         TEMPLATE,
         &[
-            ("version", env!("CARGO_PKG_VERSION").to_string()),
-            ("jobs", jobs.clone()),
-            ("jobs_q", quote(&jobs)),
-            ("tasks", tasks.to_string()),
-            ("tasks2", (2 * tasks).to_string()),
-            ("last", (tasks - 1).to_string()),
-            ("max_array", max_array.to_string()),
-            ("max_source", max_source),
-            ("inputs", inputs.len().to_string()),
-            ("list_name", list.display().to_string()),
-            ("per_task", inputs.len().div_ceil(tasks).to_string()),
-            ("outdir", outdir_text.clone()),
-            ("ext", core::extension(cfg.smooth.format).to_string()),
-            ("mem", mem.to_string()),
+            ("version", text(&env!("CARGO_PKG_VERSION"))),
+            ("jobs", text(&jobs)),
+            ("jobs_q", word(jobs.as_ref())),
+            ("tasks", text(&tasks)),
+            ("tasks2", text(&(2 * tasks))),
+            ("last", text(&(tasks - 1))),
+            ("max_array", text(&max_array)),
+            ("max_source", text(&max_source)),
+            ("inputs", text(&inputs.len())),
+            ("list_name", Value::Text(list.clone().into_os_string())),
+            ("per_task", text(&inputs.len().div_ceil(tasks))),
+            ("outdir", text(&outdir_text)),
+            ("ext", text(&core::extension(cfg.smooth.format))),
+            ("mem", text(&mem)),
             (
                 "largest_size",
-                crate::engine::memory::format_size(largest.0),
+                text(&crate::engine::memory::format_size(largest.0)),
             ),
-            ("largest_name", largest.1.display().to_string()),
-            ("name", cfg.job_name.clone()),
-            ("cpus", cpus.to_string()),
-            ("time_line", time_line),
-            ("summary_time_line", summary_time_line.to_string()),
-            ("partition_line", partition_line),
-            ("exe_q", quote(&exe.display().to_string())),
-            ("list_q", quote(&list.display().to_string())),
-            ("outdir_q", quote(&outdir_text)),
-            ("flags", flags.join(" ")),
-            ("summary_q", quote(&format!("{outdir_text}/summary.json"))),
+            ("largest_name", Value::Text(largest.1.into_os_string())),
+            ("name", text(&cfg.job_name)),
+            ("cpus", text(&cpus)),
+            ("sbatch_lines", Value::Sbatch(sbatch)),
+            ("summary_sbatch_lines", Value::Sbatch(summary_sbatch)),
+            ("exe_q", word(exe.as_os_str())),
+            ("list_q", word(list.as_os_str())),
+            ("outdir_q", word(outdir_text.as_ref())),
+            ("flags", Value::Words(flags)),
+            (
+                "summary_q",
+                word(format!("{outdir_text}/summary.json").as_ref()),
+            ),
         ],
     );
     out.write_all(script.as_bytes()).map_err(stdout_error)
 }
 
-/// `template` with each `@name@` replaced by the value of `name` in `values`, in one pass (a
-/// value is never scanned for placeholders); an `@` that starts no known placeholder stays.
-fn fill(template: &str, values: &[(&str, String)]) -> String {
+/// A value for a placeholder of the template. Every piece of text that comes from a path or a
+/// flag reaches the script as one of these, made safe for where it goes by [`Value::render`],
+/// the one place that knows how.
+enum Value {
+    /// Text in a comment or in an `#SBATCH` line (whose values [`sbatch_value`] checks):
+    /// escaped by [`comment_text`], so that nothing in it ends the line.
+    Text(OsString),
+    /// Shell words, each quoted by [`shell_word`], separated by spaces.
+    Words(Vec<OsString>),
+    /// Optional `#SBATCH --option=value` lines, each value as [`Value::Text`].
+    Sbatch(Vec<(&'static str, String)>),
+}
+
+impl Value {
+    fn render(&self) -> String {
+        match self {
+            Value::Text(t) => comment_text(t),
+            Value::Words(words) => {
+                let words: Vec<String> = words.iter().map(|w| shell_word(w)).collect();
+                words.join(" ")
+            }
+            Value::Sbatch(lines) => lines
+                .iter()
+                .map(|(option, v)| format!("#SBATCH --{option}={}\n", comment_text(v.as_ref())))
+                .collect(),
+        }
+    }
+}
+
+/// Whether sbatch reads `text` back as it is from an `#SBATCH --option=text` line: not empty, no
+/// whitespace (it ends the value), quote or backslash (sbatch takes them away), `#` (it starts a
+/// comment), control character (a line break ends the line), nor any of `also`.
+fn sbatch_value(text: &str, also: &[char]) -> bool {
+    !text.is_empty()
+        && !text.chars().any(|c| {
+            c.is_whitespace()
+                || c.is_control()
+                || matches!(c, '\'' | '"' | '\\' | '#')
+                || also.contains(&c)
+        })
+}
+
+/// `template` with each `@name@` replaced by the value of `name` in `values`, rendered
+/// ([`Value::render`]), in one pass (a value is never scanned for placeholders); an `@` that
+/// starts no known placeholder stays.
+fn fill(template: &str, values: &[(&str, Value)]) -> String {
     let mut out = String::with_capacity(template.len() + 1024);
     let mut rest = template;
     while let Some(at) = rest.find('@') {
@@ -244,7 +285,7 @@ fn fill(template: &str, values: &[(&str, String)]) -> String {
             Some(name) => {
                 let value = values.iter().find(|(n, _)| *n == name);
                 debug_assert!(value.is_some(), "no value for the placeholder @{name}@");
-                out.push_str(value.map_or("", |(_, v)| v.as_str()));
+                out.push_str(&value.map_or(String::new(), |(_, v)| v.render()));
                 rest = &after[name.len() + 1..];
             }
             None => {
@@ -262,15 +303,72 @@ fn absolute(path: &Path) -> Result<PathBuf> {
     std::path::absolute(path).map_err(|e| Error::io(path, e))
 }
 
-/// Quote `s` for a POSIX shell when it needs it.
-fn quote(s: &str) -> String {
-    let plain = !s.is_empty()
-        && s.chars()
-            .all(|c| c.is_ascii_alphanumeric() || "-_./=:,+@%".contains(c));
+/// `word` as one bash word that reads back as exactly its bytes: as it is when every byte is
+/// plain; in single quotes when it is printable UTF-8; else in ANSI-C quotes (`$'...'`) with
+/// every control character, line separator, quote, backslash and byte that is not UTF-8 escaped.
+/// The result never holds a line break, so it cannot end a here-document or a comment.
+fn shell_word(word: &OsStr) -> String {
+    let bytes = word.as_encoded_bytes();
+    let plain = !bytes.is_empty()
+        && bytes
+            .iter()
+            .all(|&b| b.is_ascii_alphanumeric() || b"-_./=:,+@%".contains(&b));
     if plain {
-        s.to_string()
-    } else {
-        format!("'{}'", s.replace('\'', r"'\''"))
+        return String::from_utf8_lossy(bytes).into_owned();
+    }
+    match word.to_str() {
+        Some(text) if !text.chars().any(unprintable) => {
+            format!("'{}'", text.replace('\'', r"'\''"))
+        }
+        _ => {
+            let mut out = String::from("$'");
+            escape(bytes, &mut out, |c| matches!(c, '\'' | '\\'));
+            out.push('\'');
+            out
+        }
+    }
+}
+
+/// `text` for a comment line (or an `#SBATCH` value): every control character, line separator,
+/// bidirectional override and byte that is not UTF-8 written as an escape (`\n`, `\x1b`,
+/// `\u{2028}`), and a backslash as `\\`, so that the text stays on its line and reads as it is.
+fn comment_text(text: &OsStr) -> String {
+    let mut out = String::new();
+    escape(text.as_encoded_bytes(), &mut out, |c| c == '\\');
+    out
+}
+
+/// Characters that change how a line reads or where it ends.
+fn unprintable(c: char) -> bool {
+    c.is_control()
+        || matches!(c, '\u{2028}' | '\u{2029}' | '\u{200e}' | '\u{200f}' | '\u{202a}'..='\u{202e}' | '\u{2066}'..='\u{2069}')
+}
+
+/// `bytes` appended to `out` with [`unprintable`] characters, bytes that are not UTF-8 and the
+/// characters `special` says escaped, in the escapes of bash's `$'...'`.
+fn escape(bytes: &[u8], out: &mut String, special: impl Fn(char) -> bool) {
+    for chunk in bytes.utf8_chunks() {
+        for c in chunk.valid().chars() {
+            match c {
+                '\n' => out.push_str("\\n"),
+                '\r' => out.push_str("\\r"),
+                '\t' => out.push_str("\\t"),
+                c if special(c) => {
+                    out.push('\\');
+                    out.push(c);
+                }
+                c if unprintable(c) => {
+                    let mut utf8 = [0; 4];
+                    for b in c.encode_utf8(&mut utf8).bytes() {
+                        out.push_str(&format!("\\x{b:02x}"));
+                    }
+                }
+                c => out.push(c),
+            }
+        }
+        for b in chunk.invalid() {
+            out.push_str(&format!("\\x{b:02x}"));
+        }
     }
 }
 
@@ -328,17 +426,91 @@ mod tests {
 
     #[test]
     fn shell_quoting() {
-        assert_eq!(quote("/a/b.ply"), "/a/b.ply");
-        assert_eq!(quote("a b"), "'a b'");
-        assert_eq!(quote("it's"), r"'it'\''s'");
+        let q = |s: &str| shell_word(s.as_ref());
+        assert_eq!(q("/a/b.ply"), "/a/b.ply");
+        assert_eq!(q("a b"), "'a b'");
+        assert_eq!(q("it's"), r"'it'\''s'");
+        assert_eq!(q(""), "''");
+        assert_eq!(q("$(touch x)`y`#"), "'$(touch x)`y`#'");
+        assert_eq!(q("a\nb"), r"$'a\nb'");
+        assert_eq!(q("it's\r\u{1b}\\"), r"$'it\'s\r\x1b\\'");
+        assert_eq!(q("é\u{2028}"), r"$'é\xe2\x80\xa8'");
+        use std::os::unix::ffi::OsStrExt;
+        let raw = OsStr::from_bytes(b"a\xff\xfe b");
+        assert_eq!(shell_word(raw), r"$'a\xff\xfe b'");
+        // bash reads every word back as its bytes.
+        let words: Vec<&OsStr> = [
+            "plain",
+            "a b",
+            "it's",
+            "x\ny",
+            "tab\tcr\r",
+            "\\back",
+            "$(id)",
+            "`id`",
+            "#c",
+            "é",
+        ]
+        .iter()
+        .map(OsStr::new)
+        .chain([raw])
+        .collect();
+        let script: Vec<String> = words
+            .iter()
+            .map(|w| format!("printf '%s\\0' {}", shell_word(w)))
+            .collect();
+        let out = std::process::Command::new("bash")
+            .arg("-c")
+            .arg(script.join("\n"))
+            .output();
+        if let Ok(out) = out {
+            let back: Vec<&[u8]> = out.stdout.split(|&b| b == 0).collect();
+            for (i, w) in words.iter().enumerate() {
+                assert_eq!(back[i], w.as_encoded_bytes(), "{w:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn comment_text_stays_on_its_line() {
+        let c = |s: &str| comment_text(s.as_ref());
+        assert_eq!(c("/data/scan.ply"), "/data/scan.ply");
+        assert_eq!(c("in\ntouch PWNED #"), r"in\ntouch PWNED #");
+        assert_eq!(c("a\rb\u{1b}[2Jc\\"), r"a\rb\x1b[2Jc\\");
+        assert_eq!(c("\u{202e}x\u{2029}"), r"\xe2\x80\xaex\xe2\x80\xa9");
+        use std::os::unix::ffi::OsStrExt;
+        assert_eq!(comment_text(OsStr::from_bytes(b"\xffz")), r"\xffz");
+    }
+
+    #[test]
+    fn sbatch_values_are_one_word_sbatch_reads_as_it_is() {
+        for good in ["debug", "2:00:00", "vcsmooth-1", "a.b_c"] {
+            assert!(sbatch_value(good, &['%']), "{good}");
+        }
+        for bad in [
+            "", "a b", "a\nb", "a'b", "a\"b", "a\\b", "a#b", "a\u{1}b", "a\u{85}b",
+        ] {
+            assert!(!sbatch_value(bad, &[]), "{bad:?}");
+        }
+        assert!(sbatch_value("50%", &[]) && !sbatch_value("50%", &['%']));
     }
 
     #[test]
     fn placeholders_filled_once() {
-        let values = [("a", "@b@".to_string()), ("b", "x".to_string())];
+        let text = |s: &str| Value::Text(s.into());
+        let values = [("a", text("@b@")), ("b", text("x"))];
         assert_eq!(fill("@a@-@b@ ${v[@]} a@b", &values), "@b@-x ${v[@]} a@b");
         assert_eq!(fill("@a@@b@", &values), "@b@x");
-        let values = [("a2", "y".to_string())];
+        let values = [("a2", text("y"))];
         assert_eq!(fill("I+@a2@, @@", &values), "I+y, @@");
+        let values = [
+            ("w", Value::Words(vec!["a b".into(), "c".into()])),
+            ("l", Value::Sbatch(vec![("time", "1:00".into())])),
+            ("t", text("x\ny")),
+        ];
+        assert_eq!(
+            fill("@w@|@l@|@t@", &values),
+            "'a b' c|#SBATCH --time=1:00\n|x\\ny"
+        );
     }
 }

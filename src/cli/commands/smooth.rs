@@ -9,7 +9,9 @@ use clap::Args as ClapArgs;
 
 use crate::cli::flags;
 use crate::cli::multires::{MultiresArgs, print_multires};
-use crate::cli::output::{check_files, mesh_output, stdout_error, svg_output, write_json};
+use crate::cli::output::{
+    check_files, check_work_dir, mesh_output, stdout_error, svg_output, write_json,
+};
 use crate::cli::plot::{Curve, file_name, volume_curve, write_volume_plot};
 use crate::cli::progress::Progress;
 use crate::cli::report::{count, fixed, iterations_run};
@@ -78,6 +80,19 @@ pub struct SmoothConfig {
 impl SmoothConfig {
     /// Resolve and check the flags; `argv` is the command line, kept for the report.
     pub fn from_args(a: SmoothArgs, argv: Vec<String>) -> Result<SmoothConfig> {
+        // Multiresolution runs a volume-constrained method on its coarse levels.
+        let default = match a.multires.multires {
+            true => crate::Method::MULTIRES_COARSE,
+            false => crate::Method::default(),
+        };
+        let options = a.smoothing.options(default)?;
+        let multires = a.multires.resolve(&options)?;
+        if multires.is_some() && a.cluster.checkpoint.is_some() {
+            return Err(flags::parameter(
+                "multires",
+                "cannot be combined with --checkpoint (it runs in one process)",
+            ));
+        }
         mesh_output(&a.files.output)?;
         if let Some(p) = &a.plot {
             svg_output(p)?;
@@ -94,22 +109,16 @@ impl SmoothConfig {
         let mut reads = vec![("IN", a.files.input.as_path())];
         reads.extend(a.pins.pin.as_deref().map(|p| ("--pin", p)));
         check_files(&reads, Some(("OUT", &a.files.output)), &sides)?;
+        if let Some(dir) = &a.cluster.checkpoint {
+            let mut files = reads.clone();
+            files.push(("OUT", &a.files.output));
+            files.extend(&sides);
+            check_work_dir(("--checkpoint", dir), &files)?;
+        }
         let mut engine = a.smoothing.engine.resolve()?;
         engine.pins = a.pins.resolve()?;
         engine.with_stats = a.report.is_some();
         engine.statistics = a.stats;
-        let mut options = a.smoothing.options();
-        if a.multires.multires && a.smoothing.method.is_none() {
-            // Multiresolution runs a volume-constrained method on its coarse levels.
-            options.method = crate::Method::MULTIRES_COARSE;
-        }
-        let multires = a.multires.resolve(&options)?;
-        if multires.is_some() && a.cluster.checkpoint.is_some() {
-            return Err(flags::parameter(
-                "multires",
-                "cannot be combined with --checkpoint (it runs in one process)",
-            ));
-        }
         Ok(SmoothConfig {
             multires,
             options,

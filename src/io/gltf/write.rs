@@ -101,6 +101,11 @@ pub(crate) fn write(path: &Path, mesh: &Mesh) -> Result<()> {
     let mut chunk = None;
     let mut staged = Vec::new();
     let mut chosen = Vec::new();
+    // Buffers go beside the file the output's links lead to, where its relative URIs point.
+    let beside = match crate::io::atomic::destination(path) {
+        Ok(crate::io::atomic::Destination::Replace(real)) => real,
+        _ => path.to_path_buf(),
+    };
     for (i, loaded) in layout.buffers.iter().enumerate() {
         let (Some(loaded), true) = (loaded, changed[i]) else {
             continue;
@@ -113,7 +118,7 @@ pub(crate) fn write(path: &Path, mesh: &Mesh) -> Result<()> {
                     Value::String(format!("{head},{}", base64_encode(&bytes)));
             }
             Origin::File(_) => {
-                let bin = bin_path(path, &chosen, layout);
+                let bin = bin_path(&beside, &chosen, layout);
                 staged.push(crate::io::atomic::stage(&bin, |out| out.write_all(&bytes))?);
                 chosen.push(bin.clone());
                 let name = bin
