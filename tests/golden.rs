@@ -44,6 +44,7 @@ fn runs(sphere: &Path, torus: &Path, big: &Path) -> Vec<Run> {
         "vcs",
         "vcs-triangle",
         "vcs-lowpass",
+        "vcs-guided",
     ];
     for (m, t) in methods
         .iter()
@@ -69,7 +70,7 @@ fn runs(sphere: &Path, torus: &Path, big: &Path) -> Vec<Run> {
             args,
         });
     }
-    let more: [(&'static str, &Path, &'static str, &'static [&'static str]); 20] = [
+    let more: [(&'static str, &Path, &'static str, &'static [&'static str]); 21] = [
         (
             "sphere4-vcs-reject",
             sphere,
@@ -251,6 +252,19 @@ fn runs(sphere: &Path, torus: &Path, big: &Path) -> Vec<Run> {
                 "2",
                 "--transfer",
                 "smooth",
+            ],
+        ),
+        (
+            "fandisk-vcs-guided",
+            &scan("denoising/Fandisk0.3-noisy.ply"),
+            "ply",
+            &[
+                "--method",
+                "vcs-guided",
+                "--threads",
+                "2",
+                "--patch-size",
+                "2000",
             ],
         ),
         (

@@ -7,7 +7,7 @@ from conftest import DATA, relative_volume_change
 
 import vcsmooth
 
-STENCIL_METHODS = ["vcs", "vcs-triangle", "vcs-lowpass"]
+STENCIL_METHODS = ["vcs", "vcs-triangle", "vcs-lowpass", "vcs-guided"]
 ALL_METHODS = list(vcsmooth.METHODS)
 
 

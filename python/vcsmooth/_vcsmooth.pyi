@@ -8,7 +8,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 _Path = Union[str, PathLike[str]]
-_Method = Literal["laplacian", "taubin", "lem", "vcs", "vcs-triangle", "vcs-lowpass", "hc"]
+_Method = Literal["laplacian", "taubin", "lem", "vcs", "vcs-triangle", "vcs-lowpass", "vcs-guided", "hc"]
 _Report = Dict[str, Any]
 
 __version__: str

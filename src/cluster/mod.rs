@@ -82,6 +82,15 @@ pub fn run_file(
     if cluster.checkpoint_every == 0 {
         return Err(Error::parameter("checkpoint_every", "must be at least 1"));
     }
+    if comm.size() > 1 && !opts.method.runs_on_ranks() {
+        return Err(Error::parameter(
+            "method",
+            format!(
+                "{} runs in one process (its per-triangle fields are not shared between ranks); run it without MPI ranks",
+                opts.method
+            ),
+        ));
+    }
     let start = agree(
         comm,
         run::Start::new(opts, engine),
@@ -637,15 +646,21 @@ impl<'a> RankRun<'a> {
             auto.resume(mesh.topo, &removed, stopped, &mut self);
         }
         let first = self.state.done + 1;
-        let mut counts: Buf<u8> = match opts.method.unit().needs().counts {
+        let needs = opts.method.unit().needs();
+        let mut counts: Buf<u8> = match needs.counts {
             true => Buf::sparse(n)?,
             false => Buf::default(),
         };
+        let faces = mesh.tris.len();
+        let mut face_vectors: Buf<DVec3> = Buf::sparse(needs.face_vectors * faces)?;
+        let mut face_scalars: Buf<f64> = Buf::sparse(needs.face_scalars * faces)?;
         let buffers = Buffers {
             pos: &mut pos,
             scratch: &mut scratch,
             prev: &mut prev,
             counts: &mut counts,
+            face_vectors: &mut face_vectors,
+            face_scalars: &mut face_scalars,
             input: input
                 .as_deref()
                 .filter(|_| opts.keeps_input())

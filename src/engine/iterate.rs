@@ -39,7 +39,7 @@ use crate::partition::Patch;
 use crate::schedule::Prefetch;
 use crate::smooth::boundary::{self, Loops};
 use crate::smooth::laplacian::{self, Previous, StepStats};
-use crate::smooth::method::{Exec, Footprint, PassFields, PatchMesh, Schedule};
+use crate::smooth::method::{Exec, FaceFields, Footprint, PassFields, PatchMesh, Schedule};
 use crate::smooth::stencil::{self, StencilParams};
 use crate::smooth::tiled::{Measure, TilePlan};
 use crate::smooth::{Options, SharedField, Smoother, SweepStats};
@@ -118,6 +118,10 @@ pub struct Buffers<'b> {
     /// The method's byte field ([`Needs::counts`](crate::smooth::method::Needs)), filled by the
     /// loop before its first iteration; empty when the method has none.
     pub counts: &'b mut [u8],
+    /// The method's per-triangle fields ([`Needs::face_vectors`](crate::smooth::method::Needs),
+    /// `face_scalars`); empty when it has none.
+    pub face_vectors: &'b mut [DVec3],
+    pub face_scalars: &'b mut [f64],
     /// The input positions, read when the options keep them ([`Options::keeps_input`]); empty
     /// otherwise.
     pub input: &'b [DVec3],
@@ -248,6 +252,8 @@ impl Run<'_, '_> {
             scratch: sums,
             prev,
             counts,
+            face_vectors,
+            face_scalars,
             input,
             mut auto,
         } = buf;
@@ -277,7 +283,24 @@ impl Run<'_, '_> {
             let start = Instant::now();
             // `prev` is the preparation's spare buffer until the positions are copied into it.
             let opts = self.opts;
-            unit.prepare(mesh.topo, opts, &mut self.exec(), pos, sums, prev, counts);
+            let patch_mesh = PatchMesh {
+                topo: mesh.topo,
+                tris: mesh.tris,
+            };
+            let faces = FaceFields {
+                vectors: face_vectors,
+                scalars: face_scalars,
+            };
+            unit.prepare(
+                patch_mesh,
+                opts,
+                &mut self.exec(),
+                pos,
+                sums,
+                prev,
+                counts,
+                faces,
+            );
             if measure {
                 let now = &pos[owned.clone()];
                 on_pool(&*self.share, || {
@@ -799,6 +822,16 @@ impl Exec for ShareExec<'_> {
         on_pool(&*self.share, || {
             reduce::for_chunks_mut(&mut field[owned], |at, out| f(first + at, out))
         });
+    }
+
+    /// Every triangle, in every process: the fields are not exchanged (see
+    /// [`Smoother::prepare`]'s callers: a method with per-triangle fields runs in one process).
+    fn face_pass(&mut self, field: &mut [DVec3], f: &(dyn Fn(usize, &mut [DVec3]) + Sync)) {
+        on_pool(&*self.share, || reduce::for_chunks_mut(field, f));
+    }
+
+    fn face_pass_f64(&mut self, field: &mut [f64], f: &(dyn Fn(usize, &mut [f64]) + Sync)) {
+        on_pool(&*self.share, || reduce::for_chunks_mut(field, f));
     }
 
     fn neighbor_sums(&mut self, pos: &[DVec3], sums: &mut [DVec3]) {

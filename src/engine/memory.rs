@@ -98,7 +98,7 @@ pub fn in_core_bytes_of_file(size: u64) -> u64 {
 
 /// [`in_core_bytes_of_file`] of a run with `opts`: [`DEVIATION_BYTES_PER_TRIANGLE`] more when it
 /// keeps the input positions ([`crate::Options::keeps_input`]), [`AUTO_BYTES_PER_TRIANGLE`] more when it
-/// stops automatically.
+/// stops automatically, and the method's per-triangle fields ([`face_field_bytes`]).
 pub fn in_core_bytes_of_file_with(size: u64, opts: &crate::Options) -> u64 {
     let mut per_triangle = HEAP_BYTES_PER_TRIANGLE;
     if opts.keeps_input() {
@@ -107,7 +107,14 @@ pub fn in_core_bytes_of_file_with(size: u64, opts: &crate::Options) -> u64 {
     if opts.auto_stop {
         per_triangle += AUTO_BYTES_PER_TRIANGLE;
     }
+    per_triangle += face_field_bytes(opts.method);
     size.saturating_mul(per_triangle) / FILE_BYTES_PER_TRIANGLE
+}
+
+/// Bytes per triangle of `method`'s per-triangle fields ([`crate::smooth::method::Needs`]).
+pub fn face_field_bytes(method: crate::Method) -> u64 {
+    let needs = method.unit().needs();
+    (needs.face_vectors * 24 + needs.face_scalars * 8) as u64
 }
 
 /// Memory a job needs to smooth a file of `size` bytes in core with `opts`, the process included.

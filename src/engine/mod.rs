@@ -168,6 +168,9 @@ impl Plan {
         let mut prev: Buf<DVec3> = storage.zeroed(sized(!schedule_of.is_jacobi() || needs.aux))?;
         let mut scratch: Buf<DVec3> = storage.zeroed(n)?;
         let mut counts: Buf<u8> = storage.zeroed(sized(needs.counts))?;
+        let faces = reordered.triangles.len();
+        let mut face_vectors: Buf<DVec3> = storage.zeroed(needs.face_vectors * faces)?;
+        let mut face_scalars: Buf<f64> = storage.zeroed(needs.face_scalars * faces)?;
         // The input positions, for a deviation bound or a method that reads them: in the plan's
         // storage (scratch out of core).
         let input: Buf<DVec3> = match opts.keeps_input() {
@@ -210,6 +213,8 @@ impl Plan {
                 scratch: &mut scratch,
                 prev: &mut prev,
                 counts: &mut counts,
+                face_vectors: &mut face_vectors,
+                face_scalars: &mut face_scalars,
                 input: &input,
                 auto: auto.as_mut(),
             };

@@ -71,6 +71,17 @@ pub struct Needs {
     pub aux: bool,
     /// A byte per vertex, filled once per run by [`Smoother::start`].
     pub counts: bool,
+    /// Vector fields per triangle ([`FaceFields::vectors`], this many times the triangle count).
+    pub face_vectors: usize,
+    /// Scalar fields per triangle ([`FaceFields::scalars`]).
+    pub face_scalars: usize,
+}
+
+/// A method's per-triangle fields ([`Needs::face_vectors`], [`Needs::face_scalars`]), one after
+/// another in the plan's triangle order; empty when it has none.
+pub struct FaceFields<'a> {
+    pub vectors: &'a mut [DVec3],
+    pub scalars: &'a mut [f64],
 }
 
 /// What ends an automatically stopped run of the method (see [`crate::engine::auto`]).
@@ -132,6 +143,12 @@ pub trait Exec {
     fn vertex_pass(&mut self, field: &mut [DVec3], f: &(dyn Fn(usize, &mut [DVec3]) + Sync));
     /// The same for a byte field only this process reads (no exchange).
     fn vertex_pass_u8(&mut self, field: &mut [u8], f: &(dyn Fn(usize, &mut [u8]) + Sync));
+    /// `f(first, out)` over every entry of a per-triangle `field` (out holds triangles
+    /// `first ..`), in fixed chunks that may run in parallel; each entry must depend only on what
+    /// `f` reads.
+    fn face_pass(&mut self, field: &mut [DVec3], f: &(dyn Fn(usize, &mut [DVec3]) + Sync));
+    /// The same for a per-triangle scalar field.
+    fn face_pass_f64(&mut self, field: &mut [f64], f: &(dyn Fn(usize, &mut [f64]) + Sync));
     /// The neighbour sums of `pos` ([`super::neighbor_sums`]) into `sums`, for the owned vertices
     /// and those around them whose sums the owned stencils read.
     fn neighbor_sums(&mut self, pos: &[DVec3], sums: &mut [DVec3]);
@@ -162,17 +179,18 @@ pub trait Smoother: Sync {
 
     /// [`Schedule::Stencils`]: before every sweep, what its stencils read beside the positions
     /// into `sums` (by default the neighbour sums); `spare` is a buffer the method may use (it
-    /// is overwritten after), `counts` its byte field.
+    /// is overwritten after), `counts` its byte field, `faces` its per-triangle fields.
     #[allow(clippy::too_many_arguments)]
     fn prepare(
         &self,
-        _topo: &Topology,
+        _mesh: PatchMesh,
         opts: &Options,
         exec: &mut dyn Exec,
         pos: &[DVec3],
         sums: &mut [DVec3],
         _spare: &mut [DVec3],
         _counts: &[u8],
+        _faces: FaceFields,
     ) {
         let _ = opts;
         exec.neighbor_sums(pos, sums);

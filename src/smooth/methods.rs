@@ -1,16 +1,18 @@
 //! The methods of the design, in the terms of [`Smoother`]: a type each, but one for the three
 //! stencil methods of Liu et al. ([`StencilMethod`]). Their kernels are in [`super::laplacian`],
-//! [`super::stencil`], [`super::boundary`] and [`super::lowpass`]; `hc`'s unit is beside its
-//! kernel, [`super::hc`].
+//! [`super::stencil`], [`super::boundary`], [`super::lowpass`] and [`super::guided`]; `hc`'s unit
+//! is beside its kernel, [`super::hc`].
 
 use std::ops::Range;
 
 use glam::DVec3;
 
 use super::boundary::{self, Loops};
-use super::method::{Control, Exec, Footprint, Needs, PatchMesh, Schedule, Smoother, StopRule};
+use super::method::{
+    Control, Exec, FaceFields, Footprint, Needs, PatchMesh, Schedule, Smoother, StopRule,
+};
 use super::stencil::{self, StencilParams};
-use super::{Options, SharedField, SweepStats, Topology, laplacian, lowpass};
+use super::{Options, SharedField, SweepStats, Topology, guided, laplacian, lowpass};
 
 /// Umbrella Laplacian, forward Euler `p += λ L(p)`, Jacobi (Liu et al. 2002, eq. 3–6). Shrinks.
 pub struct Laplacian;
@@ -225,14 +227,16 @@ impl Smoother for VcsLowpass {
     /// exchanged too.
     fn prepare(
         &self,
-        topo: &Topology,
+        mesh: PatchMesh,
         opts: &Options,
         exec: &mut dyn Exec,
         pos: &[DVec3],
         sums: &mut [DVec3],
         spare: &mut [DVec3],
         counts: &[u8],
+        _: FaceFields,
     ) {
+        let topo = mesh.topo;
         let (lambda, mu) = (opts.lambda, opts.mu);
         exec.vertex_pass(sums, &|first, out| {
             laplacian::jacobi_step(topo, pos, out, first, lambda);
@@ -260,6 +264,130 @@ impl Smoother for VcsLowpass {
         _: Option<&Loops>,
     ) -> SweepStats {
         lowpass::sweep_rings(mesh.topo, mesh.tris, pos, sums, vertices, params.deviation)
+    }
+    fn boundary_pass(&self) -> bool {
+        true
+    }
+}
+
+/// Guided normal filtering, the vertices fitted to the filtered normals, and that displacement
+/// spread over `vcs-lowpass`'s 2-ring stencils, each restoring its faces' volume exactly
+/// ([`guided`]): keeps sharp edges and the volume.
+pub struct VcsGuided;
+
+impl Smoother for VcsGuided {
+    fn name(&self) -> &'static str {
+        "vcs-guided"
+    }
+    fn help(&self) -> &'static str {
+        "feature-preserving: guided normal filtering, volume restored exactly on 2-ring stencils"
+    }
+    fn schedule(&self, _: &Options) -> Schedule {
+        Schedule::Stencils(Footprint::Ring)
+    }
+    fn keeps_volume(&self) -> bool {
+        true
+    }
+    fn needs(&self) -> Needs {
+        Needs {
+            counts: true,
+            face_vectors: guided::FACE_VECTORS,
+            face_scalars: guided::FACE_SCALARS,
+            ..Needs::default()
+        }
+    }
+    fn stop_rule(&self, _: &Options) -> StopRule {
+        StopRule::Settle
+    }
+    fn accepts(&self, control: Control) -> bool {
+        matches!(control, Control::SmoothBoundary)
+    }
+    fn start(&self, topo: &Topology, exec: &mut dyn Exec, counts: &mut [u8]) {
+        VcsLowpass.start(topo, exec, counts)
+    }
+    /// Steps 1–3 of [`guided`] into `spare` (the vertex steps alternate between `spare` and
+    /// `sums`, ending in `spare`), then the shares of that displacement into `sums`, as
+    /// `vcs-lowpass` makes them. Every pass is a Jacobi pass, so any split gives the same bits.
+    fn prepare(
+        &self,
+        mesh: PatchMesh,
+        _: &Options,
+        exec: &mut dyn Exec,
+        pos: &[DVec3],
+        sums: &mut [DVec3],
+        spare: &mut [DVec3],
+        counts: &[u8],
+        faces: FaceFields,
+    ) {
+        let (topo, tris) = (mesh.topo, mesh.tris);
+        let parts = topo.parts();
+        let parts = &parts;
+        let n = tris.len();
+        let (normals, rest) = faces.vectors.split_at_mut(n);
+        let (means, guidance) = rest.split_at_mut(n);
+        let guidance = &mut guidance[..n];
+        let (areas, consistency) = faces.scalars.split_at_mut(n);
+        let consistency = &mut consistency[..n];
+        exec.face_pass_f64(areas, &|first, out| {
+            guided::areas_into(tris, pos, out, first)
+        });
+        let areas: &[f64] = areas;
+        // `means` takes the filtered normals once the guidance is made from it, and the two
+        // swap roles: the normals of each filter iteration are those of the one before.
+        let (mut normals, mut means) = (normals, means);
+        exec.face_pass(normals, &|first, out| {
+            guided::normals_into(tris, pos, out, first)
+        });
+        for _ in 0..guided::NORMAL_ITERATIONS {
+            let field: &[DVec3] = normals;
+            exec.face_pass_f64(consistency, &|first, out| {
+                guided::consistency_into(parts, tris, field, out, first)
+            });
+            exec.face_pass(means, &|first, out| {
+                guided::patch_means_into(parts, tris, field, areas, out, first)
+            });
+            let (h, m): (&[f64], &[DVec3]) = (consistency, means);
+            exec.face_pass(guidance, &|first, out| {
+                guided::guidance_into(parts, tris, h, m, field, out, first)
+            });
+            let g: &[DVec3] = guidance;
+            exec.face_pass(means, &|first, out| {
+                guided::filter_into(parts, tris, pos, field, areas, g, out, first)
+            });
+            std::mem::swap(&mut normals, &mut means);
+        }
+        let filtered: &[DVec3] = normals;
+        exec.vertex_pass(spare, &|first, out| {
+            guided::fit_into(parts, tris, filtered, pos, out, first)
+        });
+        const _: () = assert!(guided::VERTEX_ITERATIONS % 2 == 1);
+        for _ in 0..guided::VERTEX_ITERATIONS / 2 {
+            let from: &[DVec3] = spare;
+            exec.vertex_pass(sums, &|first, out| {
+                guided::fit_into(parts, tris, filtered, from, out, first)
+            });
+            let from: &[DVec3] = sums;
+            exec.vertex_pass(spare, &|first, out| {
+                guided::fit_into(parts, tris, filtered, from, out, first)
+            });
+        }
+        let fitted: &[DVec3] = spare;
+        exec.vertex_pass(sums, &|first, out| {
+            let counts = &counts[first..first + out.len()];
+            lowpass::shares_into(topo, pos, fitted, counts, out, first)
+        });
+    }
+    fn sweep_patch(
+        &self,
+        mesh: PatchMesh,
+        vertices: Range<u32>,
+        triangles: Range<u32>,
+        pos: &mut SharedField,
+        sums: &mut SharedField,
+        params: StencilParams,
+        loops: Option<&Loops>,
+    ) -> SweepStats {
+        VcsLowpass.sweep_patch(mesh, vertices, triangles, pos, sums, params, loops)
     }
     fn boundary_pass(&self) -> bool {
         true

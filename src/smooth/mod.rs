@@ -14,6 +14,7 @@
 //! | `vcs` | edge stencils + 2-step volume restoration | Liu et al. §3, §3.1 |
 //! | `vcs-triangle` | the same on triangle stencils | Liu et al. §3.2 |
 //! | `vcs-lowpass` | Taubin's λ\|μ displacement + exact volume restoration on 2-ring stencils | [`lowpass`], docs/quality-research.md |
+//! | `vcs-guided` | guided normal filtering and a fit to the filtered normals + exact volume restoration on 2-ring stencils: keeps sharp edges | [`guided`], Zhang et al. 2015, Sun et al. 2007 |
 //! | `hc` | an umbrella average pushed back towards the input, two Jacobi passes | [`hc`], Vollmer et al. 1999 |
 //!
 //! Umbrella operator: `L(v) = (1/deg v) Σ_{u∈N(v)} p_u − p_v`. Fixed vertices (see
@@ -26,6 +27,7 @@ use std::str::FromStr;
 use glam::DVec3;
 
 pub mod boundary;
+pub mod guided;
 pub mod hc;
 pub mod laplacian;
 pub mod lowpass;
@@ -51,18 +53,21 @@ pub enum Method {
     /// (docs/quality-research.md).
     #[default]
     VcsLowpass,
+    /// Feature-preserving: keeps a machined part's edges and the volume.
+    VcsGuided,
     Hc,
 }
 
 impl Method {
     /// Every method, in documentation order.
-    pub const ALL: [Method; 7] = [
+    pub const ALL: [Method; 8] = [
         Method::Laplacian,
         Method::Taubin,
         Method::Lem,
         Method::Vcs,
         Method::VcsTriangle,
         Method::VcsLowpass,
+        Method::VcsGuided,
         Method::Hc,
     ];
 
@@ -87,6 +92,7 @@ impl Method {
             Method::Vcs => &methods::VCS,
             Method::VcsTriangle => &methods::VCS_TRIANGLE,
             Method::VcsLowpass => &methods::VcsLowpass,
+            Method::VcsGuided => &methods::VcsGuided,
             Method::Hc => &hc::Hc,
         }
     }
@@ -109,6 +115,13 @@ impl Method {
     /// Every stencil restores its local volume exactly.
     pub fn keeps_volume(self) -> bool {
         self.unit().keeps_volume()
+    }
+
+    /// Whether the method runs on MPI ranks: its fields are the vertices', exchanged at the
+    /// partition's borders. Per-triangle fields (`vcs-guided`'s) reach many rings out and are not.
+    pub fn runs_on_ranks(self) -> bool {
+        let needs = self.unit().needs();
+        needs.face_vectors + needs.face_scalars == 0
     }
 
     /// The methods that accept `control`, in documentation order.
