@@ -17,6 +17,7 @@ mod engine;
 mod fidelity;
 mod golden;
 mod hostile;
+mod hostile_gltf;
 mod hostile_scripts;
 mod layout;
 mod multires;

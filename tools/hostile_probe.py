@@ -20,7 +20,8 @@ prints one line per case that went wrong and, last, `N cases, M went wrong` (exi
 The classes: paths, values, readers, geometry, memory, signals, batch, output,
 gltf (`.gltf` with external and `data:` buffers, `.glb`: what a glTF input may hold, where a
 glTF output's buffers go), and hostile_scripts (the Slurm script against hostile file names, side
-files through links and devices, the checkpoint directory, option combinations).
+files through links and devices, the checkpoint directory, option combinations), hostile_gltf
+(glTF geometry shared between primitives and meshes: one surface, smoothed once, kept shared).
 Only the Python standard library is needed.
 """
 
@@ -1643,6 +1644,170 @@ def cases_hostile_scripts():
     return out
 
 
+def shared_gltf(v, f, prims, nodes=None, extra=(), positions=()):
+    """A sphere's glTF (`gltf_mesh`: accessor 0 the positions, 1 the indices, 2 the normals) with
+    more index accessors (`extra`: triangle lists, accessors 3, 4, ... in order), more accessors
+    (`positions`: dicts over accessor 0's view, after those) and these meshes' primitives (lists of
+    (POSITION, indices) pairs, NORMAL 2 with POSITION 0), placed by `nodes` (one per mesh)."""
+    doc, data = gltf_mesh(v, f, normals=True)
+    for tris in extra:
+        idx = b"".join(struct.pack("<3I", *t) for t in tris)
+        doc["bufferViews"].append({"buffer": 0, "byteOffset": len(data), "byteLength": len(idx),
+                                   "target": 34963})
+        doc["accessors"].append({"bufferView": len(doc["bufferViews"]) - 1, "componentType": 5125,
+                                 "count": 3 * len(tris), "type": "SCALAR"})
+        data += idx
+    doc["accessors"].extend(copy.deepcopy(list(positions)))
+    doc["buffers"][0]["byteLength"] = len(data)
+
+    def prim(pos, ind):
+        attributes = {"POSITION": pos}
+        if pos == 0:
+            attributes["NORMAL"] = 2
+        return {"attributes": attributes, "indices": ind}
+    doc["meshes"] = [{"primitives": [prim(*x) for x in mesh]} for mesh in prims]
+    doc["nodes"] = nodes or [{"mesh": m} for m in range(len(prims))]
+    doc["scenes"] = [{"nodes": list(range(len(doc["nodes"])))}]
+    return doc, data
+
+
+def positions_of(doc, buffers, a):
+    acc = doc["accessors"][a]
+    view = doc["bufferViews"][acc["bufferView"]]
+    at = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+    stride = view.get("byteStride", 12)
+    return [struct.unpack_from("<3f", buffers[view["buffer"]], at + i * stride)
+            for i in range(acc["count"])]
+
+
+def smooths_as_one_sphere(src, dst, v, order, nf, accessors=((0, 0),)):
+    """The input reads as one closed manifold sphere of `nf` triangles; smoothing it gives, bit for
+    bit, what smoothing that sphere as one primitive (triangles `order`) gives, in every accessor
+    of `accessors` ((accessor, its first vertex)); the output keeps the input's JSON but for
+    min/max and buffer uris."""
+    def check(d, code, out, err):
+        if code != 0:
+            return None
+        i, o = os.path.join(d, src), os.path.join(d, dst)
+        a = info(i)
+        if a is None:
+            return "the input does not read"
+        if find(a, "triangles") != nf or find(a, "non_manifold_edges") != 0:
+            return (f"read {find(a, 'triangles')} triangles, {find(a, 'non_manifold_edges')} "
+                    f"non-manifold edges; one sphere has {nf} and 0")
+        rdoc, rdata = gltf_mesh(v, order)
+        ri, ro = os.path.join(d, "probe-ref.glb"), os.path.join(d, "probe-ref-out.glb")
+        with open(ri, "wb") as fh:
+            fh.write(glb(rdoc, rdata))
+        p = subprocess.run([BIN, "smooth", ri, ro, "--iterations", "3"], capture_output=True,
+                           timeout=TIMEOUT)
+        if p.returncode != 0:
+            return "the reference did not smooth: " + p.stderr.decode(errors="replace")[:200]
+        want = positions_of(*read_gltf(ro), 0)
+        if want == positions_of(rdoc, [rdata], 0):
+            return "the reference did not move"
+        doc, buffers = read_gltf(o)
+        for acc, first in accessors:
+            got = positions_of(doc, buffers, acc)
+            if got != want[first:first + len(got)]:
+                return f"accessor {acc} does not hold the one sphere's smoothed positions"
+        indoc, _ = read_gltf(i)
+        strip = lambda j: edited(j, lambda x: ([a.pop(k, None) for a in x["accessors"]
+                                                for k in ("min", "max")],
+                                               [b.pop("uri", None) for b in x["buffers"]]))
+        if strip(doc) != strip(indoc):
+            return "the output's JSON changed beyond min/max and uris: the sharing was not kept"
+        return None
+    return check
+
+
+def cases_hostile_gltf():
+    """Geometry shared between primitives and meshes: the same accessors named twice, accessors
+    over the same bytes, overlapping index data, a sub-range of the positions, one index accessor
+    on two position sets; in each kind of file."""
+    out = []
+    v, f = GLTF_SPHERE
+    nv, nf = len(v), len(f)
+    n = nf
+    half = [dict(bufferView=0, componentType=5126, count=nv - nv // 3, type="VEC3",
+                 byteOffset=12 * (nv // 3))]
+    k = nv // 3
+    high = [t for t in f if min(t) >= k]
+    low = [t for t in f if min(t) < k]
+    variants = [
+        ("one primitive in two meshes", [[(0, 1)], [(0, 1)]], None, (), (), f, ((0, 0),)),
+        ("one primitive twice in a mesh", [[(0, 1), (0, 1)]], None, (), (), f, ((0, 0),)),
+        ("one mesh, three nodes with transforms", [[(0, 1)]],
+         [{"mesh": 0}, {"mesh": 0, "scale": [2, 2, 2]},
+          {"mesh": 0, "scale": [-1, 1, 1], "translation": [0, 4, 0]}], (), (), f, ((0, 0),)),
+        ("overlapping index accessors", [[(0, 3)], [(0, 4)]], None,
+         (f[:2 * n // 3], f[n // 3:]), (), f, ((0, 0),)),
+        ("a back face on the same positions", [[(0, 1), (0, 3)]], None,
+         ([(a, c, b) for a, b, c in f],), (), f, ((0, 0),)),
+        ("indices within another's", [[(0, 1)], [(0, 3)]], None, (f[n // 4:n // 2],), (), f,
+         ((0, 0),)),
+        ("a POSITION sub-range", [[(0, 3), (5, 4)]], None,
+         (low, [tuple(x - k for x in t) for t in high]), half, low + high, ((0, 0), (5, k))),
+    ]
+    for name, prims, nodes, extra, positions, order, accessors in variants:
+        doc, data = shared_gltf(v, f, prims, nodes, extra, positions)
+        for kind, setup, src, dst, new in [
+                ("glb", write("m.glb", glb(doc, data)), "m.glb", "out.glb", []),
+                ("gltf", gltf_files(doc, data), "m.gltf", "out.gltf", ["out.bin"]),
+                ("embedded", write("e.gltf", gltf_text(doc, data_uri(data))), "e.gltf",
+                 "out.gltf", [])]:
+            out.append(Case("hostile_gltf", f"{name} ({kind})", setup,
+                            ["smooth", src, dst, "--iterations", "3"], expect="ok", output=dst,
+                            new_files=None,
+                            check=smooths_as_one_sphere(src, dst, v, order, nf, accessors)))
+    # Accessors over the same bytes (an exporter's copy per mesh): POSITION 3, indices 4, NORMAL 5.
+    doc, data = gltf_mesh(v, f, normals=True)
+    doc["accessors"] += copy.deepcopy(doc["accessors"][0:3])
+    doc["meshes"].append({"primitives": [{"attributes": {"POSITION": 3, "NORMAL": 5}, "indices": 4}]})
+    doc["nodes"].append({"mesh": 1})
+    doc["scenes"] = [{"nodes": [0, 1]}]
+    for kind, setup, src, dst in [("glb", write("m.glb", glb(doc, data)), "m.glb", "out.glb"),
+                                  ("embedded", write("e.gltf", gltf_text(doc, data_uri(data))),
+                                   "e.gltf", "out.gltf")]:
+        out.append(Case("hostile_gltf", f"aliased accessors ({kind})", setup,
+                        ["smooth", src, dst, "--iterations", "3"], expect="ok", output=dst,
+                        check=smooths_as_one_sphere(src, dst, v, f, nf, ((0, 0), (3, 0)))))
+
+    # One index accessor on two position sets (bytes of their own): two spheres, both move.
+    doc, data = gltf_mesh(v, f)
+    moved = b"".join(struct.pack("<3f", x + 4, y, z) for x, y, z in v)
+    doc["bufferViews"].append({"buffer": 0, "byteOffset": len(data), "byteLength": len(moved)})
+    doc["accessors"].append({"bufferView": 2, "componentType": 5126, "count": nv, "type": "VEC3"})
+    data += moved
+    doc["buffers"][0]["byteLength"] = len(data)
+    doc["meshes"][0]["primitives"].append({"attributes": {"POSITION": 2}, "indices": 1})
+
+    def two_spheres(d, code, o, e):
+        a = info(os.path.join(d, "m.glb"))
+        if (find(a, "vertices"), find(a, "triangles"), find(a, "non_manifold_edges")) != (2 * nv, 2 * nf, 0):
+            return "not two manifold spheres"
+        odoc, buffers = read_gltf(os.path.join(d, "out.glb"))
+        for acc in (0, 2):
+            if positions_of(odoc, buffers, acc) == positions_of(doc, [data], acc):
+                return f"accessor {acc} did not move"
+        return None
+    out.append(Case("hostile_gltf", "one index accessor on two POSITION accessors",
+                    write("m.glb", glb(doc, data)), ["smooth", "m.glb", "out.glb", "--iterations", "3"],
+                    expect="ok", output="out.glb", check=two_spheres))
+
+    # Elements overlapping out of step (4 bytes apart) cannot be one vertex each: refused.
+    doc, data = shared_gltf(v, f, [[(0, 1), (4, 3)]],
+                            extra=([t for t in f if max(t) < nv - 1],),
+                            positions=[dict(bufferView=0, componentType=5126, count=nv - 1,
+                                            type="VEC3", byteOffset=4)])
+    for kind, setup, src in [("glb", write("m.glb", glb(doc, data)), "m.glb"),
+                             ("gltf", gltf_files(doc, data), "m.gltf")]:
+        out.append(Case("hostile_gltf", f"POSITION overlapping out of step ({kind})", setup,
+                        ["smooth", src, "out" + src[1:], "--iterations", "3"], expect="error",
+                        new_files=[], check=refused_naming(src, "shares bytes")))
+    return out
+
+
 CLASSES = {
     "paths": cases_paths,
     "values": cases_values,
@@ -1654,6 +1819,7 @@ CLASSES = {
     "output": cases_output,
     "gltf": cases_gltf,
     "hostile_scripts": cases_hostile_scripts,
+    "hostile_gltf": cases_hostile_gltf,
 }
 
 

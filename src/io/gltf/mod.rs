@@ -5,13 +5,20 @@
 //!
 //! Every triangle primitive (`mode` 4, the default) of every mesh: its `POSITION` accessor (float
 //! `VEC3`) and its indices (`u8`/`u16`/`u32`, or none: consecutive triples). The engine sees one
-//! mesh, the concatenation of the distinct `POSITION` accessors in order of first use: a
-//! primitive's vertices are its own (nothing is merged across primitives), except that primitives
-//! naming the same `POSITION` accessor share those vertices, as the file says. Primitives of other
-//! modes (points, lines, strips, fans) are left untouched and not smoothed.
+//! mesh, the concatenation of the `POSITION` data in order of first use: a primitive's vertices
+//! are its own (nothing is merged by value across primitives), except that primitives naming the
+//! same `POSITION` elements share those vertices, as the file says. An element is its bytes: the
+//! same accessor, another accessor over the same bytes, or one over part of them (a sub-range of
+//! the same view) names the same vertices. Shared geometry is one surface, so a triangle is read
+//! once: a triangle of another primitive on the same three vertices (the same index accessor
+//! again, an overlapping part of another, either winding) is not read again (counted twice, each
+//! of its edges would have four faces, and a non-manifold edge never moves). Within one primitive
+//! every triangle is kept as the file has it. Primitives of other modes (points, lines, strips,
+//! fans) are left untouched and not smoothed.
 //!
 //! Node transforms are ignored: a mesh is smoothed in its own local space, once, however many
-//! nodes place it (scaled or mirrored instances all receive the same smoothed mesh).
+//! nodes place it (scaled or mirrored instances all receive the same smoothed mesh), and so are
+//! two meshes whose primitives name the same data.
 //!
 //! # What is written
 //!
@@ -19,8 +26,10 @@
 //! was not read from glTF is refused (glTF output keeps a glTF input's scene; a glTF input can be
 //! written to PLY, OBJ, OFF or STL as a plain mesh). The JSON and every buffer are carried
 //! through: the smoothed positions overwrite the `POSITION` data in place (same accessor, buffer
-//! view and byte layout), `NORMAL` data is recomputed from them (area-weighted, normalised), and
-//! the `POSITION` accessors' `min`/`max` (and a `NORMAL` accessor's, if it has them) are updated.
+//! view and byte layout: shared data stays one copy, so every accessor naming a vertex reads
+//! its one smoothed position and every index stays valid), `NORMAL` data is recomputed from
+//! them (area-weighted, normalised), and the `POSITION` accessors' `min`/`max` (and a `NORMAL`
+//! accessor's, if it has them) are updated.
 //! Everything else — other attributes, materials, images, nodes, extras, extensions — keeps its
 //! bytes and values (the JSON is re-serialised, so key order and spacing may change). A changed
 //! buffer is written as the GLB's binary chunk, re-encoded into its `data:` URI, or, when it was
@@ -45,6 +54,7 @@ use serde_json::Value;
 use crate::mesh::{Carried, FileLayout};
 
 mod read;
+mod runs;
 mod uri;
 mod write;
 

@@ -1,12 +1,14 @@
 //! Reading glTF: GLB chunks, accessors and buffers into one mesh and the layout a write needs.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::io::Read;
+use std::ops::Range;
 use std::path::Path;
 
 use glam::DVec3;
 use serde_json::Value;
 
+use super::runs::runs;
 use super::uri::{base64_decode, percent_decode};
 use super::{
     CHUNK_BIN, CHUNK_JSON, COMPRESSIONS, FLOAT, GltfLayout, Loaded, Origin, Span, array, field,
@@ -36,10 +38,10 @@ pub(crate) fn read(
         buffers: Vec::new(),
     };
     reader.check_top()?;
-    let mut positions: Vec<(Span, usize)> = Vec::new();
-    let mut first_vertex: HashMap<usize, usize> = HashMap::new();
-    let mut all = Vec::new();
-    let mut normals = Vec::new();
+    let mut prims: Vec<Primitive> = Vec::new();
+    let mut checked: HashSet<usize> = HashSet::new();
+    // Each primitive's triangles in its own POSITION accessor's numbering until the vertices are
+    // known.
     let mut corners: Vec<[u32; 3]> = Vec::new();
     let mut carried = Carried {
         materials: json
@@ -69,38 +71,33 @@ pub(crate) fn read(
             let position =
                 index(position).ok_or_else(|| at("POSITION is not an accessor index".into()))?;
             let span = reader.vec3(position, "POSITION").map_err(at)?;
-            let base = match first_vertex.get(&position) {
-                Some(&base) => base,
-                None => {
-                    let base = all.len();
-                    let buffer = reader.bytes(span.buffer);
-                    for i in 0..span.count {
-                        let v = read_vec3(buffer, span.offset + i * span.stride);
-                        if !v.is_finite() {
-                            return Err(at(format!(
-                                "POSITION accessor {position}: vertex {i} is not finite ({}, {}, {})",
-                                v.x, v.y, v.z
-                            )));
-                        }
-                        all.push(v);
+            if checked.insert(position) {
+                let buffer = reader.bytes(span.buffer);
+                for i in 0..span.count {
+                    let v = read_vec3(buffer, span.offset + i * span.stride);
+                    if !v.is_finite() {
+                        return Err(at(format!(
+                            "POSITION accessor {position}: vertex {i} is not finite ({}, {}, {})",
+                            v.x, v.y, v.z
+                        )));
                     }
-                    first_vertex.insert(position, base);
-                    positions.push((span, base));
-                    base
                 }
-            };
-            if let Some(normal) = attributes.and_then(|a| a.get("NORMAL")) {
-                let normal =
-                    index(normal).ok_or_else(|| at("NORMAL is not an accessor index".into()))?;
-                let n = reader.vec3(normal, "NORMAL").map_err(at)?;
-                if n.count != span.count {
-                    return Err(at(format!(
-                        "NORMAL has {} elements but POSITION has {}",
-                        n.count, span.count
-                    )));
-                }
-                normals.push((n, base));
             }
+            let normal = match attributes.and_then(|a| a.get("NORMAL")) {
+                Some(normal) => {
+                    let normal = index(normal)
+                        .ok_or_else(|| at("NORMAL is not an accessor index".into()))?;
+                    let n = reader.vec3(normal, "NORMAL").map_err(at)?;
+                    if n.count != span.count {
+                        return Err(at(format!(
+                            "NORMAL has {} elements but POSITION has {}",
+                            n.count, span.count
+                        )));
+                    }
+                    Some(n)
+                }
+                None => None,
+            };
             let ids = match prim.get("indices") {
                 Some(i) => {
                     let i =
@@ -112,6 +109,7 @@ pub(crate) fn read(
             if ids.len() % 3 != 0 {
                 return Err(at(format!("{} indices do not make triangles", ids.len())));
             }
+            let from = corners.len();
             for t in ids.chunks_exact(3) {
                 if let Some(&v) = t.iter().find(|&&v| v as usize >= span.count) {
                     return Err(at(format!(
@@ -119,14 +117,16 @@ pub(crate) fn read(
                         span.count
                     )));
                 }
-                let vertex = |k: usize| u32::try_from(base + t[k] as usize).unwrap_or(u32::MAX);
-                corners.push([vertex(0), vertex(1), vertex(2)]);
+                corners.push([t[0], t[1], t[2]]);
             }
+            prims.push(Primitive {
+                span,
+                normal,
+                triangles: from..corners.len(),
+            });
         }
     }
-    if u32::try_from(all.len()).is_err() {
-        return Err(format!("{} vertices: more than 2^32", all.len()));
-    }
+    let (all, positions, normals, corners) = shared_geometry(&reader, &prims, corners)?;
     for name in array(&json, "extensionsUsed")
         .iter()
         .filter_map(Value::as_str)
@@ -397,21 +397,122 @@ impl<'a> Reader<'a> {
     }
 }
 
+/// A triangle primitive as read: its `POSITION` and `NORMAL` data, and where its triangles are in
+/// the corners read so far.
+struct Primitive {
+    span: Span,
+    normal: Option<Span>,
+    triangles: Range<usize>,
+}
+
+/// Vertices, `POSITION` and `NORMAL` accessors with their first vertices, and triangles.
+type Geometry = (
+    Vec<DVec3>,
+    Vec<(Span, usize)>,
+    Vec<(Span, usize)>,
+    Vec<[u32; 3]>,
+);
+
+/// The one mesh the primitives make. Each element of `POSITION` data is one vertex however many
+/// accessors and primitives name it (runs of elements in order of first use, each in its order in
+/// the buffer): shared geometry is one surface. So a triangle is read once: one whose vertices
+/// another primitive already gave (the same index data, or an overlapping part of other index
+/// data, in either winding) is that primitive's triangle again; within one primitive every
+/// triangle is kept as the file has it, as in the other formats. `corners` are in each
+/// primitive's own numbering.
+fn shared_geometry(
+    reader: &Reader,
+    prims: &[Primitive],
+    mut corners: Vec<[u32; 3]>,
+) -> std::result::Result<Geometry, String> {
+    let mut accessors: Vec<(Span, i64)> = Vec::new();
+    let mut number: HashMap<usize, usize> = HashMap::new();
+    let of_prim: Vec<usize> = prims
+        .iter()
+        .map(|p| {
+            *number.entry(p.span.accessor).or_insert_with(|| {
+                accessors.push((p.span, 0));
+                accessors.len() - 1
+            })
+        })
+        .collect();
+    let (runs, place) = runs(&accessors);
+    let mut bases = Vec::with_capacity(runs.len());
+    let mut total = 0;
+    for run in &runs {
+        bases.push(total);
+        total += run.len();
+    }
+    if u32::try_from(total).is_err() {
+        return Err(format!("{total} vertices: more than 2^32"));
+    }
+    let mut all = Vec::with_capacity(total);
+    for run in &runs {
+        let bytes = reader.bytes(run.buffer);
+        all.extend((run.first..run.end).map(|k| read_vec3(bytes, run.byte(k))));
+    }
+    let base_of = |k: usize| place[k].map_or(0, |(r, at)| bases[r] + at);
+    let positions = accessors
+        .iter()
+        .enumerate()
+        .map(|(k, &(span, _))| (span, base_of(k)))
+        .collect();
+    let normals = prims
+        .iter()
+        .zip(&of_prim)
+        .filter_map(|(p, &k)| Some((p.normal?, base_of(k))))
+        .collect();
+    let mut users = vec![0usize; runs.len()];
+    for &k in &of_prim {
+        if let Some((r, _)) = place[k] {
+            users[r] += 1;
+        }
+    }
+    let mut first_from: HashMap<[u32; 3], usize> = HashMap::new();
+    let mut kept = 0;
+    for (i, (p, &k)) in prims.iter().zip(&of_prim).enumerate() {
+        let base = base_of(k) as u32;
+        let shared = place[k].is_some_and(|(r, _)| users[r] > 1);
+        for j in p.triangles.clone() {
+            let t = corners[j].map(|v| base + v);
+            if shared {
+                let mut key = t;
+                key.sort_unstable();
+                if *first_from.entry(key).or_insert(i) != i {
+                    continue;
+                }
+            }
+            corners[kept] = t;
+            kept += 1;
+        }
+    }
+    corners.truncate(kept);
+    Ok((all, positions, normals, corners))
+}
+
 /// The bytes a write replaces, every element of the `POSITION` and `NORMAL` accessors, must hold
 /// nothing else: not each other (a `NORMAL` that is the `POSITION` accessor), not indices, not
 /// another attribute, not an image. Interleaved views are fine: only the elements' own bytes count.
+/// Accessors naming the same elements (see [`runs`]) write the same values there.
 fn check_rewritten_bytes(
     json: &Value,
     reader: &Reader,
     positions: &[(Span, usize)],
     normals: &[(Span, usize)],
 ) -> std::result::Result<(), String> {
-    let mut masks: HashMap<usize, Vec<u64>> = HashMap::new();
     let mut rewritten: Vec<usize> = Vec::new();
-    let spans = positions.iter().map(|(s, _)| (s, "POSITION"));
-    for (span, what) in spans.chain(normals.iter().map(|(s, _)| (s, "NORMAL"))) {
+    let mut tagged: Vec<(Span, i64)> = Vec::new();
+    for &(span, _) in positions {
+        rewritten.push(span.accessor);
+        tagged.push((span, 0));
+    }
+    let (position_runs, _) = runs(&tagged);
+    // A normal element belongs to one vertex: aliased NORMAL accessors share a run only when their
+    // common elements are the normals of the same vertices.
+    tagged.clear();
+    for &(span, base) in normals {
         if rewritten.contains(&span.accessor) {
-            if what == "NORMAL" && positions.iter().any(|(p, _)| p.accessor == span.accessor) {
+            if positions.iter().any(|(p, _)| p.accessor == span.accessor) {
                 return Err(format!(
                     "accessor {} is both POSITION and NORMAL: the recomputed normals would \
                      replace the positions",
@@ -421,18 +522,25 @@ fn check_rewritten_bytes(
             continue;
         }
         rewritten.push(span.accessor);
-        let len = reader.bytes(span.buffer).len();
+        let vertex_of_element_0 = base as i64 - (span.offset / span.stride) as i64;
+        tagged.push((span, vertex_of_element_0));
+    }
+    let (normal_runs, _) = runs(&tagged);
+    let mut masks: HashMap<usize, Vec<u64>> = HashMap::new();
+    let all_runs = position_runs.iter().map(|r| (r, "POSITION"));
+    for (run, what) in all_runs.chain(normal_runs.iter().map(|r| (r, "NORMAL"))) {
+        let len = reader.bytes(run.buffer).len();
         let mask = masks
-            .entry(span.buffer)
+            .entry(run.buffer)
             .or_insert_with(|| vec![0; len.div_ceil(64)]);
-        for i in 0..span.count {
-            let at = span.offset + i * span.stride;
+        for k in run.first..run.end {
+            let at = run.byte(k);
             for b in at..at + 12 {
                 if mask[b / 64] >> (b % 64) & 1 == 1 {
                     return Err(format!(
                         "{what} accessor {} shares bytes with another POSITION or NORMAL \
                          accessor: one would overwrite the other",
-                        span.accessor
+                        run.accessor
                     ));
                 }
                 mask[b / 64] |= 1 << (b % 64);

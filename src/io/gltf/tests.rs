@@ -152,3 +152,49 @@ fn percent_escapes_round_trip() {
     assert_eq!(percent_decode("a%20b%25.bin").as_deref(), Some("a b%.bin"));
     assert_eq!(percent_decode("a%2"), None);
 }
+
+#[test]
+fn runs_join_spans_naming_the_same_elements_only() {
+    let span = |accessor, buffer, offset, stride, count| Span {
+        accessor,
+        buffer,
+        offset,
+        stride,
+        count,
+    };
+    let spans = [
+        (span(0, 0, 120, 12, 10), 0), // elements 10..20
+        (span(1, 0, 0, 12, 10), 0),   // 0..10: touches the first, shares nothing
+        (span(2, 0, 180, 12, 10), 0), // 15..25: overlaps the first
+        (span(3, 0, 124, 12, 5), 0),  // out of step: a run of its own
+        (span(4, 1, 120, 12, 10), 0), // another buffer
+        (span(5, 0, 120, 12, 10), 1), // another tag
+        (span(6, 0, 0, 12, 0), 0),    // empty
+    ];
+    let (runs, place) = super::runs::runs(&spans);
+    let got: Vec<(usize, usize, usize)> =
+        runs.iter().map(|r| (r.accessor, r.first, r.end)).collect();
+    assert_eq!(
+        got,
+        [
+            (0, 10, 25),
+            (1, 0, 10),
+            (3, 10, 15),
+            (4, 10, 20),
+            (5, 10, 20)
+        ]
+    );
+    assert_eq!(
+        place,
+        [
+            Some((0, 0)),
+            Some((1, 0)),
+            Some((0, 5)),
+            Some((2, 0)),
+            Some((3, 0)),
+            Some((4, 0)),
+            None
+        ]
+    );
+    assert_eq!(runs[2].byte(10), 124);
+}
