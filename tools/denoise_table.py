@@ -75,6 +75,25 @@ DEFAULT_PEERS = [("trimesh-hc", "trimesh:humphrey"), ("trimesh-taubin", "trimesh
 MACHINED = ["Block0.4", "Fandisk0.3", "Fandisk0.7", "SharpSphere0.3", "Twelve0.5Impulsive"]
 METRICS = ["nerr", "dist", "maxdist", "dvol", "iterations"]
 SCOPES = ["all", "machined", "organic", "closed", "open"]
+EPILOG = """\
+metrics, against the clean mesh:
+  nerr        mean angle between each face's normal and the clean one's (degrees)
+  dist        mean distance of the vertices to the clean surface / bounding-box diagonal
+  maxdist     the largest such distance
+  dvol        volume change against the noisy mesh, out/noisy - 1 (a target takes |dvol|)
+  iterations  iterations a vcsmooth run did, and why --iterations auto stopped
+
+targets:  [SCOPE:]LABEL[.METRIC] OP RHS
+  SCOPE   all (default), machined, organic, closed, open, or pair names joined by commas
+  LABEL   a column: noisy, a default or --column / --peer label
+  METRIC  nerr (default), dist, maxdist, dvol, iterations
+  OP      <=  <  >=  >
+  RHS     NUMBER, or [FACTOR*]LABEL[.METRIC] (the left side's metric unless given)
+examples:
+  --target "machined:vcs-feature<=0.6*taubin"  --target "closed:vcs-feature.dvol<=1e-9"
+  --target "auto<=1.05*default10"
+
+more: tools/README-peers.md"""
 LABEL = re.compile(r"^[A-Za-z][A-Za-z0-9_+-]*$")
 
 
@@ -356,6 +375,10 @@ TITLES = {
 }
 
 
+def _show(x):
+    return f"{x:.4g}"
+
+
 def markdown(rows, labels, metric):
     if metric == "iterations":
         labels = [x for x in labels if any("iterations" in r["cells"].get(x, {}) for r in rows)]
@@ -406,8 +429,8 @@ def parse_columns(p, a):
 
 def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                epilog="Targets and metrics: see the module docstring "
-                                       "(tools/denoise_table.py) or tools/README-peers.md.")
+                                formatter_class=argparse.RawDescriptionHelpFormatter,
+                                epilog=EPILOG)
     p.add_argument("--dir", default=os.path.join(REPO, "..", "shared", "denoising"),
                    help="folder of NAME-noisy.ply / NAME-clean.ply pairs [default: ../shared/denoising "
                         "beside the repository]")
@@ -415,7 +438,7 @@ def main():
     p.add_argument("--machined", default=",".join(MACHINED), metavar="LIST",
                    help="pairs that are machined parts (scope 'machined'; the rest are 'organic') "
                         "[default: %(default)s]")
-    p.add_argument("--binary", default=None,
+    p.add_argument("--binary", default=None, metavar="PATH",
                    help="vcsmooth binary [default: $VCSMOOTH, target/release/vcsmooth, PATH]")
     p.add_argument("--column", action="append", default=[], metavar="LABEL=ARGS",
                    help="another vcsmooth column: its label and smooth arguments, e.g. "
@@ -428,20 +451,22 @@ def main():
                         "'meshlab-hc=pymeshlab:hc', 'vtk-sinc=vtk:windowed-sinc'")
     p.add_argument("--no-peers", action="store_true",
                    help="drop the default peers: " + "; ".join(f"{k}={v}" for k, v in DEFAULT_PEERS))
-    p.add_argument("--peer-iterations", type=int, default=10,
+    p.add_argument("--peer-iterations", type=int, default=10, metavar="N",
                    help="iterations of every peer (compare_peers.py's mapping) [default: 10]")
-    p.add_argument("--peers-python", default=sys.executable,
+    p.add_argument("--peers-python", default=sys.executable, metavar="PYTHON",
                    help="Python that runs the peers (where their libraries are installed) "
                         "[default: this one]")
-    p.add_argument("--timeout", type=float, default=600, help="seconds allowed per peer library and pair")
-    p.add_argument("--threads", type=int, default=None,
+    p.add_argument("--timeout", type=float, default=600, metavar="SECONDS",
+                   help="seconds allowed per peer library and pair [default: 600]")
+    p.add_argument("--threads", type=int, default=None, metavar="N",
                    help="vcsmooth --threads (the output does not depend on it) [default: vcsmooth's]")
     p.add_argument("--target", action="append", default=[], metavar="TARGET",
-                   help="e.g. 'machined:vcs-feature<=0.6*taubin' (see the docstring)")
+                   help="a target to check on every pair of its scope (repeatable; see below)")
     p.add_argument("--check", action="store_true",
                    help="exit 1 if a target fails or a vcsmooth run fails")
     p.add_argument("--json", default=None, metavar="FILE", help="write every number to FILE")
-    p.add_argument("--workdir", default=None, help="keep the smoothed meshes and reports here")
+    p.add_argument("--workdir", default=None, metavar="DIR",
+                   help="keep the smoothed meshes and reports here")
     p.add_argument("--peer-worker", help=argparse.SUPPRESS)
     p.add_argument("--peer-methods", help=argparse.SUPPRESS)
     a = p.parse_args()
@@ -462,6 +487,8 @@ def table(a, cols, peers):
     t_start = time.perf_counter()
     if a.json and not os.path.isdir(os.path.dirname(os.path.abspath(a.json))):
         raise ToolError(f"{a.json}: its folder does not exist")
+    if a.binary and not (os.path.isfile(a.binary) and os.access(a.binary, os.X_OK)):
+        raise ToolError(f"{a.binary}: not an executable file (--binary)")
     binary = find_vcsmooth(a.binary) if cols else None
     if cols and binary is None:
         raise ToolError("no vcsmooth binary (cargo build --release, or --binary PATH)")
@@ -526,7 +553,8 @@ def table(a, cols, peers):
         checked.append({"target": t["text"], "pass": ok, "pairs": res})
         bad = [r for r in res if not r["pass"]]
         detail = "no pair in scope" if not res else ", ".join(
-            f"{r['pair']} " + (r.get("missing") or f"{r['lhs']:.4g} vs {r['rhs']:.4g}") for r in bad)
+            f"{r['pair']} " + (r.get("missing") or f"{_show(r['lhs'])} vs {_show(r['rhs'])}")
+            for r in bad)
         print(f"- {'PASS' if ok else 'FAIL'} {t['text']} ({len(res) - len(bad)}/{len(res)} pairs"
               + (f"; failing: {detail}" if not ok else "") + ")")
     seconds = time.perf_counter() - t_start
