@@ -195,19 +195,29 @@ class SurfaceDistance:
         return best
 
 
-def surface_metrics(clean_v, f, out_v, sd, scale):
-    used = np.zeros(len(clean_v), bool)
-    used[f.ravel()] = True
-    d = sd.query(out_v[used]) / scale
+def normal_errors(clean_v, f, out_v):
+    """Angle (degrees) between each face's normal in out_v and the same face's in clean_v;
+    faces degenerate in either are left out."""
     nc = face_normals(clean_v, f)
     no = face_normals(out_v, f)
     lc, lo = np.linalg.norm(nc, axis=1), np.linalg.norm(no, axis=1)
     ok = (lc > 0) & (lo > 0)
     cosang = np.clip(_dot(nc[ok], no[ok]) / (lc[ok] * lo[ok]), -1.0, 1.0)
+    return np.degrees(np.arccos(cosang))
+
+
+def referenced_vertices(n, f):
+    used = np.zeros(n, bool)
+    used[f.ravel()] = True
+    return used
+
+
+def surface_metrics(clean_v, f, out_v, sd, scale):
+    d = sd.query(out_v[referenced_vertices(len(clean_v), f)]) / scale
     return {
         "rms": float(np.sqrt(np.mean(d * d))),
         "max": float(d.max()),
-        "nerr": float(np.degrees(np.arccos(cosang)).mean()),
+        "nerr": float(normal_errors(clean_v, f, out_v).mean()),
     }
 
 
