@@ -12,6 +12,7 @@ mod boundary;
 mod cli;
 mod cluster;
 mod controls;
+mod deviation;
 mod engine;
 mod fidelity;
 mod golden;

@@ -8,7 +8,7 @@ use glam::DVec3;
 use super::header::{Element, FaceRole, Kind, Property, Roles, Scalar, walk_record};
 use super::read::{Origin, decode_faces};
 use super::{Fallible, PlyEncoding, PlyLayout, ascii};
-use crate::io::{FaceBuilder, Faces, Precision, vertex_normals};
+use crate::io::{FaceBuilder, Faces, Precision, VertexValues, vertex_normals};
 use crate::mesh::Mesh;
 use crate::meter::Meter;
 
@@ -215,8 +215,12 @@ pub(crate) fn check_writable(mesh: &Mesh) -> Fallible<()> {
     Ok(())
 }
 
-/// Writes `mesh` as PLY; [`check_writable`] passed.
-pub(crate) fn write(out: &mut impl Write, mesh: &Mesh) -> io::Result<()> {
+/// Writes `mesh` as PLY, with `values` in its vertices when given; [`check_writable`] passed.
+pub(crate) fn write(
+    out: &mut impl Write,
+    mesh: &Mesh,
+    values: Option<&VertexValues>,
+) -> io::Result<()> {
     let layout = layout_of(mesh);
     let roles = Roles::find(&layout.elements).map_err(io::Error::other)?;
     // The face element to rebuild from the mesh, unless its records are stored.
@@ -225,14 +229,25 @@ pub(crate) fn write(out: &mut impl Write, mesh: &Mesh) -> io::Result<()> {
         .filter(|f| layout.elements[f.element].records.is_none());
     let faces = Faces::of(mesh);
     let ascii = layout.encoding == PlyEncoding::Ascii;
+    let added = values.map_or_else(Vec::new, |v| {
+        added_properties(&layout.elements[roles.vertex], v)
+    });
 
-    write_header(out, &layout, |e, el| match face {
-        Some(f) if f.element == e => faces.len(),
-        _ => el.count,
-    })?;
+    write_header(
+        out,
+        &layout,
+        |e, el| match face {
+            Some(f) if f.element == e => faces.len(),
+            _ => el.count,
+        },
+        (roles.vertex, &added),
+    )?;
     for (e, el) in layout.elements.iter().enumerate() {
         if e == roles.vertex {
-            write_vertices(out, el, mesh, ascii)?;
+            match values {
+                None => write_vertices(out, el, mesh, ascii)?,
+                Some(v) => write_vertices_with(out, el, &added, mesh, v, ascii)?,
+            }
         } else if let Some(f) = face.filter(|f| f.element == e) {
             write_faces(out, el, f, &faces, ascii)?;
         } else if let Some(records) = &el.records {
@@ -242,12 +257,38 @@ pub(crate) fn write(out: &mut impl Write, mesh: &Mesh) -> io::Result<()> {
     Ok(())
 }
 
+/// The name of the vertex property that holds a [`VertexValues`] scalar.
+const QUALITY: &str = "quality";
+/// The names of the colour properties.
+const COLOURS: [&str; 3] = ["red", "green", "blue"];
+
+/// The properties `values` add to the vertex element `el`: `float quality` and `uchar red green
+/// blue` (with colours), each unless `el` has it already (then its values are replaced).
+fn added_properties(el: &Element, values: &VertexValues) -> Vec<Property> {
+    let mut added = Vec::new();
+    let mut add = |name: &str, t: Scalar| {
+        if el.prop(name).is_none() {
+            added.push(Property {
+                name: name.into(),
+                kind: Kind::Scalar(t),
+            });
+        }
+    };
+    add(QUALITY, Scalar::F32);
+    if values.colours.is_some() {
+        COLOURS.iter().for_each(|c| add(c, Scalar::U8));
+    }
+    added
+}
+
 /// Writes the header of `layout` (big-endian is written as little-endian), with `count(e, el)`
-/// records for element `e`; every PLY writer's header.
+/// records for element `e` and, in element `added.0`, the properties `added.1` after its own;
+/// every PLY writer's header.
 pub(crate) fn write_header(
     out: &mut impl Write,
     layout: &PlyLayout,
     count: impl Fn(usize, &Element) -> usize,
+    added: (usize, &[Property]),
 ) -> io::Result<()> {
     out.write_all(b"ply\n")?;
     let encoding = match layout.encoding {
@@ -260,7 +301,8 @@ pub(crate) fn write_header(
     }
     for (e, el) in layout.elements.iter().enumerate() {
         writeln!(out, "element {} {}", el.name, count(e, el))?;
-        for p in &el.props {
+        let extra = if e == added.0 { added.1 } else { &[] };
+        for p in el.props.iter().chain(extra) {
             match p.kind {
                 Kind::Scalar(t) => writeln!(out, "property {} {}", t.name(), p.name)?,
                 Kind::List(c, t) => {
@@ -383,6 +425,125 @@ fn write_vertices(out: &mut impl Write, el: &Element, mesh: &Mesh, ascii: bool) 
         emit(out, &el.props, &buf, ascii)?;
     }
     Ok(())
+}
+
+/// What a vertex property written with [`VertexValues`] is rebuilt from.
+#[derive(Clone, Copy, PartialEq)]
+enum Role {
+    Coordinate(usize),
+    Normal(usize),
+    Quality,
+    Colour(usize),
+}
+
+impl Role {
+    fn of(name: &str, colours: bool) -> Option<Role> {
+        Some(match name {
+            "x" => Role::Coordinate(0),
+            "y" => Role::Coordinate(1),
+            "z" => Role::Coordinate(2),
+            "nx" => Role::Normal(0),
+            "ny" => Role::Normal(1),
+            "nz" => Role::Normal(2),
+            QUALITY => Role::Quality,
+            _ if colours => Role::Colour(COLOURS.iter().position(|c| *c == name)?),
+            _ => return None,
+        })
+    }
+}
+
+/// [`write_vertices`] with `values`: each record as it would be without them, its `quality` and
+/// colour properties (when it has them) replaced, then the `added` properties appended.
+fn write_vertices_with(
+    out: &mut impl Write,
+    el: &Element,
+    added: &[Property],
+    mesh: &Mesh,
+    values: &VertexValues,
+    ascii: bool,
+) -> io::Result<()> {
+    let props: Vec<Property> = el.props.iter().chain(added).cloned().collect();
+    // (property, type, role) of every scalar property rebuilt here.
+    let targets: Vec<(usize, Scalar, Role)> = props
+        .iter()
+        .enumerate()
+        .filter_map(|(k, p)| match p.kind {
+            Kind::Scalar(t) => Some((k, t, Role::of(&p.name, values.colours.is_some())?)),
+            Kind::List(..) => None,
+        })
+        .collect();
+    let normals = match targets.iter().any(|t| matches!(t.2, Role::Normal(_))) {
+        true => vertex_normals(&mesh.positions, &mesh.triangles),
+        false => Vec::new(),
+    };
+    let put = |record: &mut [u8], at: &dyn Fn(usize) -> usize, i: usize| {
+        let mut colour = None;
+        for &(k, t, role) in &targets {
+            let v = match role {
+                Role::Coordinate(c) => mesh.positions[i][c],
+                Role::Normal(c) => t.unit_component(normals[i][c]),
+                Role::Quality => values.quality[i],
+                Role::Colour(c) => {
+                    let rgb = *colour.get_or_insert_with(|| values.colours.map(|f| f(i)));
+                    f64::from(rgb.map_or(0, |rgb| rgb[c]))
+                }
+            };
+            t.put(v, &mut record[at(k)..]);
+        }
+    };
+    let extra: usize = added.iter().map(|p| scalar_of(p).size()).sum();
+    const FLUSH: usize = 1 << 20; // bytes per buffer
+    let mut buf = Vec::with_capacity(FLUSH + 1024);
+    let stored = el.records.as_deref();
+    if let Some(stride) = el.stride() {
+        // Fixed records: every property at the same offset in each.
+        let offsets: Vec<usize> = (0..props.len())
+            .map(|k| props[..k].iter().map(|p| scalar_of(p).size()).sum())
+            .collect();
+        let at = |k: usize| offsets[k];
+        let wide = stride + extra;
+        for i in 0..mesh.positions.len() {
+            let start = buf.len();
+            match stored {
+                Some(r) => buf.extend_from_slice(&r[i * stride..(i + 1) * stride]),
+                None => buf.resize(start + stride, 0),
+            }
+            buf.resize(start + wide, 0);
+            put(&mut buf[start..], &at, i);
+            if buf.len() >= FLUSH {
+                emit(out, &props, &buf, ascii)?;
+                buf.clear();
+            }
+        }
+        return emit(out, &props, &buf, ascii);
+    }
+    // Lists in the vertex element (then its records are stored): each record walked.
+    let records = stored.unwrap_or_default();
+    let corrupt = || io::Error::other("stored PLY vertex records are corrupt");
+    let (mut fields, mut pos, mut record) = (Vec::new(), 0, Vec::new());
+    for i in 0..mesh.positions.len() {
+        let end =
+            walk_record(records, pos, &el.props, false, &mut fields).map_err(|_| corrupt())?;
+        record.clear();
+        record.extend_from_slice(&records[pos..end]);
+        record.resize(end - pos + extra, 0);
+        walk_record(&record, 0, &props, false, &mut fields).map_err(|_| corrupt())?;
+        put(&mut record, &|k| fields[k].at, i);
+        buf.extend_from_slice(&record);
+        pos = end;
+        if buf.len() >= FLUSH {
+            emit(out, &props, &buf, ascii)?;
+            buf.clear();
+        }
+    }
+    emit(out, &props, &buf, ascii)
+}
+
+/// The type of a scalar property (a list's item type).
+fn scalar_of(p: &Property) -> Scalar {
+    match p.kind {
+        Kind::Scalar(t) | Kind::List(_, t) => t,
+    }
 }
 
 /// Writes a face element made of only the index list, from the mesh's polygons or triangles.
