@@ -420,3 +420,42 @@ fn the_report_is_a_record_that_reproduces_the_output() {
         "the report's command wrote other bytes"
     );
 }
+
+/// An ASCII PLY that carries its own `quality` (`uchar`) and another property: the field takes
+/// the `quality` in its place as `float`, the other property and the encoding stay.
+#[test]
+fn an_existing_quality_takes_the_field_in_its_place() {
+    let dir = tempfile::tempdir().unwrap();
+    let header = "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n\
+                  property float z\nproperty uchar quality\nproperty float confidence\n\
+                  element face 2\nproperty list uchar int vertex_indices\nend_header\n";
+    let body = |z: &str| {
+        format!("0 0 0 7 0.5\n1 0 0 7 0.5\n0 1 0 7 0.5\n1 1 {z} 7 0.5\n3 0 1 2\n3 1 3 2\n")
+    };
+    let (pa, pb, field) = (
+        dir.path().join("a.ply"),
+        dir.path().join("b.ply"),
+        dir.path().join("f.ply"),
+    );
+    std::fs::write(&pa, format!("{header}{}", body("0"))).unwrap();
+    std::fs::write(&pb, format!("{header}{}", body("0.25"))).unwrap();
+    ok(vcsmooth([
+        "compare",
+        &s(&pa),
+        &s(&pb),
+        "--deviation-field",
+        &s(&field),
+        "--deviation-colours",
+    ]));
+    let text = std::fs::read_to_string(&field).unwrap();
+    let want = header
+        .replace("uchar quality", "float quality")
+        .replace(
+            "property float confidence\n",
+            "property float confidence\nproperty uchar red\nproperty uchar green\nproperty uchar blue\n",
+        );
+    assert!(text.starts_with(&want), "{text}");
+    assert!(text.contains("\n1 1 0.25 0.25 0.5 255 0 0\n"), "{text}");
+    assert!(text.contains("\n0 0 0 0 0.5 255 255 255\n"), "{text}");
+    assert_eq!(vertex_values(&field, "confidence"), [0.5; 4]);
+}

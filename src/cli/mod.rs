@@ -63,7 +63,7 @@ pub enum Command {
     Smooth(smooth::SmoothArgs),
     /// Print vertices, faces, edges, boundary, components, volume, area, bounding box of a mesh.
     Info(info::InfoArgs),
-    /// Compare two meshes with the same connectivity (distances, normals, volume and area ratios).
+    /// Compare two meshes with the same connectivity (distances, normals, volume and area ratios), or any two with --surface; the deviation field and a tolerance on request.
     Compare(compare::CompareArgs),
     /// Write a closed test mesh (icosphere or torus), optionally with Gaussian noise along normals.
     Generate(generate::GenerateArgs),

@@ -36,6 +36,17 @@ impl DeviationSettings {
         self.stats || self.field || self.tolerance.is_some()
     }
 
+    /// Check the settings: a tolerance is a finite length > 0.
+    pub fn check(&self) -> Result<()> {
+        match self.tolerance {
+            Some(t) if !(t > 0.0 && t.is_finite()) => Err(crate::Error::parameter(
+                "tolerance",
+                format!("must be a finite length > 0, got {t}"),
+            )),
+            _ => Ok(()),
+        }
+    }
+
     /// Whether nothing is asked (the settings' JSON leaves them out then).
     pub fn is_off(&self) -> bool {
         !self.is_on() && !self.colours

@@ -164,6 +164,9 @@ pub struct PhaseTimings {
     pub metrics: f64,
     /// The deviation field and its statistics (in the write phase, before the write).
     pub deviation: f64,
+    /// The input's SHA-256 for a report's record (taken by the command line before the run, not
+    /// in `total`).
+    pub hash: f64,
     pub total: f64,
 }
 
@@ -368,6 +371,7 @@ pub(crate) struct Start {
 impl Start {
     pub(crate) fn new(opts: &Options, engine: &EngineSettings) -> Result<Start> {
         opts.check()?;
+        engine.deviation.check()?;
         let clock = Instant::now();
         let sampler = PeakSampler::start(std::time::Duration::from_millis(20));
         let budget = engine.budget_and_source()?;
@@ -701,7 +705,8 @@ fn expected_output_bytes(input_bytes: u64, output: &Path, mesh: &Mesh) -> u64 {
 }
 
 /// Heap or scratch, decided before reading from the file size by the memory model
-/// ([`memory::in_core_bytes_of_file_with`], which counts what `opts` keep beside the positions).
+/// ([`memory::in_core_bytes_of_run`], which counts what `opts` and the deviation field keep
+/// beside the positions).
 pub(crate) fn storage_for(
     input: &Path,
     output: &Path,
@@ -712,7 +717,7 @@ pub(crate) fn storage_for(
     let size = std::fs::metadata(input)
         .map_err(|e| Error::io(input, e))?
         .len();
-    if memory::in_core_bytes_of_file_with(size, opts) <= budget {
+    if memory::in_core_bytes_of_run(size, opts, engine.deviation.is_on()) <= budget {
         return Ok(Storage::heap().with_budget(budget));
     }
     let dir = match &engine.scratch {

@@ -271,7 +271,8 @@ pub fn write_mesh(path: &Path, mesh: &Mesh) -> Result<()> {
 /// Values added to every vertex of a written mesh (a deviation field): PLY only, as the vertex
 /// properties `float quality` and, with colours, `uchar red green blue`, after the vertex's own
 /// properties; a property of those names that the mesh's PLY layout already has keeps its place
-/// and type and takes the new values. Everything else is written as without them.
+/// and takes the new values (an integer `quality` becomes `float`). Everything else is written as
+/// without them.
 #[derive(Clone, Copy)]
 pub struct VertexValues<'a> {
     /// One value per vertex.

@@ -153,8 +153,11 @@ pub struct SmoothReport {
     /// bytes within one results version.
     pub results_version: u32,
     pub command: &'static str,
-    /// The command line as given.
+    /// The command line as given, and the directory it ran in (its relative paths start there):
+    /// run again there with the same input, it writes the same bytes.
     pub argv: Vec<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub working_directory: Option<String>,
     pub options: Options,
     pub engine: EngineSettings,
     pub input: FileStats,
@@ -200,6 +203,9 @@ impl SmoothReport {
             results_version: crate::RESULTS_VERSION,
             command: "smooth",
             argv,
+            working_directory: std::env::current_dir()
+                .ok()
+                .map(|d| d.display().to_string()),
             options,
             engine: settings,
             input: FileStats::new(files.0, run.input_format, stats(&run.input_stats)),

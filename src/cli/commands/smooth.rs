@@ -180,7 +180,9 @@ pub fn run(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) -> 
             let sha256 = match &cfg.report {
                 Some(_) => {
                     progress.phase(format!("hashing {}", cfg.input.display()));
-                    Some(crate::io::sha256_file(&cfg.input)?)
+                    let clock = std::time::Instant::now();
+                    let hash = crate::io::sha256_file(&cfg.input)?;
+                    Some((hash, clock.elapsed().as_secs_f64()))
                 }
                 None => None,
             };
@@ -265,7 +267,7 @@ fn report(
     cfg: &SmoothConfig,
     run: &engine::Report,
     multires: Option<crate::multires::MultiresStats>,
-    sha256: Option<String>,
+    sha256: Option<(String, f64)>,
     progress: &mut Progress,
     out: &mut dyn Write,
 ) -> Result<()> {
@@ -283,7 +285,10 @@ fn report(
             run,
             multires.clone(),
         );
-        report.input.sha256 = sha256;
+        if let Some((hash, seconds)) = sha256 {
+            report.input.sha256 = Some(hash);
+            report.timings.hash = seconds;
+        }
         write_json(path, &report)?;
     }
     if let Some(path) = &cfg.plot {

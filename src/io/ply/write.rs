@@ -229,9 +229,7 @@ pub(crate) fn write(
         .filter(|f| layout.elements[f.element].records.is_none());
     let faces = Faces::of(mesh);
     let ascii = layout.encoding == PlyEncoding::Ascii;
-    let added = values.map_or_else(Vec::new, |v| {
-        added_properties(&layout.elements[roles.vertex], v)
-    });
+    let props = values.map(|v| output_properties(&layout.elements[roles.vertex], v));
 
     write_header(
         out,
@@ -240,13 +238,13 @@ pub(crate) fn write(
             Some(f) if f.element == e => faces.len(),
             _ => el.count,
         },
-        (roles.vertex, &added),
+        props.as_deref().map(|p| (roles.vertex, p)),
     )?;
     for (e, el) in layout.elements.iter().enumerate() {
         if e == roles.vertex {
-            match values {
-                None => write_vertices(out, el, mesh, ascii)?,
-                Some(v) => write_vertices_with(out, el, &added, mesh, v, ascii)?,
+            match (values, &props) {
+                (Some(v), Some(props)) => write_vertices_with(out, el, props, mesh, v, ascii)?,
+                _ => write_vertices(out, el, mesh, ascii)?,
             }
         } else if let Some(f) = face.filter(|f| f.element == e) {
             write_faces(out, el, f, &faces, ascii)?;
@@ -262,10 +260,21 @@ const QUALITY: &str = "quality";
 /// The names of the colour properties.
 const COLOURS: [&str; 3] = ["red", "green", "blue"];
 
-/// The properties `values` add to the vertex element `el`: `float quality` and `uchar red green
-/// blue` (with colours), each unless `el` has it already (then its values are replaced).
-fn added_properties(el: &Element, values: &VertexValues) -> Vec<Property> {
-    let mut added = Vec::new();
+/// The vertex properties written with `values`: `el`'s own, then `float quality` and `uchar red
+/// green blue` (with colours), each unless `el` has it already (then it takes the values in its
+/// place: a `quality` of an integer type becomes `float`, which holds the field).
+fn output_properties(el: &Element, values: &VertexValues) -> Vec<Property> {
+    let mut added: Vec<Property> = el
+        .props
+        .iter()
+        .map(|p| match p.kind {
+            Kind::Scalar(t) if p.name == QUALITY && t.int_range().is_some() => Property {
+                name: p.name.clone(),
+                kind: Kind::Scalar(Scalar::F32),
+            },
+            _ => p.clone(),
+        })
+        .collect();
     let mut add = |name: &str, t: Scalar| {
         if el.prop(name).is_none() {
             added.push(Property {
@@ -282,13 +291,13 @@ fn added_properties(el: &Element, values: &VertexValues) -> Vec<Property> {
 }
 
 /// Writes the header of `layout` (big-endian is written as little-endian), with `count(e, el)`
-/// records for element `e` and, in element `added.0`, the properties `added.1` after its own;
-/// every PLY writer's header.
+/// records for element `e` and, when `props` is `Some((e, list))`, the properties `list` for
+/// element `e` instead of its own; every PLY writer's header.
 pub(crate) fn write_header(
     out: &mut impl Write,
     layout: &PlyLayout,
     count: impl Fn(usize, &Element) -> usize,
-    added: (usize, &[Property]),
+    props: Option<(usize, &[Property])>,
 ) -> io::Result<()> {
     out.write_all(b"ply\n")?;
     let encoding = match layout.encoding {
@@ -301,8 +310,11 @@ pub(crate) fn write_header(
     }
     for (e, el) in layout.elements.iter().enumerate() {
         writeln!(out, "element {} {}", el.name, count(e, el))?;
-        let extra = if e == added.0 { added.1 } else { &[] };
-        for p in el.props.iter().chain(extra) {
+        let list = match props {
+            Some((k, list)) if k == e => list,
+            _ => &el.props,
+        };
+        for p in list {
             match p.kind {
                 Kind::Scalar(t) => writeln!(out, "property {} {}", t.name(), p.name)?,
                 Kind::List(c, t) => {
@@ -452,17 +464,19 @@ impl Role {
     }
 }
 
-/// [`write_vertices`] with `values`: each record as it would be without them, its `quality` and
-/// colour properties (when it has them) replaced, then the `added` properties appended.
+/// [`write_vertices`] with `values`, the vertex element's properties written as `props`
+/// ([`output_properties`]): each record as it would be without them, its `quality` and colour
+/// properties (when it has them) replaced, then the added properties appended.
 fn write_vertices_with(
     out: &mut impl Write,
     el: &Element,
-    added: &[Property],
+    props: &[Property],
     mesh: &Mesh,
     values: &VertexValues,
     ascii: bool,
 ) -> io::Result<()> {
-    let props: Vec<Property> = el.props.iter().chain(added).cloned().collect();
+    let own = el.props.len();
+    let retyped = el.props.iter().zip(props).any(|(a, b)| a.kind != b.kind);
     // (property, type, role) of every scalar property rebuilt here.
     let targets: Vec<(usize, Scalar, Role)> = props
         .iter()
@@ -491,11 +505,11 @@ fn write_vertices_with(
             t.put(v, &mut record[at(k)..]);
         }
     };
-    let extra: usize = added.iter().map(|p| scalar_of(p).size()).sum();
+    let extra: usize = props[own..].iter().map(|p| scalar_of(p).size()).sum();
     const FLUSH: usize = 1 << 20; // bytes per buffer
     let mut buf = Vec::with_capacity(FLUSH + 1024);
     let stored = el.records.as_deref();
-    if let Some(stride) = el.stride() {
+    if let Some(stride) = el.stride().filter(|_| !retyped) {
         // Fixed records: every property at the same offset in each.
         let offsets: Vec<usize> = (0..props.len())
             .map(|k| props[..k].iter().map(|p| scalar_of(p).size()).sum())
@@ -511,13 +525,14 @@ fn write_vertices_with(
             buf.resize(start + wide, 0);
             put(&mut buf[start..], &at, i);
             if buf.len() >= FLUSH {
-                emit(out, &props, &buf, ascii)?;
+                emit(out, props, &buf, ascii)?;
                 buf.clear();
             }
         }
-        return emit(out, &props, &buf, ascii);
+        return emit(out, props, &buf, ascii);
     }
-    // Lists in the vertex element (then its records are stored): each record walked.
+    // Lists in the vertex element, or a property retyped (then its records are stored): each
+    // record walked and copied field by field, a retyped field as zeros of its new size.
     let records = stored.unwrap_or_default();
     let corrupt = || io::Error::other("stored PLY vertex records are corrupt");
     let (mut fields, mut pos, mut record) = (Vec::new(), 0, Vec::new());
@@ -525,18 +540,24 @@ fn write_vertices_with(
         let end =
             walk_record(records, pos, &el.props, false, &mut fields).map_err(|_| corrupt())?;
         record.clear();
-        record.extend_from_slice(&records[pos..end]);
-        record.resize(end - pos + extra, 0);
-        walk_record(&record, 0, &props, false, &mut fields).map_err(|_| corrupt())?;
+        for k in 0..own {
+            let next = fields.get(k + 1).map_or(end, |f| f.at);
+            match el.props[k].kind == props[k].kind {
+                true => record.extend_from_slice(&records[fields[k].at..next]),
+                false => record.resize(record.len() + scalar_of(&props[k]).size(), 0),
+            }
+        }
+        record.resize(record.len() + extra, 0);
+        walk_record(&record, 0, props, false, &mut fields).map_err(|_| corrupt())?;
         put(&mut record, &|k| fields[k].at, i);
         buf.extend_from_slice(&record);
         pos = end;
         if buf.len() >= FLUSH {
-            emit(out, &props, &buf, ascii)?;
+            emit(out, props, &buf, ascii)?;
             buf.clear();
         }
     }
-    emit(out, &props, &buf, ascii)
+    emit(out, props, &buf, ascii)
 }
 
 /// The type of a scalar property (a list's item type).
