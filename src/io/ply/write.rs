@@ -509,6 +509,29 @@ fn write_vertices_with(
     const FLUSH: usize = 1 << 20; // bytes per buffer
     let mut buf = Vec::with_capacity(FLUSH + 1024);
     let stored = el.records.as_deref();
+    // The plain layout (then `props` is it, `float quality` and with colours `uchar red green
+    // blue`) in binary: encoded straight from the arrays, as the plain layout's own fast path.
+    let plain = matches!(&el.props[..], [x, y, z] if [&x.name, &y.name, &z.name] == ["x", "y", "z"]
+            && x.kind == y.kind && y.kind == z.kind
+            && matches!(x.kind, Kind::Scalar(Scalar::F32 | Scalar::F64)));
+    if let (false, None, true) = (ascii, stored, plain) {
+        let Kind::Scalar(coordinate) = el.props[0].kind else {
+            unreachable!("matched above")
+        };
+        for start in (0..mesh.positions.len()).step_by(1 << 15) {
+            let end = (start + (1 << 15)).min(mesh.positions.len());
+            buf.clear();
+            for i in start..end {
+                put_xyz(coordinate, mesh.positions[i], &mut buf);
+                buf.extend_from_slice(&(values.quality[i] as f32).to_le_bytes());
+                if let Some(colour) = values.colours {
+                    buf.extend_from_slice(&colour(i));
+                }
+            }
+            out.write_all(&buf)?;
+        }
+        return Ok(());
+    }
     if let Some(stride) = el.stride().filter(|_| !retyped) {
         // Fixed records: every property at the same offset in each.
         let offsets: Vec<usize> = (0..props.len())
