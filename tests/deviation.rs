@@ -212,6 +212,20 @@ fn usage_errors_of_the_field_write_nothing() {
     assert!(!obj.exists());
     let o = vcsmooth(["smooth", &s(&sphere), &s(&obj), "--tolerance", "-1"]);
     assert_eq!(o.status.code(), Some(2));
+    // The cluster engine does not measure it: refused before any work.
+    let ck = dir.path().join("ck");
+    let out = dir.path().join("out.ply");
+    let o = vcsmooth([
+        "smooth",
+        &s(&sphere),
+        &s(&out),
+        "--checkpoint",
+        &s(&ck),
+        "--tolerance",
+        "1",
+    ]);
+    fails(&o, 2, &["--tolerance", "--checkpoint"]);
+    assert!(!ck.exists() && !out.exists());
     // compare's field may not overwrite one of its inputs.
     let o = vcsmooth([
         "compare",

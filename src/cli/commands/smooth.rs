@@ -133,6 +133,9 @@ impl SmoothConfig {
             colours: a.deviation.deviation_colours,
             tolerance: a.deviation.tolerance,
         };
+        if a.cluster.checkpoint.is_some() {
+            in_one_process(&engine.deviation)?;
+        }
         engine.with_stats = a.report.is_some();
         engine.statistics = a.stats;
         Ok(SmoothConfig {
@@ -213,18 +216,7 @@ pub fn run(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) -> 
                 "runs in one process; it cannot be combined with --checkpoint or MPI ranks",
             ));
         }
-        if cfg.engine.deviation.is_on() {
-            let d = &cfg.engine.deviation;
-            let name = match (d.field, d.tolerance) {
-                (true, _) => "deviation_field",
-                (false, Some(_)) => "tolerance",
-                (false, None) => "deviation_stats",
-            };
-            return Err(flags::parameter(
-                name,
-                "runs in one process; it cannot be combined with --checkpoint or MPI ranks",
-            ));
-        }
+        in_one_process(&cfg.engine.deviation)?;
         let lead = comm.rank() == 0;
         if lead {
             progress.phase(format!(
@@ -260,6 +252,23 @@ pub fn run(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) -> 
         }
         report(cfg, &run, None, None, progress, out)
     })
+}
+
+/// The deviation field is measured by the engine of one process: a usage error with the cluster
+/// engine (`--checkpoint`, MPI ranks).
+fn in_one_process(d: &crate::engine::DeviationSettings) -> Result<()> {
+    if !d.is_on() {
+        return Ok(());
+    }
+    let name = match (d.field, d.tolerance) {
+        (true, _) => "deviation_field",
+        (false, Some(_)) => "tolerance",
+        (false, None) => "deviation_stats",
+    };
+    Err(flags::parameter(
+        name,
+        "runs in one process; it cannot be combined with --checkpoint or MPI ranks",
+    ))
 }
 
 /// The report, plot and table of a finished `smooth`.
