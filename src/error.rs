@@ -58,6 +58,11 @@ pub enum Error {
     /// wrote anything.
     #[error("interrupted")]
     Interrupted,
+    /// Not a failure: work that was all done and written, whose vertices lie beyond the tolerance
+    /// it was asked to check (`what` says how many and the largest). The command line exits with
+    /// its own code for it.
+    #[error("{what}")]
+    Tolerance { what: String },
     /// A command line that asks for something impossible, in words the command line chose (its
     /// flags and arguments). Raised only by [`crate::cli`].
     #[error("{what}")]

@@ -13,6 +13,7 @@ mod cli;
 mod cluster;
 mod controls;
 mod denoise;
+mod deviation;
 mod engine;
 mod fidelity;
 mod golden;

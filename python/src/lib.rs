@@ -188,6 +188,12 @@ fn smooth_report<'py>(
 ///   non-zero values pin), instead of ``pinned``.
 /// - ``memory_budget``: bytes, or a size such as ``"2G"`` (default: 3/4 of available memory).
 /// - ``scratch``: a directory for scratch files (default: the output's directory).
+/// - ``deviation_field`` (False): write each vertex's deviation from the input (along its
+///   normal) into a PLY ``output`` as the vertex property ``quality``; ``deviation_colours``
+///   (False) also as ``red green blue``. ``deviation_stats`` (False; implied by the others and by
+///   ``tolerance``): the report's ``deviation`` (RMS, mean, percentiles, histogram).
+/// - ``tolerance`` (None): the report's ``deviation["tolerance"]`` says how many vertices moved
+///   farther (``beyond``) and whether none did (``within``); nothing is raised.
 /// - ``report``: a path to write the report to as JSON, as ``--report`` does.
 /// - ``progress`` (False): print one line per iteration on ``sys.stderr``.
 ///

@@ -66,6 +66,10 @@ const KWARGS: &[Kwarg] = &[
     Kwarg { name: "stats", scope: Smoothing, set: |v, s| { s.engine.statistics = stats(v)?; Ok(()) } },
     Kwarg { name: "memory_budget", scope: File, set: |v, s| { s.engine.memory_budget = memory_budget(v)?; Ok(()) } },
     Kwarg { name: "scratch", scope: File, set: |v, s| { s.engine.scratch = v.extract()?; Ok(()) } },
+    Kwarg { name: "deviation_field", scope: File, set: |v, s| { s.engine.deviation.field = v.extract()?; Ok(()) } },
+    Kwarg { name: "deviation_colours", scope: File, set: |v, s| { s.engine.deviation.colours = v.extract()?; Ok(()) } },
+    Kwarg { name: "deviation_stats", scope: File, set: |v, s| { s.engine.deviation.stats = v.extract()?; Ok(()) } },
+    Kwarg { name: "tolerance", scope: File, set: |v, s| { s.engine.deviation.tolerance = v.extract()?; Ok(()) } },
     Kwarg { name: "report", scope: File, set: |v, s| { s.report = v.extract()?; Ok(()) } },
     Kwarg { name: "progress", scope: File, set: |v, s| { s.progress = v.extract()?; Ok(()) } },
 ];

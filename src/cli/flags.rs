@@ -42,6 +42,9 @@ pub(super) const FLAGS: &[(&str, &str)] = &[
     ("plot", "--plot"),
     ("stats", "--stats"),
     ("methods", "--methods"),
+    ("deviation_field", "--deviation-field"),
+    ("deviation_stats", "--deviation-stats"),
+    ("tolerance", "--tolerance"),
     // Benchmark (`BenchSettings`).
     ("sizes", "--sizes"),
     ("repeats", "--repeats"),

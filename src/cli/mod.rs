@@ -16,7 +16,9 @@
 //! use no command file; this file only parses, dispatches and prints errors.
 //!
 //! [`main_with`] ties them together for the binary and returns the exit code: 0 on success, 2 for
-//! usage errors (clap's, and options that resolve to nothing valid), 1 for failures at run time.
+//! usage errors (clap's, and options that resolve to nothing valid), 1 for failures at run time,
+//! 3 ([`shared::EXIT_TOLERANCE`]) for a run that wrote everything but found vertices beyond its
+//! `--tolerance` (one line `vcsmooth: tolerance: …` on stderr).
 //! Every failure is one line on stderr, `vcsmooth: error: <file>: <problem>`; no output file, report
 //! or plot is written by a run that fails before it would write them.
 
@@ -61,7 +63,7 @@ pub enum Command {
     Smooth(smooth::SmoothArgs),
     /// Print vertices, faces, edges, boundary, components, volume, area, bounding box of a mesh.
     Info(info::InfoArgs),
-    /// Compare two meshes with the same connectivity (distances, normals, volume and area ratios).
+    /// Compare two meshes with the same connectivity (distances, normals, volume and area ratios), or any two with --surface; the deviation field and a tolerance on request.
     Compare(compare::CompareArgs),
     /// Write a closed test mesh (icosphere or torus), optionally with Gaussian noise along normals.
     Generate(generate::GenerateArgs),
@@ -162,6 +164,14 @@ where
     match run(&config) {
         Ok(()) => ExitCode::SUCCESS,
         Err(Error::Reported { .. }) => ExitCode::from(EXIT_FAILURE),
+        Err(Error::Tolerance { what }) => {
+            let _ = writeln!(
+                std::io::stderr(),
+                "vcsmooth: tolerance: {}",
+                one_line(&what)
+            );
+            ExitCode::from(shared::EXIT_TOLERANCE)
+        }
         Err(e) => {
             print_error(&flags::message(&e));
             ExitCode::from(EXIT_FAILURE)

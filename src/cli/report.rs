@@ -6,6 +6,7 @@ use std::io::Write;
 use super::output::stdout_error;
 use crate::engine::Report;
 use crate::error::Result;
+use crate::metrics::DeviationStats;
 use crate::smooth::Options;
 
 /// What the tables print for a quantity that is not defined (a ratio whose denominator is 0, a
@@ -89,6 +90,57 @@ pub fn print_rows(out: &mut dyn Write, rows: &[(&str, String)]) -> Result<()> {
     let mut text = String::new();
     for (k, v) in rows {
         text += &format!("{k:<width$}  {v}\n");
+    }
+    out.write_all(text.as_bytes()).map_err(stdout_error)
+}
+
+/// Print the statistics of a deviation field: a line of the deviation, one of the distance and
+/// its percentiles, the histogram as bars, and the tolerance's verdict.
+pub fn print_deviation(out: &mut dyn Write, d: &DeviationStats) -> Result<()> {
+    let along = match d.measure {
+        "surface" => "signed distance to B's surface, along A's normals",
+        _ => "displacement along the input's vertex normals",
+    };
+    let g = |x: f64| format!("{x:.4e}");
+    let mut text = format!(
+        "deviation ({along}) over {} vertices: rms {}, mean {}, min {}, max {}\n",
+        d.vertices,
+        g(d.rms),
+        g(d.mean),
+        g(d.min),
+        g(d.max)
+    );
+    let percentiles: Vec<String> = d
+        .percentiles
+        .iter()
+        .map(|p| format!("{}% {}", p.percent, g(p.distance)))
+        .collect();
+    text += &format!(
+        "distance: rms {}, mean {}, max {} (vertex {}); percentiles {}\n",
+        g(d.distance_rms),
+        g(d.distance_mean),
+        g(d.distance_max),
+        d.distance_max_vertex,
+        percentiles.join(", ")
+    );
+    let h = &d.histogram;
+    let most = h.counts.iter().copied().max().unwrap_or(0).max(1);
+    for (k, &c) in h.counts.iter().enumerate() {
+        let bar = "#".repeat(((c as f64 / most as f64) * 40.0).ceil() as usize);
+        let (lo, hi) = (g(h.edge(k)), g(h.edge(k + 1)));
+        text += &format!("  {lo:>12} .. {hi:<12} {c:>10} {bar}\n");
+    }
+    if let Some(t) = &d.tolerance {
+        text += &match t.within {
+            true => format!("tolerance {}: every vertex within\n", t.limit),
+            false => format!(
+                "tolerance {}: {} vertices beyond (largest {}, vertex {})\n",
+                t.limit,
+                t.beyond,
+                g(d.distance_max),
+                d.distance_max_vertex
+            ),
+        };
     }
     out.write_all(text.as_bytes()).map_err(stdout_error)
 }

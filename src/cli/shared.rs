@@ -228,7 +228,48 @@ impl EngineArgs {
             with_stats: false,
             statistics: crate::engine::Statistics::Every,
             pins: crate::engine::Pins::None,
+            deviation: Default::default(),
         })
+    }
+}
+
+/// The deviation field's colours and the tolerance (`smooth`, `compare`; each has its own
+/// `--deviation-field`).
+#[derive(Debug, Clone, ClapArgs)]
+pub struct DeviationArgs {
+    /// Print the deviation's statistics (RMS, mean and extremes of the deviation; RMS, mean, largest and percentiles 50/90/99/99.9 of the distance; a histogram), also in the JSON; implied by --deviation-field and --tolerance [default: off].
+    #[arg(long)]
+    pub deviation_stats: bool,
+    /// With --deviation-field, also the deviation's colour map as the PLY vertex properties 'red green blue': blue inward, white unmoved, red outward, saturated at --tolerance (or at the largest deviation) [default: off].
+    #[arg(long, requires = "deviation_field")]
+    pub deviation_colours: bool,
+    /// Tolerance in model units (> 0): when any vertex lies farther than D (from its input position; compare: from its vertex in A, or from B's surface), say how many and the largest, and exit with code 3; every file is still written [default: none].
+    #[arg(long, value_name = "D", value_parser = length, allow_hyphen_values = true)]
+    pub tolerance: Option<f64>,
+}
+
+/// Exit code of a run that did all it was asked but found vertices beyond `--tolerance`.
+pub const EXIT_TOLERANCE: u8 = 3;
+
+/// The tolerance's verdict of `stats` as an error for the exit code ([`Error::Tolerance`]), or
+/// `Ok` when within it (or without a tolerance).
+pub fn tolerance_verdict(
+    what: &std::path::Path,
+    stats: &crate::metrics::DeviationStats,
+) -> Result<()> {
+    match &stats.tolerance {
+        Some(t) if !t.within => Err(Error::Tolerance {
+            what: format!(
+                "{}: {} of {} vertices lie beyond the tolerance {} (largest {}, vertex {})",
+                what.display(),
+                t.beyond,
+                stats.vertices,
+                t.limit,
+                crate::cli::report::num(stats.distance_max),
+                stats.distance_max_vertex
+            ),
+        }),
+        _ => Ok(()),
     }
 }
 

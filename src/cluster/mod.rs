@@ -223,6 +223,7 @@ pub fn run_file(
             peak_anon_max: maxima[4] as u64,
             smoothing_peak_anon_max: maxima[5] as u64,
         }),
+        deviation: None,
     };
     // Every rank unmaps the plan before rank 0 removes it (on NFS a file still mapped somewhere
     // is kept as a hidden `.nfs*` file, and its directory cannot go).
@@ -340,7 +341,16 @@ fn write_output(
     let measure = engine
         .with_stats
         .then_some(|| output_stats(plan, &storage, output, &mesh, &last));
-    run::write_measured(&start.pool, output, &mesh, bytes_read, t, observer, measure)
+    run::write_measured(
+        &start.pool,
+        output,
+        &mesh,
+        None,
+        bytes_read,
+        t,
+        observer,
+        measure,
+    )
 }
 
 /// The statistics of the output as stored, as a single-process run gives them

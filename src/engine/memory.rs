@@ -30,6 +30,10 @@ pub const DEVIATION_BYTES_PER_TRIANGLE: u64 = 12;
 /// vertex beside the working positions (unit normals, their offsets, a noise field and its second
 /// buffer: 48 B per vertex at about half a vertex per triangle), in the plan's storage.
 pub const AUTO_BYTES_PER_TRIANGLE: u64 = 24;
+/// A file run that measures the deviation field ([`crate::engine::DeviationSettings`]) keeps the
+/// input's f64 positions through the run in core (the field then adds two f64 per vertex at the
+/// write, beside what the plan gave back).
+pub const FIELD_BYTES_PER_TRIANGLE: u64 = 12;
 /// An in-memory [`Mesh`](crate::Mesh) itself: f64 positions (about half a vertex per triangle)
 /// and u32 triangles.
 pub const MESH_BYTES_PER_TRIANGLE: u64 = 24;
@@ -115,6 +119,16 @@ pub fn in_core_bytes_of_file_with(size: u64, opts: &crate::Options) -> u64 {
 pub fn face_field_bytes(method: crate::Method) -> u64 {
     let needs = method.unit().needs();
     (needs.face_vectors * 24 + needs.face_scalars * 8) as u64
+}
+
+/// [`in_core_bytes_of_file_with`], and [`FIELD_BYTES_PER_TRIANGLE`] more when the run measures
+/// the deviation field (`field`).
+pub fn in_core_bytes_of_run(size: u64, opts: &crate::Options, field: bool) -> u64 {
+    let extra = match field {
+        true => size.saturating_mul(FIELD_BYTES_PER_TRIANGLE) / FILE_BYTES_PER_TRIANGLE,
+        false => 0,
+    };
+    in_core_bytes_of_file_with(size, opts).saturating_add(extra)
 }
 
 /// Memory a job needs to smooth a file of `size` bytes in core with `opts`, the process included.

@@ -2,6 +2,8 @@
 //!
 //! - [`plan`]: a [`Plan`] orders the mesh (Morton curve), builds its [`Topology`](crate::Topology), cuts it into
 //!   patches and colours them; built once, smoothed any number of times.
+//! - [`deviation`]: the deviation field of a run's output against its input (or of two meshes)
+//!   and its statistics.
 //! - [`auto`]: the automatic stop (`Options::auto_stop`): when the noise is gone.
 //! - [`iterate`]: the one iteration loop: Jacobi rounds for `laplacian` and `taubin`, colour by
 //!   colour Gauss–Seidel sweeps for the stencil methods, statistics when asked. The cluster
@@ -15,6 +17,7 @@
 //! - [`memory`]: the memory budget, the memory model (bytes per triangle) and peak sampling.
 
 pub mod auto;
+pub mod deviation;
 pub mod iterate;
 pub mod memory;
 pub mod observer;
@@ -27,6 +30,7 @@ pub mod share;
 use glam::DVec3;
 
 pub use auto::{AutoStopStats, StopReason};
+pub use deviation::DeviationSettings;
 pub use iterate::Reference;
 pub use observer::{IterationRecord, Meter, Observer, Phase, Quiet, Statistics, Unit};
 pub use pins::{PinSet, Pins};

@@ -180,8 +180,28 @@ pub fn median(values: &[f64]) -> f64 {
 pub fn median_over(
     values: &[f64],
     pool: Option<&rayon::ThreadPool>,
-    mut total: impl FnMut(Vec<u64>) -> Vec<u64>,
+    total: impl FnMut(Vec<u64>) -> Vec<u64>,
 ) -> f64 {
+    ranked_over(values, pool, total, |count| vec![count / 2])
+        .first()
+        .copied()
+        .unwrap_or(0.0)
+}
+
+/// The values of the ranks `ranks(count)` (0-based, ascending order, each below `count`) among
+/// the values that are not NaN, `count` of them; none when there are none. Counted as
+/// [`median`] counts, every rank in the same eight passes.
+pub fn ranked(values: &[f64], ranks: impl Fn(u64) -> Vec<u64>) -> Vec<f64> {
+    ranked_over(values, None, |counts| counts, ranks)
+}
+
+/// [`ranked`] over processes and on a pool, as [`median_over`].
+pub fn ranked_over(
+    values: &[f64],
+    pool: Option<&rayon::ThreadPool>,
+    mut total: impl FnMut(Vec<u64>) -> Vec<u64>,
+    ranks: impl Fn(u64) -> Vec<u64>,
+) -> Vec<f64> {
     let on = |f: &(dyn Fn() -> Vec<u64> + Sync)| match pool {
         Some(p) => p.install(f),
         None => f(),
@@ -201,26 +221,31 @@ pub fn median_over(
     });
     let count = total(local)[0];
     if count == 0 {
-        return 0.0;
+        return Vec::new();
     }
-    let mut rank = count / 2;
-    let mut prefix = 0u64;
+    let mut rank = ranks(count);
+    let mut prefix = vec![0u64; rank.len()];
     for shift in (0..64).step_by(8).rev() {
-        // The keys that agree with `prefix` above bit `shift + 8`, counted by their byte at `shift`.
+        // The keys that agree with a prefix above bit `shift + 8`, counted by their byte at
+        // `shift`: 256 bins per rank.
         let high = |k: u64| k.checked_shr(shift + 8).unwrap_or(0);
+        let highs: Vec<u64> = prefix.iter().map(|&p| high(p)).collect();
         let bins = on(&|| {
             map_fold(
                 values,
                 |_, c| {
-                    let mut bins = vec![0u64; 256];
+                    let mut bins = vec![0u64; 256 * highs.len()];
                     for k in c.iter().filter(|x| !x.is_nan()).map(|&x| key(x)) {
-                        if high(k) == high(prefix) {
-                            bins[((k >> shift) & 0xff) as usize] += 1;
+                        let (h, byte) = (high(k), ((k >> shift) & 0xff) as usize);
+                        for (r, &want) in highs.iter().enumerate() {
+                            if h == want {
+                                bins[256 * r + byte] += 1;
+                            }
                         }
                     }
                     bins
                 },
-                vec![0u64; 256],
+                vec![0u64; 256 * highs.len()],
                 |mut a, b| {
                     a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
                     a
@@ -228,19 +253,23 @@ pub fn median_over(
             )
         });
         let bins = total(bins);
-        let mut byte = 0;
-        while rank >= bins[byte] {
-            rank -= bins[byte];
-            byte += 1;
+        for (r, (rank, prefix)) in rank.iter_mut().zip(&mut prefix).enumerate() {
+            let bins = &bins[256 * r..256 * (r + 1)];
+            let mut byte = 0;
+            while *rank >= bins[byte] {
+                *rank -= bins[byte];
+                byte += 1;
+            }
+            *prefix |= (byte as u64) << shift;
         }
-        prefix |= (byte as u64) << shift;
     }
-    let bits = if prefix >> 63 == 1 {
-        prefix & !(1 << 63)
-    } else {
-        !prefix
-    };
-    f64::from_bits(bits)
+    prefix
+        .into_iter()
+        .map(|p| {
+            let bits = if p >> 63 == 1 { p & !(1 << 63) } else { !p };
+            f64::from_bits(bits)
+        })
+        .collect()
 }
 
 /// Fractional bits of [`Fixed`].

@@ -5,6 +5,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use super::auto::AutoStopStats;
+use super::deviation::{self, DeviationSettings};
 use super::memory::{self, Budget, BudgetSource, PeakSampler};
 use super::observer::{
     IterationMeter, IterationRecord, Meter, Observer, Phase, Statistics, metered,
@@ -15,13 +16,13 @@ use super::reduce;
 use crate::error::{Error, Result};
 use crate::io;
 use crate::mesh::{Buf, Mesh, Storage};
-use crate::metrics::MeshInfo;
+use crate::metrics::{DeviationStats, MeshInfo};
 use crate::smooth::Options;
 
 /// How the engine runs: threads, patches, memory, statistics, pins. Only `patch_size` and `pins`
 /// are part of the result's definition: outputs are identical for any thread count and memory
 /// budget for the same patch size and pins.
-#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct EngineSettings {
     /// Worker threads; `None`: all cores.
     pub threads: Option<usize>,
@@ -41,6 +42,11 @@ pub struct EngineSettings {
     pub statistics: Statistics,
     /// Vertices that never move, in the input's order (see [`Pins`]). Default: none.
     pub pins: Pins,
+    /// The deviation field of a file run: measured, written into the output, checked against a
+    /// tolerance (see [`DeviationSettings`]). Default: none. It adds to the output's vertices and
+    /// changes nothing else of it. Absent from JSON when off.
+    #[serde(skip_serializing_if = "DeviationSettings::is_off")]
+    pub deviation: DeviationSettings,
 }
 
 impl Default for EngineSettings {
@@ -53,6 +59,7 @@ impl Default for EngineSettings {
             with_stats: false,
             statistics: Statistics::Every,
             pins: Pins::None,
+            deviation: DeviationSettings::default(),
         }
     }
 }
@@ -98,6 +105,10 @@ pub struct Report {
     /// Ranks, halo traffic and checkpoints of a cluster run ([`crate::cluster`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub cluster: Option<ClusterStats>,
+    /// The deviation of the output as stored from the input, when the settings ask for it
+    /// ([`EngineSettings::deviation`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub deviation: Option<DeviationStats>,
 }
 
 /// What a run of the cluster engine ([`crate::cluster`]) adds to its [`Report`].
@@ -151,6 +162,11 @@ pub struct PhaseTimings {
     pub smoothing: f64,
     pub write: f64,
     pub metrics: f64,
+    /// The deviation field and its statistics (in the write phase, before the write).
+    pub deviation: f64,
+    /// The input's SHA-256 for a report's record (taken by the command line before the run, not
+    /// in `total`).
+    pub hash: f64,
     pub total: f64,
 }
 
@@ -208,15 +224,21 @@ pub(crate) fn run_file_with(
         bytes_read,
     } = prepare(input, output, opts, engine, &start, &mut t, observer)?;
 
-    let mut smoothed = start.pool.install(|| -> Result<_> {
+    let smoothed = start.pool.install(|| -> Result<_> {
         // The plan holds its own (reordered) copy: the input-order positions are not needed until
         // the write, so their memory is given back while smoothing (the peak of an in-core run).
         // Out of core (the triangles in a scratch file) the input's triangles go too, and the
         // file, held open, is read again for the write: 12 B per triangle less scratch at the
         // run's peak, for one more read of the input.
         let (n, n_triangles) = (mesh.positions.len(), mesh.triangles.len());
-        mesh.positions = Buf::default();
         let again = kept.filter(|_| mesh.triangles.is_mapped());
+        // The deviation field needs the input positions at the write: kept in core, read again
+        // out of core.
+        let mut input_positions = match engine.deviation.is_on() && again.is_none() {
+            true => std::mem::take(&mut mesh.positions),
+            false => Buf::default(),
+        };
+        mesh.positions = Buf::default();
         if again.is_some() {
             mesh.triangles = Buf::default();
         }
@@ -244,8 +266,14 @@ pub(crate) fn run_file_with(
                     ));
                 }
                 mesh.triangles = read.triangles;
-                // Every entry is overwritten below.
-                read.positions
+                match engine.deviation.is_on() {
+                    true => {
+                        input_positions = read.positions;
+                        storage.zeroed(n)?
+                    }
+                    // Every entry is overwritten below.
+                    false => read.positions,
+                }
             }
             None => storage.zeroed(n)?,
         };
@@ -253,8 +281,49 @@ pub(crate) fn run_file_with(
             plan.positions_in_input_order_metered(&mut positions, m);
             Ok(positions)
         })?;
-        Ok(smoothed)
+        Ok((smoothed, input_positions))
     })?;
+
+    let (mut smoothed, input_positions) = smoothed;
+    let field = match engine.deviation.is_on() {
+        true => {
+            let clock = Instant::now();
+            let stored = io::Stored::of(output, &mesh);
+            let made = start.pool.install(|| -> Result<_> {
+                let field = deviation::field(
+                    &storage,
+                    &input_positions,
+                    &mesh.positions,
+                    &mesh.triangles,
+                    stored.as_ref(),
+                )?;
+                let stats = deviation::statistics(&field, engine.deviation.tolerance);
+                Ok((field, stats))
+            })?;
+            t.deviation = clock.elapsed().as_secs_f64();
+            Some(made)
+        }
+        false => None,
+    };
+    drop(input_positions);
+    smoothed.deviation = field.as_ref().map(|(_, stats)| stats.clone());
+    let scale = field
+        .as_ref()
+        .map_or(0.0, |(_, stats)| engine.deviation.colour_scale(stats));
+    let colour = |i: usize| {
+        let signed = field.as_ref().map_or(0.0, |(f, _)| f.signed[i]);
+        crate::metrics::deviation::colour(signed, scale)
+    };
+    let values = field
+        .as_ref()
+        .filter(|_| engine.deviation.field)
+        .map(|(f, _)| io::VertexValues {
+            quality: &f.signed,
+            colours: match engine.deviation.colours {
+                true => Some(&colour as &(dyn Fn(usize) -> [u8; 3] + Sync)),
+                false => None,
+            },
+        });
 
     // The plan is kept past the write only to measure the output as written.
     let measure = engine
@@ -264,6 +333,7 @@ pub(crate) fn run_file_with(
         &start.pool,
         output,
         &mesh,
+        values.as_ref(),
         bytes_read,
         &mut t,
         observer,
@@ -301,6 +371,7 @@ pub(crate) struct Start {
 impl Start {
     pub(crate) fn new(opts: &Options, engine: &EngineSettings) -> Result<Start> {
         opts.check()?;
+        engine.deviation.check()?;
         let clock = Instant::now();
         let sampler = PeakSampler::start(std::time::Duration::from_millis(20));
         let budget = engine.budget_and_source()?;
@@ -385,10 +456,12 @@ pub(crate) fn prepare(
 /// `observer` against the size it should have; `measure`, if given, measures the output beside
 /// the (sequential) write, inside its phase. Seconds go into `t`; returns what `measure` gave
 /// (`None` without it).
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn write_measured(
     pool: &rayon::ThreadPool,
     output: &Path,
     mesh: &Mesh,
+    values: Option<&io::VertexValues>,
     input_bytes: u64,
     t: &mut PhaseTimings,
     observer: &mut dyn Observer,
@@ -400,7 +473,11 @@ pub(crate) fn write_measured(
         rayon::join(
             || {
                 let clock = Instant::now();
-                io::write_mesh_metered(output, mesh, &meter).map(|()| clock.elapsed().as_secs_f64())
+                match values {
+                    Some(v) => io::write_mesh_with(output, mesh, v, &meter),
+                    None => io::write_mesh_metered(output, mesh, &meter),
+                }
+                .map(|()| clock.elapsed().as_secs_f64())
             },
             || {
                 let clock = Instant::now();
@@ -527,6 +604,7 @@ struct Smoothed {
     input_stats: Option<MeshInfo>,
     output_stats: Option<MeshInfo>,
     plan: PlanStats,
+    deviation: Option<DeviationStats>,
 }
 
 /// The phases both runs share, on the current pool: the input's statistics (when asked) and
@@ -576,6 +654,7 @@ fn smooth_planned(
         input_stats,
         output_stats: None,
         plan: plan.stats(opts.method.unit().schedule(opts).footprint()),
+        deviation: None,
     })
 }
 
@@ -603,6 +682,7 @@ impl Smoothed {
             memory,
             timings,
             cluster: None,
+            deviation: self.deviation,
         }
     }
 }
@@ -625,7 +705,8 @@ fn expected_output_bytes(input_bytes: u64, output: &Path, mesh: &Mesh) -> u64 {
 }
 
 /// Heap or scratch, decided before reading from the file size by the memory model
-/// ([`memory::in_core_bytes_of_file_with`], which counts what `opts` keep beside the positions).
+/// ([`memory::in_core_bytes_of_run`], which counts what `opts` and the deviation field keep
+/// beside the positions).
 pub(crate) fn storage_for(
     input: &Path,
     output: &Path,
@@ -636,7 +717,7 @@ pub(crate) fn storage_for(
     let size = std::fs::metadata(input)
         .map_err(|e| Error::io(input, e))?
         .len();
-    if memory::in_core_bytes_of_file_with(size, opts) <= budget {
+    if memory::in_core_bytes_of_run(size, opts, engine.deviation.is_on()) <= budget {
         return Ok(Storage::heap().with_budget(budget));
     }
     let dir = match &engine.scratch {

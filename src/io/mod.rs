@@ -99,6 +99,7 @@
 
 mod atomic;
 mod detect;
+mod digest;
 mod gltf;
 mod obj;
 mod off;
@@ -107,6 +108,7 @@ mod stl;
 mod stream;
 
 pub(crate) use atomic::{Destination, destination, write_atomically};
+pub use digest::{Sha256, sha256_file};
 pub(crate) use gltf::{buffer_name_of, referenced_files};
 
 use std::fmt;
@@ -266,11 +268,46 @@ pub fn write_mesh(path: &Path, mesh: &Mesh) -> Result<()> {
     write_mesh_metered(path, mesh, &Meter::default())
 }
 
-/// [`write_mesh`], counting the bytes written into `meter` once per MiB (glTF: when it is
-/// done). The caller's total is an estimate (a text file's size is known once written): it is
-/// set to the bytes written when the write succeeds. The same file.
-pub fn write_mesh_metered(path: &Path, mesh: &Mesh, meter: &Meter) -> Result<()> {
-    write_mesh_counted(path, mesh, meter)?;
+/// Values added to every vertex of a written mesh (a deviation field): PLY only, as the vertex
+/// properties `float quality` and, with colours, `uchar red green blue`, after the vertex's own
+/// properties; a property of those names that the mesh's PLY layout already has keeps its place
+/// and takes the new values (an integer `quality` becomes `float`). Everything else is written as
+/// without them.
+#[derive(Clone, Copy)]
+pub struct VertexValues<'a> {
+    /// One value per vertex.
+    pub quality: &'a [f64],
+    /// The colour of vertex `i`.
+    pub colours: Option<&'a (dyn Fn(usize) -> [u8; 3] + Sync)>,
+}
+
+/// Whether an output at `path` can carry [`VertexValues`]: `Err` saying why not.
+pub fn check_vertex_values(path: &Path) -> std::result::Result<(), String> {
+    match Format::from_extension(path) {
+        Some(Format::Ply) => Ok(()),
+        _ => {
+            Err("per-vertex values (quality and colours) are written into PLY outputs only".into())
+        }
+    }
+}
+
+/// [`write_mesh_metered`] with `values` in the vertices (see [`VertexValues`]).
+pub fn write_mesh_with(
+    path: &Path,
+    mesh: &Mesh,
+    values: &VertexValues,
+    meter: &Meter,
+) -> Result<()> {
+    check_vertex_values(path)
+        .map_err(|what| Error::invalid(path, format!("cannot write: {what}")))?;
+    if values.quality.len() != mesh.positions.len() {
+        return Err(Error::topology(format!(
+            "{} vertex values for {} vertices",
+            values.quality.len(),
+            mesh.positions.len()
+        )));
+    }
+    write_mesh_counted(path, mesh, Some(values), meter)?;
     match meter.done() {
         0 => meter.complete(),
         written => meter.set_total(written),
@@ -278,7 +315,24 @@ pub fn write_mesh_metered(path: &Path, mesh: &Mesh, meter: &Meter) -> Result<()>
     Ok(())
 }
 
-fn write_mesh_counted(path: &Path, mesh: &Mesh, meter: &Meter) -> Result<()> {
+/// [`write_mesh`], counting the bytes written into `meter` once per MiB (glTF: when it is
+/// done). The caller's total is an estimate (a text file's size is known once written): it is
+/// set to the bytes written when the write succeeds. The same file.
+pub fn write_mesh_metered(path: &Path, mesh: &Mesh, meter: &Meter) -> Result<()> {
+    write_mesh_counted(path, mesh, None, meter)?;
+    match meter.done() {
+        0 => meter.complete(),
+        written => meter.set_total(written),
+    }
+    Ok(())
+}
+
+fn write_mesh_counted(
+    path: &Path,
+    mesh: &Mesh,
+    values: Option<&VertexValues>,
+    meter: &Meter,
+) -> Result<()> {
     let format = Format::from_extension(path).ok_or_else(|| {
         Error::invalid(
             path,
@@ -310,14 +364,20 @@ fn write_mesh_counted(path: &Path, mesh: &Mesh, meter: &Meter) -> Result<()> {
         return gltf::write(path, mesh);
     }
     atomic::write_atomically(path, |out| {
-        write_as(format, &mut Counted::new(out, meter), mesh)
+        write_as(format, &mut Counted::new(out, meter), mesh, values)
     })
 }
 
-/// `mesh` into `out` as `format` says (not glTF, which writes its own files).
-fn write_as(format: Format, out: &mut impl Write, mesh: &Mesh) -> std::io::Result<()> {
+/// `mesh` into `out` as `format` says (not glTF, which writes its own files), with `values` (PLY
+/// only, checked before).
+fn write_as(
+    format: Format,
+    out: &mut impl Write,
+    mesh: &Mesh,
+    values: Option<&VertexValues>,
+) -> std::io::Result<()> {
     match format {
-        Format::Ply => ply::write(out, mesh),
+        Format::Ply => ply::write(out, mesh, values),
         Format::Obj => obj::write(out, mesh),
         Format::Off => off::write(out, mesh),
         Format::Stl => stl::write(out, mesh),
@@ -1031,22 +1091,13 @@ pub(crate) fn fits_single(mesh: &Mesh) -> std::result::Result<(), String> {
     }
 }
 
-/// Area-weighted vertex normals, normalised; `0` where the faces around a vertex have no area.
+/// Area-weighted vertex normals, normalised; `0` where the faces around a vertex have no area
+/// (the one definition, [`crate::metrics::deviation::vertex_normals`]).
 pub(crate) fn vertex_normals(
     positions: &[glam::DVec3],
     triangles: &[[u32; 3]],
 ) -> Vec<glam::DVec3> {
-    let mut normals = vec![glam::DVec3::ZERO; positions.len()];
-    for t in triangles {
-        let [a, b, c] = t.map(|v| positions[v as usize]);
-        // |(b − a) × (c − a)| is twice the triangle's area: the sum is area-weighted.
-        let n = (b - a).cross(c - a);
-        for &v in t {
-            normals[v as usize] += n;
-        }
-    }
-    normals.iter_mut().for_each(|n| *n = n.normalize_or_zero());
-    normals
+    crate::metrics::deviation::vertex_normals(positions, triangles)
 }
 
 #[cfg(test)]

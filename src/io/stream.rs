@@ -86,7 +86,7 @@ pub fn write_ply_streamed_in(
 
     let mut refused = None;
     let written = atomic::write_atomically(path, |out| {
-        ply::write_header(out, &layout, |_, el| el.count)?;
+        ply::write_header(out, &layout, |_, el| el.count, None)?;
         let mut stream = PlyStream {
             out,
             records,

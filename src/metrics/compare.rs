@@ -41,6 +41,13 @@ pub struct Comparison {
 ///
 /// The error is [`Error::Topology`] naming the first difference (the caller adds the file names).
 pub fn compare(a: &Mesh, b: &Mesh) -> Result<Comparison> {
+    same_connectivity(a, b)?;
+    compare_same(a, b)
+}
+
+/// Whether `b` has `a`'s vertex count and triangles, their indices in range: `Ok`, or
+/// [`Error::Topology`] naming the first difference (the caller adds the file names).
+pub fn same_connectivity(a: &Mesh, b: &Mesh) -> Result<()> {
     let (na, nb) = (a.positions.len(), b.positions.len());
     if na != nb {
         return Err(Error::topology(format!(
@@ -66,7 +73,13 @@ pub fn compare(a: &Mesh, b: &Mesh) -> Result<Comparison> {
             "triangle {k} indexes a vertex out of range (0..{na})"
         )));
     }
+    Ok(())
+}
 
+/// [`compare`] of meshes that [`same_connectivity`] accepted.
+fn compare_same(a: &Mesh, b: &Mesh) -> Result<Comparison> {
+    let na = a.positions.len();
+    let ta = &a.triangles;
     let (mut sum_sq, mut max) = (0.0f64, 0.0f64);
     for (p, q) in a.positions.iter().zip(&b.positions) {
         let d = p.distance(*q);
@@ -117,6 +130,38 @@ pub fn compare(a: &Mesh, b: &Mesh) -> Result<Comparison> {
         area_a: area_a + 0.0,
         area_b: area_b + 0.0,
     })
+}
+
+/// [`compare`] of meshes that need not share vertices, given the distances of `a`'s vertices to
+/// `b`'s surface (their RMS and largest, from [`super::deviation`]): the distances are those, the
+/// volumes and areas each mesh's own (both volumes about `a`'s centroid), the normal angle
+/// undefined (`None`: no faces correspond).
+pub fn compare_surfaces(a: &Mesh, b: &Mesh, rms: f64, max: f64) -> Comparison {
+    let (lo, hi) = bounding_box(&a.positions);
+    let diagonal = (hi - lo).length();
+    let origin = super::centroid(&a.positions);
+    let (volume_a, volume_b) = (
+        super::volume_about(&a.positions, &a.triangles, origin),
+        super::volume_about(&b.positions, &b.triangles, origin),
+    );
+    let (area_a, area_b) = (
+        super::area(&a.positions, &a.triangles),
+        super::area(&b.positions, &b.triangles),
+    );
+    Comparison {
+        rms_distance: rms + 0.0,
+        max_distance: max + 0.0,
+        rms_relative: ratio(rms, diagonal),
+        max_relative: ratio(max, diagonal),
+        mean_normal_angle_deg: None,
+        volume_ratio: ratio(volume_b, volume_a),
+        area_ratio: ratio(area_b, area_a),
+        bbox_diagonal: diagonal,
+        volume_a: volume_a + 0.0,
+        volume_b: volume_b + 0.0,
+        area_a: area_a + 0.0,
+        area_b: area_b + 0.0,
+    }
 }
 
 /// `num / den` when it is a finite number (`None` for a zero denominator), never −0.

@@ -1,4 +1,6 @@
-//! Measurements of a mesh: volume, area and the per-run statistics that reports and tests use.
+//! Measurements of a mesh: volume, area and the per-run statistics that reports and tests use;
+//! how far one mesh deviates from another ([`deviation`], with [`surface`] for meshes that do
+//! not share vertices).
 //!
 //! Orientation convention: outward-facing triangles (counter-clockwise seen from outside) give a
 //! positive volume; an inward-oriented closed mesh has a negative one.
@@ -99,8 +101,11 @@ pub fn position_sum(pos: &[DVec3]) -> DVec3 {
 }
 
 mod compare;
+pub mod deviation;
 mod info;
-pub use compare::{Comparison, compare};
+pub mod surface;
+pub use compare::{Comparison, compare, compare_surfaces, same_connectivity};
+pub use deviation::{DeviationStats, deviation};
 pub use info::{
     EdgeSums, Geometry, MeshInfo, connectivity, edge_sums, extent, extent_union, geometry, info,
     info_of, mean_edge_length, roughness,

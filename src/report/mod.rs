@@ -36,6 +36,10 @@ pub struct FileStats {
     /// `ply`, `obj`, `off`, `stl`; absent when unknown.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub format: Option<String>,
+    /// The SHA-256 of the file's bytes (64 hexadecimal digits), when it was taken: a run's input,
+    /// read before the run.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sha256: Option<String>,
     pub stats: MeshInfo,
 }
 
@@ -44,7 +48,31 @@ impl FileStats {
         FileStats {
             path: path.display().to_string(),
             format: format.map(format_name),
+            sha256: None,
             stats: undefined_as_nan(&stats),
+        }
+    }
+}
+
+/// The machine a run ran on, as far as its result could depend on it (it does not: the output is
+/// the same on any machine; recorded to read the timings).
+#[derive(Debug, Clone, Serialize)]
+pub struct Machine {
+    /// Cores the process may use (its CPU affinity), and threads the run used.
+    pub cores: usize,
+    pub threads: usize,
+    pub os: &'static str,
+    pub arch: &'static str,
+}
+
+impl Machine {
+    /// This machine, running `threads` threads.
+    pub fn this(threads: usize) -> Machine {
+        Machine {
+            cores: std::thread::available_parallelism().map_or(1, |n| n.get()),
+            threads,
+            os: std::env::consts::OS,
+            arch: std::env::consts::ARCH,
         }
     }
 }
@@ -125,8 +153,11 @@ pub struct SmoothReport {
     /// bytes within one results version.
     pub results_version: u32,
     pub command: &'static str,
-    /// The command line as given.
+    /// The command line as given, and the directory it ran in (its relative paths start there):
+    /// run again there with the same input, it writes the same bytes.
     pub argv: Vec<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub working_directory: Option<String>,
     pub options: Options,
     pub engine: EngineSettings,
     pub input: FileStats,
@@ -149,6 +180,10 @@ pub struct SmoothReport {
     /// Per level of `--multires`: vertices, method, iterations, seconds.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub multires: Option<crate::multires::MultiresStats>,
+    /// The deviation of the output (as stored) from the input, when the run measured it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub deviation: Option<crate::metrics::DeviationStats>,
+    pub machine: Machine,
 }
 
 impl SmoothReport {
@@ -168,6 +203,9 @@ impl SmoothReport {
             results_version: crate::RESULTS_VERSION,
             command: "smooth",
             argv,
+            working_directory: std::env::current_dir()
+                .ok()
+                .map(|d| d.display().to_string()),
             options,
             engine: settings,
             input: FileStats::new(files.0, run.input_format, stats(&run.input_stats)),
@@ -185,6 +223,8 @@ impl SmoothReport {
             auto_stop: run.auto_stop.clone(),
             iterations: run.records.clone(),
             multires,
+            deviation: run.deviation.clone(),
+            machine: Machine::this(run.plan.threads),
         }
     }
 }

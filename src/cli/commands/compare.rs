@@ -1,5 +1,6 @@
 //! `vcsmooth compare A B [--json]`: distances, normals, volume and area ratios of two meshes with
-//! the same connectivity.
+//! the same connectivity, or with `--surface` of any two meshes; the deviation field, its
+//! statistics and a tolerance on request.
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -7,11 +8,13 @@ use std::path::PathBuf;
 use clap::Args as ClapArgs;
 use serde::Serialize;
 
-use crate::cli::output::print_json;
+use crate::cli::output::{check_files, mesh_output, print_json};
 use crate::cli::progress::Progress;
-use crate::cli::report::{defined, fixed, num, print_rows};
+use crate::cli::report::{defined, fixed, num, print_deviation, print_rows};
+use crate::cli::shared::{DeviationArgs, tolerance_verdict};
+use crate::engine::{DeviationSettings, deviation};
 use crate::error::{Error, Result};
-use crate::metrics::{self, Comparison};
+use crate::metrics::{self, Comparison, DeviationStats};
 
 /// `vcsmooth compare A B [--json]`
 #[derive(Debug, Clone, ClapArgs)]
@@ -25,6 +28,14 @@ pub struct CompareArgs {
     /// Print JSON instead of a table [default: table].
     #[arg(long)]
     pub json: bool,
+    /// Meshes that need not share vertices: each vertex of A is measured to the nearest point of B's triangles (through a bounding-volume hierarchy); the distances are those, the normal angle undefined; implies --deviation-stats [default: off: the same vertices and triangles].
+    #[arg(long)]
+    pub surface: bool,
+    /// Write the deviation field into FILE.ply as the vertex property 'quality' (see smooth's --deviation-field): B with each vertex's deviation from A, or with --surface A with each vertex's signed distance to B's surface; implies --deviation-stats.
+    #[arg(long, value_name = "FILE.ply")]
+    pub deviation_field: Option<PathBuf>,
+    #[command(flatten)]
+    pub deviation: DeviationArgs,
 }
 
 /// `vcsmooth compare`, resolved.
@@ -33,14 +44,36 @@ pub struct CompareConfig {
     pub a: PathBuf,
     pub b: PathBuf,
     pub json: bool,
+    pub surface: bool,
+    /// What to measure and write of the deviation field; `field` writes it to `field_file`.
+    pub deviation: DeviationSettings,
+    pub field_file: Option<PathBuf>,
 }
 
 impl CompareConfig {
     pub fn from_args(a: CompareArgs) -> Result<CompareConfig> {
+        if let Some(f) = &a.deviation_field {
+            mesh_output(f)?;
+            crate::io::check_vertex_values(f)
+                .map_err(|what| Error::invalid(f, format!("--deviation-field: {what}")))?;
+            check_files(
+                &[("A", &a.a), ("B", &a.b)],
+                None,
+                &[("--deviation-field", f)],
+            )?;
+        }
         Ok(CompareConfig {
+            deviation: DeviationSettings {
+                stats: a.deviation.deviation_stats || a.surface,
+                field: a.deviation_field.is_some(),
+                colours: a.deviation.deviation_colours,
+                tolerance: a.deviation.tolerance,
+            },
+            field_file: a.deviation_field,
             a: a.a,
             b: a.b,
             json: a.json,
+            surface: a.surface,
         })
     }
 }
@@ -52,6 +85,9 @@ pub struct CompareDoc {
     pub b: String,
     #[serde(flatten)]
     pub comparison: Comparison,
+    /// The deviation field's statistics, when asked for.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub deviation: Option<DeviationStats>,
 }
 
 /// `vcsmooth compare`.
@@ -61,23 +97,72 @@ pub fn run(cfg: &CompareConfig, progress: &mut Progress, out: &mut dyn Write) ->
     progress.phase(format!("reading {}", cfg.b.display()));
     let b = crate::io::read_mesh(&cfg.b)?;
     progress.phase("comparing");
-    let comparison = metrics::compare(&a, &b).map_err(|e| match e {
+    let named = |e: Error| match e {
         Error::Topology { path: None, what } => Error::Topology {
             path: Some(cfg.b.clone()),
             what: format!("{what} (compared with {})", cfg.a.display()),
         },
         other => other,
-    })?;
+    };
+    let (comparison, field) = if cfg.surface {
+        if b.triangles.is_empty() {
+            return Err(Error::invalid(
+                &cfg.b,
+                "has no triangles to measure A's distances to (--surface)",
+            ));
+        }
+        let field =
+            deviation::surface_field(&a.positions, &a.triangles, &b.positions, &b.triangles)?;
+        let stats = deviation::statistics(&field, cfg.deviation.tolerance);
+        let c = metrics::compare_surfaces(&a, &b, stats.distance_rms, stats.distance_max);
+        (c, Some((field, stats)))
+    } else {
+        let c = metrics::compare(&a, &b).map_err(named)?;
+        let field = match cfg.deviation.is_on() {
+            true => {
+                let storage = crate::mesh::Storage::heap();
+                let field =
+                    deviation::field(&storage, &a.positions, &b.positions, &a.triangles, None)?;
+                let stats = deviation::statistics(&field, cfg.deviation.tolerance);
+                Some((field, stats))
+            }
+            false => None,
+        };
+        (c, field)
+    };
+    if let (Some(path), Some((field, stats))) = (&cfg.field_file, &field) {
+        progress.phase(format!("writing {}", path.display()));
+        // The field lives on the vertices it measures: B's, or with --surface A's.
+        let on = if cfg.surface { &a } else { &b };
+        let scale = cfg.deviation.colour_scale(stats);
+        let colour = |i: usize| metrics::deviation::colour(field.signed[i], scale);
+        let values = crate::io::VertexValues {
+            quality: &field.signed,
+            colours: match cfg.deviation.colours {
+                true => Some(&colour as &(dyn Fn(usize) -> [u8; 3] + Sync)),
+                false => None,
+            },
+        };
+        crate::io::write_mesh_with(path, on, &values, &crate::meter::Meter::default())?;
+    }
     progress.finish();
     let doc = CompareDoc {
         a: cfg.a.display().to_string(),
         b: cfg.b.display().to_string(),
         comparison,
+        deviation: field.map(|(_, stats)| stats),
     };
     if cfg.json {
-        print_json(out, &doc)
+        print_json(out, &doc)?;
     } else {
-        print_comparison(out, &doc)
+        print_comparison(out, &doc)?;
+        if let Some(d) = &doc.deviation {
+            print_deviation(out, d)?;
+        }
+    }
+    match &doc.deviation {
+        Some(d) => tolerance_verdict(&cfg.b, d),
+        None => Ok(()),
     }
 }
 

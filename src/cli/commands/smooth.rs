@@ -14,8 +14,8 @@ use crate::cli::output::{
 };
 use crate::cli::plot::{Curve, file_name, volume_curve, write_volume_plot};
 use crate::cli::progress::Progress;
-use crate::cli::report::{count, fixed, iterations_run};
-use crate::cli::shared::{InOut, PinArgs, SmoothingArgs};
+use crate::cli::report::{count, fixed, iterations_run, print_deviation};
+use crate::cli::shared::{DeviationArgs, InOut, PinArgs, SmoothingArgs, tolerance_verdict};
 use crate::engine::{self, EngineSettings, IterationRecord, Statistics};
 use crate::error::{Error, Result};
 use crate::report::{SmoothReport, Summary};
@@ -41,6 +41,11 @@ pub struct SmoothArgs {
     /// Which iterations measure volume, area and displacement (each costs passes over the whole mesh, about one taubin iteration for volume and area); the others show '-' in the table and null in the report.
     #[arg(long, value_enum, value_name = "WHEN", default_value_t = Statistics::Every)]
     pub stats: Statistics,
+    /// Write each vertex's deviation into OUT (PLY only) as the vertex property 'quality' (MeshLab and CloudCompare read it as a scalar field): its displacement along the input's vertex normal, signed, positive outward; print its statistics (RMS, mean, percentiles of the distance, histogram), also in --report. The rest of OUT is as without it [default: off].
+    #[arg(long)]
+    pub deviation_field: bool,
+    #[command(flatten)]
+    pub deviation: DeviationArgs,
     #[command(flatten)]
     pub cluster: ClusterArgs,
 }
@@ -115,8 +120,22 @@ impl SmoothConfig {
             files.extend(&sides);
             check_work_dir(("--checkpoint", dir), &files)?;
         }
+        if a.deviation_field {
+            crate::io::check_vertex_values(&a.files.output).map_err(|what| {
+                Error::invalid(&a.files.output, format!("--deviation-field: {what}"))
+            })?;
+        }
         let mut engine = a.smoothing.engine.resolve()?;
         engine.pins = a.pins.resolve()?;
+        engine.deviation = crate::engine::DeviationSettings {
+            stats: a.deviation.deviation_stats,
+            field: a.deviation_field,
+            colours: a.deviation.deviation_colours,
+            tolerance: a.deviation.tolerance,
+        };
+        if a.cluster.checkpoint.is_some() {
+            in_one_process(&engine.deviation)?;
+        }
         engine.with_stats = a.report.is_some();
         engine.statistics = a.stats;
         Ok(SmoothConfig {
@@ -160,6 +179,16 @@ impl SmoothConfig {
 pub fn run(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) -> Result<()> {
     crate::cluster::with_world(|comm| {
         let Some(cluster) = cfg.cluster(comm.size()) else {
+            // Before the run: what it reads is what was hashed (and the read finds it cached).
+            let sha256 = match &cfg.report {
+                Some(_) => {
+                    progress.phase(format!("hashing {}", cfg.input.display()));
+                    let clock = std::time::Instant::now();
+                    let hash = crate::io::sha256_file(&cfg.input)?;
+                    Some((hash, clock.elapsed().as_secs_f64()))
+                }
+                None => None,
+            };
             progress.phase(format!("smoothing {}", cfg.input.display()));
             progress.smoothing(&cfg.options);
             let (run, multires) = match &cfg.multires {
@@ -179,7 +208,7 @@ pub fn run(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) -> 
                     (run, Some(stats))
                 }
             };
-            return report(cfg, &run, multires, progress, out);
+            return report(cfg, &run, multires, sha256, progress, out);
         };
         if cfg.multires.is_some() {
             return Err(flags::parameter(
@@ -187,6 +216,7 @@ pub fn run(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) -> 
                 "runs in one process; it cannot be combined with --checkpoint or MPI ranks",
             ));
         }
+        in_one_process(&cfg.engine.deviation)?;
         let lead = comm.rank() == 0;
         if lead {
             progress.phase(format!(
@@ -220,8 +250,25 @@ pub fn run(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) -> 
         if !lead {
             return Ok(());
         }
-        report(cfg, &run, None, progress, out)
+        report(cfg, &run, None, None, progress, out)
     })
+}
+
+/// The deviation field is measured by the engine of one process: a usage error with the cluster
+/// engine (`--checkpoint`, MPI ranks).
+fn in_one_process(d: &crate::engine::DeviationSettings) -> Result<()> {
+    if !d.is_on() {
+        return Ok(());
+    }
+    let name = match (d.field, d.tolerance) {
+        (true, _) => "deviation_field",
+        (false, Some(_)) => "tolerance",
+        (false, None) => "deviation_stats",
+    };
+    Err(flags::parameter(
+        name,
+        "runs in one process; it cannot be combined with --checkpoint or MPI ranks",
+    ))
 }
 
 /// The report, plot and table of a finished `smooth`.
@@ -229,6 +276,7 @@ fn report(
     cfg: &SmoothConfig,
     run: &engine::Report,
     multires: Option<crate::multires::MultiresStats>,
+    sha256: Option<(String, f64)>,
     progress: &mut Progress,
     out: &mut dyn Write,
 ) -> Result<()> {
@@ -238,7 +286,7 @@ fn report(
         && run.input_stats.is_some()
         && run.output_stats.is_some()
     {
-        let report = SmoothReport::new(
+        let mut report = SmoothReport::new(
             cfg.argv.clone(),
             cfg.options,
             cfg.engine.clone(),
@@ -246,6 +294,10 @@ fn report(
             run,
             multires.clone(),
         );
+        if let Some((hash, seconds)) = sha256 {
+            report.input.sha256 = Some(hash);
+            report.timings.hash = seconds;
+        }
         write_json(path, &report)?;
     }
     if let Some(path) = &cfg.plot {
@@ -276,6 +328,9 @@ fn report(
     }
     if let Some(m) = &multires {
         print_multires(out, m)?;
+    }
+    if let Some(d) = &run.deviation {
+        print_deviation(out, d)?;
     }
     let (t, p, m) = (&run.timings, &run.plan, &run.memory);
     writeln!(
@@ -322,7 +377,11 @@ fn report(
         "seconds: ingest {:.3}, reorder {:.3}, topology {:.3}, partition {:.3}, smoothing {:.3}, write {:.3}, total {:.3}",
         t.ingest, t.reorder, t.topology, t.partition, t.smoothing, t.write, t.total
     )
-    .map_err(stdout_error)
+    .map_err(stdout_error)?;
+    match &run.deviation {
+        Some(d) => tolerance_verdict(&cfg.output, d),
+        None => Ok(()),
+    }
 }
 
 /// Print the per-iteration table of a run.

@@ -8,7 +8,7 @@ use glam::DVec3;
 use super::header::{Element, FaceRole, Kind, Property, Roles, Scalar, walk_record};
 use super::read::{Origin, decode_faces};
 use super::{Fallible, PlyEncoding, PlyLayout, ascii};
-use crate::io::{FaceBuilder, Faces, Precision, vertex_normals};
+use crate::io::{FaceBuilder, Faces, Precision, VertexValues, vertex_normals};
 use crate::mesh::Mesh;
 use crate::meter::Meter;
 
@@ -215,8 +215,12 @@ pub(crate) fn check_writable(mesh: &Mesh) -> Fallible<()> {
     Ok(())
 }
 
-/// Writes `mesh` as PLY; [`check_writable`] passed.
-pub(crate) fn write(out: &mut impl Write, mesh: &Mesh) -> io::Result<()> {
+/// Writes `mesh` as PLY, with `values` in its vertices when given; [`check_writable`] passed.
+pub(crate) fn write(
+    out: &mut impl Write,
+    mesh: &Mesh,
+    values: Option<&VertexValues>,
+) -> io::Result<()> {
     let layout = layout_of(mesh);
     let roles = Roles::find(&layout.elements).map_err(io::Error::other)?;
     // The face element to rebuild from the mesh, unless its records are stored.
@@ -225,14 +229,23 @@ pub(crate) fn write(out: &mut impl Write, mesh: &Mesh) -> io::Result<()> {
         .filter(|f| layout.elements[f.element].records.is_none());
     let faces = Faces::of(mesh);
     let ascii = layout.encoding == PlyEncoding::Ascii;
+    let props = values.map(|v| output_properties(&layout.elements[roles.vertex], v));
 
-    write_header(out, &layout, |e, el| match face {
-        Some(f) if f.element == e => faces.len(),
-        _ => el.count,
-    })?;
+    write_header(
+        out,
+        &layout,
+        |e, el| match face {
+            Some(f) if f.element == e => faces.len(),
+            _ => el.count,
+        },
+        props.as_deref().map(|p| (roles.vertex, p)),
+    )?;
     for (e, el) in layout.elements.iter().enumerate() {
         if e == roles.vertex {
-            write_vertices(out, el, mesh, ascii)?;
+            match (values, &props) {
+                (Some(v), Some(props)) => write_vertices_with(out, el, props, mesh, v, ascii)?,
+                _ => write_vertices(out, el, mesh, ascii)?,
+            }
         } else if let Some(f) = face.filter(|f| f.element == e) {
             write_faces(out, el, f, &faces, ascii)?;
         } else if let Some(records) = &el.records {
@@ -242,12 +255,49 @@ pub(crate) fn write(out: &mut impl Write, mesh: &Mesh) -> io::Result<()> {
     Ok(())
 }
 
+/// The name of the vertex property that holds a [`VertexValues`] scalar.
+const QUALITY: &str = "quality";
+/// The names of the colour properties.
+const COLOURS: [&str; 3] = ["red", "green", "blue"];
+
+/// The vertex properties written with `values`: `el`'s own, then `float quality` and `uchar red
+/// green blue` (with colours), each unless `el` has it already (then it takes the values in its
+/// place: a `quality` of an integer type becomes `float`, which holds the field).
+fn output_properties(el: &Element, values: &VertexValues) -> Vec<Property> {
+    let mut added: Vec<Property> = el
+        .props
+        .iter()
+        .map(|p| match p.kind {
+            Kind::Scalar(t) if p.name == QUALITY && t.int_range().is_some() => Property {
+                name: p.name.clone(),
+                kind: Kind::Scalar(Scalar::F32),
+            },
+            _ => p.clone(),
+        })
+        .collect();
+    let mut add = |name: &str, t: Scalar| {
+        if el.prop(name).is_none() {
+            added.push(Property {
+                name: name.into(),
+                kind: Kind::Scalar(t),
+            });
+        }
+    };
+    add(QUALITY, Scalar::F32);
+    if values.colours.is_some() {
+        COLOURS.iter().for_each(|c| add(c, Scalar::U8));
+    }
+    added
+}
+
 /// Writes the header of `layout` (big-endian is written as little-endian), with `count(e, el)`
-/// records for element `e`; every PLY writer's header.
+/// records for element `e` and, when `props` is `Some((e, list))`, the properties `list` for
+/// element `e` instead of its own; every PLY writer's header.
 pub(crate) fn write_header(
     out: &mut impl Write,
     layout: &PlyLayout,
     count: impl Fn(usize, &Element) -> usize,
+    props: Option<(usize, &[Property])>,
 ) -> io::Result<()> {
     out.write_all(b"ply\n")?;
     let encoding = match layout.encoding {
@@ -260,7 +310,11 @@ pub(crate) fn write_header(
     }
     for (e, el) in layout.elements.iter().enumerate() {
         writeln!(out, "element {} {}", el.name, count(e, el))?;
-        for p in &el.props {
+        let list = match props {
+            Some((k, list)) if k == e => list,
+            _ => &el.props,
+        };
+        for p in list {
             match p.kind {
                 Kind::Scalar(t) => writeln!(out, "property {} {}", t.name(), p.name)?,
                 Kind::List(c, t) => {
@@ -383,6 +437,157 @@ fn write_vertices(out: &mut impl Write, el: &Element, mesh: &Mesh, ascii: bool) 
         emit(out, &el.props, &buf, ascii)?;
     }
     Ok(())
+}
+
+/// What a vertex property written with [`VertexValues`] is rebuilt from.
+#[derive(Clone, Copy, PartialEq)]
+enum Role {
+    Coordinate(usize),
+    Normal(usize),
+    Quality,
+    Colour(usize),
+}
+
+impl Role {
+    fn of(name: &str, colours: bool) -> Option<Role> {
+        Some(match name {
+            "x" => Role::Coordinate(0),
+            "y" => Role::Coordinate(1),
+            "z" => Role::Coordinate(2),
+            "nx" => Role::Normal(0),
+            "ny" => Role::Normal(1),
+            "nz" => Role::Normal(2),
+            QUALITY => Role::Quality,
+            _ if colours => Role::Colour(COLOURS.iter().position(|c| *c == name)?),
+            _ => return None,
+        })
+    }
+}
+
+/// [`write_vertices`] with `values`, the vertex element's properties written as `props`
+/// ([`output_properties`]): each record as it would be without them, its `quality` and colour
+/// properties (when it has them) replaced, then the added properties appended.
+fn write_vertices_with(
+    out: &mut impl Write,
+    el: &Element,
+    props: &[Property],
+    mesh: &Mesh,
+    values: &VertexValues,
+    ascii: bool,
+) -> io::Result<()> {
+    let own = el.props.len();
+    let retyped = el.props.iter().zip(props).any(|(a, b)| a.kind != b.kind);
+    // (property, type, role) of every scalar property rebuilt here.
+    let targets: Vec<(usize, Scalar, Role)> = props
+        .iter()
+        .enumerate()
+        .filter_map(|(k, p)| match p.kind {
+            Kind::Scalar(t) => Some((k, t, Role::of(&p.name, values.colours.is_some())?)),
+            Kind::List(..) => None,
+        })
+        .collect();
+    let normals = match targets.iter().any(|t| matches!(t.2, Role::Normal(_))) {
+        true => vertex_normals(&mesh.positions, &mesh.triangles),
+        false => Vec::new(),
+    };
+    let put = |record: &mut [u8], at: &dyn Fn(usize) -> usize, i: usize| {
+        let mut colour = None;
+        for &(k, t, role) in &targets {
+            let v = match role {
+                Role::Coordinate(c) => mesh.positions[i][c],
+                Role::Normal(c) => t.unit_component(normals[i][c]),
+                Role::Quality => values.quality[i],
+                Role::Colour(c) => {
+                    let rgb = *colour.get_or_insert_with(|| values.colours.map(|f| f(i)));
+                    f64::from(rgb.map_or(0, |rgb| rgb[c]))
+                }
+            };
+            t.put(v, &mut record[at(k)..]);
+        }
+    };
+    let extra: usize = props[own..].iter().map(|p| scalar_of(p).size()).sum();
+    const FLUSH: usize = 1 << 20; // bytes per buffer
+    let mut buf = Vec::with_capacity(FLUSH + 1024);
+    let stored = el.records.as_deref();
+    // The plain layout (then `props` is it, `float quality` and with colours `uchar red green
+    // blue`) in binary: encoded straight from the arrays, as the plain layout's own fast path.
+    let plain = matches!(&el.props[..], [x, y, z] if [&x.name, &y.name, &z.name] == ["x", "y", "z"]
+            && x.kind == y.kind && y.kind == z.kind
+            && matches!(x.kind, Kind::Scalar(Scalar::F32 | Scalar::F64)));
+    if let (false, None, true) = (ascii, stored, plain) {
+        let Kind::Scalar(coordinate) = el.props[0].kind else {
+            unreachable!("matched above")
+        };
+        for start in (0..mesh.positions.len()).step_by(1 << 15) {
+            let end = (start + (1 << 15)).min(mesh.positions.len());
+            buf.clear();
+            for i in start..end {
+                put_xyz(coordinate, mesh.positions[i], &mut buf);
+                buf.extend_from_slice(&(values.quality[i] as f32).to_le_bytes());
+                if let Some(colour) = values.colours {
+                    buf.extend_from_slice(&colour(i));
+                }
+            }
+            out.write_all(&buf)?;
+        }
+        return Ok(());
+    }
+    if let Some(stride) = el.stride().filter(|_| !retyped) {
+        // Fixed records: every property at the same offset in each.
+        let offsets: Vec<usize> = (0..props.len())
+            .map(|k| props[..k].iter().map(|p| scalar_of(p).size()).sum())
+            .collect();
+        let at = |k: usize| offsets[k];
+        let wide = stride + extra;
+        for i in 0..mesh.positions.len() {
+            let start = buf.len();
+            match stored {
+                Some(r) => buf.extend_from_slice(&r[i * stride..(i + 1) * stride]),
+                None => buf.resize(start + stride, 0),
+            }
+            buf.resize(start + wide, 0);
+            put(&mut buf[start..], &at, i);
+            if buf.len() >= FLUSH {
+                emit(out, props, &buf, ascii)?;
+                buf.clear();
+            }
+        }
+        return emit(out, props, &buf, ascii);
+    }
+    // Lists in the vertex element, or a property retyped (then its records are stored): each
+    // record walked and copied field by field, a retyped field as zeros of its new size.
+    let records = stored.unwrap_or_default();
+    let corrupt = || io::Error::other("stored PLY vertex records are corrupt");
+    let (mut fields, mut pos, mut record) = (Vec::new(), 0, Vec::new());
+    for i in 0..mesh.positions.len() {
+        let end =
+            walk_record(records, pos, &el.props, false, &mut fields).map_err(|_| corrupt())?;
+        record.clear();
+        for k in 0..own {
+            let next = fields.get(k + 1).map_or(end, |f| f.at);
+            match el.props[k].kind == props[k].kind {
+                true => record.extend_from_slice(&records[fields[k].at..next]),
+                false => record.resize(record.len() + scalar_of(&props[k]).size(), 0),
+            }
+        }
+        record.resize(record.len() + extra, 0);
+        walk_record(&record, 0, props, false, &mut fields).map_err(|_| corrupt())?;
+        put(&mut record, &|k| fields[k].at, i);
+        buf.extend_from_slice(&record);
+        pos = end;
+        if buf.len() >= FLUSH {
+            emit(out, props, &buf, ascii)?;
+            buf.clear();
+        }
+    }
+    emit(out, props, &buf, ascii)
+}
+
+/// The type of a scalar property (a list's item type).
+fn scalar_of(p: &Property) -> Scalar {
+    match p.kind {
+        Kind::Scalar(t) | Kind::List(_, t) => t,
+    }
 }
 
 /// Writes a face element made of only the index list, from the mesh's polygons or triangles.
