@@ -100,7 +100,7 @@ pub fn position_sum(pos: &[DVec3]) -> DVec3 {
 
 mod compare;
 mod info;
-pub use compare::{Comparison, compare};
+pub use compare::{Comparison, compare, displacement_lengths};
 pub use info::{
     EdgeSums, Geometry, MeshInfo, connectivity, edge_sums, extent, extent_union, geometry, info,
     info_of, mean_edge_length, roughness,

@@ -7,11 +7,18 @@ use std::path::PathBuf;
 use clap::Args as ClapArgs;
 use serde::Serialize;
 
-use crate::cli::output::print_json;
+use std::sync::Arc;
+
+use crate::cli::output::{check_files, print_json};
+use crate::cli::pictures::{Drawn, PictureArgs, PictureConfig, Sheet, distances, print_drawn};
+use crate::cli::plot::file_name;
 use crate::cli::progress::Progress;
 use crate::cli::report::{defined, fixed, num, print_rows};
+use crate::engine::{Meter, Observer, Phase};
 use crate::error::{Error, Result};
+use crate::mesh::{Mesh, Storage};
 use crate::metrics::{self, Comparison};
+use crate::render::{self, View};
 
 /// `vcsmooth compare A B [--json]`
 #[derive(Debug, Clone, ClapArgs)]
@@ -25,6 +32,8 @@ pub struct CompareArgs {
     /// Print JSON instead of a table [default: table].
     #[arg(long)]
     pub json: bool,
+    #[command(flatten)]
+    pub pictures: PictureArgs,
 }
 
 /// `vcsmooth compare`, resolved.
@@ -33,14 +42,21 @@ pub struct CompareConfig {
     pub a: PathBuf,
     pub b: PathBuf,
     pub json: bool,
+    /// `--png` and its tile size.
+    pub png: Option<PictureConfig>,
 }
 
 impl CompareConfig {
     pub fn from_args(a: CompareArgs) -> Result<CompareConfig> {
+        let png = a.pictures.resolve()?;
+        if let Some(p) = &png {
+            check_files(&[("A", &a.a), ("B", &a.b)], None, &[("--png", &p.path)])?;
+        }
         Ok(CompareConfig {
             a: a.a,
             b: a.b,
             json: a.json,
+            png,
         })
     }
 }
@@ -68,6 +84,10 @@ pub fn run(cfg: &CompareConfig, progress: &mut Progress, out: &mut dyn Write) ->
         },
         other => other,
     })?;
+    let drawn = match &cfg.png {
+        Some(png) => Some(draw(cfg, png.clone(), &a, &b, progress)?),
+        None => None,
+    };
     progress.finish();
     let doc = CompareDoc {
         a: cfg.a.display().to_string(),
@@ -75,10 +95,55 @@ pub fn run(cfg: &CompareConfig, progress: &mut Progress, out: &mut dyn Write) ->
         comparison,
     };
     if cfg.json {
-        print_json(out, &doc)
-    } else {
-        print_comparison(out, &doc)
+        return print_json(out, &doc);
     }
+    print_comparison(out, &doc)?;
+    match drawn {
+        Some(d) => print_drawn(out, &d),
+        None => Ok(()),
+    }
+}
+
+/// The picture of `compare --png`: A and B in grey, and B coloured by the distance between their
+/// vertices, every view framing both.
+fn draw(
+    cfg: &CompareConfig,
+    png: PictureConfig,
+    a: &Mesh,
+    b: &Mesh,
+    progress: &mut Progress,
+) -> Result<Drawn> {
+    let meter = Arc::new(Meter::new((a.triangles.len() + b.triangles.len()) as u64));
+    progress.phase_start(Phase::Render, &meter);
+    let drawn = (|| {
+        let views = &View::STANDARD;
+        let seen: Vec<_> = render::view_bounds(&a.positions, views)
+            .into_iter()
+            .zip(render::view_bounds(&b.positions, views))
+            .map(|(x, y)| x.union(y))
+            .collect();
+        let mut sheet = Sheet::new(png, &seen);
+        let (name_a, name_b) = (file_name(&cfg.a), file_name(&cfg.b));
+        sheet.draw(
+            format!("A: {name_a}"),
+            &a.positions,
+            &a.triangles,
+            None,
+            &meter,
+        )?;
+        let moved = distances(&a.positions, &b.positions, &Storage::heap())?;
+        let what = Some((&moved[..], "distance to A".to_string()));
+        sheet.draw(
+            format!("B: {name_b}"),
+            &b.positions,
+            &b.triangles,
+            what,
+            &meter,
+        )?;
+        sheet.write(&format!("vcsmooth compare {name_a} {name_b}"))
+    })();
+    progress.phase_end(Phase::Render);
+    drawn
 }
 
 /// Print a comparison as aligned `key  value` lines.

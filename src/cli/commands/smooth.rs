@@ -12,6 +12,7 @@ use crate::cli::multires::{MultiresArgs, print_multires};
 use crate::cli::output::{
     check_files, check_work_dir, mesh_output, stdout_error, svg_output, write_json,
 };
+use crate::cli::pictures::{PictureArgs, PictureConfig, RunPictures, Sheet, print_drawn};
 use crate::cli::plot::{Curve, file_name, volume_curve, write_volume_plot};
 use crate::cli::progress::Progress;
 use crate::cli::report::{count, fixed, iterations_run};
@@ -42,6 +43,8 @@ pub struct SmoothArgs {
     #[arg(long, value_enum, value_name = "WHEN", default_value_t = Statistics::Every)]
     pub stats: Statistics,
     #[command(flatten)]
+    pub pictures: PictureArgs,
+    #[command(flatten)]
     pub cluster: ClusterArgs,
 }
 
@@ -68,6 +71,8 @@ pub struct SmoothConfig {
     pub engine: EngineSettings,
     pub report: Option<PathBuf>,
     pub plot: Option<PathBuf>,
+    /// `--png` and its tile size.
+    pub png: Option<PictureConfig>,
     /// `--multires` and its options.
     pub multires: Option<crate::multires::MultiresOptions>,
     /// `--checkpoint DIR` (kept) and `--checkpoint-every`.
@@ -103,9 +108,17 @@ impl SmoothConfig {
                 ));
             }
         }
+        let png = a.pictures.resolve()?;
+        if png.is_some() && a.cluster.checkpoint.is_some() {
+            return Err(flags::parameter(
+                "png",
+                "draws a run in one process: it cannot be combined with --checkpoint",
+            ));
+        }
         let mut sides = Vec::new();
         sides.extend(a.report.as_deref().map(|r| ("--report", r)));
         sides.extend(a.plot.as_deref().map(|p| ("--plot", p)));
+        sides.extend(png.as_ref().map(|p| ("--png", p.path.as_path())));
         let mut reads = vec![("IN", a.files.input.as_path())];
         reads.extend(a.pins.pin.as_deref().map(|p| ("--pin", p)));
         check_files(&reads, Some(("OUT", &a.files.output)), &sides)?;
@@ -127,6 +140,7 @@ impl SmoothConfig {
             output: a.files.output,
             report: a.report,
             plot: a.plot,
+            png,
             checkpoint: a.cluster.checkpoint,
             checkpoint_every: a.cluster.checkpoint_every as usize,
             argv,
@@ -162,11 +176,15 @@ pub fn run(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) -> 
         let Some(cluster) = cfg.cluster(comm.size()) else {
             progress.phase(format!("smoothing {}", cfg.input.display()));
             progress.smoothing(&cfg.options);
-            let (run, multires) = match &cfg.multires {
-                None => (
-                    engine::run_file(&cfg.input, &cfg.output, &cfg.options, &cfg.engine, progress)?,
+            let labels = (
+                format!("before: {}", file_name(&cfg.input)),
+                format!("after: {}", file_name(&cfg.output)),
+            );
+            let smooth = |observer: &mut dyn engine::Observer| match &cfg.multires {
+                None => Ok((
+                    engine::run_file(&cfg.input, &cfg.output, &cfg.options, &cfg.engine, observer)?,
                     None,
-                ),
+                )),
                 Some(m) => {
                     let (run, stats) = crate::multires::run_file(
                         &cfg.input,
@@ -174,17 +192,34 @@ pub fn run(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) -> 
                         &cfg.options,
                         m,
                         &cfg.engine,
-                        progress,
+                        observer,
                     )?;
-                    (run, Some(stats))
+                    Ok::<_, Error>((run, Some(stats)))
                 }
             };
-            return report(cfg, &run, multires, progress, out);
+            let (run, multires, sheet) = match cfg.png.clone() {
+                Some(png) => {
+                    let mut pictures = RunPictures::new(&mut *progress, png, labels);
+                    let (run, multires) = smooth(&mut pictures)?;
+                    (run, multires, pictures.into_sheet())
+                }
+                None => {
+                    let (run, multires) = smooth(&mut *progress)?;
+                    (run, multires, None)
+                }
+            };
+            return report(cfg, &run, multires, sheet, progress, out);
         };
         if cfg.multires.is_some() {
             return Err(flags::parameter(
                 "multires",
                 "runs in one process; it cannot be combined with --checkpoint or MPI ranks",
+            ));
+        }
+        if cfg.png.is_some() {
+            return Err(flags::parameter(
+                "png",
+                "draws a run in one process; it cannot be combined with --checkpoint or MPI ranks",
             ));
         }
         let lead = comm.rank() == 0;
@@ -220,7 +255,7 @@ pub fn run(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) -> 
         if !lead {
             return Ok(());
         }
-        report(cfg, &run, None, progress, out)
+        report(cfg, &run, None, None, progress, out)
     })
 }
 
@@ -229,6 +264,7 @@ fn report(
     cfg: &SmoothConfig,
     run: &engine::Report,
     multires: Option<crate::multires::MultiresStats>,
+    sheet: Option<Sheet>,
     progress: &mut Progress,
     out: &mut dyn Write,
 ) -> Result<()> {
@@ -256,6 +292,19 @@ fn report(
         let title = format!("{} on {}", cfg.options.method, file_name(&cfg.input));
         write_volume_plot(path, &title, &[curve])?;
     }
+    let drawn = match sheet {
+        Some(sheet) => {
+            let title = format!(
+                "vcsmooth smooth {} -> {}: {}, {}",
+                file_name(&cfg.input),
+                file_name(&cfg.output),
+                cfg.options.method,
+                iterations_run(&cfg.options, run)
+            );
+            Some(sheet.write(&title)?)
+        }
+        None => None,
+    };
     progress.finish();
 
     let s = Summary::of_run(records, multires.as_ref());
@@ -322,7 +371,11 @@ fn report(
         "seconds: ingest {:.3}, reorder {:.3}, topology {:.3}, partition {:.3}, smoothing {:.3}, write {:.3}, total {:.3}",
         t.ingest, t.reorder, t.topology, t.partition, t.smoothing, t.write, t.total
     )
-    .map_err(stdout_error)
+    .map_err(stdout_error)?;
+    match drawn {
+        Some(d) => print_drawn(out, &d),
+        None => Ok(()),
+    }
 }
 
 /// Print the per-iteration table of a run.
