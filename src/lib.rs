@@ -29,6 +29,7 @@
 //!   to file, the memory model.
 //! - [`multires`]: coarse levels smoothed with `vcs`, the fine level with Laplacian or Taubin.
 //! - [`cluster`]: the same loop over MPI ranks, with checkpoints.
+//! - [`render`]: pictures of a mesh drawn on the CPU (views, shading, colour maps, labels).
 //! - [`report`]: the report model, what `smooth --report` and `info --json` write and Python
 //!   returns.
 //! - `modes`: `batch` (job arrays), `bench` (throughput), `refine` (subdivide and smooth).
@@ -55,6 +56,7 @@ pub mod metrics;
 pub mod modes;
 pub mod multires;
 pub mod partition;
+pub mod render;
 pub mod report;
 pub mod schedule;
 pub mod shapes;

@@ -10,7 +10,7 @@
 //!    terminal, and prints its result.
 //!
 //! What several commands share has one file each: the flag groups ([`shared`]; [`batch_smooth`] for
-//! `batch` and `slurm-script`), `smooth`'s `--multires` flags ([`multires`]), the reports' pieces
+//! `batch` and `slurm-script`), `smooth`'s `--multires` flags ([`multires`]), the pictures of `--png` ([`pictures`]), the reports' pieces
 //! ([`report`]), output files and streams ([`output`]), plots ([`plot`]), progress ([`progress`])
 //! and flag names ([`flags`]). Command files use shared files and never each other; shared files
 //! use no command file; this file only parses, dispatches and prints errors.
@@ -27,6 +27,7 @@ pub mod commands;
 pub mod flags;
 pub mod multires;
 pub mod output;
+pub mod pictures;
 pub mod plot;
 pub mod progress;
 pub mod report;

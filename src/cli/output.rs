@@ -54,6 +54,21 @@ pub fn svg_output(path: &Path) -> Result<()> {
     parent_exists(path)
 }
 
+/// Check that a picture can be written to `path`: `.png`, existing directory.
+pub fn png_output(path: &Path) -> Result<()> {
+    let ok = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("png"));
+    if !ok {
+        return Err(Error::invalid(
+            path,
+            "pictures are written as PNG: the file name must end in .png",
+        ));
+    }
+    parent_exists(path)
+}
+
 /// Check that the directory `path` would be created in exists (and is a directory).
 pub fn parent_exists(path: &Path) -> Result<()> {
     if path.as_os_str().is_empty() {

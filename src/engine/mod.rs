@@ -32,7 +32,7 @@ use glam::DVec3;
 pub use auto::{AutoStopStats, StopReason};
 pub use deviation::DeviationSettings;
 pub use iterate::Reference;
-pub use observer::{IterationRecord, Meter, Observer, Phase, Quiet, Statistics, Unit};
+pub use observer::{IterationRecord, Meter, Moment, Observer, Phase, Quiet, Statistics, Unit};
 pub use pins::{PinSet, Pins};
 pub use plan::{DEFAULT_PATCH_SIZE, Layout, Plan, PlanStats, PrepTimings};
 pub use run::{ClusterStats, EngineSettings, MemoryStats, PhaseTimings, Report, run_file};

@@ -33,6 +33,9 @@ pub enum Phase {
     /// Putting the smoothed positions back in the input's vertex order for the output, in items
     /// (vertices placed).
     Restore,
+    /// Drawing pictures of the mesh (a caller's, told by its [`Observer`]), in items (triangles
+    /// drawn).
+    Render,
     /// Writing the output, in bytes of the file. The total is the expected size (the input's size
     /// for an output of the input's format, else an estimate), set to the size written at the end.
     Write,
@@ -49,6 +52,7 @@ impl Phase {
             Phase::Statistics => "measuring",
             Phase::Smooth => "smoothing",
             Phase::Restore => "restoring input order",
+            Phase::Render => "drawing pictures",
             Phase::Write => "writing",
         }
     }
@@ -57,7 +61,9 @@ impl Phase {
     pub fn unit(self) -> Unit {
         match self {
             Phase::Read | Phase::Write => Unit::Bytes,
-            Phase::Reorder | Phase::Topology | Phase::Schedule | Phase::Restore => Unit::Items,
+            Phase::Reorder | Phase::Topology | Phase::Schedule | Phase::Restore | Phase::Render => {
+                Unit::Items
+            }
             Phase::Statistics => Unit::Steps,
             Phase::Smooth => Unit::Iterations,
         }
@@ -209,6 +215,31 @@ pub trait Observer: Send {
     fn interrupted(&mut self) -> bool {
         false
     }
+
+    /// The mesh being smoothed, just before the iterations and just after them ([`Moment`]), on
+    /// the run's thread pool: its positions and triangles in the plan's vertex order, and the
+    /// `storage` that holds the run's arrays (heap or scratch), where what the observer keeps of
+    /// them belongs. Told by a file run in one process ([`crate::engine::run_file`], the
+    /// multiresolution mode's) and an in-memory run, not by the cluster engine. An error ends the
+    /// run there, before anything is written. The pictures of a run are drawn here.
+    fn mesh_at(
+        &mut self,
+        _moment: Moment,
+        _positions: &[glam::DVec3],
+        _triangles: &[[u32; 3]],
+        _storage: &crate::mesh::Storage,
+    ) -> crate::Result<()> {
+        Ok(())
+    }
+}
+
+/// When [`Observer::mesh_at`] is told.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Moment {
+    /// The input's positions, before the first iteration.
+    BeforeSmoothing,
+    /// The smoothed positions, after the last iteration.
+    AfterSmoothing,
 }
 
 /// An observer that ignores everything.

@@ -8,7 +8,7 @@ use super::auto::AutoStopStats;
 use super::deviation::{self, DeviationSettings};
 use super::memory::{self, Budget, BudgetSource, PeakSampler};
 use super::observer::{
-    IterationMeter, IterationRecord, Meter, Observer, Phase, Statistics, metered,
+    IterationMeter, IterationRecord, Meter, Moment, Observer, Phase, Statistics, metered,
 };
 use super::pins::Pins;
 use super::plan::{DEFAULT_PATCH_SIZE, Layout, Plan, PlanStats, PrepTimings};
@@ -252,6 +252,8 @@ pub(crate) fn run_file_with(
             observer,
             |plan, obs| smooth(plan, &storage, obs),
         )?;
+        let r = &plan.reordered;
+        observer.mesh_at(Moment::AfterSmoothing, &r.positions, &r.triangles, &storage)?;
         let mut positions = match again {
             Some(kept) => {
                 let clock = Instant::now();
@@ -576,6 +578,8 @@ pub(crate) fn run_mesh(
             observer,
             |plan, obs| plan.smooth_stopped(&storage, opts, engine.statistics, obs),
         )?;
+        let r = &plan.reordered;
+        observer.mesh_at(Moment::AfterSmoothing, &r.positions, &r.triangles, &storage)?;
         let clock = Instant::now();
         smoothed.output_stats = smoothed.input_stats.clone().map(|mut info| {
             info.set_geometry(plan.geometry_about(glam::DVec3::from(info.volume_origin)));
@@ -623,6 +627,8 @@ fn smooth_planned(
     smooth: impl FnOnce(&mut Plan, &mut dyn Observer) -> Result<Stopped>,
 ) -> Result<Smoothed> {
     t.add_preparation(&plan.timings);
+    let r = &plan.reordered;
+    observer.mesh_at(Moment::BeforeSmoothing, &r.positions, &r.triangles, storage)?;
     let clock = Instant::now();
     let input_stats = match engine.with_stats {
         true => Some(metered(observer, Phase::Statistics, 2, |m| {

@@ -104,6 +104,7 @@ mod gltf;
 mod obj;
 mod off;
 mod ply;
+mod png;
 mod stl;
 mod stream;
 
@@ -117,6 +118,7 @@ use std::io::{Read, Write};
 use std::path::Path;
 use std::sync::Arc;
 
+pub use self::png::{encode_png, write_png};
 pub use crate::mesh::{Format, Precision, Source};
 pub use gltf::GltfLayout;
 pub use ply::{PlyEncoding, PlyLayout};

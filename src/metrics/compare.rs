@@ -164,6 +164,15 @@ pub fn compare_surfaces(a: &Mesh, b: &Mesh, rms: f64, max: f64) -> Comparison {
     }
 }
 
+/// The distance each vertex moved from `a` to `b` (the same vertices, in the same order), into
+/// `out`: the value the pictures of a run or a comparison colour each vertex by. A field of signed
+/// deviations along the input's normals may take its place.
+pub fn displacement_lengths(a: &[DVec3], b: &[DVec3], out: &mut [f32]) {
+    for ((p, q), d) in a.iter().zip(b).zip(out) {
+        *d = p.distance(*q) as f32;
+    }
+}
+
 /// `num / den` when it is a finite number (`None` for a zero denominator), never −0.
 fn ratio(num: f64, den: f64) -> Option<f64> {
     let r = num / den;

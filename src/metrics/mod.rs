@@ -104,7 +104,7 @@ mod compare;
 pub mod deviation;
 mod info;
 pub mod surface;
-pub use compare::{Comparison, compare, compare_surfaces, same_connectivity};
+pub use compare::{Comparison, compare, compare_surfaces, displacement_lengths, same_connectivity};
 pub use deviation::{DeviationStats, deviation};
 pub use info::{
     EdgeSums, Geometry, MeshInfo, connectivity, edge_sums, extent, extent_union, geometry, info,

@@ -8,13 +8,19 @@ use std::path::PathBuf;
 use clap::Args as ClapArgs;
 use serde::Serialize;
 
+use std::sync::Arc;
+
 use crate::cli::output::{check_files, mesh_output, print_json};
+use crate::cli::pictures::{Drawn, PictureArgs, PictureConfig, Sheet, distances, print_drawn};
+use crate::cli::plot::file_name;
 use crate::cli::progress::Progress;
 use crate::cli::report::{defined, fixed, num, print_deviation, print_rows};
 use crate::cli::shared::{DeviationArgs, tolerance_verdict};
-use crate::engine::{DeviationSettings, deviation};
+use crate::engine::{DeviationSettings, Meter, Observer, Phase, deviation};
 use crate::error::{Error, Result};
+use crate::mesh::{Mesh, Storage};
 use crate::metrics::{self, Comparison, DeviationStats};
+use crate::render::{self, View};
 
 /// `vcsmooth compare A B [--json]`
 #[derive(Debug, Clone, ClapArgs)]
@@ -36,6 +42,8 @@ pub struct CompareArgs {
     pub deviation_field: Option<PathBuf>,
     #[command(flatten)]
     pub deviation: DeviationArgs,
+    #[command(flatten)]
+    pub pictures: PictureArgs,
 }
 
 /// `vcsmooth compare`, resolved.
@@ -48,6 +56,8 @@ pub struct CompareConfig {
     /// What to measure and write of the deviation field; `field` writes it to `field_file`.
     pub deviation: DeviationSettings,
     pub field_file: Option<PathBuf>,
+    /// `--png` and its tile size.
+    pub png: Option<PictureConfig>,
 }
 
 impl CompareConfig {
@@ -62,6 +72,14 @@ impl CompareConfig {
                 &[("--deviation-field", f)],
             )?;
         }
+        let png = a.pictures.resolve()?;
+        if let Some(p) = &png {
+            let mut side = vec![("--png", p.path.as_path())];
+            if let Some(f) = &a.deviation_field {
+                side.push(("--deviation-field", f.as_path()));
+            }
+            check_files(&[("A", &a.a), ("B", &a.b)], None, &side)?;
+        }
         Ok(CompareConfig {
             deviation: DeviationSettings {
                 stats: a.deviation.deviation_stats || a.surface,
@@ -74,6 +92,7 @@ impl CompareConfig {
             b: a.b,
             json: a.json,
             surface: a.surface,
+            png,
         })
     }
 }
@@ -145,6 +164,16 @@ pub fn run(cfg: &CompareConfig, progress: &mut Progress, out: &mut dyn Write) ->
         };
         crate::io::write_mesh_with(path, on, &values, &crate::meter::Meter::default())?;
     }
+    let drawn = match &cfg.png {
+        Some(png) => {
+            let surface = field
+                .as_ref()
+                .filter(|_| cfg.surface)
+                .map(|(f, _)| &f.distance[..]);
+            Some(draw(cfg, png.clone(), &a, &b, surface, progress)?)
+        }
+        None => None,
+    };
     progress.finish();
     let doc = CompareDoc {
         a: cfg.a.display().to_string(),
@@ -159,11 +188,80 @@ pub fn run(cfg: &CompareConfig, progress: &mut Progress, out: &mut dyn Write) ->
         if let Some(d) = &doc.deviation {
             print_deviation(out, d)?;
         }
+        if let Some(d) = drawn {
+            print_drawn(out, &d)?;
+        }
     }
     match &doc.deviation {
         Some(d) => tolerance_verdict(&cfg.b, d),
         None => Ok(()),
     }
+}
+
+/// The picture of `compare --png`: A and B in grey, and B coloured by the distance between their
+/// vertices (with `--surface`, A coloured by `surface`, its vertices' distances to B's surface),
+/// every view framing both.
+fn draw(
+    cfg: &CompareConfig,
+    png: PictureConfig,
+    a: &Mesh,
+    b: &Mesh,
+    surface: Option<&[f64]>,
+    progress: &mut Progress,
+) -> Result<Drawn> {
+    let meter = Arc::new(Meter::new((a.triangles.len() + b.triangles.len()) as u64));
+    progress.phase_start(Phase::Render, &meter);
+    let drawn = (|| {
+        let views = &View::STANDARD;
+        let seen: Vec<_> = render::view_bounds(&a.positions, views)
+            .into_iter()
+            .zip(render::view_bounds(&b.positions, views))
+            .map(|(x, y)| x.union(y))
+            .collect();
+        let mut sheet = Sheet::new(png, &seen);
+        let (name_a, name_b) = (file_name(&cfg.a), file_name(&cfg.b));
+        sheet.draw(
+            format!("A: {name_a}"),
+            &a.positions,
+            &a.triangles,
+            None,
+            &meter,
+        )?;
+        match surface {
+            None => {
+                let moved = distances(&a.positions, &b.positions, &Storage::heap())?;
+                let what = Some((&moved[..], "distance to A".to_string()));
+                sheet.draw(
+                    format!("B: {name_b}"),
+                    &b.positions,
+                    &b.triangles,
+                    what,
+                    &meter,
+                )?;
+            }
+            Some(d) => {
+                sheet.draw(
+                    format!("B: {name_b}"),
+                    &b.positions,
+                    &b.triangles,
+                    None,
+                    &meter,
+                )?;
+                let d: Vec<f32> = d.iter().map(|&x| x as f32).collect();
+                let what = Some((&d[..], "distance to B's surface".to_string()));
+                sheet.draw(
+                    format!("A: {name_a}"),
+                    &a.positions,
+                    &a.triangles,
+                    what,
+                    &meter,
+                )?;
+            }
+        }
+        sheet.write(&format!("vcsmooth compare {name_a} {name_b}"))
+    })();
+    progress.phase_end(Phase::Render);
+    drawn
 }
 
 /// Print a comparison as aligned `key  value` lines.

@@ -12,6 +12,7 @@ use crate::cli::multires::{MultiresArgs, print_multires};
 use crate::cli::output::{
     check_files, check_work_dir, mesh_output, stdout_error, svg_output, write_json,
 };
+use crate::cli::pictures::{PictureArgs, PictureConfig, RunPictures, Sheet, print_drawn};
 use crate::cli::plot::{Curve, file_name, volume_curve, write_volume_plot};
 use crate::cli::progress::Progress;
 use crate::cli::report::{count, fixed, iterations_run, print_deviation};
@@ -47,6 +48,8 @@ pub struct SmoothArgs {
     #[command(flatten)]
     pub deviation: DeviationArgs,
     #[command(flatten)]
+    pub pictures: PictureArgs,
+    #[command(flatten)]
     pub cluster: ClusterArgs,
 }
 
@@ -73,6 +76,8 @@ pub struct SmoothConfig {
     pub engine: EngineSettings,
     pub report: Option<PathBuf>,
     pub plot: Option<PathBuf>,
+    /// `--png` and its tile size.
+    pub png: Option<PictureConfig>,
     /// `--multires` and its options.
     pub multires: Option<crate::multires::MultiresOptions>,
     /// `--checkpoint DIR` (kept) and `--checkpoint-every`.
@@ -108,9 +113,17 @@ impl SmoothConfig {
                 ));
             }
         }
+        let png = a.pictures.resolve()?;
+        if png.is_some() && a.cluster.checkpoint.is_some() {
+            return Err(flags::parameter(
+                "png",
+                "draws a run in one process: it cannot be combined with --checkpoint",
+            ));
+        }
         let mut sides = Vec::new();
         sides.extend(a.report.as_deref().map(|r| ("--report", r)));
         sides.extend(a.plot.as_deref().map(|p| ("--plot", p)));
+        sides.extend(png.as_ref().map(|p| ("--png", p.path.as_path())));
         let mut reads = vec![("IN", a.files.input.as_path())];
         reads.extend(a.pins.pin.as_deref().map(|p| ("--pin", p)));
         check_files(&reads, Some(("OUT", &a.files.output)), &sides)?;
@@ -146,6 +159,7 @@ impl SmoothConfig {
             output: a.files.output,
             report: a.report,
             plot: a.plot,
+            png,
             checkpoint: a.cluster.checkpoint,
             checkpoint_every: a.cluster.checkpoint_every as usize,
             argv,
@@ -191,11 +205,15 @@ pub fn run(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) -> 
             };
             progress.phase(format!("smoothing {}", cfg.input.display()));
             progress.smoothing(&cfg.options);
-            let (run, multires) = match &cfg.multires {
-                None => (
-                    engine::run_file(&cfg.input, &cfg.output, &cfg.options, &cfg.engine, progress)?,
+            let labels = (
+                format!("before: {}", file_name(&cfg.input)),
+                format!("after: {}", file_name(&cfg.output)),
+            );
+            let smooth = |observer: &mut dyn engine::Observer| match &cfg.multires {
+                None => Ok((
+                    engine::run_file(&cfg.input, &cfg.output, &cfg.options, &cfg.engine, observer)?,
                     None,
-                ),
+                )),
                 Some(m) => {
                     let (run, stats) = crate::multires::run_file(
                         &cfg.input,
@@ -203,12 +221,23 @@ pub fn run(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) -> 
                         &cfg.options,
                         m,
                         &cfg.engine,
-                        progress,
+                        observer,
                     )?;
-                    (run, Some(stats))
+                    Ok::<_, Error>((run, Some(stats)))
                 }
             };
-            return report(cfg, &run, multires, sha256, progress, out);
+            let (run, multires, sheet) = match cfg.png.clone() {
+                Some(png) => {
+                    let mut pictures = RunPictures::new(&mut *progress, png, labels);
+                    let (run, multires) = smooth(&mut pictures)?;
+                    (run, multires, pictures.into_sheet())
+                }
+                None => {
+                    let (run, multires) = smooth(&mut *progress)?;
+                    (run, multires, None)
+                }
+            };
+            return report(cfg, &run, multires, sha256, sheet, progress, out);
         };
         if cfg.multires.is_some() {
             return Err(flags::parameter(
@@ -217,6 +246,12 @@ pub fn run(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) -> 
             ));
         }
         in_one_process(&cfg.engine.deviation)?;
+        if cfg.png.is_some() {
+            return Err(flags::parameter(
+                "png",
+                "draws a run in one process; it cannot be combined with --checkpoint or MPI ranks",
+            ));
+        }
         let lead = comm.rank() == 0;
         if lead {
             progress.phase(format!(
@@ -250,7 +285,7 @@ pub fn run(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) -> 
         if !lead {
             return Ok(());
         }
-        report(cfg, &run, None, None, progress, out)
+        report(cfg, &run, None, None, None, progress, out)
     })
 }
 
@@ -277,6 +312,7 @@ fn report(
     run: &engine::Report,
     multires: Option<crate::multires::MultiresStats>,
     sha256: Option<(String, f64)>,
+    sheet: Option<Sheet>,
     progress: &mut Progress,
     out: &mut dyn Write,
 ) -> Result<()> {
@@ -308,6 +344,19 @@ fn report(
         let title = format!("{} on {}", cfg.options.method, file_name(&cfg.input));
         write_volume_plot(path, &title, &[curve])?;
     }
+    let drawn = match sheet {
+        Some(sheet) => {
+            let title = format!(
+                "vcsmooth smooth {} -> {}: {}, {}",
+                file_name(&cfg.input),
+                file_name(&cfg.output),
+                cfg.options.method,
+                iterations_run(&cfg.options, run)
+            );
+            Some(sheet.write(&title)?)
+        }
+        None => None,
+    };
     progress.finish();
 
     let s = Summary::of_run(records, multires.as_ref());
@@ -378,6 +427,9 @@ fn report(
         t.ingest, t.reorder, t.topology, t.partition, t.smoothing, t.write, t.total
     )
     .map_err(stdout_error)?;
+    if let Some(d) = drawn {
+        print_drawn(out, &d)?;
+    }
     match &run.deviation {
         Some(d) => tolerance_verdict(&cfg.output, d),
         None => Ok(()),
