@@ -94,7 +94,7 @@ impl Scale {
     }
 
     /// About `count` round values from `lo` to `hi` (both ends included) for a scale bar's
-    /// labels: steps of 1, 2 or 5 times a power of ten.
+    /// labels: steps of 1, 2 or 5 times a power of ten, none within half a step of an end.
     pub fn ticks(&self, count: usize) -> Vec<f32> {
         let (lo, hi) = (self.lo as f64, self.hi as f64);
         let span = hi - lo;
@@ -103,11 +103,12 @@ impl Scale {
         }
         let rough = span / (count - 1) as f64;
         let power = 10f64.powf(rough.log10().floor());
+        // The round step nearest the rough one (by ratio), so the count is about what was asked.
         let step = [1.0, 2.0, 5.0, 10.0]
             .into_iter()
             .map(|m| m * power)
-            .find(|s| *s >= rough)
-            .unwrap_or(10.0 * power);
+            .min_by(|a, b| (a / rough).ln().abs().total_cmp(&(b / rough).ln().abs()))
+            .unwrap_or(power);
         // The ends, which say the range exactly, and the round values between them that leave
         // room for the ends' labels.
         let first = (lo / step).ceil() as i64;
@@ -172,6 +173,8 @@ mod tests {
         assert_eq!(t.first(), Some(&0.0));
         assert_eq!(t.last(), Some(&0.0123));
         assert!(t.len() >= 4 && t.len() <= 8, "{t:?}");
+        let t = Scale::for_range(0.0, 1.0).ticks(5);
+        assert_eq!(t, [0.0, 0.2, 0.4, 0.6, 0.8, 1.0]);
         assert!(t.windows(2).all(|w| w[0] < w[1]), "{t:?}");
         assert_eq!(label(0.005), "5e-3");
         assert_eq!(label(0.0123), "0.0123");

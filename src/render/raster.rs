@@ -93,7 +93,7 @@ fn draw_triangle(frame: &Frame, index: u64, corners: [DVec3; 3]) {
     let inv = 1.0 / area;
     for y in y0 as usize..=y1 as usize {
         let row = &frame.samples[y * cam.width..(y + 1) * cam.width];
-        for x in x0 as usize..=x1 as usize {
+        for (x, sample) in row.iter().enumerate().take(x1 as usize + 1).skip(x0 as usize) {
             let p = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
             let (e0, e1, e2) = (edge(b2, c2, p), edge(c2, a2, p), edge(a2, b2, p));
             if e0 * sign < slack || e1 * sign < slack || e2 * sign < slack {
@@ -101,7 +101,7 @@ fn draw_triangle(frame: &Frame, index: u64, corners: [DVec3; 3]) {
             }
             let z = (e0 * a.z + e1 * b.z + e2 * c.z) * inv;
             let depth = (z.clamp(0.0, 1.0) * DEPTH_MAX).round() as u64;
-            row[x].fetch_min(depth << INDEX_BITS | index, Ordering::Relaxed);
+            sample.fetch_min(depth << INDEX_BITS | index, Ordering::Relaxed);
         }
     }
 }
