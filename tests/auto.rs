@@ -17,7 +17,7 @@ use vcsmooth::{Mesh, Method, Options, Report, Topology, shapes};
 
 use crate::oracles::lowpass;
 use crate::util::{
-    cluster_settings, engine_settings, fails, generate_sphere, noisy_sphere, ok, read_json,
+    arg, cluster_settings, engine_settings, fails, generate_sphere, noisy_sphere, ok, read_json,
     read_scan, run_ranks, scan, vcsmooth,
 };
 
@@ -276,10 +276,6 @@ fn the_engine_follows_the_prototype_rule() {
             j + 1
         );
     }
-}
-
-fn arg(p: &Path) -> String {
-    p.display().to_string()
 }
 
 #[test]

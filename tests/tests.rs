@@ -24,6 +24,7 @@ mod layout;
 mod multires;
 mod oracles;
 mod patches;
+mod pictures;
 mod pins;
 mod progress;
 mod refine;

@@ -45,6 +45,11 @@ where
     command().args(args).output().expect("run vcsmooth")
 }
 
+/// A path as a command-line argument.
+pub fn arg(p: &Path) -> String {
+    p.display().to_string()
+}
+
 pub fn stdout(o: &Output) -> String {
     String::from_utf8_lossy(&o.stdout).into_owned()
 }

@@ -93,7 +93,12 @@ fn draw_triangle(frame: &Frame, index: u64, corners: [DVec3; 3]) {
     let inv = 1.0 / area;
     for y in y0 as usize..=y1 as usize {
         let row = &frame.samples[y * cam.width..(y + 1) * cam.width];
-        for (x, sample) in row.iter().enumerate().take(x1 as usize + 1).skip(x0 as usize) {
+        for (x, sample) in row
+            .iter()
+            .enumerate()
+            .take(x1 as usize + 1)
+            .skip(x0 as usize)
+        {
             let p = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
             let (e0, e1, e2) = (edge(b2, c2, p), edge(c2, a2, p), edge(a2, b2, p));
             if e0 * sign < slack || e1 * sign < slack || e2 * sign < slack {
