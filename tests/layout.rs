@@ -354,3 +354,95 @@ fn no_loose_module_files() {
         .collect();
     assert!(loose.is_empty(), "loose files in src/: {loose:?}");
 }
+
+/// The variants of `smooth::Method`, read from its declaration.
+fn method_variants() -> Vec<String> {
+    let text = std::fs::read_to_string(src().join("smooth/mod.rs")).unwrap();
+    let body = text
+        .split("pub enum Method {")
+        .nth(1)
+        .and_then(|rest| rest.split('}').next())
+        .expect("smooth/mod.rs declares `pub enum Method`");
+    body.lines()
+        .map(str::trim)
+        .filter(|l| !l.starts_with("//") && !l.starts_with("#["))
+        .filter_map(|l| l.strip_suffix(','))
+        .map(str::to_string)
+        .collect()
+}
+
+/// A variant's command-line name, as the registry spells it (`VcsLowpass` → `vcs-lowpass`).
+fn kebab(variant: &str) -> String {
+    let mut out = String::new();
+    for (i, c) in variant.chars().enumerate() {
+        if c.is_ascii_uppercase() && i > 0 {
+            out.push('-');
+        }
+        out.push(c.to_ascii_lowercase());
+    }
+    out
+}
+
+/// Whether `lit` holds `name` as a word of its own (`vcs` in "vcs-lowpass" is not `vcs`).
+fn names_word(lit: &str, name: &str) -> bool {
+    let word = |c: char| c.is_ascii_alphanumeric() || c == '-' || c == '_';
+    lit.split(|c: char| !word(c)).any(|w| w == name)
+}
+
+/// Outside `smooth/` the library asks the registry: no method's variant, no method's name, and no
+/// `match` on a method (unit tests aside). A new method is one unit there and nowhere else.
+#[test]
+fn no_method_is_named_outside_smooth() {
+    let variants = method_variants();
+    assert!(variants.len() >= 8, "{variants:?}");
+    let mut files = Vec::new();
+    rust_files(&src(), &mut files);
+    rust_files(&python_src(), &mut files);
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut found = Vec::new();
+    for f in files {
+        let rel = f.strip_prefix(root).unwrap().to_path_buf();
+        // `tests.rs` files are unit-test modules (`#[cfg(test)] mod tests;`).
+        if rel.starts_with("src/smooth") || rel.file_name().is_some_and(|n| n == "tests.rs") {
+            continue;
+        }
+        let code = code_of(&std::fs::read_to_string(&f).unwrap());
+        for v in &variants {
+            let path = format!("Method::{v}");
+            for (i, _) in code.match_indices(&path) {
+                let next = code[i + path.len()..].chars().next();
+                if !next.is_some_and(|c| c.is_ascii_alphanumeric() || c == '_') {
+                    found.push(format!("{}: {path}", rel.display()));
+                }
+            }
+            for (line, lit) in string_literals(&code) {
+                if names_word(&lit, &kebab(v)) {
+                    found.push(format!("{}:{line}: {lit:?}", rel.display()));
+                }
+            }
+        }
+        for (i, _) in code.match_indices("match ") {
+            let scrutinee = code[i + 6..].split('{').next().unwrap_or("").trim();
+            if scrutinee == "method" || scrutinee.ends_with(".method") {
+                found.push(format!("{}: match {scrutinee}", rel.display()));
+            }
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "methods named outside src/smooth:\n{}",
+        found.join("\n")
+    );
+}
+
+#[test]
+fn the_method_scan_sees_variants_names_and_matches() {
+    assert_eq!(kebab("VcsLowpass"), "vcs-lowpass");
+    assert!(names_word("use vcs-lowpass here", "vcs-lowpass"));
+    assert!(!names_word("vcs-lowpass", "vcs"));
+    assert!(!names_word("vcsmooth", "vcs"));
+    let code =
+        code_of("fn f() { if m == Method::Vcs { g(\"taubin\") } }\n#[cfg(test)]\nMethod::Hc");
+    assert!(code.contains("Method::Vcs") && !code.contains("Method::Hc"));
+    assert_eq!(string_literals(&code)[0].1, "taubin");
+}

@@ -31,7 +31,7 @@ run whose mesh exceeds its --memory-budget puts the large arrays in scratch file
 drop on a loaded machine: the table's first line gives the load average. The defaults take about a
 minute on 2 cores.
 
-Example: vcsmooth bench --sizes 1M,4M --methods laplacian,taubin,vcs --threads 1,2 --json";
+Example: vcsmooth bench --sizes 1M,4M --threads 1,2 --json";
 
 /// `vcsmooth bench [--sizes ...] [--methods ...] [--threads ...] [--iterations N] [--repeats R] [--json]`
 #[derive(Debug, Clone, ClapArgs)]
