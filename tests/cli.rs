@@ -487,6 +487,62 @@ fn curves_take_every_control_as_smooth_does() {
     );
 }
 
+/// `curves --iterations auto --pin FILE`: each method stops where `smooth --iterations auto`
+/// stops, with the same pins, and its curve is that run's volume column; the pins take effect.
+#[test]
+fn curves_take_the_automatic_stop_and_pins_as_smooth_does() {
+    let (dir, sphere) = noisy_sphere_file();
+    let plot = dir.path().join("curves.svg");
+    let pins = dir.path().join("pins.txt");
+    let listed: String = (0..200).map(|i| format!("{}\n", 3 * i)).collect();
+    std::fs::write(&pins, listed).unwrap();
+    let methods = ["taubin", "vcs", "laplacian"];
+    let curves_of = |extra: &[&str]| -> serde_json::Value {
+        let mut args = vec!["curves", sphere.to_str().unwrap(), "--methods"];
+        args.extend(["taubin,vcs,laplacian", "--iterations", "auto", "--json"]);
+        // `smooth`'s order of the vertices (the automatic stop's noise sample follows it).
+        args.extend(["--plot", plot.to_str().unwrap(), "--patch-size", "512"]);
+        args.extend(extra);
+        json(&ok(vcsmooth(args)))
+    };
+    let pct = |c: &serde_json::Value| -> Vec<f64> {
+        let v = c["volume_pct"].as_array().unwrap();
+        v.iter().map(|x| x.as_f64().unwrap()).collect()
+    };
+    let doc = curves_of(&["--pin", pins.to_str().unwrap()]);
+    assert_eq!(doc["auto_stop"], true);
+    let curves: Vec<Vec<f64>> = doc["curves"].as_array().unwrap().iter().map(pct).collect();
+    let longest = curves.iter().map(|c| c.len() - 1).max().unwrap();
+    assert_eq!(doc["iterations"].as_u64().unwrap() as usize, longest);
+    for (method, curve) in methods.iter().zip(&curves) {
+        let (out, report) = (dir.path().join("out.ply"), dir.path().join("r.json"));
+        let mut args = vec!["smooth", sphere.to_str().unwrap(), out.to_str().unwrap()];
+        args.extend([
+            "--method",
+            method,
+            "--iterations",
+            "auto",
+            "--patch-size",
+            "512",
+        ]);
+        args.extend(["--pin", pins.to_str().unwrap()]);
+        args.extend(["--report", report.to_str().unwrap()]);
+        ok(vcsmooth(args));
+        let smooth: Vec<f64> = read_json(&report)["iterations"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|r| r["volume_pct"].as_f64().unwrap())
+            .collect();
+        assert!(smooth.len() < 100, "{method}: the stop never came");
+        assert_eq!(curve[1..], smooth[..], "{method}");
+    }
+    // Without the pins the Laplacian's curve differs: they were applied.
+    let free = curves_of(&[]);
+    let laplacian = pct(&free["curves"][2]);
+    assert_ne!(laplacian[1], curves[2][1]);
+}
+
 #[test]
 fn missing_input_fails_cleanly_and_writes_nothing() {
     let dir = tempfile::tempdir().unwrap();

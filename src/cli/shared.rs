@@ -89,7 +89,7 @@ impl std::fmt::Display for Iterations {
 }
 
 /// `--iterations` (clap value parser): a whole number or `auto`.
-fn iterations(s: &str) -> std::result::Result<Iterations, String> {
+pub fn iterations(s: &str) -> std::result::Result<Iterations, String> {
     if s.trim() == "auto" {
         return Ok(Iterations::Auto);
     }

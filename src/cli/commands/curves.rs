@@ -12,7 +12,7 @@ use crate::cli::output::{check_files, print_json, stdout_error, svg_output};
 use crate::cli::plot::{Curve, file_name, volume_curve, write_volume_plot};
 use crate::cli::progress::Progress;
 use crate::cli::report::fixed;
-use crate::cli::shared::{EngineArgs, MethodParams, distinct};
+use crate::cli::shared::{EngineArgs, Iterations, MethodParams, PinArgs, distinct, iterations};
 use crate::engine::{self, IterationRecord};
 use crate::engine::{EngineSettings, Layout};
 use crate::error::Result;
@@ -29,12 +29,14 @@ pub struct CurvesArgs {
     #[arg(long, value_enum, value_delimiter = ',', value_name = "M,M,...",
           default_values_t = Method::CURVES)]
     pub methods: Vec<Method>,
-    /// Iterations per method (at least 1).
-    #[arg(long, value_name = "N", default_value_t = 10, allow_negative_numbers = true,
-          value_parser = clap::value_parser!(u32).range(1..))]
-    pub iterations: u32,
+    /// Iterations per method (at least 1), or 'auto': each method stops when its noise is gone, as `smooth --iterations auto` does (its curve ends there).
+    #[arg(long, value_name = "N|auto", default_value = "10", allow_negative_numbers = true,
+          value_parser = curve_iterations)]
+    pub iterations: Iterations,
     #[command(flatten)]
     pub params: MethodParams,
+    #[command(flatten)]
+    pub pins: PinArgs,
     #[command(flatten)]
     pub engine: EngineArgs,
     /// SVG file for the volume curves, one line per method with a legend.
@@ -68,14 +70,23 @@ impl CurvesConfig {
             return Err(flags::parameter("methods", "names no method"));
         }
         // Every method runs with the same parameters: each must accept them.
-        let iterations = a.iterations as usize;
+        let options_of = |method| match a.iterations {
+            Iterations::Count(n) => a.params.options(method, n),
+            Iterations::Auto => Ok(Options {
+                auto_stop: true,
+                ..a.params.options(method, engine::auto::DEFAULT_CAP)?
+            }),
+        };
         for &method in &methods {
-            a.params.options(method, iterations)?;
+            options_of(method)?;
         }
-        let options = a.params.options(methods[0], iterations)?;
+        let options = options_of(methods[0])?;
         svg_output(&a.plot)?;
-        check_files(&[("IN", &a.input)], None, &[("--plot", &a.plot)])?;
-        let engine = a.engine.resolve()?;
+        let mut reads = vec![("IN", a.input.as_path())];
+        reads.extend(a.pins.pin.as_deref().map(|p| ("--pin", p)));
+        check_files(&reads, None, &[("--plot", &a.plot)])?;
+        let mut engine = a.engine.resolve()?;
+        engine.pins = a.pins.resolve()?;
         let layout = match a.engine.patch_size {
             Some(_) => engine.layout(),
             None => Layout::Whole,
@@ -89,6 +100,15 @@ impl CurvesConfig {
             plot: a.plot,
             json: a.json,
         })
+    }
+}
+
+/// `--iterations` of `curves` (clap value parser): as `smooth`'s, but a curve needs at least one
+/// iteration.
+fn curve_iterations(s: &str) -> std::result::Result<Iterations, String> {
+    match iterations(s)? {
+        Iterations::Count(0) => Err("a curve needs at least 1 iteration".to_string()),
+        n => Ok(n),
     }
 }
 
@@ -108,6 +128,8 @@ pub struct CurvesDoc {
     pub tool: Tool,
     pub input: String,
     pub iterations: usize,
+    /// `--iterations auto`: every curve ends where its method stopped.
+    pub auto_stop: bool,
     pub lambda: f64,
     pub mu: f64,
     pub reject_energy_increase: bool,
@@ -165,7 +187,12 @@ pub fn run(cfg: &CurvesConfig, progress: &mut Progress, out: &mut dyn Write) -> 
     let doc = CurvesDoc {
         tool: Tool::this(),
         input: cfg.input.display().to_string(),
-        iterations: cfg.options.iterations,
+        // With the automatic stop, the longest curve's length (each stops where its noise is gone).
+        iterations: match cfg.options.auto_stop {
+            true => docs.iter().map(|d| d.iterations.len()).max().unwrap_or(0),
+            false => cfg.options.iterations,
+        },
+        auto_stop: cfg.options.auto_stop,
         lambda: cfg.options.lambda,
         mu: cfg.options.mu,
         reject_energy_increase: cfg.options.reject_energy_increase,
