@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use serde_json::Value;
 
-use crate::util::{fails, generate_sphere, json, listing, ok, read_json, scan, vcsmooth};
+use crate::util::{command, fails, generate_sphere, json, listing, ok, read_json, scan, vcsmooth};
 
 const METHODS: [&str; 5] = ["vcs", "vcs-triangle", "lem", "laplacian", "taubin"];
 
@@ -541,6 +541,37 @@ fn curves_take_the_automatic_stop_and_pins_as_smooth_does() {
     let free = curves_of(&[]);
     let laplacian = pct(&free["curves"][2]);
     assert_ne!(laplacian[1], curves[2][1]);
+}
+
+/// A reader that closes standard output early (`| head -1`) ends the command quietly: its files
+/// written, its own exit code (0, or the tolerance's), nothing on stderr.
+#[test]
+fn a_closed_stdout_ends_quietly_with_the_commands_own_code() {
+    let (dir, sphere) = noisy_sphere_file();
+    let out = dir.path().join("out.ply");
+    let closed = |args: &[&str]| {
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
+        command().args(args).stdout(writer).output().unwrap()
+    };
+    let s = sphere.to_str().unwrap();
+    for (args, code) in [
+        (vec!["info", s], 0),
+        (vec!["smooth", s, out.to_str().unwrap()], 0),
+        (
+            vec!["smooth", s, out.to_str().unwrap(), "--tolerance", "1e-9"],
+            3,
+        ),
+    ] {
+        let _ = std::fs::remove_file(&out);
+        let o = closed(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(code), "{args:?}: {err}");
+        assert!(!err.contains("error"), "{args:?}: {err}");
+        if args[0] == "smooth" {
+            assert!(out.exists(), "{args:?}: no output");
+        }
+    }
 }
 
 #[test]

@@ -184,7 +184,7 @@ where
 pub fn run(config: &Config) -> Result<()> {
     let mut progress = Progress::for_stderr();
     let stdout = std::io::stdout();
-    let mut out = stdout.lock();
+    let mut out = output::ClosablePipe::new(stdout.lock());
     run_with(config, &mut progress, &mut out)
 }
 

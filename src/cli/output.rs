@@ -368,6 +368,51 @@ pub fn stdout_error(e: std::io::Error) -> Error {
     Error::io("<stdout>", e)
 }
 
+/// Standard output that a reader may close early (`vcsmooth info x.ply | head -1`): once a write
+/// finds the pipe closed, that and every later write are dropped as written, so the command
+/// finishes its work (its files, its exit code) quietly, as `head` expects of a producer.
+pub struct ClosablePipe<W: Write> {
+    inner: W,
+    closed: bool,
+}
+
+impl<W: Write> ClosablePipe<W> {
+    pub fn new(inner: W) -> ClosablePipe<W> {
+        ClosablePipe {
+            inner,
+            closed: false,
+        }
+    }
+}
+
+impl<W: Write> Write for ClosablePipe<W> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        if self.closed {
+            return Ok(buf.len());
+        }
+        match self.inner.write(buf) {
+            Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => {
+                self.closed = true;
+                Ok(buf.len())
+            }
+            r => r,
+        }
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        match self.closed {
+            true => Ok(()),
+            false => match self.inner.flush() {
+                Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => {
+                    self.closed = true;
+                    Ok(())
+                }
+                r => r,
+            },
+        }
+    }
+}
+
 /// Print `vcsmooth: error: <message>` on stderr, on one line.
 pub fn print_error(message: &str) {
     eprintln!("vcsmooth: error: {}", one_line(message));
