@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use indicatif::{HumanDuration, ProgressBar, ProgressDrawTarget, ProgressState, ProgressStyle};
 
 use crate::engine::{IterationRecord, Meter, Observer, Phase};
 use crate::smooth::Options;
@@ -145,11 +145,9 @@ impl Progress {
             )
             .unwrap_or_else(|_| ProgressStyle::default_bar())
         } else {
-            ProgressStyle::with_template(
+            with_eta(ProgressStyle::with_template(
                 "{prefix} [{bar:24}] {pos}/{len} {msg} [{elapsed}, eta {eta}]",
-            )
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> ")
+            ))
         };
         if let Some(bar) = self.replace_bar(style, it.label.clone(), it.total as u64) {
             bar.tick();
@@ -159,11 +157,9 @@ impl Progress {
     /// Show a phase of the library as a bar of its meter, with its percentage, the time it has
     /// taken and the time left.
     fn draw_phase(&mut self, phase: Phase, meter: &Arc<Meter>) {
-        let style = ProgressStyle::with_template(
+        let style = with_eta(ProgressStyle::with_template(
             "{prefix} [{bar:24}] {percent:>3}% [{elapsed}, eta {eta}]",
-        )
-        .unwrap_or_else(|_| ProgressStyle::default_bar())
-        .progress_chars("=> ");
+        ));
         let Some(bar) = self.replace_bar(style, phase.name().to_string(), meter.total()) else {
             return;
         };
@@ -203,6 +199,23 @@ impl Progress {
             bar.finish_and_clear();
         }
     }
+}
+
+/// A bar's style whose `{eta}` says "unknown" until there is progress to estimate it from
+/// (indicatif shows `0s` then, which reads as "done").
+fn with_eta(template: Result<ProgressStyle, indicatif::style::TemplateError>) -> ProgressStyle {
+    template
+        .unwrap_or_else(|_| ProgressStyle::default_bar())
+        .progress_chars("=> ")
+        .with_key(
+            "eta",
+            |state: &ProgressState, w: &mut dyn std::fmt::Write| {
+                let _ = match state.pos() {
+                    0 => w.write_str("unknown"),
+                    _ => write!(w, "{:#}", HumanDuration(state.eta())),
+                };
+            },
+        )
 }
 
 impl Drop for Progress {
