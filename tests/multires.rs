@@ -524,3 +524,45 @@ fn crease_vertices_keep_their_bytes() {
         a.positions.len()
     );
 }
+
+/// `--multires --pin FILE`: every pinned vertex keeps its bytes through the levels, the transfer
+/// and the final volume correction, the others move, and the volume stays exact.
+#[test]
+fn pinned_vertices_keep_their_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in.ply");
+    generate_sphere(&input, 4, Some(0.3), Some(5));
+    let pins = dir.path().join("pins.txt");
+    let pinned: Vec<usize> = (0..2562).step_by(5).collect();
+    let listed: String = pinned.iter().map(|v| format!("{v}\n")).collect();
+    std::fs::write(&pins, listed).unwrap();
+    let (out, report) = (dir.path().join("out.ply"), dir.path().join("r.json"));
+    let [i, o, r, p] = [&input, &out, &report, &pins].map(|p| p.display().to_string());
+    ok(vcsmooth([
+        "smooth",
+        &i,
+        &o,
+        "--multires",
+        "--pin",
+        &p,
+        "--report",
+        &r,
+    ]));
+    let (a, b) = (io::read_mesh(&input).unwrap(), io::read_mesh(&out).unwrap());
+    for &v in &pinned {
+        assert_eq!(a.positions[v], b.positions[v], "pinned vertex {v} moved");
+    }
+    let moved = (0..a.positions.len())
+        .filter(|v| a.positions[*v] != b.positions[*v])
+        .count();
+    assert!(moved > a.positions.len() / 2, "{moved} moved");
+    let doc = read_json(&report);
+    let last = doc["iterations"]
+        .as_array()
+        .unwrap()
+        .last()
+        .unwrap()
+        .clone();
+    let pct = last["volume_pct"].as_f64().unwrap();
+    assert!((pct - 100.0).abs() < 1e-7, "{pct}");
+}
