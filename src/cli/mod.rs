@@ -37,6 +37,7 @@ mod tests;
 
 use std::ffi::OsString;
 use std::io::Write;
+use std::path::Path;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
@@ -126,6 +127,23 @@ impl Config {
         })
     }
 }
+impl Config {
+    /// The file a run of this command works on, named if it is interrupted: the file it writes,
+    /// or the one it reads when it writes none (`batch` names each input as it goes).
+    fn subject(&self) -> Option<&Path> {
+        match self {
+            Config::Smooth(c) => Some(&c.output),
+            Config::Info(c) => Some(&c.input),
+            Config::Compare(c) => Some(&c.b),
+            Config::Generate(c) => Some(&c.output),
+            Config::Curves(c) => Some(&c.input),
+            Config::Subdivide(c) => Some(&c.output),
+            Config::Refine(c) => Some(&c.output),
+            Config::Demo(_) | Config::Bench(_) | Config::Batch(_) | Config::SlurmScript(_) => None,
+        }
+    }
+}
+
 /// Exit code of a failure at run time (unreadable input, failed write, …).
 pub const EXIT_FAILURE: u8 = 1;
 /// Exit code of a usage error (bad flags or option values), as clap uses.
@@ -141,10 +159,15 @@ where
     // Without it, SIGINT, SIGTERM and SIGHUP still end the process, leaving temporary files.
     let _ = crate::signals::remove_on_signals(|signal| {
         // Not `eprintln!`: stderr may be a closed pipe, and this must not panic.
-        let _ = writeln!(
-            std::io::stderr(),
-            "vcsmooth: error: interrupted by {signal}"
-        );
+        let mut stderr = std::io::stderr();
+        let _ = match crate::signals::subject() {
+            Some(file) => writeln!(
+                stderr,
+                "vcsmooth: error: {}: interrupted by {signal}",
+                file.display()
+            ),
+            None => writeln!(stderr, "vcsmooth: error: interrupted by {signal}"),
+        };
     });
     let argv: Vec<OsString> = argv.into_iter().map(Into::into).collect();
     let args = match Args::try_parse_from(&argv) {
@@ -162,6 +185,7 @@ where
             return ExitCode::from(EXIT_USAGE);
         }
     };
+    crate::signals::set_subject(config.subject());
     match run(&config) {
         Ok(()) => ExitCode::SUCCESS,
         Err(Error::Reported { .. }) => ExitCode::from(EXIT_FAILURE),

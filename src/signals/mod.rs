@@ -33,6 +33,20 @@ fn registry() -> MutexGuard<'static, Vec<PathBuf>> {
     REGISTRY.lock().unwrap_or_else(|e| e.into_inner())
 }
 
+/// The file the process is working on (a run's output, a batch's current input), named by the
+/// line that reports an interruption.
+static SUBJECT: Mutex<Option<PathBuf>> = Mutex::new(None);
+
+/// Name `path` as the file the process is working on from now on (`None`: no file).
+pub fn set_subject(path: Option<&Path>) {
+    *SUBJECT.lock().unwrap_or_else(|e| e.into_inner()) = path.map(Path::to_path_buf);
+}
+
+/// The file named by [`set_subject`] last.
+pub fn subject() -> Option<PathBuf> {
+    SUBJECT.lock().unwrap_or_else(|e| e.into_inner()).clone()
+}
+
 /// A registered temporary file: removed when dropped, unless it was renamed into place.
 #[derive(Debug)]
 pub struct Temporary(Option<PathBuf>);

@@ -63,15 +63,18 @@ fn temp_bytes(dir: &Path) -> Option<u64> {
     })
 }
 
-/// The child, interrupted by `signal` (number `number`), must have printed one line and exited
-/// with 128 + `number`.
-fn check_interrupted(child: Child, signal: &str, number: i32) {
+/// The child, interrupted by `signal` (number `number`), must have printed one line naming
+/// `output` and exited with 128 + `number`.
+fn check_interrupted(child: Child, output: &Path, signal: &str, number: i32) {
     let out = child.wait_with_output().unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(128 + number), "{signal}: {err}");
     assert_eq!(
         err,
-        format!("vcsmooth: error: interrupted by {signal}\n"),
+        format!(
+            "vcsmooth: error: {}: interrupted by {signal}\n",
+            output.display()
+        ),
         "{signal}"
     );
 }
@@ -102,7 +105,10 @@ fn a_signal_mid_write_removes_the_temporary_file_and_keeps_the_previous_output()
             assert_eq!(out.status.code(), Some(128 + number), "SIG{signal}: {err}");
             assert_eq!(
                 err,
-                format!("vcsmooth: error: interrupted by SIG{signal}\n")
+                format!(
+                    "vcsmooth: error: {}: interrupted by SIG{signal}\n",
+                    output.display()
+                )
             );
             assert_eq!(std::fs::read(&output).unwrap(), PREVIOUS, "SIG{signal}");
             assert_eq!(listing(d), ["big.ply", "out.ply"], "SIG{signal}");
@@ -204,7 +210,7 @@ fn a_signal_while_smoothing_with_scratch_files_leaves_nothing() {
     assert!(wait_for(&mut child, mapped), "the run ended by itself");
     std::thread::sleep(Duration::from_millis(100));
     send(&child, "TERM");
-    check_interrupted(child, "SIGTERM", 15);
+    check_interrupted(child, &output, "SIGTERM", 15);
     assert_eq!(std::fs::read(&output).unwrap(), PREVIOUS);
     assert_eq!(listing(d), ["in.ply", "out.ply", "scratch"]);
     assert!(listing(&scratch).is_empty(), "{:?}", listing(&scratch));

@@ -173,6 +173,7 @@ fn run_share(
         let clock = Instant::now();
         progress.phase(format!("smoothing {}", input.display()));
         progress.smoothing(&smooth.options);
+        crate::signals::set_subject(Some(input));
         let result = catch_panic(|| {
             let input_id = core::FileId::of(input)?;
             let run = engine::run_file(input, &output, &smooth.options, &smooth.engine, progress)?;
