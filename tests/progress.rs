@@ -38,6 +38,8 @@ struct Recorder {
     seen: Vec<Seen>,
     running: Option<Running>,
     iterations: Vec<usize>,
+    /// The parts told within iterations (`Some((done, of))`) and each iteration's end (`None`).
+    log: Vec<Option<(usize, usize)>>,
 }
 
 impl Observer for Recorder {
@@ -95,6 +97,11 @@ impl Observer for Recorder {
             "an iteration outside the smoothing phase"
         );
         self.iterations.push(record.iteration);
+        self.log.push(None);
+    }
+
+    fn iteration_part(&mut self, done: usize, of: usize) {
+        self.log.push(Some((done, of)));
     }
 }
 
@@ -234,6 +241,35 @@ fn a_write_in_another_format_ends_at_its_size_and_an_automatic_stop_at_its_cap()
     );
     assert!(seen.iterations.len() < 200, "the stop never came");
     assert_eq!(seen.total(Phase::Smooth), 200);
+}
+
+/// A stencil method's iterations tell their parts (the colours of the sweep), in order, each
+/// iteration all of them before its record: what lets a display move within a long iteration.
+#[test]
+fn iterations_tell_their_colours_as_they_go() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in.ply");
+    vcsmooth::io::write_mesh(&input, &noisy_sphere(5, 0.3, 2)).unwrap();
+    let output = dir.path().join("out.ply");
+    let settings = EngineSettings {
+        patch_size: 64,
+        ..EngineSettings::default()
+    };
+    for method in [Method::Vcs, Method::VcsLowpass] {
+        let opts = Options {
+            method,
+            iterations: 3,
+            ..Options::default()
+        };
+        let (seen, report) = run_file(&input, &output, &opts, &settings);
+        let colours = report.plan.colours;
+        assert!(colours > 1, "{method}: {colours} colours");
+        let per_iteration: Vec<Option<(usize, usize)>> = (1..=colours)
+            .map(|c| Some((c, colours)))
+            .chain([None])
+            .collect();
+        assert_eq!(seen.log, per_iteration.repeat(3), "{method}");
+    }
 }
 
 /// An in-memory run has no read and no write; it puts the positions back in the caller's order.

@@ -220,6 +220,10 @@ impl Observer for RunPictures<'_> {
         self.inner.iteration(record, total);
     }
 
+    fn iteration_part(&mut self, done: usize, of: usize) {
+        self.inner.iteration_part(done, of);
+    }
+
     fn phase_start(&mut self, phase: Phase, meter: &Arc<Meter>) {
         self.inner.phase_start(phase, meter);
     }

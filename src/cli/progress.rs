@@ -22,7 +22,13 @@ pub struct Progress {
     iterations: Option<IterationBar>,
     /// Copies the current phase's meter into the bar.
     ticker: Option<Ticker>,
+    /// Iterations done in the current smoothing phase.
+    iterations_done: u64,
 }
+
+/// Steps of the iteration bar per iteration: it moves within an iteration as its parts (the
+/// colours of a stencil sweep) are done.
+const STEPS: u64 = 1000;
 
 /// An iteration bar: its label, its length, whether the run stops by itself before it.
 #[derive(Clone)]
@@ -84,6 +90,7 @@ impl Progress {
             bar: None,
             iterations: None,
             ticker: None,
+            iterations_done: 0,
         }
     }
 
@@ -93,6 +100,7 @@ impl Progress {
             bar: Some(bar),
             iterations: None,
             ticker: None,
+            iterations_done: 0,
         }
     }
 
@@ -141,15 +149,23 @@ impl Progress {
     fn draw(&mut self, it: &IterationBar) {
         let style = if it.auto_stop {
             ProgressStyle::with_template(
-                "{prefix}: iteration {pos} (stops when the noise is gone, at most {len}) {msg} [{elapsed}]",
+                "{prefix}: iteration {done} (stops when the noise is gone, at most {cap}) {msg} [{elapsed}]",
             )
             .unwrap_or_else(|_| ProgressStyle::default_bar())
         } else {
             with_eta(ProgressStyle::with_template(
-                "{prefix} [{bar:24}] {pos}/{len} {msg} [{elapsed}, eta {eta}]",
+                "{prefix} [{bar:24}] {done}/{cap} {msg} [{elapsed}, eta {eta}]",
             ))
-        };
-        if let Some(bar) = self.replace_bar(style, it.label.clone(), it.total as u64) {
+        }
+        // Whole iterations, from the bar's steps.
+        .with_key("done", |state: &ProgressState, w: &mut dyn std::fmt::Write| {
+            let _ = write!(w, "{}", state.pos() / STEPS);
+        })
+        .with_key("cap", |state: &ProgressState, w: &mut dyn std::fmt::Write| {
+            let _ = write!(w, "{}", state.len().unwrap_or(0) / STEPS);
+        });
+        self.iterations_done = 0;
+        if let Some(bar) = self.replace_bar(style, it.label.clone(), it.total as u64 * STEPS) {
             bar.tick();
         }
     }
@@ -245,9 +261,17 @@ impl Observer for Progress {
         self.stop_ticker();
     }
 
-    fn iteration(&mut self, record: &IterationRecord, _total: usize) {
+    fn iteration_part(&mut self, done: usize, of: usize) {
         if let Some(bar) = &self.bar {
-            bar.set_position(record.iteration as u64);
+            let within = done as u64 * STEPS / of.max(1) as u64;
+            bar.set_position(self.iterations_done * STEPS + within.min(STEPS - 1));
+        }
+    }
+
+    fn iteration(&mut self, record: &IterationRecord, _total: usize) {
+        self.iterations_done = record.iteration as u64;
+        if let Some(bar) = &self.bar {
+            bar.set_position(record.iteration as u64 * STEPS);
             if record.volume_pct.is_finite() {
                 bar.set_message(format!("volume {:.6} %", record.volume_pct));
             }

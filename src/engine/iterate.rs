@@ -410,6 +410,9 @@ impl Run<'_, '_> {
             });
             sweep.add(&done);
             self.share.colour_end(pos, sums);
+            if self.share.leads() {
+                self.observer.iteration_part(c + 1, colours.len());
+            }
         }
         sweep
     }

@@ -197,6 +197,11 @@ pub trait Observer: Send {
     /// the automatic stop, `Options::auto_stop`, the cap: the run may end sooner).
     fn iteration(&mut self, _record: &IterationRecord, _total: usize) {}
 
+    /// Inside an iteration: `done` of its `of` parts (the colours of a stencil sweep) are done.
+    /// Called between the parts, on the loop's thread, so that a display moves within long
+    /// iterations.
+    fn iteration_part(&mut self, _done: usize, _of: usize) {}
+
     /// A long phase begins. `meter` counts its work in [`Phase::unit`] from the threads doing it:
     /// keep a clone and read it from any thread (a display's timer) until
     /// [`Observer::phase_end`]; its count only grows. Phases do not nest.
@@ -277,6 +282,10 @@ impl Observer for IterationMeter<'_> {
     fn iteration(&mut self, record: &IterationRecord, total: usize) {
         self.meter.reach(record.iteration as u64);
         self.inner.iteration(record, total);
+    }
+
+    fn iteration_part(&mut self, done: usize, of: usize) {
+        self.inner.iteration_part(done, of);
     }
 
     fn interrupted(&mut self) -> bool {
