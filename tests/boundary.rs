@@ -1,4 +1,4 @@
-//! Smooth boundaries (item 4): `--boundary fixed|smooth` and the library's
+//! Smooth boundaries: `--boundary fixed|smooth` and the library's
 //! `Options::boundary`. On the open scans (bunny, demosthenes) with noise, `smooth` makes every
 //! boundary loop smoother while its vector area (the hole's size) and the mesh's volume stay
 //! exact; `fixed` is today's result; results do not depend on the thread count or the storage.

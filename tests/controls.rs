@@ -1,4 +1,4 @@
-//! Creases and a deviation bound (items 2 and 3): `--crease-angle DEG` and
+//! Creases and a deviation bound: `--crease-angle DEG` and
 //! `--max-deviation D`, and the library's `Options::crease_angle` and `Options::max_deviation`.
 //! A noisy cube keeps its edges with creases and rounds them off without; no vertex ends farther
 //! than the bound from its input in any method; vcs keeps the volume with either; results do not

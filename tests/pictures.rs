@@ -1,4 +1,4 @@
-//! `--png` (issue 36): `smooth` and `compare` draw what the smoothing did; the picture is a real
+//! `--png`: `smooth` and `compare` draw what the smoothing did; the picture is a real
 //! PNG of the size the run prints, the same for any thread count, and changes nothing else.
 
 use std::path::Path;
@@ -129,4 +129,28 @@ fn compare_draws_both_meshes_and_their_distances() {
         let channels = samples.len() / (w * h) as usize;
         assert!(colours(&samples, channels) > 1000, "{extra:?}");
     }
+}
+
+/// A picture is drawn by the engine of one process: with `--checkpoint` (the cluster engine) it
+/// is refused before any work, naming the flag, and nothing is written.
+#[test]
+fn a_picture_of_a_cluster_run_is_refused_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = noisy();
+    let (out, png, work) = (
+        dir.path().join("out.ply"),
+        dir.path().join("p.png"),
+        dir.path().join("work"),
+    );
+    let o = vcsmooth([
+        "smooth",
+        &arg(&input),
+        &arg(&out),
+        "--png",
+        &arg(&png),
+        "--checkpoint",
+        &arg(&work),
+    ]);
+    fails(&o, 2, &["--png", "--checkpoint"]);
+    assert!(listing(dir.path()).is_empty(), "{:?}", listing(dir.path()));
 }

@@ -1,4 +1,4 @@
-//! Pinned vertices (item 1): `--pin FILE` and `--pin-property NAME`, and the library's
+//! Pinned vertices: `--pin FILE` and `--pin-property NAME`, and the library's
 //! `EngineSettings::pins`. A pinned vertex keeps its record byte for byte in every method, for any
 //! thread count, in core and out of core, in multiresolution and over the cluster engine's ranks;
 //! vcs keeps the volume; bad pins are one-line errors that write nothing.

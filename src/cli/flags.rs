@@ -45,6 +45,7 @@ pub(super) const FLAGS: &[(&str, &str)] = &[
     ("deviation_field", "--deviation-field"),
     ("deviation_stats", "--deviation-stats"),
     ("tolerance", "--tolerance"),
+    ("png", "--png"),
     // Benchmark (`BenchSettings`).
     ("sizes", "--sizes"),
     ("repeats", "--repeats"),

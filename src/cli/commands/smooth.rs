@@ -114,12 +114,6 @@ impl SmoothConfig {
             }
         }
         let png = a.pictures.resolve()?;
-        if png.is_some() && a.cluster.checkpoint.is_some() {
-            return Err(flags::parameter(
-                "png",
-                "draws a run in one process: it cannot be combined with --checkpoint",
-            ));
-        }
         let mut sides = Vec::new();
         sides.extend(a.report.as_deref().map(|r| ("--report", r)));
         sides.extend(a.plot.as_deref().map(|p| ("--plot", p)));
@@ -147,7 +141,7 @@ impl SmoothConfig {
             tolerance: a.deviation.tolerance,
         };
         if a.cluster.checkpoint.is_some() {
-            in_one_process(&engine.deviation)?;
+            in_one_process(false, &engine.deviation, png.is_some())?;
         }
         engine.with_stats = a.report.is_some();
         engine.statistics = a.stats;
@@ -239,19 +233,11 @@ pub fn run(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) -> 
             };
             return report(cfg, &run, multires, sha256, sheet, progress, out);
         };
-        if cfg.multires.is_some() {
-            return Err(flags::parameter(
-                "multires",
-                "runs in one process; it cannot be combined with --checkpoint or MPI ranks",
-            ));
-        }
-        in_one_process(&cfg.engine.deviation)?;
-        if cfg.png.is_some() {
-            return Err(flags::parameter(
-                "png",
-                "draws a run in one process; it cannot be combined with --checkpoint or MPI ranks",
-            ));
-        }
+        in_one_process(
+            cfg.multires.is_some(),
+            &cfg.engine.deviation,
+            cfg.png.is_some(),
+        )?;
         let lead = comm.rank() == 0;
         if lead {
             progress.phase(format!(
@@ -289,20 +275,25 @@ pub fn run(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) -> 
     })
 }
 
-/// The deviation field is measured by the engine of one process: a usage error with the cluster
-/// engine (`--checkpoint`, MPI ranks).
-fn in_one_process(d: &crate::engine::DeviationSettings) -> Result<()> {
-    if !d.is_on() {
-        return Ok(());
-    }
-    let name = match (d.field, d.tolerance) {
-        (true, _) => "deviation_field",
-        (false, Some(_)) => "tolerance",
-        (false, None) => "deviation_stats",
+/// What only the engine of one process does (the multiresolution levels, the deviation field
+/// and its statistics, the pictures): a usage error with the cluster engine (`--checkpoint`, MPI
+/// ranks), named by its flag.
+fn in_one_process(multires: bool, d: &crate::engine::DeviationSettings, png: bool) -> Result<()> {
+    let name = match (multires, d.is_on(), png) {
+        (true, _, _) => "multires",
+        (false, true, _) if d.field => "deviation_field",
+        (false, true, _) if d.tolerance.is_some() => "tolerance",
+        (false, true, _) => "deviation_stats",
+        (false, false, true) => "png",
+        (false, false, false) => return Ok(()),
+    };
+    let does = match name {
+        "png" => "draws a run in one process",
+        _ => "runs in one process",
     };
     Err(flags::parameter(
         name,
-        "runs in one process; it cannot be combined with --checkpoint or MPI ranks",
+        format!("{does}; it cannot be combined with --checkpoint or MPI ranks"),
     ))
 }
 
