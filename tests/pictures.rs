@@ -67,7 +67,7 @@ fn smooth_draws_the_run_and_changes_nothing_else() {
         line.contains(&format!("{w} x {h} pixels")),
         "{line} but {w} x {h}"
     );
-    // Three rows of four views (before, after, coloured by the distance moved): far more than a
+    // Three rows of four views (before, after, coloured by the signed deviation): far more than a
     // blank sheet's colours, and the colour map's too.
     let channels = samples.len() / (w * h) as usize;
     assert!(
@@ -75,6 +75,18 @@ fn smooth_draws_the_run_and_changes_nothing_else() {
         "{} colours",
         colours(&samples, channels)
     );
+    // The deviation is signed: the map shows vertices moved inwards (blue) and outwards (red).
+    let pixels: Vec<&[u8]> = samples.chunks(channels).collect();
+    let blue = pixels
+        .iter()
+        .filter(|p| p[2] as i32 > p[0] as i32 + 60)
+        .count();
+    // (Red: no shade of grey nor of the sequential map, whose warm end is yellow.)
+    let red = pixels
+        .iter()
+        .filter(|p| p[0] as i32 > p[1] as i32 + 60 && p[0] as i32 > p[2] as i32 + 60)
+        .count();
+    assert!(blue > 1000 && red > 1000, "{blue} blue, {red} red pixels");
     // Smaller tiles, a smaller picture; and the same picture for any thread count.
     let (w2, h2, _) = decode(&p2);
     assert!(w2 < w && h2 < h, "{w2} x {h2} against {w} x {h}");

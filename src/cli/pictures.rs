@@ -1,6 +1,6 @@
 //! `--png FILE` of `smooth` and `compare`: one picture of the meshes from the standard views
-//! (front, side, top, iso) in rows, before and after (A and B), and a row coloured by the
-//! distance each vertex moved with its scale bar. Drawn by [`crate::render`] on the run's threads
+//! (front, side, top, iso) in rows, before and after (A and B), and a row coloured by each
+//! vertex's signed deviation along the normal of the first with its scale bar. Drawn by [`crate::render`] on the run's threads
 //! over the engine's own arrays, written by [`crate::io::write_png`].
 
 use std::path::PathBuf;
@@ -19,7 +19,7 @@ use crate::render::{self, Camera, Paint, Row, Scale, View};
 /// `--png FILE` and its tile size.
 #[derive(Debug, Clone, ClapArgs)]
 pub struct PictureArgs {
-    /// Write a PNG picture of the mesh from the front, the side, the top and an isometric view (+Y up): with smooth, before and after smoothing and coloured by the distance each vertex moved, with its scale; with compare, A, B and B coloured by the distance between their vertices. Drawn on the CPU, written atomically.
+    /// Write a PNG picture of the mesh from the front, the side, the top and an isometric view (+Y up): with smooth, before and after smoothing and coloured by each vertex's signed deviation along its input normal (blue inwards, red outwards), with its scale; with compare, A, B and B coloured by its deviation from A. Drawn on the CPU, written atomically.
     #[arg(long, value_name = "FILE.png")]
     pub png: Option<PathBuf>,
     /// Pixels of each view's square tile in the --png picture.
@@ -94,7 +94,10 @@ impl Sheet {
         let mut paints = vec![Paint::Grey];
         let mut scale = None;
         if let Some((values, what)) = &distances {
-            let s = Scale::for_range(0.0, largest(values));
+            // Magnitudes on a sequential scale from 0; signed values on a diverging one, white
+            // at 0.
+            let (lo, hi) = range(values);
+            let s = Scale::for_range(lo.min(0.0), hi);
             paints.push(Paint::Values { values, scale: s });
             scale = Some((s, what.clone()));
         }
@@ -107,9 +110,18 @@ impl Sheet {
             scale: None,
         });
         if let (Some(tiles), Some(scale)) = (coloured, scale) {
-            let max = scale.0.hi;
+            let (lo, hi) = distances.as_ref().map_or((0.0, 0.0), |(v, _)| range(v));
+            let label = match lo < 0.0 {
+                true => format!(
+                    "{}: from {} to {}",
+                    scale.1,
+                    render::palette::label(lo),
+                    render::palette::label(hi)
+                ),
+                false => format!("{}: largest {}", scale.1, render::palette::label(hi)),
+            };
             self.rows.push(Row {
-                label: format!("{}: largest {}", scale.1, render::palette::label(max)),
+                label,
                 tiles,
                 scale: Some(scale),
             });
@@ -151,31 +163,47 @@ pub fn print_drawn(out: &mut dyn std::io::Write, d: &Drawn) -> Result<()> {
 }
 
 /// The largest of `values` (0 for none), over chunks.
-fn largest(values: &[f32]) -> f32 {
+/// The smallest and largest of `values`, with 0 (NaN ignored).
+fn range(values: &[f32]) -> (f32, f32) {
     reduce::map_fold(
         values,
-        |_, c| c.iter().fold(0.0f32, |m, &v| m.max(v)),
-        0.0,
-        f32::max,
+        |_, c| {
+            c.iter()
+                .fold((0.0f32, 0.0f32), |(lo, hi), &v| (lo.min(v), hi.max(v)))
+        },
+        (0.0, 0.0),
+        |(a, b), (c, d)| (a.min(c), b.max(d)),
     )
 }
 
-/// The distance each vertex moved from `a` to `b`, over chunks, in `storage`.
-pub fn distances(a: &[DVec3], b: &[DVec3], storage: &Storage) -> Result<Buf<f32>> {
-    let mut out = storage.working::<f32>(a.len())?;
+/// The deviation of each vertex from `before` to `after` along `before`'s vertex normal over
+/// `triangles` (as the deviation field measures it, [`crate::engine::deviation`]), over chunks,
+/// in `storage`.
+pub fn deviations(
+    before: &[DVec3],
+    after: &[DVec3],
+    triangles: &[[u32; 3]],
+    storage: &Storage,
+) -> Result<Buf<f32>> {
+    let mut normals: Buf<DVec3> = storage.working(before.len())?;
+    crate::metrics::deviation::vertex_normal_sums(before, triangles, &mut normals);
+    let mut out = storage.working::<f32>(before.len())?;
     reduce::for_chunks_mut(&mut out, |first, chunk| {
-        let end = first + chunk.len();
-        crate::metrics::displacement_lengths(&a[first..end], &b[first..end], chunk)
+        for (k, d) in chunk.iter_mut().enumerate() {
+            let i = first + k;
+            *d = crate::metrics::deviation::signed(before[i], after[i], normals[i]) as f32;
+        }
     });
     Ok(out)
 }
 
-/// What the distance row of a picture says it shows, and its scale bar.
-pub const DISTANCE: &str = "distance moved";
+/// What the deviation row of a run's picture says it shows.
+pub const DEVIATION: &str = "deviation along the input normal";
 
 /// The observer of a `smooth --png` run: everything passes on to `inner`; before the iterations
 /// the mesh is drawn and its positions kept (in the run's storage: scratch when the run is out of
-/// core), after them it is drawn again with the distance each vertex moved.
+/// core), after them it is drawn again with each vertex's signed deviation along its input
+/// normal.
 pub struct RunPictures<'a> {
     pub inner: &'a mut dyn Observer,
     /// The picture's settings and the labels of its rows, before and after.
@@ -272,10 +300,10 @@ impl Observer for RunPictures<'_> {
                 let label = self.labels.1.clone();
                 let sheet = self.phase(triangles.len(), |meter| {
                     let clock = Instant::now();
-                    let moved = distances(&before, positions, storage)?;
+                    let moved = deviations(&before, positions, triangles, storage)?;
                     drop(before);
                     sheet.seconds += clock.elapsed().as_secs_f64();
-                    let distances = Some((&moved[..], DISTANCE.to_string()));
+                    let distances = Some((&moved[..], DEVIATION.to_string()));
                     sheet.draw(label, positions, triangles, distances, meter)?;
                     Ok(sheet)
                 })?;

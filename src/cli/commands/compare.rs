@@ -11,7 +11,7 @@ use serde::Serialize;
 use std::sync::Arc;
 
 use crate::cli::output::{check_files, mesh_output, print_json};
-use crate::cli::pictures::{Drawn, PictureArgs, PictureConfig, Sheet, distances, print_drawn};
+use crate::cli::pictures::{Drawn, PictureArgs, PictureConfig, Sheet, deviations, print_drawn};
 use crate::cli::plot::file_name;
 use crate::cli::progress::Progress;
 use crate::cli::report::{defined, fixed, num, print_deviation, print_rows};
@@ -198,8 +198,8 @@ pub fn run(cfg: &CompareConfig, progress: &mut Progress, out: &mut dyn Write) ->
     }
 }
 
-/// The picture of `compare --png`: A and B in grey, and B coloured by the distance between their
-/// vertices (with `--surface`, A coloured by `surface`, its vertices' distances to B's surface),
+/// The picture of `compare --png`: A and B in grey, and B coloured by its deviation from A along
+/// A's vertex normals (with `--surface`, A coloured by `surface`, its vertices' distances to B's surface),
 /// every view framing both.
 fn draw(
     cfg: &CompareConfig,
@@ -229,8 +229,8 @@ fn draw(
         )?;
         match surface {
             None => {
-                let moved = distances(&a.positions, &b.positions, &Storage::heap())?;
-                let what = Some((&moved[..], "distance to A".to_string()));
+                let moved = deviations(&a.positions, &b.positions, &a.triangles, &Storage::heap())?;
+                let what = Some((&moved[..], "deviation from A along its normal".to_string()));
                 sheet.draw(
                     format!("B: {name_b}"),
                     &b.positions,
