@@ -208,8 +208,18 @@ fn usage_errors_of_the_field_write_nothing() {
     crate::util::generate_sphere(&sphere, 2, None, None);
     let obj = dir.path().join("out.obj");
     let o = vcsmooth(["smooth", &s(&sphere), &s(&obj), "--deviation-field"]);
-    fails(&o, 2, &["out.obj", "PLY"]);
+    fails(&o, 2, &["out.obj", "colours", "PLY"]);
     assert!(!obj.exists());
+    let off = dir.path().join("out.off");
+    let o = vcsmooth([
+        "smooth",
+        &s(&sphere),
+        &s(&off),
+        "--deviation-field",
+        "--deviation-colours",
+    ]);
+    fails(&o, 2, &["out.off", "PLY"]);
+    assert!(!off.exists());
     let o = vcsmooth(["smooth", &s(&sphere), &s(&obj), "--tolerance", "-1"]);
     assert_eq!(o.status.code(), Some(2));
     // The cluster engine does not measure it: refused before any work.
@@ -240,6 +250,69 @@ fn usage_errors_of_the_field_write_nothing() {
     io::write_mesh(&cloud, &Mesh::new(vec![DVec3::ZERO; 3], Vec::new())).unwrap();
     let o = vcsmooth(["compare", &s(&sphere), &s(&cloud), "--surface"]);
     fails(&o, 1, &["cloud.ply", "no triangles"]);
+}
+
+/// An OBJ output carries the field's colours (`v x y z r g b`, in [0, 1]): the same bytes as a
+/// PLY output's `red green blue` of the same run, over 255; from an OBJ input the numbers that
+/// followed a position (old colours) give way to them and the rest of the line stays.
+#[test]
+fn an_obj_output_carries_the_colours() {
+    let dir = tempfile::tempdir().unwrap();
+    let sphere = dir.path().join("sphere.ply");
+    crate::util::generate_sphere(&sphere, 3, Some(0.3), Some(4));
+    let (ply, obj) = (dir.path().join("out.ply"), dir.path().join("out.obj"));
+    let field = ["--deviation-field", "--deviation-colours"];
+    for out in [&ply, &obj] {
+        let mut args = vec!["smooth".to_string(), s(&sphere), s(out)];
+        args.extend(field.iter().map(|a| a.to_string()));
+        ok(vcsmooth(&args));
+    }
+    let rgb: Vec<[f64; 3]> = {
+        let [r, g, b] = ["red", "green", "blue"].map(|c| vertex_values(&ply, c));
+        (0..r.len()).map(|i| [r[i], g[i], b[i]]).collect()
+    };
+    let colours_of = |path: &Path| -> Vec<[f64; 3]> {
+        let text = std::fs::read_to_string(path).unwrap();
+        text.lines()
+            .filter(|l| l.starts_with("v "))
+            .map(|l| {
+                let n: Vec<f64> = l
+                    .split_whitespace()
+                    .skip(4)
+                    .take(3)
+                    .map(|t| t.parse().unwrap())
+                    .collect();
+                assert_eq!(n.len(), 3, "{l}");
+                [0, 1, 2].map(|k| (n[k] * 255.0).round())
+            })
+            .collect()
+    };
+    assert_eq!(colours_of(&obj), rgb);
+    assert!(rgb.iter().any(|c| c[0] > c[2]) && rgb.iter().any(|c| c[2] > c[0]));
+    // The positions are those of the plain OBJ run.
+    let plain = dir.path().join("plain.obj");
+    ok(vcsmooth(["smooth", &s(&sphere), &s(&plain)]));
+    let (a, b) = (io::read_mesh(&plain).unwrap(), io::read_mesh(&obj).unwrap());
+    assert_eq!(a.positions, b.positions);
+    // From an OBJ input with colours and comments: its colours replaced, its comments kept.
+    let input = dir.path().join("coloured.obj");
+    let mut text = String::new();
+    for (i, p) in a.positions.iter().enumerate() {
+        text += &format!("v {} {} {} 0.1 0.2 0.3 # vertex {i}\n", p.x, p.y, p.z);
+    }
+    for t in &a.triangles {
+        text += &format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1);
+    }
+    std::fs::write(&input, text).unwrap();
+    let again = dir.path().join("again.obj");
+    let mut args = vec!["smooth".to_string(), s(&input), s(&again)];
+    args.extend(field.iter().map(|a| a.to_string()));
+    ok(vcsmooth(&args));
+    let written = std::fs::read_to_string(&again).unwrap();
+    let first = written.lines().find(|l| l.starts_with("v ")).unwrap();
+    assert!(first.ends_with(" # vertex 0"), "{first}");
+    assert_eq!(first.split_whitespace().count(), 7 + 3, "{first}");
+    assert!(!written.contains(" 0.1 0.2 0.3"), "old colours kept");
 }
 
 #[test]

@@ -240,7 +240,7 @@ pub struct DeviationArgs {
     /// Print the deviation's statistics (RMS, mean and extremes of the deviation; RMS, mean, largest and percentiles 50/90/99/99.9 of the distance; a histogram), also in the JSON; implied by --deviation-field and --tolerance [default: off].
     #[arg(long)]
     pub deviation_stats: bool,
-    /// With --deviation-field, also the deviation's colour map as the PLY vertex properties 'red green blue': blue inward, white unmoved, red outward, saturated at --tolerance (or at the largest deviation) [default: off].
+    /// With --deviation-field, also the deviation's colour map as the PLY vertex properties 'red green blue' (OBJ: 'v x y z r g b', in 0..1): blue inward, white unmoved, red outward, saturated at --tolerance (or at the largest deviation) [default: off].
     #[arg(long, requires = "deviation_field")]
     pub deviation_colours: bool,
     /// Tolerance in model units (> 0): when any vertex lies farther than D (from its input position; compare: from its vertex in A, or from B's surface), say how many and the largest, and exit with code 3; every file is still written [default: none].

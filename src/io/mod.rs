@@ -283,13 +283,21 @@ pub struct VertexValues<'a> {
     pub colours: Option<&'a (dyn Fn(usize) -> [u8; 3] + Sync)>,
 }
 
-/// Whether an output at `path` can carry [`VertexValues`]: `Err` saying why not.
-pub fn check_vertex_values(path: &Path) -> std::result::Result<(), String> {
+/// Whether an output at `path` can carry [`VertexValues`], with their colours or without:
+/// `Err` saying why not. PLY carries both (`quality`, `red green blue`); OBJ the colours alone
+/// (`v x y z r g b`, which MeshLab and CloudCompare read).
+pub fn check_vertex_values(path: &Path, colours: bool) -> std::result::Result<(), String> {
     match Format::from_extension(path) {
         Some(Format::Ply) => Ok(()),
-        _ => {
-            Err("per-vertex values (quality and colours) are written into PLY outputs only".into())
-        }
+        Some(Format::Obj) if colours => Ok(()),
+        Some(Format::Obj) => Err(
+            "an OBJ file carries per-vertex colours but no per-vertex value: ask for the colours, or write a PLY"
+                .into(),
+        ),
+        _ => Err(
+            "per-vertex values are written into PLY outputs (and as colours into OBJ outputs) only"
+                .into(),
+        ),
     }
 }
 
@@ -300,7 +308,7 @@ pub fn write_mesh_with(
     values: &VertexValues,
     meter: &Meter,
 ) -> Result<()> {
-    check_vertex_values(path)
+    check_vertex_values(path, values.colours.is_some())
         .map_err(|what| Error::invalid(path, format!("cannot write: {what}")))?;
     if values.quality.len() != mesh.positions.len() {
         return Err(Error::topology(format!(
@@ -370,8 +378,8 @@ fn write_mesh_counted(
     })
 }
 
-/// `mesh` into `out` as `format` says (not glTF, which writes its own files), with `values` (PLY
-/// only, checked before).
+/// `mesh` into `out` as `format` says (not glTF, which writes its own files), with `values` (PLY;
+/// OBJ their colours; checked before).
 fn write_as(
     format: Format,
     out: &mut impl Write,
@@ -380,7 +388,7 @@ fn write_as(
 ) -> std::io::Result<()> {
     match format {
         Format::Ply => ply::write(out, mesh, values),
-        Format::Obj => obj::write(out, mesh),
+        Format::Obj => obj::write(out, mesh, values.and_then(|v| v.colours)),
         Format::Off => off::write(out, mesh),
         Format::Stl => stl::write(out, mesh),
         Format::Gltf | Format::Glb => Err(std::io::Error::other("glTF is written by gltf::write")),

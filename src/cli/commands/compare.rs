@@ -64,7 +64,7 @@ impl CompareConfig {
     pub fn from_args(a: CompareArgs) -> Result<CompareConfig> {
         if let Some(f) = &a.deviation_field {
             mesh_output(f)?;
-            crate::io::check_vertex_values(f)
+            crate::io::check_vertex_values(f, a.deviation.deviation_colours)
                 .map_err(|what| Error::invalid(f, format!("--deviation-field: {what}")))?;
             check_files(
                 &[("A", &a.a), ("B", &a.b)],

@@ -42,7 +42,7 @@ pub struct SmoothArgs {
     /// Which iterations measure volume, area and displacement (each costs passes over the whole mesh, about one taubin iteration for volume and area); the others show '-' in the table and null in the report.
     #[arg(long, value_enum, value_name = "WHEN", default_value_t = Statistics::Every)]
     pub stats: Statistics,
-    /// Write each vertex's deviation into OUT (PLY only) as the vertex property 'quality' (MeshLab and CloudCompare read it as a scalar field): its displacement along the input's vertex normal, signed, positive outward; print its statistics (RMS, mean, percentiles of the distance, histogram), also in --report. The rest of OUT is as without it [default: off].
+    /// Write each vertex's deviation into OUT as the PLY vertex property 'quality' (an OBJ output carries its colours alone, with --deviation-colours) (MeshLab and CloudCompare read it as a scalar field): its displacement along the input's vertex normal, signed, positive outward; print its statistics (RMS, mean, percentiles of the distance, histogram), also in --report. The rest of OUT is as without it [default: off].
     #[arg(long)]
     pub deviation_field: bool,
     #[command(flatten)]
@@ -128,9 +128,10 @@ impl SmoothConfig {
             check_work_dir(("--checkpoint", dir), &files)?;
         }
         if a.deviation_field {
-            crate::io::check_vertex_values(&a.files.output).map_err(|what| {
-                Error::invalid(&a.files.output, format!("--deviation-field: {what}"))
-            })?;
+            crate::io::check_vertex_values(&a.files.output, a.deviation.deviation_colours)
+                .map_err(|what| {
+                    Error::invalid(&a.files.output, format!("--deviation-field: {what}"))
+                })?;
         }
         let mut engine = a.smoothing.engine.resolve()?;
         engine.pins = a.pins.resolve()?;

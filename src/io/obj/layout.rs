@@ -114,16 +114,32 @@ impl ObjLayout {
         }
     }
 
-    /// Writes the text with `mesh`'s positions and recomputed normals; `check_writable` passed.
-    pub(super) fn write(&self, out: &mut impl Write, mesh: &Mesh) -> io::Result<()> {
+    /// Writes the text with `mesh`'s positions and recomputed normals, and `colours` after each
+    /// position in place of the numbers that followed it (colours, or a weight); `check_writable`
+    /// passed.
+    pub(super) fn write(
+        &self,
+        out: &mut impl Write,
+        mesh: &Mesh,
+        colours: Option<&(dyn Fn(usize) -> [u8; 3] + Sync)>,
+    ) -> io::Result<()> {
         let normals = self.normals(mesh);
         let mut normals = self.normal_cuts.iter().zip(&normals).peekable();
         let mut at = 0;
-        for (&cut, &p) in self.vertex_cuts.iter().zip(mesh.positions.iter()) {
+        for (i, (&cut, &p)) in self
+            .vertex_cuts
+            .iter()
+            .zip(mesh.positions.iter())
+            .enumerate()
+        {
             while let Some((&n_cut, &n)) = normals.next_if(|&(&c, _)| c < cut) {
                 at = self.put(out, at, n_cut, n, Precision::Float)?;
             }
             at = self.put(out, at, cut, p, mesh.source.precision)?;
+            if let Some(colour) = colours {
+                super::write_colour(out, colour(i))?;
+                at = after_numbers(&self.text, at);
+            }
         }
         for (&n_cut, &n) in normals {
             at = self.put(out, at, n_cut, n, Precision::Float)?;
@@ -172,6 +188,26 @@ impl ObjLayout {
         }
         sums.iter_mut().for_each(|n| *n = n.normalize_or_zero());
         sums
+    }
+}
+
+/// Where the numbers that follow `at` on its line end (`at` itself when none does): the rest of
+/// the line from there (a comment, the line's end) is kept.
+fn after_numbers(text: &[u8], mut at: usize) -> usize {
+    loop {
+        let mut i = at;
+        while i < text.len() && (text[i] == b' ' || text[i] == b'\t') {
+            i += 1;
+        }
+        let start = i;
+        while i < text.len() && !text[i].is_ascii_whitespace() && text[i] != b'#' {
+            i += 1;
+        }
+        let token = &text[start..i];
+        if token.is_empty() || crate::io::number(token).is_err() {
+            return at;
+        }
+        at = i;
     }
 }
 

@@ -247,9 +247,13 @@ pub(crate) fn read(bytes: &[u8]) -> Result<Mesh, String> {
 /// A face corner without a normal reference.
 const NO_NORMAL: u32 = u32::MAX;
 
-pub(crate) fn write(out: &mut impl Write, mesh: &Mesh) -> io::Result<()> {
+pub(crate) fn write(
+    out: &mut impl Write,
+    mesh: &Mesh,
+    colours: Option<&(dyn Fn(usize) -> [u8; 3] + Sync)>,
+) -> io::Result<()> {
     if let Some(layout) = layout::of(mesh) {
-        return layout.write(out, mesh);
+        return layout.write(out, mesh, colours);
     }
     let faces = Faces::of(mesh);
     writeln!(
@@ -258,9 +262,12 @@ pub(crate) fn write(out: &mut impl Write, mesh: &Mesh) -> io::Result<()> {
         mesh.positions.len(),
         faces.len()
     )?;
-    for &p in &mesh.positions {
+    for (i, &p) in mesh.positions.iter().enumerate() {
         out.write_all(b"v ")?;
         write_xyz(out, p, mesh.source.precision)?;
+        if let Some(colour) = colours {
+            write_colour(out, colour(i))?;
+        }
         out.write_all(b"\n")?;
     }
     faces.try_for_each(|corners| {
@@ -270,4 +277,11 @@ pub(crate) fn write(out: &mut impl Write, mesh: &Mesh) -> io::Result<()> {
         }
         out.write_all(b"\n")
     })
+}
+
+/// ` r g b` after a vertex's position: the colour's bytes over 255, in four decimals, which read
+/// back to the same bytes.
+pub(crate) fn write_colour(out: &mut impl Write, rgb: [u8; 3]) -> io::Result<()> {
+    let [r, g, b] = rgb.map(|c| c as f64 / 255.0);
+    write!(out, " {r:.4} {g:.4} {b:.4}")
 }
