@@ -131,7 +131,7 @@ fn a_known_displacement_gives_the_known_field_and_statistics() {
 
     // The library's pure function gives the same field.
     assert_eq!(
-        metrics::deviation(&a.positions, &b.positions, &a.triangles),
+        metrics::signed_deviations(&a.positions, &b.positions, &a.triangles),
         q
     );
 }

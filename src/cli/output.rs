@@ -266,14 +266,14 @@ fn resolved(path: &Path) -> std::path::PathBuf {
     out
 }
 
-/// Check that the output `path` can be written, before any work (see [`check_writable`]): it is
+/// Check that the output `path` can be written, before any work (see `check_writable`): it is
 /// replaced by renaming, so what it leads to must be a regular file or nothing yet.
 pub fn writable(path: &Path) -> Result<()> {
     check_writable(path, false)
 }
 
 /// Check that the side file `path` (a report, a plot, a summary) can be written, before any work
-/// (see [`check_writable`]): it may also lead to a character device, a pipe or a descriptor of
+/// (see `check_writable`): it may also lead to a character device, a pipe or a descriptor of
 /// this process (`/dev/stdout`), written through as a stream.
 pub fn side_writable(path: &Path) -> Result<()> {
     check_writable(path, true)
@@ -343,7 +343,7 @@ fn check_writable(path: &Path, stream: bool) -> Result<()> {
 
 /// Write `bytes` to `path` through a temporary file beside it, renamed into place when complete:
 /// a reader never sees a half-written file under `path`, and a failure leaves no file behind (a
-/// path that leads to a stream is written through, see [`crate::io::destination`]).
+/// path that leads to a stream is written through, see `io::destination`).
 pub fn atomic_write(path: &Path, bytes: &[u8]) -> Result<()> {
     crate::io::write_atomically(path, |w| w.write_all(bytes))
 }

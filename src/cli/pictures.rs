@@ -176,27 +176,6 @@ fn range(values: &[f32]) -> (f32, f32) {
     )
 }
 
-/// The deviation of each vertex from `before` to `after` along `before`'s vertex normal over
-/// `triangles` (as the deviation field measures it, [`crate::engine::deviation`]), over chunks,
-/// in `storage`.
-pub fn deviations(
-    before: &[DVec3],
-    after: &[DVec3],
-    triangles: &[[u32; 3]],
-    storage: &Storage,
-) -> Result<Buf<f32>> {
-    let mut normals: Buf<DVec3> = storage.working(before.len())?;
-    crate::metrics::deviation::vertex_normal_sums(before, triangles, &mut normals);
-    let mut out = storage.working::<f32>(before.len())?;
-    reduce::for_chunks_mut(&mut out, |first, chunk| {
-        for (k, d) in chunk.iter_mut().enumerate() {
-            let i = first + k;
-            *d = crate::metrics::deviation::signed(before[i], after[i], normals[i]) as f32;
-        }
-    });
-    Ok(out)
-}
-
 /// What the deviation row of a run's picture says it shows.
 pub const DEVIATION: &str = "deviation along the input normal";
 
@@ -300,7 +279,13 @@ impl Observer for RunPictures<'_> {
                 let label = self.labels.1.clone();
                 let sheet = self.phase(triangles.len(), |meter| {
                     let clock = Instant::now();
-                    let moved = deviations(&before, positions, triangles, storage)?;
+                    let moved = crate::engine::deviation::signed(
+                        storage,
+                        &before,
+                        positions,
+                        triangles,
+                        |d| d as f32,
+                    )?;
                     drop(before);
                     sheet.seconds += clock.elapsed().as_secs_f64();
                     let distances = Some((&moved[..], DEVIATION.to_string()));

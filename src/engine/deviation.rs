@@ -83,17 +83,7 @@ pub fn field(
         None => output[i],
     };
     let n = input.len();
-    let mut normals: Buf<DVec3> = storage.working(n)?;
-    // In triangle order, on one thread: the sum of each vertex has one order.
-    kernel::vertex_normal_sums(input, triangles, &mut normals);
-    let mut signed: Buf<f64> = storage.zeroed(n)?;
-    reduce::for_chunks_mut(&mut signed, |first, out| {
-        for (k, d) in out.iter_mut().enumerate() {
-            let i = first + k;
-            *d = kernel::signed(input[i], at(i), normals[i]);
-        }
-    });
-    drop(normals);
+    let signed = signed_into(storage, input, triangles, &at, |d| d)?;
     let mut distance: Buf<f64> = storage.zeroed(n)?;
     reduce::for_chunks_mut(&mut distance, |first, out| {
         for (k, d) in out.iter_mut().enumerate() {
@@ -105,6 +95,41 @@ pub fn field(
         signed,
         distance,
     })
+}
+
+/// The signed part of [`field`] alone, without the output's rounding, each value as `T`: what a
+/// picture colours.
+pub fn signed<T: crate::mesh::storage::Pod>(
+    storage: &Storage,
+    input: &[DVec3],
+    output: &[DVec3],
+    triangles: &[[u32; 3]],
+    to: impl Fn(f64) -> T + Sync,
+) -> Result<Buf<T>> {
+    signed_into(storage, input, triangles, |i| output[i], to)
+}
+
+/// Each vertex's signed deviation from `input` to `at(i)` along `input`'s vertex normal over
+/// `triangles`, as `to` makes it, in `storage`.
+fn signed_into<T: crate::mesh::storage::Pod>(
+    storage: &Storage,
+    input: &[DVec3],
+    triangles: &[[u32; 3]],
+    at: impl Fn(usize) -> DVec3 + Sync,
+    to: impl Fn(f64) -> T + Sync,
+) -> Result<Buf<T>> {
+    let n = input.len();
+    let mut normals: Buf<DVec3> = storage.working(n)?;
+    // In triangle order, on one thread: the sum of each vertex has one order.
+    kernel::vertex_normal_sums(input, triangles, &mut normals);
+    let mut signed: Buf<T> = storage.zeroed(n)?;
+    reduce::for_chunks_mut(&mut signed, |first, out| {
+        for (k, d) in out.iter_mut().enumerate() {
+            let i = first + k;
+            *d = to(kernel::signed(input[i], at(i), normals[i]));
+        }
+    });
+    Ok(signed)
 }
 
 /// The field of the vertices of `a` (over its `a_triangles`) against the surface of `b`: each

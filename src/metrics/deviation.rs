@@ -58,7 +58,7 @@ pub fn signed(from: DVec3, to: DVec3, normal: DVec3) -> f64 {
 /// The deviation of every vertex from `input` to `output` (both indexed alike) over `triangles`
 /// (the input's; see the module documentation). Sequential; the engine computes the same values in
 /// parallel into storage of its choice ([`crate::engine::deviation`]).
-pub fn deviation(input: &[DVec3], output: &[DVec3], triangles: &[[u32; 3]]) -> Vec<f64> {
+pub fn signed_deviations(input: &[DVec3], output: &[DVec3], triangles: &[[u32; 3]]) -> Vec<f64> {
     let mut normals = vec![DVec3::ZERO; input.len()];
     vertex_normal_sums(input, triangles, &mut normals);
     input
@@ -311,14 +311,14 @@ mod tests {
     fn a_sphere_grown_by_a_known_amount() {
         let a = icosphere(3);
         let b: Vec<DVec3> = a.positions.iter().map(|p| *p * 1.25).collect();
-        let d = deviation(&a.positions, &b, &a.triangles);
+        let d = signed_deviations(&a.positions, &b, &a.triangles);
         // Each vertex moves 0.25 along its radius, nearly its vertex normal.
         for x in &d {
             assert!((x - 0.25).abs() < 1e-3, "{x}");
         }
         let inward: Vec<DVec3> = a.positions.iter().map(|p| *p * 0.9).collect();
         assert!(
-            deviation(&a.positions, &inward, &a.triangles)
+            signed_deviations(&a.positions, &inward, &a.triangles)
                 .iter()
                 .all(|x| *x < 0.0)
         );
@@ -333,7 +333,7 @@ mod tests {
             DVec3::Y,
             DVec3::new(6.0, 5.0, 5.0), // unreferenced: no normal
         ];
-        let d = deviation(&p, &q, &[[0, 1, 2]]);
+        let d = signed_deviations(&p, &q, &[[0, 1, 2]]);
         assert_eq!(d, vec![0.5, 0.0, 0.0, 0.0]);
     }
 

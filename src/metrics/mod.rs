@@ -105,7 +105,7 @@ pub mod deviation;
 mod info;
 pub mod surface;
 pub use compare::{Comparison, compare, compare_surfaces, displacement_lengths, same_connectivity};
-pub use deviation::{DeviationStats, deviation};
+pub use deviation::{DeviationStats, signed_deviations};
 pub use info::{
     EdgeSums, Geometry, MeshInfo, connectivity, edge_sums, extent, extent_union, geometry, info,
     info_of, mean_edge_length, roughness,

@@ -2,7 +2,7 @@
 //! `compare`'s distance between meshes that do not share vertices.
 //!
 //! The tree is built once over the triangles (median split of the centroids along the longest
-//! axis of their box, down to leaves of at most [`LEAF`] triangles); a query descends nearer
+//! axis of their box, down to leaves of at most `LEAF` triangles); a query descends nearer
 //! child first and prunes a box farther than the best distance found so far. Building and
 //! querying are deterministic: the nearest point found is the same on every run, and of several
 //! triangles at the same distance the one found first in that fixed order wins.

@@ -1,4 +1,4 @@
-//! The rasteriser's kernels, pure and sequential (the threads are [`super::parallel`]'s): a
+//! The rasteriser's kernels, pure and sequential (the threads are `render::parallel`'s): a
 //! triangle drawn into a frame of visibility samples, and a sample shaded from the triangle it
 //! shows.
 //!

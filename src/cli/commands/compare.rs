@@ -11,7 +11,7 @@ use serde::Serialize;
 use std::sync::Arc;
 
 use crate::cli::output::{check_files, mesh_output, print_json};
-use crate::cli::pictures::{Drawn, PictureArgs, PictureConfig, Sheet, deviations, print_drawn};
+use crate::cli::pictures::{Drawn, PictureArgs, PictureConfig, Sheet, print_drawn};
 use crate::cli::plot::file_name;
 use crate::cli::progress::Progress;
 use crate::cli::report::{defined, fixed, num, print_deviation, print_rows};
@@ -229,7 +229,13 @@ fn draw(
         )?;
         match surface {
             None => {
-                let moved = deviations(&a.positions, &b.positions, &a.triangles, &Storage::heap())?;
+                let moved = crate::engine::deviation::signed(
+                    &Storage::heap(),
+                    &a.positions,
+                    &b.positions,
+                    &a.triangles,
+                    |d| d as f32,
+                )?;
                 let what = Some((&moved[..], "deviation from A along its normal".to_string()));
                 sheet.draw(
                     format!("B: {name_b}"),
