@@ -83,7 +83,7 @@ pub fn field(
         None => output[i],
     };
     let n = input.len();
-    let signed = signed_into(storage, input, triangles, &at, |d| d)?;
+    let signed = signed_into(storage, input, triangles, at, |d| d)?;
     let mut distance: Buf<f64> = storage.zeroed(n)?;
     reduce::for_chunks_mut(&mut distance, |first, out| {
         for (k, d) in out.iter_mut().enumerate() {
