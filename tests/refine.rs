@@ -10,7 +10,7 @@ use vcsmooth::modes::refine::{self, RefineOptions};
 use vcsmooth::topology::Topology;
 use vcsmooth::{Mesh, io, metrics, shapes};
 
-use crate::util::{generate_sphere, noisy_sphere, ok, read_scan, vcsmooth};
+use crate::util::{arg, generate_sphere, noisy_sphere, ok, read_scan, vcsmooth};
 
 fn bbox_diagonal(pos: &[DVec3]) -> f64 {
     let lo = pos.iter().fold(DVec3::splat(f64::MAX), |a, &p| a.min(p));
@@ -176,8 +176,8 @@ fn real_scan_closed_manifold_on_surface() {
         "fertility δ={delta:.3}: {} → {} triangles, max edge {:.3} → {:.3}",
         s.triangles_before, s.triangles_after, s.max_edge_before, s.max_edge_after
     );
-    // The PLY layout no longer matches: it is dropped, and the mesh can be written as PLY.
-    assert!(out.source.layout.is_none());
+    // The PLY layout follows the new vertices and faces, and the mesh can be written as PLY.
+    assert!(out.source.layout.is_some());
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("f.ply");
     io::write_mesh(&path, &out).unwrap();
@@ -446,6 +446,224 @@ fn the_triangle_estimate_is_close_and_from_above() {
                 "δ = {delta}: {made} made, {estimate} estimated"
             );
             assert!(refine::triangles_at_least(mesh, delta) <= made);
+        }
+    }
+}
+
+// ---- properties through subdivision (hostile use #11) ----
+
+/// An octahedron PLY (`encoding`: `ascii`, `binary_little_endian`, `binary_big_endian`) with
+/// `uchar red green blue` (per vertex, hand-picked), `double quality` (an affine function of the
+/// position, so every midpoint's value is known) and a per-face `uchar label` (the octant of the
+/// face, which every child face lies in).
+fn coloured_octahedron(path: &Path, encoding: &str) {
+    let v: Vec<[f32; 3]> = crate::util::octa_v();
+    let f: Vec<[i32; 3]> = crate::util::octa_f();
+    let colours = [
+        [255u8, 0, 0],
+        [0, 255, 0],
+        [0, 0, 255],
+        [10, 20, 31],
+        [200, 201, 3],
+        [7, 7, 7],
+    ];
+    let mut out = format!(
+        "ply\nformat {encoding} 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\nproperty double quality\nelement face {}\nproperty list uchar int vertex_indices\nproperty uchar label\nend_header\n",
+        v.len(),
+        f.len()
+    )
+    .into_bytes();
+    let big = encoding == "binary_big_endian";
+    let put = |out: &mut Vec<u8>, le: &[u8]| {
+        let mut b = le.to_vec();
+        if big {
+            b.reverse();
+        }
+        out.extend_from_slice(&b);
+    };
+    for (p, c) in v.iter().zip(colours) {
+        let q = quality(DVec3::new(p[0].into(), p[1].into(), p[2].into()));
+        if encoding == "ascii" {
+            out.extend(
+                format!(
+                    "{} {} {} {} {} {} {q:?}\n",
+                    p[0], p[1], p[2], c[0], c[1], c[2]
+                )
+                .bytes(),
+            );
+        } else {
+            p.iter().for_each(|x| put(&mut out, &x.to_le_bytes()));
+            out.extend_from_slice(&c);
+            put(&mut out, &q.to_le_bytes());
+        }
+    }
+    for t in &f {
+        let label = octant(t.map(|i| {
+            let p = v[i as usize];
+            DVec3::new(p[0].into(), p[1].into(), p[2].into())
+        }));
+        if encoding == "ascii" {
+            out.extend(format!("3 {} {} {} {label}\n", t[0], t[1], t[2]).bytes());
+        } else {
+            out.push(3);
+            t.iter().for_each(|i| put(&mut out, &i.to_le_bytes()));
+            out.push(label);
+        }
+    }
+    std::fs::write(path, out).unwrap();
+}
+
+fn quality(p: DVec3) -> f64 {
+    10.0 + p.x + 2.0 * p.y + 3.0 * p.z
+}
+
+fn octant(t: [DVec3; 3]) -> u8 {
+    let c = (t[0] + t[1] + t[2]) / 3.0;
+    (c.x > 0.0) as u8 | ((c.y > 0.0) as u8) << 1 | ((c.z > 0.0) as u8) << 2
+}
+
+/// The values of vertex property `name` of a PLY file.
+fn vertex_values(m: &Mesh, name: &str) -> Vec<f64> {
+    let layout = m.source.layout.as_ref().expect("a PLY layout");
+    let ply = layout.as_any().downcast_ref::<io::PlyLayout>().unwrap();
+    let mut out = vec![f64::NAN; m.positions.len()];
+    ply.vertex_values(name, |i, x| out[i] = x).unwrap();
+    out
+}
+
+/// Vertex colours and quality, and face labels, survive `subdivide` and `refine` (with and
+/// without smoothing) in every PLY encoding: the input's vertices keep theirs exactly, a new
+/// vertex's colour is the rounded mean of the two vertices of the edge it split (two collinear
+/// neighbours it is the midpoint of), its quality (affine in the position) is the midpoint's, and
+/// every child face keeps its parent's label. Nothing is said on stderr: nothing was dropped.
+#[test]
+fn subdivision_interpolates_vertex_properties_and_copies_face_properties() {
+    let dir = tempfile::tempdir().unwrap();
+    for encoding in ["ascii", "binary_little_endian", "binary_big_endian"] {
+        let input = dir.path().join(format!("{encoding}.ply"));
+        coloured_octahedron(&input, encoding);
+        let before = io::read_mesh(&input).unwrap();
+        let n = before.positions.len();
+        let colour_of = |m: &Mesh| -> Vec<[f64; 3]> {
+            let [r, g, b] = ["red", "green", "blue"].map(|c| vertex_values(m, c));
+            (0..m.positions.len()).map(|i| [r[i], g[i], b[i]]).collect()
+        };
+        let c0 = colour_of(&before);
+        for (cmd, extra) in [
+            ("subdivide", &[][..]),
+            ("refine", &["--rounds", "2", "--iterations", "0"][..]),
+            ("refine", &["--rounds", "2", "--iterations", "3"][..]),
+        ] {
+            let out = dir.path().join(format!("{encoding}-{cmd}.ply"));
+            let mut args = vec![
+                cmd.to_string(),
+                arg(&input),
+                arg(&out),
+                "--max-edge".into(),
+                "0.3".into(),
+            ];
+            args.extend(extra.iter().map(|s| s.to_string()));
+            let o = vcsmooth(&args);
+            assert!(
+                crate::util::stderr(&o).is_empty(),
+                "{cmd} {extra:?}: {}",
+                crate::util::stderr(&o)
+            );
+            ok(o);
+            let m = io::read_mesh(&out).unwrap();
+            assert!(m.positions.len() > 4 * n, "{cmd}");
+            let c = colour_of(&m);
+            assert_eq!(
+                &c[..n],
+                &c0[..],
+                "{encoding} {cmd} {extra:?}: input vertices keep theirs"
+            );
+            let moved = extra.contains(&"3");
+            if !moved {
+                let q = vertex_values(&m, "quality");
+                for v in 0..m.positions.len() {
+                    let p = m.positions[v];
+                    assert!(
+                        (q[v] - quality(p)).abs() < 1e-5,
+                        "{encoding} {cmd}: quality of {v}"
+                    );
+                    if v < n {
+                        continue;
+                    }
+                    // The edge it split: two earlier vertices it is the midpoint of (a later
+                    // pass may have split that edge again).
+                    let found = (0..v).any(|a| {
+                        (a + 1..v).any(|b| {
+                            (m.positions[a] + m.positions[b] - 2.0 * p).length() < 1e-5
+                                && (0..3).all(|k| c[v][k] == (0.5 * (c[a][k] + c[b][k])).round())
+                        })
+                    });
+                    assert!(
+                        found,
+                        "{encoding} {cmd}: vertex {v}'s colour {:?} is no edge's mean",
+                        c[v]
+                    );
+                }
+                if encoding == "ascii" {
+                    let text = std::fs::read_to_string(&out).unwrap();
+                    let body = text.split("end_header\n").nth(1).unwrap();
+                    let faces: Vec<&str> = body.lines().skip(m.positions.len()).collect();
+                    assert_eq!(faces.len(), m.triangles.len());
+                    for (line, t) in faces.iter().zip(m.triangles.iter()) {
+                        let label: u8 = line.split_whitespace().nth(4).unwrap().parse().unwrap();
+                        assert_eq!(label, octant(t.map(|i| m.positions[i as usize])), "{line}");
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// What a subdivision cannot carry is dropped with one `vcsmooth: note:` line naming it, and the
+/// run succeeds: OBJ vertex colours (`v x y z r g b`) and a PLY vertex element with a list.
+#[test]
+fn subdivision_says_what_it_drops() {
+    let dir = tempfile::tempdir().unwrap();
+    let obj = dir.path().join("c.obj");
+    let mut text = String::new();
+    for p in crate::util::octa_v() {
+        text += &format!("v {} {} {} 0.5 0.25 1\n", p[0], p[1], p[2]);
+    }
+    for t in crate::util::octa_f() {
+        text += &format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1);
+    }
+    std::fs::write(&obj, text).unwrap();
+    let ply = dir.path().join("l.ply");
+    let mut text = "ply\nformat ascii 1.0\nelement vertex 6\nproperty float x\nproperty float y\nproperty float z\nproperty list uchar int tags\nelement face 8\nproperty list uchar int vertex_indices\nend_header\n".to_string();
+    for p in crate::util::octa_v() {
+        text += &format!("{} {} {} 1 7\n", p[0], p[1], p[2]);
+    }
+    for t in crate::util::octa_f() {
+        text += &format!("3 {} {} {}\n", t[0], t[1], t[2]);
+    }
+    std::fs::write(&ply, text).unwrap();
+    for (input, what) in [(&obj, "colours"), (&ply, "vertex.tags")] {
+        for cmd in ["subdivide", "refine"] {
+            let out = dir.path().join(format!("out-{cmd}.ply"));
+            let o = vcsmooth(
+                [
+                    cmd,
+                    &arg(input),
+                    &arg(&out),
+                    "--max-edge",
+                    "0.5",
+                    "--rounds",
+                    "1",
+                ][..if cmd == "refine" { 7 } else { 5 }]
+                    .to_vec(),
+            );
+            let err = crate::util::stderr(&o);
+            assert_eq!(err.lines().count(), 1, "{err}");
+            assert!(
+                err.starts_with("vcsmooth: note: ") && err.contains(what),
+                "{err}"
+            );
+            ok(o);
         }
     }
 }

@@ -1808,6 +1808,65 @@ def cases_hostile_gltf():
     return out
 
 
+def coloured_octahedron_ply():
+    v, f = octahedron()
+    cols = [(255, 0, 0), (0, 255, 0), (0, 0, 255), (10, 20, 31), (200, 201, 3), (7, 7, 7)]
+    lines = ["ply", "format ascii 1.0", f"element vertex {len(v)}", "property float x",
+             "property float y", "property float z", "property uchar red", "property uchar green",
+             "property uchar blue", f"element face {len(f)}",
+             "property list uchar int vertex_indices", "property uchar label", "end_header"]
+    lines += [" ".join(repr(float(c)) for c in p) + " %d %d %d" % c for p, c in zip(v, cols)]
+    lines += [f"3 {t[0]} {t[1]} {t[2]} {k}" for k, t in enumerate(f)]
+    return ("\n".join(lines) + "\n").encode(), cols
+
+
+def colours_kept(d, code, out, err):
+    """The ASCII PLY output has the input's colours on its first vertices, a colour on every
+    vertex and a label on every face; nothing is dropped (no note)."""
+    text = open(os.path.join(d, "out.ply")).read()
+    head, body = text.split("end_header\n", 1)
+    if "property uchar red" not in head or "property uchar label" not in head:
+        return "the colours or face labels were dropped"
+    nv = int(re.search(r"element vertex (\d+)", head).group(1))
+    rows = body.splitlines()
+    cols = [tuple(int(x) for x in r.split()[3:6]) for r in rows[:nv]]
+    if cols[:6] != coloured_octahedron_ply()[1]:
+        return f"the input's vertices lost their colours: {cols[:6]}"
+    if any(len(r.split()) != 5 for r in rows[nv:]):
+        return "a face lost its label"
+    if "note:" in err:
+        return f"a note although nothing was dropped: {err.strip()}"
+    return None
+
+
+def says_dropped(what):
+    def check(d, code, out, err):
+        lines = [l for l in err.splitlines() if l]
+        if len(lines) != 1 or not lines[0].startswith("vcsmooth: note: ") or what not in lines[0]:
+            return f"no one-line note naming {what}: {err.strip()!r}"
+        return None
+    return check
+
+
+def cases_properties():
+    """Subdivision (subdivide, refine) keeps what it can interpolate and says what it drops."""
+    out = []
+    ply = write("in.ply", coloured_octahedron_ply()[0])
+    v, f = octahedron()
+    text = "".join(f"v {p[0]} {p[1]} {p[2]} 0.5 0.25 1\n" for p in v)
+    text += "".join(f"f {t[0] + 1} {t[1] + 1} {t[2] + 1}\n" for t in f)
+    coloured_obj = write("in.obj", text.encode())
+    for cmd in [["subdivide"], ["refine", "--rounds", "2"], ["refine", "--rounds", "1", "--iterations", "0"]]:
+        for delta in ["0.9", "0.2"]:
+            out.append(Case("properties", f"{' '.join(cmd)} --max-edge {delta}: PLY colours", ply,
+                            [cmd[0], "in.ply", "out.ply", "--max-edge", delta] + cmd[1:],
+                            expect="ok", check=colours_kept, output="out.ply"))
+        out.append(Case("properties", f"{' '.join(cmd)}: OBJ colours dropped with a note", coloured_obj,
+                        [cmd[0], "in.obj", "out.ply", "--max-edge", "0.5"] + cmd[1:],
+                        expect="ok", check=says_dropped("colours"), output="out.ply"))
+    return out
+
+
 CLASSES = {
     "paths": cases_paths,
     "values": cases_values,
@@ -1817,6 +1876,7 @@ CLASSES = {
     "signals": cases_signals,
     "batch": cases_batch,
     "output": cases_output,
+    "properties": cases_properties,
     "gltf": cases_gltf,
     "hostile_scripts": cases_hostile_scripts,
     "hostile_gltf": cases_hostile_gltf,

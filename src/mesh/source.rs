@@ -82,6 +82,19 @@ pub trait FileLayout: fmt::Debug + Send + Sync {
     fn carries(&self) -> Carried {
         Carried::default()
     }
+    /// This layout after a subdivision appended vertices at edge midpoints (`parents[i]`: the two
+    /// endpoints of vertex `n + i`, `n` the vertex count before; each may itself be a new vertex
+    /// earlier in the list) and replaced the faces by `triangles` (`face_of[t]`: the input face
+    /// that triangle `t` lies in). `None`: the layout cannot follow, the output is written plain, and
+    /// what it carried is dropped (callers compare [`FileLayout::carries`] to say what).
+    fn subdivided(
+        &self,
+        _parents: &[[u32; 2]],
+        _triangles: &[[u32; 3]],
+        _face_of: &[u32],
+    ) -> Option<Arc<dyn FileLayout>> {
+        None
+    }
 }
 
 /// What a file carries besides positions and faces. A writer of the same format keeps all of it

@@ -130,8 +130,10 @@ pub fn estimate_triangles(mesh: &Mesh, max_edge: f64) -> f64 {
 }
 
 /// Subdivide `mesh` in place until every edge is at most `max_edge` (see the module doc for the
-/// scheme and its guarantees). The positions move to the heap; a PLY source layout is dropped
-/// (the connectivity no longer matches it), keeping the format and the coordinate precision.
+/// scheme and its guarantees). The positions move to the heap; the source layout follows the split
+/// where it can ([`crate::mesh::FileLayout::subdivided`]: a PLY's vertex properties are
+/// interpolated at the new vertices, its face properties copied to the child faces) and is
+/// dropped otherwise, keeping the format and the coordinate precision.
 ///
 /// Errors: `max_edge` not finite and positive; triangles indexing vertices out of range; a δ
 /// that would create more than [`MAX_TRIANGLES`] triangles (checked before allocating).
@@ -162,19 +164,40 @@ pub fn subdivide(mesh: &mut Mesh, max_edge: f64) -> Result<SubdivideStats> {
     if stats.max_edge_before * stats.max_edge_before > limit2 {
         let mut pos: Vec<DVec3> = mesh.positions.to_vec();
         let mut tris: Vec<[u32; 3]> = mesh.triangles.to_vec();
+        // What the source layout needs to follow the split: each new vertex's edge, each
+        // triangle's input face (a polygon's fan triangles share their polygon).
+        let mut lineage = mesh.source.layout.as_ref().map(|_| Lineage {
+            parents: Vec::new(),
+            face_of: match &mesh.source.face_sizes {
+                Some(sizes) => sizes
+                    .iter()
+                    .enumerate()
+                    .flat_map(|(f, &k)| {
+                        std::iter::repeat_n(f as u32, (k as usize).saturating_sub(2))
+                    })
+                    .collect(),
+                None => (0..tris.len() as u32).collect(),
+            },
+        });
+        lineage.take_if(|l| l.face_of.len() != tris.len());
         loop {
             if stats.passes >= MAX_PASSES {
                 return Err(Error::topology(format!(
                     "subdivision did not bring every edge down to {max_edge} after {MAX_PASSES} passes"
                 )));
             }
-            if !bisect_pass(&mut pos, &mut tris, limit2, max_edge)? {
+            if !bisect_pass(&mut pos, &mut tris, limit2, max_edge, lineage.as_mut())? {
                 break;
             }
             stats.passes += 1;
         }
         let source = std::mem::take(&mut mesh.source);
+        let layout = source
+            .layout
+            .zip(lineage)
+            .and_then(|(l, t)| l.subdivided(&t.parents, &tris, &t.face_of));
         *mesh = Mesh::new(pos, tris);
+        mesh.source.layout = layout;
         mesh.source.format = source.format;
         mesh.source.precision = source.precision;
         mesh.source.input_faces = mesh.triangles.len();
@@ -217,13 +240,24 @@ fn key(u: u32, v: u32) -> u64 {
     ((a as u64) << 32) | b as u64
 }
 
+/// Where the vertices and triangles of a subdivision came from, for the source layout
+/// ([`crate::mesh::FileLayout::subdivided`]).
+struct Lineage {
+    /// The edge endpoints of each new vertex, in order of creation.
+    parents: Vec<[u32; 2]>,
+    /// The input face of each current triangle.
+    face_of: Vec<u32>,
+}
+
 /// One conforming bisection pass. Returns false (and changes nothing) when no edge is longer
-/// than δ (`limit2` = δ²).
+/// than δ (`limit2` = δ²). With `lineage`, records the new vertices' edges and the triangles'
+/// input faces.
 fn bisect_pass(
     pos: &mut Vec<DVec3>,
     tris: &mut Vec<[u32; 3]>,
     limit2: f64,
     max_edge: f64,
+    mut lineage: Option<&mut Lineage>,
 ) -> Result<bool> {
     // Half-edges (key, 3·face + corner) sorted by key: undirected edges are the runs of equal keys.
     let mut half: Vec<(u64, u32)> = Vec::with_capacity(3 * tris.len());
@@ -316,6 +350,9 @@ fn bisect_pass(
             let (a, b) = ((k >> 32) as usize, (k & 0xffff_ffff) as usize);
             mid[e] = pos.len() as u32;
             pos.push(0.5 * (pos[a] + pos[b]));
+            if let Some(l) = lineage.as_deref_mut() {
+                l.parents.push([a as u32, b as u32]);
+            }
         }
     }
     let mut out: Vec<[u32; 3]> = Vec::with_capacity(new_triangles as usize);
@@ -351,6 +388,18 @@ fn bisect_pass(
         }
     }
     debug_assert_eq!(out.len() as u64, new_triangles);
+    if let Some(l) = lineage {
+        // Children follow their parent in `out`: 1 + (marked edges) of them each.
+        let mut face_of = Vec::with_capacity(out.len());
+        for (f, &input) in l.face_of.iter().enumerate() {
+            let children = 1
+                + (0..3)
+                    .filter(|&c| marked[edge_of[3 * f + c] as usize])
+                    .count();
+            face_of.extend(std::iter::repeat_n(input, children));
+        }
+        l.face_of = face_of;
+    }
     *tris = out;
     Ok(true)
 }

@@ -96,9 +96,11 @@ pub fn run(cfg: &RefineConfig, progress: &mut Progress, out: &mut dyn Write) -> 
         };
         check_memory(m, cfg.options.max_edge, cfg.budget, &cfg.output, &prefix)
     };
+    let carried = super::subdivide::carried(&mesh);
     let records =
         refine::refine_checked(&mut mesh, &cfg.options, cfg.threads, progress, &mut check)
             .map_err(|e| e.in_file(&cfg.input))?;
+    super::subdivide::note_dropped(&cfg.input, &carried, &mesh);
     progress.phase(format!("writing {}", cfg.output.display()));
     io::write_mesh(&cfg.output, &mesh)?;
     progress.finish();

@@ -13,7 +13,7 @@ use crate::cli::shared::{InOut, length};
 use crate::engine::memory;
 use crate::error::{Error, Result};
 use crate::io;
-use crate::mesh::Mesh;
+use crate::mesh::{Carried, Mesh};
 use crate::modes::refine;
 
 /// `vcsmooth subdivide IN OUT --max-edge DELTA`
@@ -56,7 +56,9 @@ pub fn run(cfg: &SubdivideConfig, progress: &mut Progress, out: &mut dyn Write) 
     let mut mesh = io::read_mesh(&cfg.input)?;
     check_memory(&mesh, cfg.max_edge, cfg.budget, &cfg.output, "")?;
     progress.phase("subdividing");
+    let carried = carried(&mesh);
     let s = refine::subdivide(&mut mesh, cfg.max_edge).map_err(|e| e.in_file(&cfg.input))?;
+    note_dropped(&cfg.input, &carried, &mesh);
     progress.phase(format!("writing {}", cfg.output.display()));
     io::write_mesh(&cfg.output, &mesh)?;
     progress.finish();
@@ -102,4 +104,46 @@ pub(crate) fn check_memory(
             output.display(),
         ))
     })
+}
+
+/// What `mesh`'s source layout carries besides positions and faces.
+pub(crate) fn carried(mesh: &Mesh) -> Carried {
+    mesh.source
+        .layout
+        .as_ref()
+        .map(|l| l.carries())
+        .unwrap_or_default()
+}
+
+/// One `vcsmooth: note:` line on stderr naming what `before` carried and `mesh` (subdivided) no
+/// longer does: the properties a subdivision could not give its new vertices and faces
+/// ([`crate::mesh::FileLayout::subdivided`]). Nothing when nothing was dropped.
+pub(crate) fn note_dropped(input: &Path, before: &Carried, mesh: &Mesh) {
+    let after = carried(mesh);
+    let mut dropped: Vec<String> = [
+        (before.colours && !after.colours, "colours"),
+        (before.uvs && !after.uvs, "texture coordinates"),
+        (before.normals && !after.normals, "normals"),
+        (before.materials && !after.materials, "materials"),
+    ]
+    .iter()
+    .filter(|(lost, _)| *lost)
+    .map(|(_, what)| what.to_string())
+    .collect();
+    dropped.extend(
+        before
+            .other
+            .iter()
+            .filter(|o| !after.other.contains(o))
+            .cloned(),
+    );
+    if !dropped.is_empty() {
+        // Not `eprintln!`: stderr may be a closed pipe, and this must not panic.
+        let _ = writeln!(
+            std::io::stderr(),
+            "vcsmooth: note: {}: subdivision dropped {}: only a PLY input's properties are interpolated at new vertices",
+            input.display(),
+            dropped.join(", ")
+        );
+    }
 }

@@ -86,6 +86,88 @@ impl crate::mesh::FileLayout for PlyLayout {
         }
         carried
     }
+
+    /// A new vertex's scalar properties are the mean of its edge's two endpoints', rounded to
+    /// the property's type (integers to nearest, half away from zero); coordinates and normals
+    /// are rewritten from the mesh anyway. A child face keeps its input face's properties, with
+    /// its own three corners. Other elements are kept as they are. `None` (dropped) when the
+    /// vertex element has list properties or the stored records do not walk.
+    fn subdivided(
+        &self,
+        parents: &[[u32; 2]],
+        triangles: &[[u32; 3]],
+        face_of: &[u32],
+    ) -> Option<std::sync::Arc<dyn crate::mesh::FileLayout>> {
+        let roles = header::Roles::find(&self.elements).ok()?;
+        let mut elements = Vec::with_capacity(self.elements.len());
+        for (e, el) in self.elements.iter().enumerate() {
+            let mut el = el.clone();
+            if e == roles.vertex {
+                if el.records.is_some() {
+                    let stride = el.stride()?;
+                    let fields: Vec<(usize, Scalar)> = (0..el.props.len())
+                        .map(|k| (el.offset(k), el.scalar(k)))
+                        .collect();
+                    let records = el.records.as_mut()?;
+                    records.truncate(el.count * stride);
+                    records.reserve_exact(parents.len() * stride);
+                    for &[a, b] in parents {
+                        let (a, b) = (a as usize * stride, b as usize * stride);
+                        let at = records.len();
+                        records.resize(at + stride, 0);
+                        for &(o, t) in &fields {
+                            let va = t.get(&records[a + o..])?;
+                            let vb = t.get(&records[b + o..])?;
+                            t.put(0.5 * va + 0.5 * vb, &mut records[at + o..]);
+                        }
+                    }
+                }
+                el.count += parents.len();
+            } else if let Some(face) = roles.face.filter(|f| f.element == e) {
+                if let Some(records) = el.records.as_ref() {
+                    let mut starts = Vec::with_capacity(el.count);
+                    let (mut fields, mut pos) = (Vec::new(), 0);
+                    for _ in 0..el.count {
+                        starts.push(pos);
+                        pos = walk_record(records, pos, &el.props, false, &mut fields).ok()?;
+                    }
+                    let mut out = Vec::with_capacity(triangles.len() * (pos / el.count.max(1)));
+                    for (t, &f) in triangles.iter().zip(face_of) {
+                        walk_record(
+                            records,
+                            *starts.get(f as usize)?,
+                            &el.props,
+                            false,
+                            &mut fields,
+                        )
+                        .ok()?;
+                        for (k, p) in el.props.iter().enumerate() {
+                            let at = fields[k].at;
+                            match p.kind {
+                                _ if k == face.list => {
+                                    put_face(face.count, face.index, t, &mut out)
+                                }
+                                Kind::Scalar(s) => {
+                                    out.extend_from_slice(&records[at..at + s.size()])
+                                }
+                                Kind::List(c, s) => out.extend_from_slice(
+                                    &records[at..at + c.size() + fields[k].n * s.size()],
+                                ),
+                            }
+                        }
+                    }
+                    el.records = Some(out);
+                }
+                el.count = triangles.len();
+            }
+            elements.push(el);
+        }
+        Some(std::sync::Arc::new(PlyLayout {
+            encoding: self.encoding,
+            meta: self.meta.clone(),
+            elements,
+        }))
+    }
 }
 
 impl PlyLayout {
