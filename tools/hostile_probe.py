@@ -1867,6 +1867,39 @@ def cases_properties():
     return out
 
 
+def radii_within(lo, hi):
+    """The output's vertex radii (about the origin) stay within [lo, hi]: a multiresolution run may
+    not wreck a small sphere."""
+    def check(d, code, out, err):
+        text = open(os.path.join(d, "out.ply"), "rb").read()
+        head, body = text.split(b"end_header\n", 1)
+        nv = int(re.search(rb"element vertex (\d+)", head).group(1))
+        props = re.findall(rb"property (float|double) [xyz]\b", head)
+        fmt = "<" + "".join("f" if t == b"float" else "d" for t in props)
+        size = struct.calcsize(fmt)
+        r = [sum(c * c for c in struct.unpack_from(fmt, body, k * size)) ** 0.5 for k in range(nv)]
+        if min(r) < lo or max(r) > hi:
+            return f"radii {min(r):.3f}..{max(r):.3f}, outside {lo}..{hi}"
+        return None
+    return check
+
+
+def cases_multires():
+    """Multiresolution levels too coarse to carry the shape are not built (small meshes, many
+    levels, coarse cells): the output stays near the input."""
+    out = []
+    for k in [3, 4]:
+        for levels in ["3", "5", "8"]:
+            for cell in ["4", "8"]:
+                def setup(d, k=k):
+                    medium(d, k=k)
+                out.append(Case("multires", f"level-{k} sphere, --levels {levels} --cell-factor {cell}",
+                                setup, ["smooth", "in.ply", "out.ply", "--multires", "--levels", levels,
+                                        "--cell-factor", cell],
+                                expect="either", check=radii_within(0.85, 1.15), output="out.ply"))
+    return out
+
+
 CLASSES = {
     "paths": cases_paths,
     "values": cases_values,
@@ -1877,6 +1910,7 @@ CLASSES = {
     "batch": cases_batch,
     "output": cases_output,
     "properties": cases_properties,
+    "multires": cases_multires,
     "gltf": cases_gltf,
     "hostile_scripts": cases_hostile_scripts,
     "hostile_gltf": cases_hostile_gltf,

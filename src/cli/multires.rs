@@ -113,6 +113,17 @@ pub fn print_multires(
         m.correction_seconds,
         m.seconds
     );
+    if let Some(r) = &m.refused {
+        text += &format!(
+            "levels: {} of {} asked: level {} would have {} vertices keeping {} % of the volume, below {} % (too coarse to carry the shape)\n",
+            m.levels.len(),
+            m.options.levels,
+            r.level,
+            r.vertices,
+            fixed(r.volume_pct, 1),
+            fixed(100.0 * crate::multires::MIN_LEVEL_VOLUME, 0)
+        );
+    }
     out.write_all(text.as_bytes()).map_err(stdout_error)
 }
 

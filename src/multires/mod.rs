@@ -51,6 +51,12 @@ pub use transfer::Transfer;
 pub const DEFAULT_LEVELS: usize = 2;
 /// Largest `--levels`: beyond that a level has a handful of vertices even for billions of triangles.
 pub const MAX_LEVELS: usize = 8;
+/// The least share of the input's volume a coarse level must keep as clustered (before its
+/// volume is restored) to be built. A coarser level has lost the shape: restoring its volume
+/// inflates what it collapsed, smoothing it moves vertices farther than a cell, and the transfer
+/// hands that down (a level-4 sphere's 8-vertex level kept 56 % and wrecked the output; levels
+/// that carry the shape keep 97 % and more).
+pub const MIN_LEVEL_VOLUME: f64 = 0.95;
 /// Default cell edge of a coarse level, in mean edge lengths of the level below it.
 pub const DEFAULT_CELL_FACTOR: f64 = 4.0;
 
@@ -102,12 +108,24 @@ pub struct LevelStats {
     pub smooth_seconds: f64,
 }
 
+/// A coarse level not built: clustered, it kept too little of the input's volume
+/// ([`MIN_LEVEL_VOLUME`]).
+#[derive(Debug, Clone, Copy, serde::Serialize)]
+pub struct RefusedLevel {
+    pub level: usize,
+    pub vertices: usize,
+    /// Its volume as clustered, % of the input's.
+    pub volume_pct: f64,
+}
+
 /// The whole multiresolution run, for reports.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct MultiresStats {
     pub options: MultiresOptions,
     /// Finest first.
     pub levels: Vec<LevelStats>,
+    /// The coarser level that was not built because it lost the shape, when one was not.
+    pub refused: Option<RefusedLevel>,
     /// Volume % after the fine smoothing, before the final correction.
     pub volume_pct_before_correction: f64,
     /// The output's volume and area as a percentage of the input's: also after 0 iterations of
@@ -237,6 +255,7 @@ pub fn smooth_plan(
 
     // 1. The hierarchy, finest to coarsest.
     let mut levels: Vec<Level> = Vec::new();
+    let mut refused = None;
     for k in 1..m.levels {
         let t = Instant::now();
         let finer = levels.last().map_or(&*plan, |l| &l.plan);
@@ -253,6 +272,19 @@ pub fn smooth_plan(
         let c = clustering::cluster(storage, pos, tris, topo, cell)?;
         // A level that does not shrink (or has nothing left to smooth) ends the hierarchy.
         if c.triangles.is_empty() || 2 * c.positions.len() > pos.len() {
+            break;
+        }
+        // So does one that lost the shape (for a mesh that encloses a volume).
+        let kept = reduce::volume(&c.positions, &c.triangles, origin) / v0;
+        if v0.is_finite()
+            && v0 != 0.0
+            && !((MIN_LEVEL_VOLUME..=1.0 / MIN_LEVEL_VOLUME).contains(&kept))
+        {
+            refused = Some(RefusedLevel {
+                level: k,
+                vertices: c.positions.len(),
+                volume_pct: 100.0 * kept,
+            });
             break;
         }
         let mut coarse = Plan::new(
@@ -415,6 +447,7 @@ pub fn smooth_plan(
         MultiresStats {
             options: *m,
             levels: all,
+            refused,
             volume_pct_before_correction: before,
             volume_pct: pct(volume),
             area_pct: metrics::percent(area, a0),
