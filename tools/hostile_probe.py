@@ -1900,6 +1900,75 @@ def cases_multires():
     return out
 
 
+def flat_sheet(n=7, lift=0.0, plane=2):
+    """An `n × n` grid sheet (OBJ text), its coordinate `plane` 0 on its border and `lift` inside,
+    the interior wobbling in the sheet: flat (volume exactly 0) when `lift` is 0."""
+    v, f = [], []
+    for j in range(n):
+        for i in range(n):
+            inside = 0 < i < n - 1 and 0 < j < n - 1
+            w = ((i * 7 + j * 3) % 5) * 0.05 if inside else 0.0
+            p = [i + w, j - w]
+            p.insert(plane, lift if inside else 0.0)
+            v.append(tuple(p))
+    for j in range(n - 1):
+        for i in range(n - 1):
+            a = j * n + i
+            f += [(a, a + 1, a + n + 1), (a, a + n + 1, a + n)]
+    return obj(v, f)
+
+
+def ratios_undefined(report=None, lines=()):
+    """Nothing prints a percentage of a zero volume: no `100.000000` volume, no NaN; the lines
+    matching `lines` say `undefined`; the report's volume percentages are null."""
+    def check(d, code, out, err):
+        if re.search(r"\bNaN\b|\binf\b", out):
+            return "printed NaN/inf"
+        if any(re.search(r"volume 100\.0+ %", l) for l in out.splitlines() if "raised" not in l):
+            return "a volume ratio against 0 printed as a number"
+        for pattern in lines:
+            hit = [l for l in out.splitlines() if re.search(pattern, l)]
+            if not hit or any("undefined" not in l for l in hit):
+                return f"lines /{pattern}/ do not say undefined: {hit}"
+        if report:
+            with open(os.path.join(d, report)) as fh:
+                r = json.load(fh)
+            pcts = [r["summary"]["volume_pct"]] + [i["volume_pct"] for i in r.get("iterations", [])]
+            if any(x is not None for x in pcts):
+                return f"report volume_pct not null: {pcts}"
+        return None
+    return check
+
+
+def cases_hostile_ratios():
+    """A ratio against zero (issue round three, item 12): a flat open sheet has a volume of
+    exactly 0, and every volume percentage of it is undefined (`null` in JSON), on every path
+    that prints one."""
+    out = []
+    cls = "hostile_ratios"
+    for plane in (0, 2):
+        sheet = write("flat.obj", flat_sheet(plane=plane))
+        for method in ("vcs", "laplacian", "taubin", "vcs-lowpass"):
+            for extra in ([], ["--checkpoint", "ck"], ["--stats", "last"]):
+                argv = ["smooth", "flat.obj", "out.obj", "--iterations", "3", "--method", method,
+                        "--report", "r.json"] + extra
+                out.append(Case(cls, f"flat sheet (plane {plane}) {method} {' '.join(extra)}".strip(),
+                                sheet, argv, expect="ok", output="out.obj",
+                                check=ratios_undefined("r.json", [r"; volume "])))
+        out.append(Case(cls, f"flat sheet (plane {plane}) multires", sheet,
+                        ["smooth", "flat.obj", "out.obj", "--multires", "--iterations", "2"],
+                        expect="ok", output="out.obj",
+                        check=ratios_undefined(None, [r"; volume ", r"before the final correction"])))
+        out.append(Case(cls, f"flat sheet (plane {plane}) curves", sheet,
+                        ["curves", "flat.obj", "--iterations", "2", "--plot", "c.svg"],
+                        expect="ok", check=ratios_undefined(None, [r"^\s+[0-9]+\s"])))
+    both_sheets = both(write("in/flat.obj", flat_sheet()), write("in/raised.obj", flat_sheet(lift=2.0)))
+    out.append(Case(cls, "batch of a flat and a raised sheet", both_sheets,
+                    ["batch", "in", "o", "--iterations", "2"], expect="ok",
+                    check=ratios_undefined(None, [r"flat\.ply: "])))
+    return out
+
+
 CLASSES = {
     "paths": cases_paths,
     "values": cases_values,
@@ -1914,6 +1983,7 @@ CLASSES = {
     "gltf": cases_gltf,
     "hostile_scripts": cases_hostile_scripts,
     "hostile_gltf": cases_hostile_gltf,
+    "hostile_ratios": cases_hostile_ratios,
 }
 
 

@@ -108,11 +108,14 @@ pub fn without_gil<T: Send>(
 
 /// One line of progress on `sys.stderr` (where Jupyter shows it; Rust's stderr is the server's).
 fn print_progress(py: Python<'_>, r: &IterationRecord, total: usize) {
+    // '-': not measured; `undefined`: measured, but the input's volume (or area) is 0.
     let measured = |x: f64, decimals: usize| {
         if x.is_finite() {
             format!("{x:.decimals$} %")
-        } else {
+        } else if r.volume.is_nan() {
             "-".to_string()
+        } else {
+            "undefined".to_string()
         }
     };
     let line = format!(

@@ -5,7 +5,7 @@ use clap::builder::PossibleValue;
 use clap::{Args as ClapArgs, ValueEnum};
 
 use super::output::stdout_error;
-use super::report::fixed;
+use super::report::{fixed, percent_text};
 use crate::error::Result;
 use crate::multires::{DEFAULT_LEVELS, MAX_LEVELS, MultiresOptions, Transfer};
 use crate::smooth::{Control, Method};
@@ -106,9 +106,9 @@ pub fn print_multires(
         );
     }
     text += &format!(
-        "multires: {} transfer, volume {} % before the final correction, relative error {:.1e} after ({:.3} s); {:.3} s in all\n",
+        "multires: {} transfer, volume {} before the final correction, relative error {:.1e} after ({:.3} s); {:.3} s in all\n",
         m.options.transfer.name(),
-        fixed(m.volume_pct_before_correction, 6),
+        percent_text(m.volume_pct_before_correction, 6),
         m.volume_error,
         m.correction_seconds,
         m.seconds

@@ -17,9 +17,13 @@ pub struct Curve {
     pub volume_pct: Vec<f64>,
 }
 
-/// Volume % at iterations 0 (the input: 100), 1, …, N.
+/// Volume % at iterations 0 (the input: 100), 1, …, N; all undefined (NaN) when the input's
+/// volume is 0 (a measured volume whose percentage is not finite).
 pub fn volume_curve(records: &[IterationRecord]) -> Vec<f64> {
-    std::iter::once(100.0)
+    let against_zero = records
+        .iter()
+        .any(|r| r.volume.is_finite() && !r.volume_pct.is_finite());
+    std::iter::once(if against_zero { f64::NAN } else { 100.0 })
         .chain(records.iter().map(|r| r.volume_pct))
         .collect()
 }

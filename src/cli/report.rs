@@ -16,10 +16,16 @@ pub const UNDEFINED: &str = "undefined";
 
 /// `x` as a percentage of `reference`: NaN (undefined) when the reference is 0.
 pub fn percent_of(x: f64, reference: f64) -> f64 {
-    if reference == 0.0 {
-        f64::NAN
+    crate::metrics::percent(x, reference)
+}
+
+/// `x` as `12.345678 %` with `decimals` decimals, or [`UNDEFINED`] (no `%`) when it is not finite:
+/// a ratio against zero.
+pub fn percent_text(x: f64, decimals: usize) -> String {
+    if x.is_finite() {
+        format!("{} %", fixed(x, decimals))
     } else {
-        100.0 * x / reference
+        UNDEFINED.to_string()
     }
 }
 

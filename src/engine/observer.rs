@@ -93,7 +93,7 @@ pub struct IterationRecord {
     pub iteration: usize,
     #[serde(deserialize_with = "nan_if_null")]
     pub volume: f64,
-    /// Volume as a percentage of the input volume (100 when the input volume is 0).
+    /// Volume as a percentage of the input volume (NaN, undefined, when the input volume is 0).
     #[serde(deserialize_with = "nan_if_null")]
     pub volume_pct: f64,
     #[serde(deserialize_with = "nan_if_null")]
@@ -114,7 +114,7 @@ pub struct IterationRecord {
 
 /// JSON has no NaN: serde_json writes it as `null`, and this reads `null` back as NaN (a resumed
 /// cluster run reads the records of unmeasured iterations from its checkpoint).
-fn nan_if_null<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+pub(crate) fn nan_if_null<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
     use serde::Deserialize;
     Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
 }

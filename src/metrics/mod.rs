@@ -26,12 +26,12 @@ pub fn area(pos: &[DVec3], triangles: &[[u32; 3]]) -> f64 {
     doubled_area_sum(pos, triangles) / 2.0
 }
 
-/// `x` as a percentage of `reference` (100 when the reference is 0, NaN for NaN).
+/// `x` as a percentage of `reference`; NaN (undefined: `null` in JSON, `undefined` in tables)
+/// for NaN, and for a reference of 0 or not finite (the volume of a flat or open sheet), which
+/// no ratio is against.
 pub fn percent(x: f64, reference: f64) -> f64 {
-    if x.is_nan() {
+    if x.is_nan() || reference == 0.0 || !reference.is_finite() {
         f64::NAN
-    } else if reference == 0.0 {
-        100.0
     } else {
         100.0 * x / reference
     }

@@ -222,8 +222,10 @@ pub struct MeshRow {
     pub iterations: usize,
     pub vertices: usize,
     pub triangles: usize,
-    /// Final volume and area as a percentage of the input's.
+    /// Final volume and area as a percentage of the input's (NaN, `null`, against zero).
+    #[serde(deserialize_with = "crate::engine::observer::nan_if_null")]
     pub volume_pct: f64,
+    #[serde(deserialize_with = "crate::engine::observer::nan_if_null")]
     pub area_pct: f64,
     /// Wall-clock seconds of the whole file (read, prepare, smooth, write).
     pub seconds: f64,
@@ -594,6 +596,10 @@ pub fn summarize(outdir: &Path, inputs: Option<&[PathBuf]>) -> Result<BatchSumma
         totals.vertices += m.vertices as u64;
         totals.triangles += m.triangles as u64;
         totals.seconds += m.seconds;
+        // An undefined volume ratio (an input of zero volume) is no extreme.
+        if !m.volume_pct.is_finite() {
+            continue;
+        }
         totals.min_volume_pct = Some(
             totals
                 .min_volume_pct

@@ -378,7 +378,8 @@ pub fn smooth_plan(
         fixed_vertices: plan.topology.stats.fixed_vertices,
         method: m.fine_method,
         iterations: opts.iterations,
-        volume_pct: 100.0,
+        // The input itself: 100 %, undefined against a volume of 0.
+        volume_pct: if pct(0.0).is_nan() { f64::NAN } else { 100.0 },
         build_seconds: 0.0,
         transfer_seconds: 0.0,
         smooth_seconds: 0.0,

@@ -291,6 +291,138 @@ fn undefined_quantities_read_undefined_and_null() {
     no_made_up_numbers(&text);
 }
 
+/// A noisy `n × n` grid sheet as OBJ text, its coordinate `fixed` (0: x, 2: z) 0 on its border and
+/// `lift` inside (0: flat).
+fn sheet(n: usize, fixed: usize, lift: f64) -> String {
+    let mut text = String::new();
+    for j in 0..n {
+        for i in 0..n {
+            let interior = (1..n - 1).contains(&i) && (1..n - 1).contains(&j);
+            let wobble = if interior {
+                ((i * 7 + j * 3) % 5) as f64 * 0.05
+            } else {
+                0.0
+            };
+            let (u, v) = (i as f64 + wobble, j as f64 - wobble);
+            let h = if interior { lift } else { 0.0 };
+            let p = if fixed == 0 { [h, u, v] } else { [u, v, h] };
+            text += &format!("v {} {} {}\n", p[0], p[1], p[2]);
+        }
+    }
+    for j in 0..n - 1 {
+        for i in 0..n - 1 {
+            let a = j * n + i + 1;
+            let (b, c, d) = (a + 1, a + n, a + n + 1);
+            text += &format!("f {a} {b} {d}\nf {a} {d} {c}\n");
+        }
+    }
+    text
+}
+
+/// A volume ratio against an input of volume exactly 0 (a flat sheet) is
+/// undefined wherever it is shown: the summary and iteration table of `smooth` (one process,
+/// `--checkpoint`, `--multires`), its report, `curves`, `batch` and its summary. An open sheet
+/// that is not flat has a volume (measured about the centroid): it keeps its numbers.
+#[test]
+fn a_ratio_against_zero_volume_is_undefined_everywhere() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    for (name, axis) in [("flat-z.obj", 2), ("flat-x.obj", 0)] {
+        let input = d.join(name);
+        std::fs::write(&input, sheet(7, axis, 0.0)).unwrap();
+        for method in ["vcs", "laplacian", "taubin"] {
+            for extra in [&[][..], &["--checkpoint", "ck"][..], &["--multires"][..]] {
+                if extra == ["--multires"] && method != "vcs" {
+                    continue;
+                }
+                let (out, report) = (d.join("out.obj"), d.join("r.json"));
+                let mut args: Vec<&dyn AsRef<std::ffi::OsStr>> = vec![
+                    &"smooth",
+                    &input,
+                    &out,
+                    &"--iterations",
+                    &"3",
+                    &"--method",
+                    &method,
+                    &"--stats",
+                    &"every",
+                    &"--report",
+                    &report,
+                ];
+                let ck = d.join("ck");
+                for e in extra {
+                    args.push(if *e == "ck" { &ck } else { e });
+                }
+                let text = ok(run(&args));
+                let what = format!("{name} {method} {extra:?}");
+                assert!(
+                    text.contains("; volume undefined, area 100.0000 %"),
+                    "{what}: {text}"
+                );
+                assert!(!text.contains("volume 100.000000"), "{what}: {text}");
+                assert!(text.contains("    undefined   100.0000"), "{what}: {text}");
+                no_made_up_numbers(&text);
+                let r = crate::util::read_json(&report);
+                assert!(r["summary"]["volume_pct"].is_null(), "{what}: {r}");
+                for it in r["iterations"].as_array().unwrap() {
+                    assert!(it["volume_pct"].is_null(), "{what}: {it}");
+                    assert_eq!(it["volume"].as_f64(), Some(0.0), "{what}: {it}");
+                }
+            }
+        }
+    }
+    let plot = d.join("c.svg");
+    let table = ok(run(&[
+        &"curves",
+        &d.join("flat-z.obj"),
+        &"--iterations",
+        &"2",
+        &"--plot",
+        &plot,
+    ]));
+    for line in table
+        .lines()
+        .filter(|l| l.trim_start().starts_with(char::is_numeric))
+    {
+        assert_eq!(line.matches("undefined").count(), 3, "{table}");
+    }
+    no_made_up_numbers(&table);
+
+    let (inputs, outdir) = (d.join("in"), d.join("outdir"));
+    std::fs::create_dir(&inputs).unwrap();
+    std::fs::write(inputs.join("flat.obj"), sheet(7, 2, 0.0)).unwrap();
+    std::fs::write(inputs.join("raised.obj"), sheet(7, 2, 5.0)).unwrap();
+    let text = ok(run(&[&"batch", &inputs, &outdir, &"--iterations", &"2"]));
+    assert!(
+        text.contains("flat.ply: 72 triangles, 2 × vcs-lowpass, volume undefined,"),
+        "{text}"
+    );
+    assert!(
+        text.contains("raised.ply: 72 triangles, 2 × vcs-lowpass, volume 100.000000 %"),
+        "{text}"
+    );
+    let json_path = d.join("summary.json");
+    let summary = ok(run(&[
+        &"batch",
+        &"--summary",
+        &outdir,
+        &"--json",
+        &json_path,
+    ]));
+    assert!(
+        summary
+            .lines()
+            .any(|l| l.starts_with("flat ") && l.contains(" undefined ")),
+        "{summary}"
+    );
+    no_made_up_numbers(&summary);
+    let s = crate::util::read_json(&json_path);
+    let rows = s["meshes"].as_array().unwrap();
+    assert!(rows[0]["volume_pct"].is_null(), "{s}");
+    // The extremes are over the defined ratios only.
+    assert_eq!(s["totals"]["min_volume_pct"], rows[1]["volume_pct"], "{s}");
+}
+
 #[test]
 fn numeric_flags_are_refused_outside_their_range_at_once() {
     let (dir, scan) = scan_dir();

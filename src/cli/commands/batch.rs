@@ -15,6 +15,7 @@ use crate::cli::output::{
     Identity, one_line, print_error, print_json, side_writable, stdout_error, write_json,
 };
 use crate::cli::progress::Progress;
+use crate::cli::report::{fixed, percent_text};
 use crate::engine;
 use crate::error::{Error, Result};
 use crate::io::Format;
@@ -227,7 +228,7 @@ fn run_share(
                 done += 1;
                 writeln!(
                     out,
-                    "done {} -> {}: {} triangles, {} × {}{}, volume {:.6} %, {:.3} s",
+                    "done {} -> {}: {} triangles, {} × {}{}, volume {}, {:.3} s",
                     row.input,
                     row.output,
                     row.triangles,
@@ -238,7 +239,7 @@ fn run_share(
                     } else {
                         ""
                     },
-                    row.volume_pct,
+                    percent_text(row.volume_pct, 6),
                     row.seconds
                 )
                 .map_err(stdout_error)?;
@@ -385,8 +386,13 @@ fn print_summary(out: &mut dyn Write, s: &core::BatchSummary) -> Result<()> {
     );
     for m in &s.meshes {
         text += &format!(
-            "{:<w$}  {:>12}  {:<12}  {:>10}  {:>12.6}  {:>10.3}\n",
-            m.name, m.triangles, m.method, m.iterations, m.volume_pct, m.seconds
+            "{:<w$}  {:>12}  {:<12}  {:>10}  {:>12}  {:>10.3}\n",
+            m.name,
+            m.triangles,
+            m.method,
+            m.iterations,
+            fixed(m.volume_pct, 6),
+            m.seconds
         );
     }
     let t = &s.totals;

@@ -10,7 +10,7 @@ use clap::Args as ClapArgs;
 use crate::cli::commands::subdivide::check_memory;
 use crate::cli::output::stdout_error;
 use crate::cli::progress::Progress;
-use crate::cli::report::{UNDEFINED, fixed, percent_of};
+use crate::cli::report::{percent_of, percent_text};
 use crate::cli::shared::{InOut, MAX_THREADS, length};
 use crate::engine::memory;
 use crate::error::Result;
@@ -145,8 +145,5 @@ pub fn run(cfg: &RefineConfig, progress: &mut Progress, out: &mut dyn Write) -> 
 /// `volume` as `12.345678901 %` of `reference`, or [`UNDEFINED`] when the reference is 0 (an open
 /// or flat mesh).
 fn volume_pct(volume: f64, reference: f64) -> String {
-    match percent_of(volume, reference) {
-        p if p.is_finite() => format!("{} %", fixed(p, 9)),
-        _ => UNDEFINED.to_string(),
-    }
+    percent_text(percent_of(volume, reference), 9)
 }

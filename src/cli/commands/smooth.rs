@@ -15,7 +15,7 @@ use crate::cli::output::{
 use crate::cli::pictures::{PictureArgs, PictureConfig, RunPictures, Sheet, print_drawn};
 use crate::cli::plot::{Curve, file_name, volume_curve, write_volume_plot};
 use crate::cli::progress::Progress;
-use crate::cli::report::{count, fixed, iterations_run, print_deviation};
+use crate::cli::report::{count, fixed, iterations_run, percent_text, print_deviation};
 use crate::cli::shared::{DeviationArgs, InOut, PinArgs, SmoothingArgs, tolerance_verdict};
 use crate::engine::{self, EngineSettings, IterationRecord, Statistics};
 use crate::error::{Error, Result};
@@ -353,15 +353,15 @@ fn report(
 
     let s = Summary::of_run(records, multires.as_ref());
     let text = format!(
-        "{} -> {}: {}, {}, {} vertices, {} triangles; volume {} %, area {} %\n",
+        "{} -> {}: {}, {}, {} vertices, {} triangles; volume {}, area {}\n",
         cfg.input.display(),
         cfg.output.display(),
         cfg.options.method,
         iterations_run(&cfg.options, run),
         run.vertices,
         run.triangles,
-        fixed(s.volume_pct, 6),
-        fixed(s.area_pct, 4)
+        percent_text(s.volume_pct, 6),
+        percent_text(s.area_pct, 4)
     );
     out.write_all(text.as_bytes()).map_err(stdout_error)?;
     if !records.is_empty() {
@@ -443,15 +443,16 @@ fn print_iterations(out: &mut dyn Write, records: &[IterationRecord]) -> Result<
         "rejected",
         "seconds"
     );
-    // Statistics not measured (`smooth --stats last`) are NaN: shown as '-'.
+    // Statistics not measured (`smooth --stats last`) are NaN: shown as '-'; a measured volume
+    // whose ratio is undefined (against a volume of 0) as `undefined`.
     let measured = |x: f64, text: String| if x.is_nan() { "-".into() } else { text };
     for r in records {
         let s = &r.stencils;
         text += &format!(
             "{:>5} {:>12} {:>10} {:>11} {:>11} {:>10} {:>9} {:>10} {:>9} {:>9.3}\n",
             r.iteration,
-            measured(r.volume_pct, fixed(r.volume_pct, 6)),
-            measured(r.area_pct, fixed(r.area_pct, 4)),
+            measured(r.volume, fixed(r.volume_pct, 6)),
+            measured(r.volume, fixed(r.area_pct, 4)),
             measured(r.max_displacement, format!("{:.4e}", r.max_displacement)),
             measured(r.mean_displacement, format!("{:.4e}", r.mean_displacement)),
             s.applied,
