@@ -165,7 +165,11 @@ impl Progress {
             let _ = write!(w, "{}", state.len().unwrap_or(0) / STEPS);
         });
         self.iterations_done = 0;
-        if let Some(bar) = self.replace_bar(style, it.label.clone(), it.total as u64 * STEPS) {
+        if let Some(bar) = self.replace_bar(
+            style,
+            it.label.clone(),
+            (it.total as u64).saturating_mul(STEPS),
+        ) {
             bar.tick();
         }
     }
@@ -264,14 +268,18 @@ impl Observer for Progress {
     fn iteration_part(&mut self, done: usize, of: usize) {
         if let Some(bar) = &self.bar {
             let within = done as u64 * STEPS / of.max(1) as u64;
-            bar.set_position(self.iterations_done * STEPS + within.min(STEPS - 1));
+            bar.set_position(
+                self.iterations_done
+                    .saturating_mul(STEPS)
+                    .saturating_add(within.min(STEPS - 1)),
+            );
         }
     }
 
     fn iteration(&mut self, record: &IterationRecord, _total: usize) {
         self.iterations_done = record.iteration as u64;
         if let Some(bar) = &self.bar {
-            bar.set_position(record.iteration as u64 * STEPS);
+            bar.set_position((record.iteration as u64).saturating_mul(STEPS));
             if record.volume_pct.is_finite() {
                 bar.set_message(format!("volume {:.6} %", record.volume_pct));
             }
