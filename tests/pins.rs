@@ -554,6 +554,101 @@ fn bad_pins_are_one_line_errors_and_write_nothing() {
     fails(&o, 2, &["--pin FILE", "--pin-property NAME"]);
 }
 
+/// Hostile pin files are refused like hostile meshes, bounded and at once: devices, pipes and
+/// directories (`/dev/zero` ran until the OOM killer), binary data, endless lines, indices no
+/// mesh has; a file of 20 million lines under a 600 MB address-space limit (it aborted) is read
+/// as a stream and fails at its first index out of range. One line, no output, no panic.
+#[test]
+fn hostile_pin_files_are_bounded_and_refused_at_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let (input, _, _) = sphere_with_pins(dir.path(), 3);
+    let out = dir.path().join("out.ply");
+    let file = |name: &str, bytes: &[u8]| {
+        let p = dir.path().join(name);
+        std::fs::write(&p, bytes).unwrap();
+        s(&p)
+    };
+    let fifo = dir.path().join("pins.fifo");
+    let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+    let mut long = b"1\n".to_vec();
+    long.extend(std::iter::repeat_n(b'7', 100_000));
+    let mut binary = b"1\n2\n".to_vec();
+    binary.extend((0..4096u32).map(|i| (i.wrapping_mul(2_654_435_761) >> 24) as u8));
+    let mut cases: Vec<(String, i32, Vec<&str>)> = vec![
+        (
+            "/dev/zero".into(),
+            2,
+            vec!["not a file of vertex indices", "device"],
+        ),
+        (
+            "/dev/urandom".into(),
+            2,
+            vec!["not a file of vertex indices", "device"],
+        ),
+        ("/dev/null".into(), 2, vec!["not a file of vertex indices"]),
+        (s(dir.path()), 2, vec!["a directory"]),
+        (
+            file("zeros.txt", &[0u8; 1 << 20]),
+            2,
+            vec!["line 1", "NUL byte"],
+        ),
+        (file("binary.txt", &binary), 2, vec!["line 3"]),
+        (
+            file("long.txt", &long),
+            2,
+            vec!["line 2", "longer than 64 KiB"],
+        ),
+        (
+            file("no-newline.txt", &vec![b'5'; 1 << 20]),
+            2,
+            vec!["line 1", "longer than 64 KiB"],
+        ),
+        (
+            file("huge-index.txt", b"3\n4294967296\n"),
+            2,
+            vec!["line 2", "4294967296", "out of range"],
+        ),
+    ];
+    if made.is_ok_and(|s| s.success()) {
+        cases.push((s(&fifo), 2, vec!["not a file of vertex indices", "pipe"]));
+    }
+    for (pins, code, mentions) in &cases {
+        let o = vcsmooth(["smooth", &s(&input), &s(&out), "--pin", pins]);
+        let mut all = vec![pins.as_str()];
+        all.extend(mentions);
+        fails(&o, *code, &all);
+        assert!(!out.exists(), "{pins} wrote an output");
+    }
+    // 20 million lines, read under an address-space limit: streamed into the mesh's bit set and
+    // failing at the first index the mesh does not have, not after holding the whole file.
+    let big = dir.path().join("big.txt");
+    let mut text = Vec::with_capacity(170 << 20);
+    for i in 0..20_000_000u32 {
+        text.extend_from_slice(format!("{i}\n").as_bytes());
+    }
+    std::fs::write(&big, &text).unwrap();
+    drop(text);
+    let o = std::process::Command::new("sh")
+        .arg("-c")
+        .arg("ulimit -v 600000; exec \"$0\" \"$@\"")
+        .args([
+            crate::util::BIN,
+            "smooth",
+            &s(&input),
+            &s(&out),
+            "--pin",
+            &s(&big),
+        ])
+        .output()
+        .unwrap();
+    fails(
+        &o,
+        1,
+        &[&s(&big), "line 643", "vertex index 642", "642 vertices"],
+    );
+    assert!(!out.exists());
+}
+
 /// `batch --pin-property`: pinned outputs, and markers that certify the pins (a rerun without
 /// them redoes the mesh).
 #[test]

@@ -1969,6 +1969,45 @@ def cases_hostile_ratios():
     return out
 
 
+def cases_hostile_pins():
+    """Pin files read without bounds (issue round three, item 6): devices, pipes, directories,
+    binary data, endless lines, indices no mesh has, a file of 20 million lines under an
+    address-space limit. Each is refused in one line naming the pin file, nothing written."""
+    out = []
+    cls = "hostile_pins"
+    mesh = write("scan.ply", SPHERE_PLY)
+
+    def fifo(d):
+        os.mkfifo(os.path.join(d, "pins.fifo"))
+
+    def big(d):
+        with open(os.path.join(d, "big.txt"), "w") as fh:
+            for start in range(0, 20_000_000, 1_000_000):
+                fh.write("\n".join(map(str, range(start, start + 1_000_000))) + "\n")
+
+    long_line = b"1\n" + b"7" * 100_000 + b"\n"
+    binary = b"1\n2\n" + bytes((i * 2654435761 >> 24) & 255 for i in range(4096))
+    variants = [
+        ("/dev/zero", "/dev/zero", None, None),
+        ("/dev/urandom", "/dev/urandom", None, None),
+        ("/dev/null", "/dev/null", None, None),
+        ("a directory", "sub", write("sub/x", b""), None),
+        ("a FIFO", "pins.fifo", fifo, None),
+        ("1 MiB of zero bytes", "zeros.txt", write("zeros.txt", bytes(1 << 20)), None),
+        ("binary after two lines", "bin.txt", write("bin.txt", binary), None),
+        ("a 100 kB line", "long.txt", write("long.txt", long_line), None),
+        ("1 MiB of digits, no newline", "digits.txt", write("digits.txt", b"5" * (1 << 20)), None),
+        ("an index from 2^32", "huge.txt", write("huge.txt", b"3\n4294967296\n"), None),
+        ("20 million lines under ulimit -v 600000", "big.txt", big, 600000),
+    ]
+    for name, pins, setup, limit in variants:
+        argv = ["smooth", "scan.ply", "out.ply", "--pin", pins]
+        out.append(Case(cls, f"--pin {name}", both(mesh, setup) if setup else mesh, argv,
+                        expect="error", limit_as_kb=limit, timeout=60, output="out.ply",
+                        new_files=[], check=refused_naming(pins)))
+    return out
+
+
 CLASSES = {
     "paths": cases_paths,
     "values": cases_values,
@@ -1984,6 +2023,7 @@ CLASSES = {
     "hostile_scripts": cases_hostile_scripts,
     "hostile_gltf": cases_hostile_gltf,
     "hostile_ratios": cases_hostile_ratios,
+    "hostile_pins": cases_hostile_pins,
 }
 
 

@@ -117,17 +117,18 @@ impl Pins {
                     .filter(|(_, p)| **p)
                     .for_each(|(v, _)| set.insert(v));
             }
-            Pins::File(path) => {
-                for (line, i) in read_pin_file(path)? {
-                    if i >= n as u64 {
-                        return Err(Error::invalid(
-                            path,
-                            format!("line {line}: {}", out_of_range(i)),
-                        ));
-                    }
-                    set.insert(i as usize);
+            // Streamed into the mesh's bit set: whatever the file's length, it costs no more than
+            // one bit per vertex, and fails at its first index out of range.
+            Pins::File(path) => for_each_pin(path, |line, i| {
+                if i >= n as u64 {
+                    return Err(Error::invalid(
+                        path,
+                        format!("line {line}: {}", out_of_range(i)),
+                    ));
                 }
-            }
+                set.insert(i as usize);
+                Ok(())
+            })?,
             Pins::Property(name) => {
                 let fail = |what: String| match input {
                     Some(p) => Error::invalid(p, what),
@@ -164,7 +165,7 @@ impl Pins {
             Pins::Property(name) => return Ok(format!("property {name}")),
             Pins::Indices(i) => i.iter().map(|&i| i.into()).collect(),
             Pins::Mask(m) => (0..m.len() as u64).filter(|&v| m[v as usize]).collect(),
-            Pins::File(path) => read_pin_file(path)?.into_iter().map(|(_, i)| i).collect(),
+            Pins::File(path) => distinct_pins(path)?,
         };
         indices.sort_unstable();
         indices.dedup();
@@ -179,29 +180,107 @@ impl Pins {
     }
 }
 
-/// The indices of a pin file with their line numbers (1-based), in file order.
-fn read_pin_file(path: &Path) -> Result<Vec<(usize, u64)>> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let text = std::str::from_utf8(crate::io::without_bom(&bytes))
-        .map_err(|_| Error::invalid(path, "is not a text file of vertex indices"))?;
-    let mut out = Vec::new();
-    for (k, line) in text.lines().enumerate() {
-        let entry = line.split('#').next().unwrap_or_default().trim();
+/// The longest line a pin file may have (an index and its comment).
+const MAX_PIN_LINE: usize = 64 << 10;
+
+/// Call `each(line, index)` for the indices of a pin file, with their line numbers (1-based), in
+/// file order. Streamed: memory is one line, at most [`MAX_PIN_LINE`] bytes. Only a regular file
+/// is read (a pin file is read more than once: for the plan's key, then against the mesh; a pipe
+/// would be empty the second time, a device endless); a NUL byte, text that is not UTF-8 or a line
+/// too long refuse it at once.
+fn for_each_pin(path: &Path, mut each: impl FnMut(usize, u64) -> Result<()>) -> Result<()> {
+    use std::io::BufRead;
+    let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
+    if !meta.is_file() {
+        let kind = if meta.is_dir() {
+            "a directory"
+        } else {
+            "a pipe, device or socket: save the indices to a regular file"
+        };
+        return Err(Error::invalid(
+            path,
+            format!("is not a file of vertex indices ({kind})"),
+        ));
+    }
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut reader = std::io::BufReader::with_capacity(1 << 16, file);
+    let mut line = Vec::new();
+    for k in 1.. {
+        line.clear();
+        let n = std::io::Read::take(&mut reader, MAX_PIN_LINE as u64 + 1)
+            .read_until(b'\n', &mut line)
+            .map_err(|e| Error::io(path, e))?;
+        if n == 0 {
+            break;
+        }
+        let at = |what: &str| Error::invalid(path, format!("line {k}: {what}"));
+        if line.contains(&0) {
+            return Err(at(
+                "a NUL byte: binary data, not a text file of vertex indices",
+            ));
+        }
+        if line.len() > MAX_PIN_LINE {
+            return Err(at(&format!(
+                "longer than {} KiB: not a text file of vertex indices",
+                MAX_PIN_LINE >> 10
+            )));
+        }
+        let bytes = if k == 1 {
+            crate::io::without_bom(&line)
+        } else {
+            &line
+        };
+        let text = std::str::from_utf8(bytes)
+            .map_err(|_| Error::invalid(path, "is not a text file of vertex indices"))?;
+        let entry = text.split('#').next().unwrap_or_default().trim();
         if entry.is_empty() {
             continue;
         }
         let i = entry.parse::<u64>().map_err(|_| {
-            Error::invalid(
-                path,
-                format!(
-                    "line {}: '{entry}' is not a vertex index (a whole number from 0)",
-                    k + 1
-                ),
-            )
+            let shown: String = entry.chars().take(40).collect();
+            let more = if shown.len() < entry.len() { "…" } else { "" };
+            at(&format!(
+                "'{shown}{more}' is not a vertex index (a whole number from 0)"
+            ))
         })?;
-        out.push((k + 1, i));
+        each(k, i)?;
     }
-    Ok(out)
+    Ok(())
+}
+
+/// The distinct indices of a pin file, ascending. A mesh has fewer than 2^32 vertices, so an
+/// index from 2^32 is refused here; the set is held compactly (sorted and deduplicated as it
+/// grows) and allocated fallibly.
+fn distinct_pins(path: &Path) -> Result<Vec<u64>> {
+    let mut out: Vec<u32> = Vec::new();
+    for_each_pin(path, |line, i| {
+        let Ok(i) = u32::try_from(i) else {
+            return Err(Error::invalid(
+                path,
+                format!("line {line}: vertex index {i} is out of range for any mesh (from 2^32)"),
+            ));
+        };
+        if out.len() == out.capacity() {
+            out.sort_unstable();
+            out.dedup();
+            if out.len() * 2 > out.capacity() {
+                out.try_reserve(out.capacity().max(1 << 12)).map_err(|_| {
+                    Error::invalid(
+                        path,
+                        format!(
+                            "line {line}: out of memory holding {} distinct pins",
+                            out.len()
+                        ),
+                    )
+                })?;
+            }
+        }
+        out.push(i);
+        Ok(())
+    })?;
+    out.sort_unstable();
+    out.dedup();
+    Ok(out.into_iter().map(u64::from).collect())
 }
 
 /// In reports: `null`, or what was pinned by (`{"indices": n}`, `{"mask": n}`, `{"file": path}`,
@@ -250,6 +329,15 @@ impl Plan {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn read_pin_file(path: &Path) -> Result<Vec<(usize, u64)>> {
+        let mut out = Vec::new();
+        for_each_pin(path, |line, i| {
+            out.push((line, i));
+            Ok(())
+        })?;
+        Ok(out)
+    }
 
     #[test]
     fn pin_files_and_keys() {

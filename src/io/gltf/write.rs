@@ -268,6 +268,10 @@ fn named_files(json: &Value, dir: &Path) -> Vec<PathBuf> {
 /// when it is named `.gltf`.
 pub(crate) fn referenced_files(path: &Path) -> Vec<PathBuf> {
     let json = || -> Option<Value> {
+        // Only a regular file: opening a pipe would wait for a writer, or take its first bytes.
+        if !std::fs::metadata(path).ok()?.is_file() {
+            return None;
+        }
         let mut file = std::fs::File::open(path).ok()?;
         let size = file.metadata().ok()?.len();
         let mut head = Vec::new();
