@@ -478,3 +478,143 @@ fn iteration_counts_the_budget_cannot_record_are_refused_on_every_rank() {
     }
     assert!(!output.exists());
 }
+
+/// A checkpoint belongs to the content it was made from, not to a file name, size and time: a
+/// mesh of the same name, size and modification time in another folder is smoothed afresh (it
+/// got the first mesh's result, exit 0), while the same bytes under another name resume. A
+/// glTF whose external buffer changed is another input too. The report's `input.sha256` is the
+/// one the checkpoint was keyed by.
+#[test]
+fn a_checkpoint_is_reused_only_for_the_same_content() {
+    let tmp = tempfile::tempdir().unwrap();
+    let folder = |name: &str| {
+        let d = tmp.path().join(name);
+        std::fs::create_dir(&d).unwrap();
+        d
+    };
+    let (a, b, c) = (folder("a"), folder("b"), folder("c"));
+    let first = a.join("scan.ply");
+    let second = b.join("scan.ply");
+    io::write_mesh(&first, &noisy_sphere(4, 0.4, 1)).unwrap();
+    io::write_mesh(&second, &noisy_sphere(4, 0.4, 2)).unwrap();
+    let when = std::fs::metadata(&first).unwrap().modified().unwrap();
+    for f in [&first, &second] {
+        let file = std::fs::File::options().write(true).open(f).unwrap();
+        file.set_modified(when).unwrap();
+    }
+    assert_eq!(
+        std::fs::metadata(&first).unwrap().len(),
+        std::fs::metadata(&second).unwrap().len()
+    );
+    assert_ne!(
+        std::fs::read(&first).unwrap(),
+        std::fs::read(&second).unwrap()
+    );
+    let renamed = c.join("renamed.ply");
+    std::fs::copy(&first, &renamed).unwrap();
+
+    let work = tmp.path().join("ck");
+    let smooth = |input: &Path, out: &Path, checkpoint: bool| {
+        let report = tmp.path().join("r.json");
+        let mut args = vec![
+            "smooth".to_string(),
+            input.display().to_string(),
+            out.display().to_string(),
+            "--iterations".into(),
+            "3".into(),
+            "--report".into(),
+            report.display().to_string(),
+        ];
+        if checkpoint {
+            args.extend(["--checkpoint".into(), work.display().to_string()]);
+        }
+        ok(vcsmooth(args));
+        read_json(&report)
+    };
+    let out = |name: &str| tmp.path().join(name);
+    let r = smooth(&first, &out("first.ply"), true);
+    assert_eq!(r["cluster"]["resumed_after"], 0);
+    let hash = io::sha256_file(&first).unwrap();
+    assert_eq!(r["input"]["sha256"].as_str(), Some(hash.as_str()));
+
+    // Same name, size and time, other bytes: a new plan, and its own result.
+    let r = smooth(&second, &out("second.ply"), true);
+    assert_eq!(
+        r["cluster"]["resumed_after"], 0,
+        "a foreign checkpoint was resumed"
+    );
+    smooth(&second, &out("second-plain.ply"), false);
+    assert_eq!(
+        std::fs::read(out("second.ply")).unwrap(),
+        std::fs::read(out("second-plain.ply")).unwrap()
+    );
+    assert_ne!(
+        std::fs::read(out("second.ply")).unwrap(),
+        std::fs::read(out("first.ply")).unwrap()
+    );
+
+    // The same bytes as the plan's, under another name: resumed, with the same output.
+    smooth(&first, &out("again.ply"), true);
+    let r = smooth(&renamed, &out("renamed.ply"), true);
+    assert_eq!(
+        r["cluster"]["resumed_after"], 3,
+        "the same content was not resumed"
+    );
+    assert_eq!(
+        std::fs::read(out("renamed.ply")).unwrap(),
+        std::fs::read(out("first.ply")).unwrap()
+    );
+
+    // A .gltf's geometry lives in its buffer: another buffer behind the same JSON is another
+    // input.
+    let gltf = c.join("scan.gltf");
+    let write_gltf = |seed: u64| {
+        let m = noisy_sphere(4, 0.4, seed);
+        let mut bin: Vec<u8> = m
+            .positions
+            .iter()
+            .flat_map(|p| p.as_vec3().to_array())
+            .flat_map(f32::to_le_bytes)
+            .collect();
+        let at = bin.len();
+        bin.extend(m.triangles.iter().flatten().flat_map(|v| v.to_le_bytes()));
+        let doc = serde_json::json!({
+            "asset": {"version": "2.0"},
+            "scene": 0,
+            "scenes": [{"nodes": [0]}],
+            "nodes": [{"mesh": 0}],
+            "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+            "buffers": [{"uri": "scan.bin", "byteLength": bin.len()}],
+            "bufferViews": [
+                {"buffer": 0, "byteOffset": 0, "byteLength": at},
+                {"buffer": 0, "byteOffset": at, "byteLength": bin.len() - at},
+            ],
+            "accessors": [
+                {"bufferView": 0, "componentType": 5126, "count": m.positions.len(),
+                 "type": "VEC3", "min": [-2.0, -2.0, -2.0], "max": [2.0, 2.0, 2.0]},
+                {"bufferView": 1, "componentType": 5125, "count": 3 * m.triangles.len(),
+                 "type": "SCALAR"},
+            ],
+        });
+        std::fs::write(c.join("scan.bin"), bin).unwrap();
+        std::fs::write(&gltf, serde_json::to_vec(&doc).unwrap()).unwrap();
+    };
+    write_gltf(1);
+    let json = std::fs::read(&gltf).unwrap();
+    let json_time = std::fs::metadata(&gltf).unwrap().modified().unwrap();
+    smooth(&gltf, &out("g1.gltf"), true);
+    let r = smooth(&gltf, &out("g1.gltf"), true);
+    assert_eq!(r["cluster"]["resumed_after"], 3);
+    write_gltf(2);
+    let file = std::fs::File::options().write(true).open(&gltf).unwrap();
+    file.set_modified(json_time).unwrap();
+    assert!(
+        std::fs::read(&gltf).unwrap() == json,
+        "the same JSON, another buffer"
+    );
+    let r = smooth(&gltf, &out("g2.gltf"), true);
+    assert_eq!(
+        r["cluster"]["resumed_after"], 0,
+        "a changed buffer was not noticed"
+    );
+}

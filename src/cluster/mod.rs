@@ -102,11 +102,11 @@ pub fn run_file(
 
     // 1. The plan: rank 0 makes it unless a matching one is there; the others wait for it.
     let made = if comm.rank() == 0 {
-        ensure_plan(&work, input, output, opts, engine, &start, &mut t, observer)
+        ensure_plan(&work, input, output, opts, engine, &start, &mut t, observer).map(Some)
     } else {
-        Ok(())
+        Ok(None)
     };
-    agree(comm, made, "rank 0 could not prepare the plan")?;
+    let input_sha256 = agree(comm, made, "rank 0 could not prepare the plan")?;
 
     // 2. Every rank maps the plan and finds its part.
     let smoothing_sampler = memory::PeakSampler::start(std::time::Duration::from_millis(20));
@@ -224,6 +224,7 @@ pub fn run_file(
             smoothing_peak_anon_max: maxima[5] as u64,
         }),
         deviation: None,
+        input_sha256,
     };
     // Every rank unmaps the plan before rank 0 removes it (on NFS a file still mapped somewhere
     // is kept as a hidden `.nfs*` file, and its directory cannot go).
@@ -248,8 +249,9 @@ fn agree<T>(comm: &dyn Comm, r: Result<T>, other: &str) -> Result<T> {
     }
 }
 
-/// Rank 0: reuse the plan in the work directory if it was made from the same input, options and
-/// patch size; otherwise prepare it as the engine's run does ([`run::prepare`]) and store it there.
+/// Rank 0: reuse the plan in the work directory if it was made from the same input (by content),
+/// options, patch size and pins; otherwise prepare it as the engine's run does ([`run::prepare`])
+/// and store it there. Returns the input's SHA-256.
 #[allow(clippy::too_many_arguments)]
 fn ensure_plan(
     work: &WorkDir,
@@ -260,12 +262,15 @@ fn ensure_plan(
     start: &run::Start,
     t: &mut PhaseTimings,
     observer: &mut dyn Observer,
-) -> Result<()> {
-    let key = PlanKey::of(input, opts, engine.patch_size, &engine.pins)?;
+) -> Result<String> {
+    let clock = Instant::now();
+    let key = PlanKey::of(input, opts, engine.patch_size, &engine.pins, observer)?;
+    t.hash = clock.elapsed().as_secs_f64();
+    let hash = key.input_sha256[0].clone();
     if let Some(doc) = work.read_plan_doc()?
         && doc.key == key
     {
-        return Ok(());
+        return Ok(hash);
     }
     // Pinned vertices and creases are fixed in the stored topology (`fixed.u8`), which every rank
     // maps.
@@ -291,7 +296,8 @@ fn ensure_plan(
         // the hole areas that smooth boundaries keep.
         let keep_input = opts.keeps_input() || opts.auto_stop || !loops.is_empty();
         work.write_plan(&plan, key, input_stats, keep_input, &loops)
-    })
+    })?;
+    Ok(hash)
 }
 
 /// Rank 0: the input with the final positions, written as the engine's run writes

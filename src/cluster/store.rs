@@ -3,8 +3,8 @@
 //! completed iteration).
 //!
 //! Files (all written by rank 0, except the positions, whose owned ranges each rank writes):
-//! - `plan.json`: what the arrays hold and what they were made from (input file size and time,
-//!   method options, patch size). Written last: a directory without it holds no usable plan.
+//! - `plan.json`: what the arrays hold and what they were made from (the SHA-256 of the input
+//!   and of the files it names, method options, patch size, pins). Written last: a directory without it holds no usable plan.
 //! - `order.u32` (reordered → input vertex), `triangles.u32` (reordered, smallest vertex first),
 //!   `vv_offsets.u64`, `vv.u32`, `vf_offsets.u64`, `vf.u32`, `fixed.u8` (the adjacency).
 //! - `positions-0.f64`, `positions-1.f64`: two slots of `3 × f64` per reordered vertex. An
@@ -21,8 +21,10 @@ use std::path::{Path, PathBuf};
 
 use glam::DVec3;
 
-use crate::engine::{self, IterationRecord};
+use crate::engine::observer::metered;
+use crate::engine::{self, IterationRecord, Observer, Phase};
 use crate::error::{Error, Result};
+use crate::io;
 use crate::mesh::Buf;
 use crate::mesh::storage::{Pod, as_bytes};
 use crate::metrics::MeshInfo;
@@ -57,10 +59,12 @@ pub const FILES: [&str; 13] = [
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PlanKey {
     pub format: u32,
-    /// File name, size and modification time of the input.
-    pub input_name: String,
+    /// The SHA-256 of the input's bytes, then of each file it names (a glTF's buffers and
+    /// images), in that order: what the run reads, whatever its name, folder or time. Empty in
+    /// plans made before it, which are therefore made again.
+    #[serde(default)]
+    pub input_sha256: Vec<String>,
     pub input_size: u64,
-    pub input_modified_ns: u128,
     /// The options that change results (method, λ, μ, rejection), as JSON.
     pub options: String,
     pub patch_size: usize,
@@ -71,19 +75,16 @@ pub struct PlanKey {
 
 impl PlanKey {
     /// The key of `input` smoothed with `options` (iterations excluded: a resumed run may go on
-    /// further) at `patch_size` with `pins`.
+    /// further) at `patch_size` with `pins`. Hashing the input is a [`Phase::Hash`] of
+    /// `observer`'s.
     pub fn of(
         input: &Path,
         opts: &crate::Options,
         patch_size: usize,
         pins: &crate::engine::Pins,
+        observer: &mut dyn Observer,
     ) -> Result<PlanKey> {
         let meta = fs::metadata(input).map_err(|e| Error::io(input, e))?;
-        let modified = meta
-            .modified()
-            .ok()
-            .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
-            .map_or(0, |d| d.as_nanos());
         let mut options = serde_json::json!({
             "method": opts.method,
             "lambda": opts.lambda,
@@ -106,14 +107,26 @@ impl PlanKey {
         if !opts.boundary.is_fixed() {
             options["boundary"] = opts.boundary.name().into();
         }
+        let mut files = vec![input.to_path_buf()];
+        files.extend(
+            io::referenced_files(input)
+                .into_iter()
+                .filter(|f| f.is_file()),
+        );
+        let bytes = files
+            .iter()
+            .map(|f| fs::metadata(f).map_or(0, |m| m.len()))
+            .sum();
+        let input_sha256 = metered(observer, Phase::Hash, bytes, |meter| {
+            files
+                .iter()
+                .map(|f| io::sha256_counted(f, meter))
+                .collect::<Result<Vec<_>>>()
+        })?;
         Ok(PlanKey {
             format: FORMAT,
-            input_name: input
-                .file_name()
-                .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_default(),
+            input_sha256,
             input_size: meta.len(),
-            input_modified_ns: modified,
             options: options.to_string(),
             patch_size,
             pins: pins.key()?,

@@ -12,6 +12,9 @@ use crate::smooth::SweepStats;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[non_exhaustive]
 pub enum Phase {
+    /// Taking the SHA-256 of the input and of the files it names, in bytes: the cluster engine
+    /// identifies a checkpoint's input by its content.
+    Hash,
     /// Reading and decoding the input, in bytes of the file. The binary PLY decoders count as
     /// they go; other readers count the file when they are done with it.
     Read,
@@ -45,6 +48,7 @@ impl Phase {
     /// What a display shows: "reading", "reordering", …
     pub fn name(self) -> &'static str {
         match self {
+            Phase::Hash => "hashing",
             Phase::Read => "reading",
             Phase::Reorder => "reordering",
             Phase::Topology => "building topology",
@@ -60,7 +64,7 @@ impl Phase {
     /// The unit its meter counts.
     pub fn unit(self) -> Unit {
         match self {
-            Phase::Read | Phase::Write => Unit::Bytes,
+            Phase::Hash | Phase::Read | Phase::Write => Unit::Bytes,
             Phase::Reorder | Phase::Topology | Phase::Schedule | Phase::Restore | Phase::Render => {
                 Unit::Items
             }

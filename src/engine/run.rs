@@ -109,6 +109,10 @@ pub struct Report {
     /// ([`EngineSettings::deviation`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub deviation: Option<DeviationStats>,
+    /// The input file's SHA-256, when the run took it: the cluster engine identifies the input
+    /// of its checkpoint by content.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub input_sha256: Option<String>,
 }
 
 /// What a run of the cluster engine ([`crate::cluster`]) adds to its [`Report`].
@@ -164,8 +168,8 @@ pub struct PhaseTimings {
     pub metrics: f64,
     /// The deviation field and its statistics (in the write phase, before the write).
     pub deviation: f64,
-    /// The input's SHA-256 for a report's record (taken by the command line before the run, not
-    /// in `total`).
+    /// The input's SHA-256: for a report's record, taken by the command line before the run (not
+    /// in `total`); in a cluster run, the key of its checkpoint (in `total`).
     pub hash: f64,
     pub total: f64,
 }
@@ -689,6 +693,7 @@ impl Smoothed {
             timings,
             cluster: None,
             deviation: self.deviation,
+            input_sha256: None,
         }
     }
 }

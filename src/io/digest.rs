@@ -6,6 +6,7 @@ use std::io::Read;
 use std::path::Path;
 
 use crate::error::{Error, Result};
+use crate::meter::Meter;
 
 const K: [u32; 64] = [
     0x428a2f98, 0x71374491, 0xb5c0fbcf, 0xe9b5dba5, 0x3956c25b, 0x59f111f1, 0x923f82a4, 0xab1c5ed5,
@@ -119,6 +120,11 @@ fn compress(state: &mut [u32; 8], block: &[u8; 64]) {
 
 /// The SHA-256 of the file at `path`, read from its start to its end.
 pub fn sha256_file(path: &Path) -> Result<String> {
+    sha256_counted(path, &Meter::new(0))
+}
+
+/// The SHA-256 of the file at `path`, counting the bytes hashed into `meter`.
+pub fn sha256_counted(path: &Path, meter: &Meter) -> Result<String> {
     let mut file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
     let mut hash = Sha256::default();
     let mut buf = vec![0u8; 1 << 20];
@@ -130,6 +136,7 @@ pub fn sha256_file(path: &Path) -> Result<String> {
             Err(e) => return Err(Error::io(path, e)),
         };
         hash.update(&buf[..n]);
+        meter.add(n as u64);
     }
     Ok(hash.hex())
 }

@@ -110,7 +110,7 @@ mod stream;
 mod text;
 
 pub(crate) use atomic::{Destination, destination, write_atomically};
-pub use digest::{Sha256, sha256_file};
+pub use digest::{Sha256, sha256_counted, sha256_file};
 pub(crate) use gltf::{buffer_name_of, referenced_files};
 
 use std::fs::File;

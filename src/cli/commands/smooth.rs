@@ -325,6 +325,8 @@ fn report(
         if let Some((hash, seconds)) = sha256 {
             report.input.sha256 = Some(hash);
             report.timings.hash = seconds;
+        } else if let Some(hash) = &run.input_sha256 {
+            report.input.sha256 = Some(hash.clone());
         }
         write_json(path, &report)?;
     }
@@ -413,9 +415,14 @@ fn report(
         )
         .map_err(stdout_error)?;
     }
+    // A report's hash is taken outside the run; a checkpoint's is part of it.
+    let hash = match &run.cluster {
+        Some(_) => format!("hash {:.3}, ", t.hash),
+        None => String::new(),
+    };
     writeln!(
         out,
-        "seconds: ingest {:.3}, reorder {:.3}, topology {:.3}, partition {:.3}, smoothing {:.3}, write {:.3}, total {:.3}",
+        "seconds: {hash}ingest {:.3}, reorder {:.3}, topology {:.3}, partition {:.3}, smoothing {:.3}, write {:.3}, total {:.3}",
         t.ingest, t.reorder, t.topology, t.partition, t.smoothing, t.write, t.total
     )
     .map_err(stdout_error)?;
