@@ -902,6 +902,95 @@ fn smooth_output_identical_across_threads_and_memory_budgets() {
     assert!(!dir.path().join("x.ply").exists());
 }
 
+/// The memory budget holds what the tool itself adds: every per-vertex structure (a file of
+/// 920k unreferenced vertices beside a sphere ran in core at 1.13× an 80 MiB budget, its size
+/// saying it fitted) and every per-patch one (the schedule of `--patch-size 1` took 1.79 GiB at a
+/// 64 MiB budget). Vertices are counted from the PLY header, a schedule that cannot fit is refused
+/// before any work naming a patch size that fits, and that size runs within the budget.
+#[test]
+fn the_memory_budget_counts_vertices_and_patches() {
+    let dir = tempfile::tempdir().unwrap();
+    let sphere = vcsmooth::shapes::icosphere(6);
+    let mut crowded = sphere.clone();
+    crowded.positions.extend(
+        (0..920_000u32).map(|i| glam::DVec3::new(5.0 + f64::from(i % 97), f64::from(i / 97), 7.0)),
+    );
+    crowded.source.precision = vcsmooth::io::Precision::Float;
+    let input = dir.path().join("crowded.ply");
+    vcsmooth::io::write_mesh(&input, &crowded).unwrap();
+    // 12 B per vertex: by its size alone (the model's 19 B per triangle) it would fit in core.
+    assert!(std::fs::metadata(&input).unwrap().len() < 13 << 20);
+    let out = dir.path().join("out.ply");
+    let report = dir.path().join("r.json");
+    let s = |p: &Path| p.display().to_string();
+    let run = |input: &Path, extra: &[&str]| {
+        let mut args = vec![
+            "smooth".to_string(),
+            s(input),
+            s(&out),
+            "--iterations".into(),
+            "2".into(),
+            "--report".into(),
+            s(&report),
+        ];
+        args.extend(extra.iter().map(|a| a.to_string()));
+        vcsmooth(&args)
+    };
+    for (budget, bytes) in [("80M", 80u64 << 20), ("128M", 128 << 20)] {
+        ok(run(&input, &["--memory-budget", budget]));
+        let r = read_json(&report);
+        let peak = r["memory"]["peak_anon"].as_u64().unwrap();
+        assert!(
+            peak <= bytes,
+            "{budget}: peak {peak} in {}",
+            r["memory"]["storage"]
+        );
+    }
+
+    let small = dir.path().join("sphere.ply");
+    vcsmooth::io::write_mesh(&small, &sphere).unwrap();
+    std::fs::remove_file(&out).unwrap();
+    let o = run(&small, &["--memory-budget", "64M", "--patch-size", "1"]);
+    fails(
+        &o,
+        1,
+        &[
+            "--patch-size 1",
+            "40962 patches",
+            "schedule",
+            "memory budget",
+        ],
+    );
+    assert!(!out.exists(), "a refused plan wrote an output");
+    let err = String::from_utf8_lossy(&o.stderr).to_string();
+    let fits = err
+        .split("use a patch size of ")
+        .nth(1)
+        .and_then(|t| t.split(' ').next())
+        .unwrap_or_else(|| panic!("no patch size named: {err}"));
+    assert!(fits.parse::<usize>().unwrap() > 1, "{err}");
+    for method in ["vcs", "taubin"] {
+        ok(run(
+            &small,
+            &[
+                "--memory-budget",
+                "64M",
+                "--patch-size",
+                fits,
+                "--method",
+                method,
+            ],
+        ));
+        let r = read_json(&report);
+        let peak = r["memory"]["peak_anon"].as_u64().unwrap();
+        assert!(
+            peak <= 64 << 20,
+            "{method} at --patch-size {fits}: peak {peak}"
+        );
+        assert!(r["plan"]["patches"].as_u64().unwrap() > 1000);
+    }
+}
+
 /// `generate mesh --from MESH --subdivide L` streams a refined scan: 4^L times the triangles,
 /// closed like its base, the same volume (flat subdivision); misuse is a one-line usage error.
 #[test]

@@ -35,6 +35,7 @@ import hashlib
 import json
 import math
 import os
+import random
 import re
 import shutil
 import signal
@@ -1247,8 +1248,9 @@ def cases_gltf():
         rerun(d)
         os.remove(os.path.join(d, "out.bin"))
         os.symlink("m.bin", os.path.join(d, "out.bin"))
+    # Written through, the link would overwrite the input's buffer: the output takes another name.
     ok("an earlier run's out.bin, now a link to the input's", rerun_link, smooth("m.gltf", "out.gltf"),
-       replaces=["out.bin"], check=gltf_written("m.gltf", "out.gltf"))
+       new=["out-1.bin"], check=gltf_written("m.gltf", "out.gltf", uris=["out-1.bin"]))
 
     # Two external buffers, each holding a mesh.
     w = [(x + 5, y, z) for x, y, z in v]
@@ -2008,6 +2010,118 @@ def cases_hostile_pins():
     return out
 
 
+def jittered_sphere(seed):
+    """SPHERE with every vertex moved a little, differently for each seed: the same file size."""
+    v, f = SPHERE
+    rnd = random.Random(seed)
+    return ply_binary([tuple(c * (1 + 0.05 * rnd.uniform(-1, 1)) for c in p) for p in v], f)
+
+
+def files_equal(a, b):
+    def check(d, code, out, err):
+        if code != 0:
+            return None
+        with open(os.path.join(d, a), "rb") as fa, open(os.path.join(d, b), "rb") as fb:
+            if fa.read() != fb.read():
+                return f"{a} differs from {b}"
+        return None
+    return check
+
+
+def report_says(path, key, want):
+    def check(d, code, out, err):
+        if code != 0:
+            return None
+        with open(os.path.join(d, path)) as fh:
+            value = json.load(fh)
+        for k in key:
+            value = value[k]
+        if value != want:
+            return f"{'.'.join(key)} is {value!r}, should be {want!r}"
+        return None
+    return check
+
+
+def cases_hostile_checkpoints():
+    """A checkpoint is its input's by content (issue round three, item 3): a mesh of the same
+    name, size and modification time in another folder is smoothed afresh, not given the first
+    mesh's result; the same bytes under another name resume."""
+    out = []
+    cls = "hostile_checkpoints"
+    smooth = ["--iterations", "3", "--checkpoint", "ck"]
+
+    def twins(d):
+        for folder, seed in (("a", 1), ("b", 2)):
+            write(f"{folder}/scan.ply", jittered_sphere(seed))(d)
+        stamp = os.stat(os.path.join(d, "a/scan.ply")).st_mtime_ns
+        for folder in ("a", "b"):
+            os.utime(os.path.join(d, folder, "scan.ply"), ns=(stamp, stamp))
+        shutil.copy(os.path.join(d, "a/scan.ply"), os.path.join(d, "renamed.ply"))
+        for argv in (["a/scan.ply", "a.ply"] + smooth, ["b/scan.ply", "b-plain.ply", "--iterations", "3"]):
+            subprocess.run([BIN, "smooth"] + argv, cwd=d, check=True, capture_output=True)
+
+    plan = ["ck/" + f for f in ("plan.json", "state.json", "order.u32", "triangles.u32",
+                                "vv_offsets.u64", "vv.u32", "vf_offsets.u64", "vf.u32", "fixed.u8",
+                                "positions-0.f64", "positions-1.f64")]
+    out.append(Case(cls, "same name, size and time in another folder", twins,
+                     ["smooth", "b/scan.ply", "b.ply", "--report", "r.json"] + smooth,
+                     expect="ok", output="b.ply", replaces=plan + ["r.json"],
+                     check=all_of(files_equal("b.ply", "b-plain.ply"),
+                                  report_says("r.json", ["cluster", "resumed_after"], 0))))
+    out.append(Case(cls, "the same bytes under another name resume", twins,
+                     ["smooth", "renamed.ply", "r.ply", "--report", "r.json"] + smooth,
+                     expect="ok", output="r.ply", replaces=["r.json"],
+                     check=all_of(files_equal("r.ply", "a.ply"),
+                                  report_says("r.json", ["cluster", "resumed_after"], 3))))
+    return out
+
+
+def peak_within(path, budget):
+    def check(d, code, out, err):
+        if code != 0:
+            return None
+        with open(os.path.join(d, path)) as fh:
+            peak = json.load(fh)["memory"]["peak_anon"]
+        if peak > budget:
+            return f"peak anonymous memory {peak / 2**20:.1f} MiB over the budget of {budget / 2**20:.0f} MiB"
+        return None
+    return check
+
+
+def cases_hostile_budgets():
+    """The memory budget counts what the tool adds (issue round three, item 7): a file of many
+    unreferenced vertices, whose size says it fits in core, and the schedule of tiny patches,
+    which is on the heap whatever the storage. Each run stays within its budget or is refused
+    before any work."""
+    out = []
+    cls = "hostile_budgets"
+
+    def crowded(d):
+        v, f = SPHERE
+        extra = [(5 + i % 97, i // 97 * 0.01, 7.0) for i in range(920_000)]
+        write("crowded.ply", ply_binary(list(v) + extra, f))(d)
+
+    for budget in ("64M", "80M", "128M"):
+        for method in ("vcs", "taubin"):
+            out.append(Case(cls, f"920k unreferenced vertices, {method}, --memory-budget {budget}",
+                             crowded, ["smooth", "crowded.ply", "out.ply", "--method", method,
+                                       "--iterations", "2", "--memory-budget", budget,
+                                       "--report", "r.json"],
+                             output="out.ply", check=peak_within("r.json", int(budget[:-1]) << 20)))
+    for k, sizes in ((6, (1, 2, 4, 8)), (8, (1, 16, 64))):
+        for size in sizes:
+            for method in ("vcs", "taubin"):
+                out.append(Case(cls, f"--patch-size {size}, {method}, 64M, {20 * 4**k} triangles",
+                                 lambda d, k=k: medium(d, k=k),
+                                 ["smooth", "in.ply", "out.ply", "--patch-size", str(size),
+                                  "--method", method, "--iterations", "1", "--memory-budget", "64M",
+                                  "--report", "r.json"],
+                                 output="out.ply", timeout=60, check=all_of(
+                                     peak_within("r.json", 64 << 20),
+                                     refused_naming("--patch-size"))))
+    return out
+
+
 CLASSES = {
     "paths": cases_paths,
     "values": cases_values,
@@ -2024,6 +2138,8 @@ CLASSES = {
     "hostile_gltf": cases_hostile_gltf,
     "hostile_ratios": cases_hostile_ratios,
     "hostile_pins": cases_hostile_pins,
+    "hostile_checkpoints": cases_hostile_checkpoints,
+    "hostile_budgets": cases_hostile_budgets,
 }
 
 

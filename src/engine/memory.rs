@@ -54,6 +54,19 @@ pub const NOISE_BYTES_PER_TRIANGLE: u64 = 48;
 /// triangle on a noisy sphere; `refine`'s smoothing of the output needs less
 /// ([`HEAP_BYTES_PER_TRIANGLE`]).
 pub const SUBDIVIDE_BYTES_PER_TRIANGLE: u64 = 160;
+/// In core, a vertex beyond the half a vertex per triangle that [`HEAP_BYTES_PER_TRIANGLE`]
+/// counts: its positions (input, reordered, working), neighbour sums, order and adjacency offsets.
+/// Measured 90 B per unreferenced vertex (920k of them beside a sphere, `vcs`), rounded up; a
+/// file whose header says it holds many more vertices than half its faces is charged for them.
+pub const HEAP_BYTES_PER_VERTEX: u64 = 104;
+/// The schedule of a plan cut into patches (each patch's near patches, both conflict graphs,
+/// colours and halos) is held on the heap whatever the storage: [`PATCH_BYTES`] per patch plus
+/// [`NEAR_BYTES`] divided by the patch size, since smaller patches have more near patches each.
+/// Measured on a 1.3M-triangle sphere: 2.9, 2.0, 1.6 and 1.3 KiB per patch at patch sizes 1, 2,
+/// 4 and 8, 0.9–1.1 KiB from 16 to 1024.
+pub const PATCH_BYTES: u64 = 1024;
+pub const NEAR_BYTES: u64 = 3072;
+
 /// Memory for the process itself, its thread stacks and buffers, on top of the per-triangle part.
 pub const BASE_BYTES: u64 = 256 << 20;
 
@@ -134,6 +147,67 @@ pub fn in_core_bytes_of_run(size: u64, opts: &crate::Options, field: bool) -> u6
 /// Memory a job needs to smooth a file of `size` bytes in core with `opts`, the process included.
 pub fn job_bytes_of_file(size: u64, opts: &crate::Options) -> u64 {
     in_core_bytes_of_file_with(size, opts).saturating_add(BASE_BYTES)
+}
+
+/// [`in_core_bytes_of_run`] from the counts a file's header gives: the triangles at their model
+/// and each vertex beyond half a vertex per triangle at [`HEAP_BYTES_PER_VERTEX`] (with the
+/// input positions, automatic-stop fields and deviation field that `opts` and `field` keep per
+/// vertex).
+pub fn in_core_bytes_of_counts(
+    vertices: u64,
+    triangles: u64,
+    opts: &crate::Options,
+    field: bool,
+) -> u64 {
+    let as_file = triangles.saturating_mul(FILE_BYTES_PER_TRIANGLE);
+    let mut per_vertex = HEAP_BYTES_PER_VERTEX;
+    if opts.keeps_input() {
+        per_vertex += 2 * DEVIATION_BYTES_PER_TRIANGLE;
+    }
+    if opts.auto_stop {
+        per_vertex += 2 * AUTO_BYTES_PER_TRIANGLE;
+    }
+    if field {
+        per_vertex += 2 * FIELD_BYTES_PER_TRIANGLE;
+    }
+    let extra = vertices.saturating_sub(triangles / 2);
+    in_core_bytes_of_run(as_file, opts, field).saturating_add(extra.saturating_mul(per_vertex))
+}
+
+/// Heap bytes of the schedule of `vertices` cut into patches of `patch_size` (none for one
+/// patch); see [`PATCH_BYTES`].
+pub fn schedule_bytes(vertices: u64, patch_size: usize) -> u64 {
+    let size = patch_size.max(1) as u64;
+    if vertices <= size {
+        return 0;
+    }
+    vertices
+        .div_ceil(size)
+        .saturating_mul(PATCH_BYTES + NEAR_BYTES / size)
+}
+
+/// The schedule of `vertices` in patches of `patch_size` is on the heap whatever the storage: a
+/// patch size whose schedule would take more than half of `budget` is refused before the plan is
+/// made, naming the smallest patch size that fits.
+pub fn check_schedule(vertices: u64, patch_size: usize, budget: u64) -> Result<()> {
+    let need = schedule_bytes(vertices, patch_size);
+    if need <= budget / 2 {
+        return Ok(());
+    }
+    let mut fits = patch_size.max(1);
+    while schedule_bytes(vertices, fits) > budget / 2 && (fits as u64) < vertices {
+        fits *= 2;
+    }
+    Err(Error::parameter(
+        "patch_size",
+        format!(
+            "{patch_size}: {} patches of {vertices} vertices need about {} for their schedule, more than half the memory budget of {}; use a patch size of {fits} or more (the default is {}), or raise the budget",
+            vertices.div_ceil(patch_size.max(1) as u64),
+            format_size(need),
+            format_size(budget),
+            crate::engine::DEFAULT_PATCH_SIZE
+        ),
+    ))
 }
 
 /// Memory to smooth a mesh of `triangles` that is also held in memory beside the plan (`bench`).

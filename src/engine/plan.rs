@@ -112,12 +112,17 @@ impl Plan {
             Layout::Patches(0) => {
                 return Err(Error::parameter("patch_size", "must be at least 1"));
             }
-            Layout::Patches(_) => metered(
-                observer,
-                Phase::Reorder,
-                partition::REORDER_PASSES.items(n, t),
-                |m| partition::reorder_metered(storage, positions, triangles, m),
-            )?,
+            Layout::Patches(size) => {
+                if let Some(budget) = storage.budget() {
+                    super::memory::check_schedule(n, size, budget)?;
+                }
+                metered(
+                    observer,
+                    Phase::Reorder,
+                    partition::REORDER_PASSES.items(n, t),
+                    |m| partition::reorder_metered(storage, positions, triangles, m),
+                )?
+            }
             Layout::Whole => Reordered {
                 order: {
                     let mut order = storage.zeroed::<u32>(positions.len())?;

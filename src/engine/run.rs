@@ -715,9 +715,11 @@ fn expected_output_bytes(input_bytes: u64, output: &Path, mesh: &Mesh) -> u64 {
     }
 }
 
-/// Heap or scratch, decided before reading from the file size by the memory model
+/// Heap or scratch, decided before reading by the memory model: from the file size
 /// ([`memory::in_core_bytes_of_run`], which counts what `opts` and the deviation field keep
-/// beside the positions).
+/// beside the positions), or from a PLY header's counts when they say more
+/// ([`memory::in_core_bytes_of_counts`]: a file of many vertices and few faces), with the
+/// schedule of its patches ([`memory::schedule_bytes`]), which is on the heap either way.
 pub(crate) fn storage_for(
     input: &Path,
     output: &Path,
@@ -728,7 +730,14 @@ pub(crate) fn storage_for(
     let size = std::fs::metadata(input)
         .map_err(|e| Error::io(input, e))?
         .len();
-    if memory::in_core_bytes_of_run(size, opts, engine.deviation.is_on()) <= budget {
+    let field = engine.deviation.is_on();
+    let by_size = memory::in_core_bytes_of_run(size, opts, field);
+    let (by_counts, vertices) = match io::header_counts(input) {
+        Some((v, f)) => (memory::in_core_bytes_of_counts(v, f, opts, field), v),
+        None => (0, size / memory::FILE_BYTES_PER_TRIANGLE / 2),
+    };
+    let schedule = memory::schedule_bytes(vertices, engine.patch_size);
+    if by_size.max(by_counts).saturating_add(schedule) <= budget {
         return Ok(Storage::heap().with_budget(budget));
     }
     let dir = match &engine.scratch {

@@ -121,6 +121,7 @@ use std::sync::Arc;
 pub use self::png::{encode_png, write_png};
 pub use crate::mesh::{Format, Precision, Source};
 pub use gltf::GltfLayout;
+pub(crate) use ply::header_counts;
 pub use ply::{PlyEncoding, PlyLayout};
 pub use stream::{PlyStream, write_ply_streamed, write_ply_streamed_in};
 pub(crate) use text::{

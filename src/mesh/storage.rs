@@ -121,6 +121,11 @@ impl Storage {
         }
     }
 
+    /// The run's memory budget, when it was given one ([`Storage::with_budget`]).
+    pub fn budget(&self) -> Option<u64> {
+        self.budget
+    }
+
     /// Whether arrays go to scratch files.
     pub fn is_mapped(&self) -> bool {
         self.scratch.is_some()

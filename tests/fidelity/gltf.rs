@@ -277,6 +277,28 @@ fn gltf_with_an_external_bin_writes_its_own_bin() {
     assert_eq!(after["buffers"][0]["uri"], "again-1.bin");
     let bin_after = std::fs::read(dir.path().join("again-1.bin")).unwrap();
     check_smoothed(&json2, &bin, &after, &bin_after);
+
+    // An earlier output's buffer replaced by a link to the input's: written through, the link
+    // overwrote the input's buffer. The output takes another name; the link and its target stay.
+    let linked = dir.path().join("linked.gltf");
+    smooth(&input, &linked);
+    std::fs::remove_file(dir.path().join("linked.bin")).unwrap();
+    std::os::unix::fs::symlink("scan data.bin", dir.path().join("linked.bin")).unwrap();
+    smooth(&input, &linked);
+    assert!(
+        std::fs::read(dir.path().join("scan data.bin")).unwrap() == bin,
+        "the input's buffer was written through the link"
+    );
+    assert!(
+        std::fs::symlink_metadata(dir.path().join("linked.bin"))
+            .unwrap()
+            .file_type()
+            .is_symlink()
+    );
+    let after = crate::util::read_json(&linked);
+    assert_eq!(after["buffers"][0]["uri"], "linked-1.bin");
+    let bin_after = std::fs::read(dir.path().join("linked-1.bin")).unwrap();
+    check_smoothed(&json, &bin, &after, &bin_after);
 }
 
 /// `batch` takes a directory's `.gltf` and `.glb` files like its other meshes, written in the

@@ -100,9 +100,10 @@ pub fn run(cfg: &RefineConfig, progress: &mut Progress, out: &mut dyn Write) -> 
     let records =
         refine::refine_checked(&mut mesh, &cfg.options, cfg.threads, progress, &mut check)
             .map_err(|e| e.in_file(&cfg.input))?;
-    super::subdivide::note_dropped(&cfg.input, &carried, &mesh);
     progress.phase(format!("writing {}", cfg.output.display()));
     io::write_mesh(&cfg.output, &mesh)?;
+    // Said once the output is there: a refused write is one line.
+    super::subdivide::note_dropped(&cfg.input, &carried, &mesh);
     progress.finish();
     let volume1 = crate::metrics::volume_about(&mesh.positions, &mesh.triangles, origin);
     let max_edge = records.last().map_or_else(

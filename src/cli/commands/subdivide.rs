@@ -58,9 +58,10 @@ pub fn run(cfg: &SubdivideConfig, progress: &mut Progress, out: &mut dyn Write) 
     progress.phase("subdividing");
     let carried = carried(&mesh);
     let s = refine::subdivide(&mut mesh, cfg.max_edge).map_err(|e| e.in_file(&cfg.input))?;
-    note_dropped(&cfg.input, &carried, &mesh);
     progress.phase(format!("writing {}", cfg.output.display()));
     io::write_mesh(&cfg.output, &mesh)?;
+    // Said once the output is there: a refused write is one line.
+    note_dropped(&cfg.input, &carried, &mesh);
     progress.finish();
     writeln!(
         out,

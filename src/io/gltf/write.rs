@@ -188,7 +188,10 @@ fn bin_path(output: &Path, chosen: &[PathBuf], layout: &GltfLayout) -> PathBuf {
     if let Some(dir) = &layout.dir {
         inputs.extend(named_files(&layout.json, dir));
     }
-    let inputs: Vec<PathBuf> = inputs.iter().map(|p| canonical(p)).collect();
+    // Compared as the files they are: a candidate that is a link to an input's buffer (an
+    // earlier output's buffer replaced by one) would be written through onto the input.
+    let real = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| canonical(p));
+    let inputs: Vec<PathBuf> = inputs.iter().map(|p| real(p)).collect();
     let replaced: Vec<PathBuf> = referenced_files(output)
         .iter()
         .map(|p| canonical(p))
@@ -203,7 +206,7 @@ fn bin_path(output: &Path, chosen: &[PathBuf], layout: &GltfLayout) -> PathBuf {
         };
         let candidate = output.with_file_name(name);
         let resolved = canonical(&candidate);
-        let taken = inputs.contains(&resolved)
+        let taken = inputs.contains(&real(&candidate))
             || chosen.contains(&resolved)
             || (std::fs::symlink_metadata(&candidate).is_ok() && !replaced.contains(&resolved));
         if !taken {

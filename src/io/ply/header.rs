@@ -224,6 +224,33 @@ pub(crate) struct Header {
 /// The longest header: a file that has no `end_header` by then is refused there.
 const MAX_HEADER: usize = 1 << 20;
 
+/// The vertex and face counts a PLY file's header declares, read from its first bytes only; `None`
+/// when `path` is not a regular file with a readable PLY header (the reader says why later).
+pub(crate) fn header_counts(path: &std::path::Path) -> Option<(u64, u64)> {
+    use std::io::Read;
+    if !std::fs::metadata(path).ok()?.is_file() {
+        return None;
+    }
+    let mut head = Vec::new();
+    std::fs::File::open(path)
+        .ok()?
+        .take(MAX_HEADER as u64)
+        .read_to_end(&mut head)
+        .ok()?;
+    if !has_magic(crate::io::without_bom(&head)) {
+        return None;
+    }
+    let header = parse_header(&head).ok()?;
+    let count = |name: &str| {
+        header
+            .elements
+            .iter()
+            .find(|e| e.name == name)
+            .map_or(0, |e| e.count as u64)
+    };
+    Some((count("vertex"), count("face")))
+}
+
 /// Whether the text (after any byte-order mark) starts with the line `ply`.
 pub(crate) fn has_magic(text: &[u8]) -> bool {
     text.split(|&b| b == b'\n')

@@ -20,7 +20,7 @@ use super::Faces;
 use crate::mesh::Mesh;
 use header::{Element, Kind, walk_record};
 
-pub(crate) use header::{Scalar, has_magic};
+pub(crate) use header::{Scalar, has_magic, header_counts};
 pub(crate) use read::{ReadError, read, read_metered};
 pub(crate) use write::{
     PlainRecords, check_writable, coordinate_types, put_face, put_xyz, write, write_header,
