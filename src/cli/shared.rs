@@ -193,7 +193,7 @@ pub struct EngineArgs {
     /// Worker threads, 1 to 4096 [default: all cores].
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=MAX_THREADS as i64), allow_negative_numbers = true)]
     pub threads: Option<u32>,
-    /// Vertices per patch; the result is identical for any thread count and memory budget for a given patch size [default: 16384].
+    /// Vertices per patch; the result is identical for any thread count and memory budget for a given patch size. Each patch holds about 1 KiB of schedule in memory (up to 4 KiB for patches of a few vertices): a size whose schedule would take more than half the memory budget is refused [default: 16384].
     #[arg(long, value_name = "VERTICES", value_parser = whole_in(1, u32::MAX as u64 - 1), allow_negative_numbers = true)]
     pub patch_size: Option<u64>,
     /// Anonymous memory allowed, with K/M/G/T suffixes (binary units); larger meshes go to memory-mapped scratch files [default: 3/4 of available memory, or of a tighter cgroup limit or rlimit].
@@ -240,7 +240,7 @@ pub struct DeviationArgs {
     /// Print the deviation's statistics (RMS, mean and extremes of the deviation; RMS, mean, largest and percentiles 50/90/99/99.9 of the distance; a histogram), also in the JSON; implied by --deviation-field and --tolerance [default: off].
     #[arg(long)]
     pub deviation_stats: bool,
-    /// With --deviation-field, also the deviation's colour map as the PLY vertex properties 'red green blue' (OBJ: 'v x y z r g b', in 0..1): blue inward, white unmoved, red outward, saturated at --tolerance (or at the largest deviation) [default: off].
+    /// With --deviation-field, also the deviation's colour map as the PLY vertex properties 'red green blue' (OBJ: 'v x y z r g b', in 0..1; glTF: COLOR_0): blue inward, white unmoved, red outward, saturated at --tolerance (or at the largest deviation) [default: off].
     #[arg(long, requires = "deviation_field")]
     pub deviation_colours: bool,
     /// Tolerance in model units (> 0): when any vertex lies farther than D (from its input position; compare: from its vertex in A, or from B's surface), say how many and the largest, and exit with code 3; every file is still written [default: none].

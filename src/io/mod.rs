@@ -290,7 +290,7 @@ pub struct VertexValues<'a> {
 
 /// Whether an output at `path` can carry [`VertexValues`], with their colours or without:
 /// `Err` saying why not. PLY carries both (`quality`, `red green blue`); OBJ the colours alone
-/// (`v x y z r g b`, which MeshLab and CloudCompare read).
+/// (`v x y z r g b`, which MeshLab and CloudCompare read), glTF too (`COLOR_0`).
 pub fn check_vertex_values(path: &Path, colours: bool) -> std::result::Result<(), String> {
     match Format::from_extension(path) {
         Some(Format::Ply) => Ok(()),
@@ -299,8 +299,13 @@ pub fn check_vertex_values(path: &Path, colours: bool) -> std::result::Result<()
             "an OBJ file carries per-vertex colours but no per-vertex value: ask for the colours, or write a PLY"
                 .into(),
         ),
+        Some(Format::Gltf | Format::Glb) if colours => Ok(()),
+        Some(Format::Gltf | Format::Glb) => Err(
+            "a glTF file carries per-vertex colours (COLOR_0) but no per-vertex value: add --deviation-colours, or write a PLY"
+                .into(),
+        ),
         _ => Err(
-            "per-vertex values are written into PLY outputs (and as colours into OBJ outputs) only"
+            "per-vertex values are written into PLY outputs (and as colours into OBJ and glTF outputs) only"
                 .into(),
         ),
     }
@@ -376,7 +381,7 @@ fn write_mesh_counted(
         .map_err(|what| Error::invalid(path, format!("cannot write: {what}")))?;
     if let Format::Gltf | Format::Glb = format {
         // Also writes buffer files beside the output, each atomically.
-        return gltf::write(path, mesh);
+        return gltf::write(path, mesh, values.and_then(|v| v.colours));
     }
     atomic::write_atomically(path, |out| {
         write_as(format, &mut Counted::new(out, meter), mesh, values)

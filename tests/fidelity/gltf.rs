@@ -724,3 +724,101 @@ fn unbase64(text: &str) -> Vec<u8> {
     }
     out
 }
+
+/// The deviation field's colours go into a glTF output as `COLOR_0` (normalized `u8` RGBA, in a
+/// view appended to the positions' buffer), replacing the colours the primitive had: the same
+/// bytes as a PLY output's `red green blue` of the same run, the positions those of a plain run,
+/// in a GLB and in a `.gltf` with an external buffer. A value without colours is a usage error.
+#[test]
+fn deviation_colours_go_into_color_0() {
+    let dir = tempfile::tempdir().unwrap();
+    let (json, bin) = sphere();
+    let n = json["accessors"][0]["count"].as_u64().unwrap() as usize;
+    let glb_in = dir.path().join("scan.glb");
+    std::fs::write(&glb_in, glb(&json, &bin)).unwrap();
+    let mut external = json.clone();
+    external["buffers"][0]["uri"] = json!("scan.bin");
+    let gltf_in = dir.path().join("scan.gltf");
+    std::fs::write(&gltf_in, serde_json::to_vec(&external).unwrap()).unwrap();
+    std::fs::write(dir.path().join("scan.bin"), &bin).unwrap();
+    let field = ["--deviation-field", "--deviation-colours"];
+    let run = |input: &Path, output: &Path, args: &[&str]| {
+        let mut all = vec![
+            "smooth".to_string(),
+            input.display().to_string(),
+            output.display().to_string(),
+        ];
+        all.extend(args.iter().map(|a| a.to_string()));
+        ok(vcsmooth(&all));
+    };
+    let ply = dir.path().join("out.ply");
+    run(&glb_in, &ply, &field);
+    let reference: Vec<[u8; 4]> = {
+        let mesh = io::read_mesh(&ply).unwrap();
+        let layout = mesh.source.layout.as_ref().unwrap();
+        let layout = layout.as_any().downcast_ref::<io::PlyLayout>().unwrap();
+        let mut rgb = vec![[0u8, 0, 0, 255]; n];
+        for (k, name) in ["red", "green", "blue"].iter().enumerate() {
+            layout
+                .vertex_values(name, |i, v| rgb[i][k] = v as u8)
+                .unwrap();
+        }
+        rgb
+    };
+    assert!(reference.iter().any(|c| c[0] > c[2]) && reference.iter().any(|c| c[2] > c[0]));
+    let colours_of = |json: &Value, bin: &[u8]| -> Vec<[u8; 4]> {
+        let a = json["meshes"][0]["primitives"][0]["attributes"]["COLOR_0"]
+            .as_u64()
+            .unwrap() as usize;
+        assert_ne!(a, 3, "the old colours are still drawn");
+        let acc = &json["accessors"][a];
+        assert_eq!(
+            (acc["componentType"].as_u64(), acc["type"].as_str()),
+            (Some(5121), Some("VEC4"))
+        );
+        assert_eq!(acc["normalized"], true);
+        assert_eq!(acc["count"].as_u64(), Some(n as u64));
+        let view = &json["bufferViews"][acc["bufferView"].as_u64().unwrap() as usize];
+        let at = |v: &Value| v.get("byteOffset").and_then(Value::as_u64).unwrap_or(0) as usize;
+        let start = at(view) + at(acc);
+        assert!(at(view) + view["byteLength"].as_u64().unwrap() as usize <= bin.len());
+        assert!(start % 4 == 0 && start + 4 * n <= bin.len());
+        assert_eq!(
+            json["buffers"][0]["byteLength"].as_u64(),
+            Some(bin.len() as u64)
+        );
+        (0..n)
+            .map(|i| bin[start + 4 * i..start + 4 * i + 4].try_into().unwrap())
+            .collect()
+    };
+    for (input, out, plain) in [
+        (&glb_in, "out.glb", "plain.glb"),
+        (&gltf_in, "out.gltf", "plain.gltf"),
+    ] {
+        let (out, plain) = (dir.path().join(out), dir.path().join(plain));
+        run(input, &out, &field);
+        run(input, &plain, &[]);
+        let (doc, data) = if out.extension().unwrap() == "glb" {
+            unglb(&std::fs::read(&out).unwrap())
+        } else {
+            let doc: Value = serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap();
+            let uri = doc["buffers"][0]["uri"].as_str().unwrap().to_string();
+            (doc, std::fs::read(dir.path().join(uri)).unwrap())
+        };
+        assert!(colours_of(&doc, &data) == reference, "{}", out.display());
+        let (a, b) = (io::read_mesh(&out).unwrap(), io::read_mesh(&plain).unwrap());
+        assert_eq!(a.positions, b.positions, "{}", out.display());
+        assert_eq!(a.triangles, b.triangles);
+    }
+    assert!(std::fs::read(dir.path().join("scan.bin")).unwrap() == bin);
+
+    let bare = dir.path().join("bare.glb");
+    let o = vcsmooth([
+        "smooth".as_ref(),
+        glb_in.as_os_str(),
+        bare.as_os_str(),
+        "--deviation-field".as_ref(),
+    ]);
+    fails(&o, 2, &["bare.glb", "COLOR_0", "--deviation-colours"]);
+    assert!(!bare.exists());
+}

@@ -52,7 +52,15 @@ pub(crate) fn check_writable(mesh: &Mesh, format: Format) -> std::result::Result
 /// beside it, each atomically. Every file is complete on disk before any is renamed into place
 /// (buffers first, so the glTF never names a missing file): a failure while writing leaves no
 /// new file and changes none.
-pub(crate) fn write(path: &Path, mesh: &Mesh) -> Result<()> {
+///
+/// With `colours`, every primitive drawn from the mesh's positions gets them as its `COLOR_0`
+/// (normalized `u8` RGBA, opaque; one accessor per positions accessor, in a view appended to the
+/// first positions buffer), replacing any it had.
+pub(crate) fn write(
+    path: &Path,
+    mesh: &Mesh,
+    colours: Option<&(dyn Fn(usize) -> [u8; 3] + Sync + '_)>,
+) -> Result<()> {
     let Some(layout) = layout_of(mesh) else {
         return Err(Error::invalid(path, "cannot write: not a glTF mesh"));
     };
@@ -97,6 +105,11 @@ pub(crate) fn write(path: &Path, mesh: &Mesh) -> Result<()> {
                 set_bounds(&mut json, span.accessor, lo, hi, true);
             }
         }
+    }
+    if let (Some(colour), Some(&(first, _))) = (colours, layout.positions.first()) {
+        let bytes = buffers[first.buffer].as_mut().expect("a loaded buffer");
+        append_colours(&mut json, bytes, first.buffer, &layout.positions, colour);
+        changed[first.buffer] = true;
     }
     let mut chunk = None;
     let mut staged = Vec::new();
@@ -149,6 +162,67 @@ pub(crate) fn write(path: &Path, mesh: &Mesh) -> Result<()> {
         bin.commit()?;
     }
     gltf.commit()
+}
+
+/// Appends to `bytes` (buffer `buffer`) one view of RGBA colours for every positions accessor in
+/// `positions` (with the mesh vertex its first element is), one accessor each, and points each
+/// primitive's `COLOR_0` at the accessor of its `POSITION`. The buffer's `byteLength` follows.
+fn append_colours(
+    json: &mut Value,
+    bytes: &mut Vec<u8>,
+    buffer: usize,
+    positions: &[(super::Span, usize)],
+    colour: &(dyn Fn(usize) -> [u8; 3] + Sync + '_),
+) {
+    bytes.resize(bytes.len().next_multiple_of(4), 0);
+    let start = bytes.len();
+    let mut accessors: Vec<(usize, usize, usize)> = Vec::new();
+    for &(span, base) in positions {
+        if accessors.iter().any(|a| a.0 == span.accessor) {
+            continue;
+        }
+        let at = bytes.len() - start;
+        for i in 0..span.count {
+            let [r, g, b] = colour(base + i);
+            bytes.extend_from_slice(&[r, g, b, 255]);
+        }
+        accessors.push((span.accessor, at, span.count));
+    }
+    let view = array(json, "bufferViews").len();
+    let length = bytes.len() - start;
+    json["bufferViews"] = Value::Array(
+        array(json, "bufferViews")
+            .iter()
+            .cloned()
+            .chain([serde_json::json!({
+                "buffer": buffer, "byteOffset": start, "byteLength": length, "byteStride": 4,
+                "target": 34962,
+            })])
+            .collect(),
+    );
+    let mut list: Vec<Value> = array(json, "accessors").to_vec();
+    let mut colour_of = std::collections::HashMap::new();
+    for (position, at, count) in accessors {
+        colour_of.insert(position, list.len());
+        list.push(serde_json::json!({
+            "bufferView": view, "byteOffset": at, "componentType": 5121,
+            "normalized": true, "count": count, "type": "VEC4",
+        }));
+    }
+    json["accessors"] = Value::Array(list);
+    json["buffers"][buffer]["byteLength"] = bytes.len().into();
+    if let Some(meshes) = json.get_mut("meshes").and_then(Value::as_array_mut) {
+        for primitive in meshes
+            .iter_mut()
+            .filter_map(|m| m.get_mut("primitives").and_then(Value::as_array_mut))
+            .flatten()
+        {
+            let position = primitive["attributes"]["POSITION"].as_u64();
+            if let Some(&c) = position.and_then(|p| colour_of.get(&(p as usize))) {
+                primitive["attributes"]["COLOR_0"] = c.into();
+            }
+        }
+    }
 }
 
 /// Sets an accessor's `min`/`max` to `lo`/`hi` (only if it had them, when `if_present`).
