@@ -21,7 +21,12 @@ The classes: paths, values, readers, geometry, memory, signals, batch, output,
 gltf (`.gltf` with external and `data:` buffers, `.glb`: what a glTF input may hold, where a
 glTF output's buffers go), and hostile_scripts (the Slurm script against hostile file names, side
 files through links and devices, the checkpoint directory, option combinations), hostile_gltf
-(glTF geometry shared between primitives and meshes: one surface, smoothed once, kept shared).
+(glTF geometry shared between primitives and meshes: one surface, smoothed once, kept shared),
+multires and properties (levels too coarse to carry the shape; subdivision keeps what it can),
+hostile_ratios (ratios against zero volume), hostile_pins (pin files from devices, pipes, binary
+data, endless lines), hostile_checkpoints (a checkpoint is its input's by content),
+hostile_budgets (the budget holds unreferenced vertices and tiny patches) and hostile_bounds
+(`--max-deviation` holds in the file as written).
 Only the Python standard library is needed.
 """
 
