@@ -1125,3 +1125,85 @@ fn generate_mesh_refuses_a_non_ply_output() {
     fails(&o, 2, &["x.obj", ".ply output"]);
     assert!(listing(dir.path()).is_empty(), "{:?}", listing(dir.path()));
 }
+
+/// A run in which most vertices cannot move says so in one warning line, with why and what to
+/// try; one in which none can says its output has the input's positions. A triangle soup (every
+/// corner its own vertex, as an unmerged STL or a texture-seamed file) fixes every vertex; a closed
+/// sphere warns of nothing. The report carries the counts (`plan.fixed`).
+#[test]
+fn a_run_says_when_most_vertices_cannot_move() {
+    let dir = tempfile::tempdir().unwrap();
+    let sphere = crate::util::noisy_sphere(3, 0.3, 5);
+    let soup = vcsmooth::Mesh::new(
+        sphere
+            .triangles
+            .iter()
+            .flat_map(|t| t.map(|v| sphere.positions[v as usize]))
+            .collect(),
+        (0..sphere.triangles.len() as u32)
+            .map(|k| [3 * k, 3 * k + 1, 3 * k + 2])
+            .collect(),
+    );
+    let (closed, loose) = (dir.path().join("closed.ply"), dir.path().join("soup.ply"));
+    vcsmooth::io::write_mesh(&closed, &sphere).unwrap();
+    vcsmooth::io::write_mesh(&loose, &soup).unwrap();
+    let out = dir.path().join("out.ply");
+    let report = dir.path().join("r.json");
+    let run = |input: &Path, extra: &[&str]| {
+        let mut args = vec![
+            "smooth".to_string(),
+            input.display().to_string(),
+            out.display().to_string(),
+            "--iterations".into(),
+            "2".into(),
+            "--report".into(),
+            report.display().to_string(),
+        ];
+        args.extend(extra.iter().map(|a| a.to_string()));
+        let o = vcsmooth(&args);
+        assert_eq!(
+            o.status.code(),
+            Some(0),
+            "{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        String::from_utf8_lossy(&o.stderr).to_string()
+    };
+    let err = run(&closed, &[]);
+    assert!(!err.contains("warning"), "{err}");
+    assert_eq!(read_json(&report)["plan"]["fixed"]["fixed"], 0);
+
+    let err = run(&loose, &[]);
+    let lines: Vec<&str> = err.lines().filter(|l| l.contains("warning")).collect();
+    assert_eq!(lines.len(), 1, "{err}");
+    let n = soup.positions.len();
+    for part in [
+        "vcsmooth: warning: ",
+        "soup.ply: ",
+        &format!("none of the {n} vertices can move"),
+        "boundary edges",
+        "merge the duplicate vertices",
+        "--boundary smooth",
+    ] {
+        assert!(lines[0].contains(part), "{part}: {}", lines[0]);
+    }
+    let r = read_json(&report);
+    assert_eq!(r["plan"]["fixed"]["fixed"].as_u64(), Some(n as u64));
+    assert_eq!(
+        r["plan"]["fixed"]["boundary_edges"].as_u64(),
+        Some(n as u64)
+    );
+    assert!(std::fs::read(&out).is_ok());
+
+    // Most vertices pinned: the warning names the pins.
+    let pins = dir.path().join("pins.txt");
+    let many: String = (0..sphere.positions.len() * 3 / 4)
+        .map(|i| format!("{i}\n"))
+        .collect();
+    std::fs::write(&pins, many).unwrap();
+    let err = run(&closed, &["--pin", &pins.display().to_string()]);
+    assert!(
+        err.contains("cannot move freely") && err.contains("pinned") && err.contains("pin fewer"),
+        "{err}"
+    );
+}

@@ -198,6 +198,7 @@ pub fn run_file(
                 colours.len(),
                 halo,
                 doc.crossing_edge_stencils,
+                engine::plan::FixedVertices::of(&doc.topology),
             )
         }),
         memory: MemoryStats {

@@ -352,6 +352,16 @@ fn report(
         None => None,
     };
     progress.finish();
+    if cfg.options.iterations > 0
+        && let Some(line) = run.plan.fixed.warning(!cfg.options.boundary.is_fixed())
+    {
+        // Not `eprintln!`: stderr may be a closed pipe, and this must not panic.
+        let _ = writeln!(
+            std::io::stderr(),
+            "vcsmooth: warning: {}: {line}",
+            cfg.input.display()
+        );
+    }
 
     let s = Summary::of_run(records, multires.as_ref());
     let text = format!(
