@@ -11,7 +11,7 @@ use vcsmooth::engine::{
     AutoStopStats, EngineSettings, Layout, Plan, Quiet, Statistics, StopReason, thread_pool,
 };
 use vcsmooth::mesh::Storage;
-use vcsmooth::smooth::lowpass::RING_RADIUS;
+use vcsmooth::smooth::lowpass::BLOCK;
 use vcsmooth::smooth::method::StopRule;
 use vcsmooth::{Mesh, Method, Options, Report, Topology, shapes};
 
@@ -242,13 +242,14 @@ fn the_engine_follows_the_prototype_rule() {
     let topo = Topology::build(p.len(), &tris).unwrap();
     let mut proto = lowpass::AutoStop::new(&topo, &tris, &p, 1);
     proto.tau = DETAIL_RATIO;
-    let stencils = lowpass::RingStencils::build(&topo, RING_RADIUS);
     let (mut scratch, mut tmp) = (lowpass::Scratch::default(), Vec::new());
     let mut proto_stop = None;
     let mut ratios = Vec::new();
     for k in 1..=DEFAULT_CAP {
-        lowpass::lowpass_iteration(&topo, &tris, &stencils, &mut p, 0.5, -0.53, &mut scratch);
-        lowpass::scalar_taubin_pair(&topo, proto.synthetic_mut(), 0.5, -0.53, &mut tmp);
+        let block = BLOCK as usize;
+        let mu = vcsmooth::Method::VcsLowpass.unit().default_mu();
+        lowpass::lowpass_iteration(&topo, &tris, &mut p, 0.5, mu, block, &mut scratch);
+        lowpass::scalar_taubin_pair(&topo, proto.synthetic_mut(), 0.5, mu, &mut tmp);
         let o = proto.observe(&p);
         ratios.push(o.ratio);
         if o.stop {

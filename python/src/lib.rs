@@ -118,8 +118,8 @@ fn smooth_arrays<'py>(
 ///
 /// - ``method``: one of ``vcsmooth.METHODS`` (what each does: ``vcsmooth smooth --help``);
 ///   default: the library's default method, ``vcsmooth.DEFAULT_METHOD``.
-/// - ``iterations`` (10, or ``"auto"``: stop when the noise is gone, after at most 100), ``lam`` (0.5, the Laplacian step λ, in (0, 1]), ``mu`` (-0.53,
-///   Taubin's second step, in [-1, 0)), ``reject_energy_increase`` (False).
+/// - ``iterations`` (10, or ``"auto"``: stop when the noise is gone, after at most 100), ``lam`` (0.5, the Laplacian step λ, in (0, 1]), ``mu`` (None: the
+///   method's own, -0.53 for taubin and -0.52 for vcs-lowpass; Taubin's second step, in [-1, 0)), ``reject_energy_increase`` (False).
 /// - ``crease_angle`` (None): vertices on edges whose faces' normals differ by more than this
 ///   many degrees, in (0, 180), stay where they are.
 /// - ``max_deviation`` (None): no vertex ends farther than this from its input position.

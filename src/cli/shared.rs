@@ -56,18 +56,19 @@ pub struct SmoothingArgs {
 
 impl SmoothingArgs {
     /// The smoothing these flags ask for, `default` the method without `--method` (checked as
-    /// [`MethodParams::options`] checks it).
+    /// [`MethodParams::options`] checks it), its defaults resolved (the report names them).
     pub fn options(&self, default: Method) -> Result<Options> {
         let method = self.method.unwrap_or(default);
-        match self.iterations {
-            Iterations::Count(n) => self.params.options(method, n),
-            Iterations::Auto => Ok(Options {
+        let options = match self.iterations {
+            Iterations::Count(n) => self.params.options(method, n)?,
+            Iterations::Auto => Options {
                 auto_stop: true,
                 ..self
                     .params
                     .options(method, crate::engine::auto::DEFAULT_CAP)?
-            }),
-        }
+            },
+        };
+        Ok(options.resolved())
     }
 }
 
@@ -106,9 +107,9 @@ pub struct MethodParams {
           help = used_by("Laplacian step size λ, in (0, 1]", Control::Lambda, ""))]
     pub lambda: f64,
     /// Taubin's second step size μ, in [-1, 0).
-    #[arg(long, value_name = "Y", default_value_t = -0.53, value_parser = step_mu, allow_hyphen_values = true,
-          help = used_by("Taubin's second step size μ, in [-1, 0)", Control::Mu, ""))]
-    pub mu: f64,
+    #[arg(long, value_name = "Y", value_parser = step_mu, allow_hyphen_values = true,
+          help = used_by("Taubin's second step size μ, in [-1, 0)", Control::Mu, &mu_defaults()))]
+    pub mu: Option<f64>,
     /// Skip a stencil whose result has a higher stencil energy than before.
     #[arg(long, help = used_by(
         "Skip a stencil whose result has a higher stencil energy than before",
@@ -127,6 +128,14 @@ pub struct MethodParams {
     pub boundary: Boundary,
 }
 
+/// `--mu`'s defaults, each method's own.
+fn mu_defaults() -> String {
+    let each: Vec<String> = Method::accepting(Control::Mu)
+        .map(|m| format!("{} for {}", m.unit().default_mu(), m.name()))
+        .collect();
+    format!(" [default: {}]", each.join(", "))
+}
+
 /// A flag's help line, `what`, with the methods that take `control` in parentheses, then `tail`.
 fn used_by(what: &str, control: Control, tail: &str) -> String {
     format!("{what} ({}){tail}", Method::names_accepting(control, "and"))
@@ -143,7 +152,7 @@ fn deviation_help() -> String {
         ms.join(", ")
     };
     format!(
-        "No vertex ends farther than D (model units, > 0) from its input position: the stencil methods ({}) skip a stencil that would move one farther (the volume stays exact); {} clamp each vertex (they do not keep the volume) [default: none]",
+        "No vertex ends farther than D (model units, > 0) from its input position: the stencil methods ({}) skip a stencil that would move one farther, or hold such vertices of a block back and restore the block's volume with the others (the volume stays exact); {} clamp each vertex (they do not keep the volume) [default: none]",
         names(false),
         names(true)
     )
@@ -441,6 +450,84 @@ impl ValueEnum for Boundary {
         };
         Some(PossibleValue::new(self.name()).help(help))
     }
+}
+
+/// Whether `--deviation-field` can go into `path` (with `--deviation-colours` or without): the
+/// usage error naming the flags when not.
+pub fn check_deviation_field(path: &std::path::Path, colours: bool) -> Result<()> {
+    use crate::io::ValuesRefused;
+    crate::io::check_vertex_values(path, colours).map_err(|why| {
+        let what = match why {
+            ValuesRefused::ColoursOnly(format) => format!(
+                "{format} carries per-vertex colours but no per-vertex value: add --deviation-colours, or write a PLY"
+            ),
+            ValuesRefused::Unsupported => why.to_string(),
+        };
+        crate::Error::invalid(path, format!("--deviation-field: {what}"))
+    })
+}
+
+/// One line for a run in which more than half of the vertices of its triangles cannot move
+/// freely (or none can): how many, why, and what to try; `None` otherwise. `boundary_smooth`:
+/// the run moves boundary vertices along their loops.
+pub fn fixed_warning(
+    fixed: &crate::engine::plan::FixedVertices,
+    boundary_smooth: bool,
+) -> Option<String> {
+    // Vertices of no triangle are not part of the surface.
+    let n = fixed.vertices.saturating_sub(fixed.unreferenced);
+    let f = fixed.fixed.saturating_sub(fixed.unreferenced);
+    if n == 0 || 2 * f <= n {
+        return None;
+    }
+    let mut why = Vec::new();
+    let mut try_ = Vec::new();
+    if fixed.boundary_edges > 0 {
+        why.push(format!(
+            "{} boundary edges (open borders, or seams where the file splits vertices: texture seams, unmerged corners)",
+            fixed.boundary_edges
+        ));
+        try_.push("merge the duplicate vertices of seams before smoothing".to_string());
+        if !boundary_smooth {
+            try_.push(format!(
+                "--boundary smooth ({}) to move boundary vertices along their loops",
+                Method::names_accepting(Control::SmoothBoundary, "or")
+            ));
+        }
+    }
+    if fixed.non_manifold_edges + fixed.non_manifold_vertices > 0 {
+        why.push(format!(
+            "{} non-manifold edges and {} non-manifold vertices",
+            fixed.non_manifold_edges, fixed.non_manifold_vertices
+        ));
+    }
+    if fixed.pinned > 0 {
+        why.push(format!("{} pinned", fixed.pinned));
+        try_.push("pin fewer vertices".to_string());
+    }
+    if fixed.on_creases > 0 {
+        why.push(format!("{} on creases", fixed.on_creases));
+        try_.push("a larger --crease-angle".to_string());
+    }
+    let mut line = match (f == n, boundary_smooth && fixed.boundary_edges > 0) {
+        (true, false) => {
+            format!("none of the {n} vertices can move, so the output has the input's positions")
+        }
+        (true, true) => format!(
+            "none of the {n} vertices can move freely (boundary vertices only along their loops)"
+        ),
+        (false, _) => format!(
+            "{f} of {n} vertices ({:.0} %) cannot move freely",
+            100.0 * f as f64 / n as f64
+        ),
+    };
+    if !why.is_empty() {
+        line += &format!(": {}", why.join(", "));
+    }
+    if !try_.is_empty() {
+        line += &format!("; try: {}", try_.join("; "));
+    }
+    Some(line)
 }
 
 #[cfg(test)]

@@ -58,7 +58,10 @@ fn defaults_match_the_contract() {
     assert_eq!(s.options(Method::default()).unwrap().iterations, 10);
     assert!(!s.options(Method::default()).unwrap().auto_stop);
     assert_eq!(s.params.lambda, 0.5);
-    assert_eq!(s.params.mu, -0.53);
+    assert_eq!(s.params.mu, None);
+    assert_eq!(s.options(Method::default()).unwrap().mu, Some(-0.52));
+    let taubin = s.params.options(Method::Taubin, 10).unwrap();
+    assert_eq!((taubin.mu, taubin.mu()), (None, -0.53));
     assert!(!s.params.reject_energy_increase);
     assert_eq!(s.engine.threads, None);
 
@@ -109,7 +112,7 @@ fn rejects_bad_values() {
     let Command::Smooth(s) = a.command else {
         panic!("not smooth")
     };
-    assert_eq!(s.smoothing.params.mu, -0.6);
+    assert_eq!(s.smoothing.params.mu, Some(-0.6));
 }
 
 #[test]

@@ -88,7 +88,7 @@ impl PlanKey {
         let mut options = serde_json::json!({
             "method": opts.method,
             "lambda": opts.lambda,
-            "mu": opts.mu,
+            "mu": opts.mu(),
             "reject_energy_increase": opts.reject_energy_increase,
         });
         // Creases are fixed in the stored topology, the deviation bound needs the stored input
@@ -144,7 +144,7 @@ pub struct PlanDoc {
     pub patches: Vec<[u32; 4]>,
     pub colours: Vec<Vec<u32>>,
     pub halo: Vec<u32>,
-    /// `vcs-lowpass`'s colouring (see [`crate::schedule::Schedule::ring_colours`]); empty in
+    /// `vcs-guided`'s colouring (see [`crate::schedule::Schedule::ring_colours`]); empty in
     /// plans made before it.
     #[serde(default)]
     pub ring_colours: Vec<Vec<u32>>,

@@ -114,65 +114,6 @@ impl FixedVertices {
             on_creases: stats.crease_vertices,
         }
     }
-
-    /// One line for a run in which more than half of the vertices of its triangles cannot move
-    /// freely (or none can): how many, why, and what to try; `None` otherwise. `boundary_smooth`:
-    /// the run moves boundary vertices along their loops.
-    pub fn warning(&self, boundary_smooth: bool) -> Option<String> {
-        // Vertices of no triangle are not part of the surface.
-        let n = self.vertices.saturating_sub(self.unreferenced);
-        let f = self.fixed.saturating_sub(self.unreferenced);
-        if n == 0 || 2 * f <= n {
-            return None;
-        }
-        let mut why = Vec::new();
-        let mut try_ = Vec::new();
-        if self.boundary_edges > 0 {
-            why.push(format!(
-                "{} boundary edges (open borders, or seams where the file splits vertices: texture seams, unmerged corners)",
-                self.boundary_edges
-            ));
-            try_.push("merge the duplicate vertices of seams before smoothing");
-            if !boundary_smooth {
-                try_.push(
-                    "--boundary smooth (vcs methods) to move boundary vertices along their loops",
-                );
-            }
-        }
-        if self.non_manifold_edges + self.non_manifold_vertices > 0 {
-            why.push(format!(
-                "{} non-manifold edges and {} non-manifold vertices",
-                self.non_manifold_edges, self.non_manifold_vertices
-            ));
-        }
-        if self.pinned > 0 {
-            why.push(format!("{} pinned", self.pinned));
-            try_.push("pin fewer vertices");
-        }
-        if self.on_creases > 0 {
-            why.push(format!("{} on creases", self.on_creases));
-            try_.push("a larger --crease-angle");
-        }
-        let mut line = match (f == n, boundary_smooth && self.boundary_edges > 0) {
-            (true, false) => format!(
-                "none of the {n} vertices can move, so the output has the input's positions"
-            ),
-            (true, true) => format!(
-                "none of the {n} vertices can move freely (boundary vertices only along their loops)"
-            ),
-            (false, _) => format!(
-                "{f} of {n} vertices ({:.0} %) cannot move freely",
-                100.0 * f as f64 / n as f64
-            ),
-        };
-        if !why.is_empty() {
-            line += &format!(": {}", why.join(", "));
-        }
-        if !try_.is_empty() {
-            line += &format!("; try: {}", try_.join("; "));
-        }
-        Some(line)
-    }
 }
 
 impl Plan {

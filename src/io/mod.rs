@@ -288,26 +288,41 @@ pub struct VertexValues<'a> {
     pub colours: Option<&'a (dyn Fn(usize) -> [u8; 3] + Sync)>,
 }
 
-/// Whether an output at `path` can carry [`VertexValues`], with their colours or without:
-/// `Err` saying why not. PLY carries both (`quality`, `red green blue`); OBJ the colours alone
-/// (`v x y z r g b`, which MeshLab and CloudCompare read), glTF too (`COLOR_0`).
-pub fn check_vertex_values(path: &Path, colours: bool) -> std::result::Result<(), String> {
+/// Why an output cannot carry [`VertexValues`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ValuesRefused {
+    /// The format (named) carries per-vertex colours but no per-vertex value.
+    ColoursOnly(&'static str),
+    /// The format carries neither.
+    Unsupported,
+}
+
+impl std::fmt::Display for ValuesRefused {
+    fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        match self {
+            ValuesRefused::ColoursOnly(format) => write!(
+                f,
+                "{format} carries per-vertex colours but no per-vertex value: ask for the colours, or write a PLY"
+            ),
+            ValuesRefused::Unsupported => f.write_str(
+                "per-vertex values are written into PLY outputs (and as colours into OBJ and glTF outputs) only",
+            ),
+        }
+    }
+}
+
+/// Whether an output at `path` can carry [`VertexValues`], with their colours or without.
+/// PLY carries both (`quality`, `red green blue`); OBJ the colours alone (`v x y z r g b`, which
+/// MeshLab and CloudCompare read), glTF too (`COLOR_0`).
+pub fn check_vertex_values(path: &Path, colours: bool) -> std::result::Result<(), ValuesRefused> {
     match Format::from_extension(path) {
         Some(Format::Ply) => Ok(()),
-        Some(Format::Obj) if colours => Ok(()),
-        Some(Format::Obj) => Err(
-            "an OBJ file carries per-vertex colours but no per-vertex value: ask for the colours, or write a PLY"
-                .into(),
-        ),
-        Some(Format::Gltf | Format::Glb) if colours => Ok(()),
-        Some(Format::Gltf | Format::Glb) => Err(
-            "a glTF file carries per-vertex colours (COLOR_0) but no per-vertex value: add --deviation-colours, or write a PLY"
-                .into(),
-        ),
-        _ => Err(
-            "per-vertex values are written into PLY outputs (and as colours into OBJ and glTF outputs) only"
-                .into(),
-        ),
+        Some(Format::Obj | Format::Gltf | Format::Glb) if colours => Ok(()),
+        Some(Format::Obj) => Err(ValuesRefused::ColoursOnly("an OBJ file")),
+        Some(Format::Gltf | Format::Glb) => {
+            Err(ValuesRefused::ColoursOnly("a glTF file (COLOR_0)"))
+        }
+        _ => Err(ValuesRefused::Unsupported),
     }
 }
 

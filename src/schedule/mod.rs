@@ -14,7 +14,7 @@
 //! of their free vertices, so within 3 of the patch): against another patch's position writes (1
 //! ring out) that is the same 4 rings, so they share the edge colouring.
 //!
-//! `vcs-lowpass` has wider stencils and gets its own colouring ([`Schedule::ring_colours`]): the
+//! `vcs-guided` has wider stencils and gets its own colouring ([`Schedule::ring_colours`]): the
 //! stencil of an owned vertex v writes the positions of its 2-ring `F_v` and reads the corners of
 //! the faces touching `F_v`, i.e. the 3-ring of v (its step-1 shares are computed before the sweep
 //! and only read; it keeps no neighbour sums). A patch therefore writes within 2 rings of its
@@ -37,7 +37,7 @@ use crate::topology::Topology;
 const CONFLICT_RINGS: usize = 4;
 /// Rings of halo a patch reads outside its owned range (F ∪ N(F) with F one ring out).
 const HALO_RINGS: usize = 2;
-/// The same two for the 2-ring stencils of `vcs-lowpass` (see the module doc).
+/// The same two for the 2-ring stencils of `vcs-guided` (see the module doc).
 const RING_CONFLICT_RINGS: usize = 5;
 const RING_HALO_RINGS: usize = 3;
 
@@ -49,7 +49,7 @@ pub struct Schedule {
     pub colours: Vec<Vec<u32>>,
     /// Per patch: vertices outside its owned range that its stencils read.
     pub halo: Vec<u32>,
-    /// The colouring for the 2-ring stencils of `vcs-lowpass`, in the same form.
+    /// The colouring for the 2-ring stencils of `vcs-guided`, in the same form.
     pub ring_colours: Vec<Vec<u32>>,
     /// Per patch: vertices outside its owned range that its 2-ring stencils read (3 rings).
     pub ring_halo: Vec<u32>,

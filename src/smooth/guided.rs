@@ -1,8 +1,8 @@
 //! `vcs-guided`: a feature-preserving first step for Liu et al.'s 2-step approach (their §4:
 //! "other operators can also be adopted in the first step"): guided normal filtering (Zhang et
 //! al. 2015) of the face normals, the vertices moved to fit the filtered normals (Sun et al.
-//! 2007), and the resulting displacement spread over `vcs-lowpass`'s 2-ring stencils, each of
-//! which restores its faces' volume exactly ([`super::lowpass`]). A low-pass filter rounds the
+//! 2007), and the resulting displacement spread over 2-ring stencils, each of
+//! which restores its faces' volume exactly ([`super::rings`]). A low-pass filter rounds the
 //! edges of a machined part as it removes the noise; the normal filter does not average across an
 //! edge, because its range weight compares *guidance* normals, each the mean normal of the most
 //! consistent (flattest, least edge-crossing) patch next to the face, which stay apart across
@@ -20,8 +20,8 @@
 //!    rest of `P_i` (so the filter follows a scan's varying density), `σ_r` = [`SIGMA_RANGE`].
 //! 3. [`VERTEX_ITERATIONS`] Jacobi steps `p_v += (1/|F_v|) Σ_{f∋v} n_f (n_f · (c_f − p_v))`:
 //!    each vertex moves towards the planes of its faces' filtered normals (fixed vertices stay).
-//! 4. The displacement `D` from `P` to the result of 3 is applied as `vcs-lowpass` applies its
-//!    Taubin displacement ([`super::lowpass::shares_into`], [`super::lowpass::sweep_rings`]):
+//! 4. The displacement `D` from `P` to the result of 3 is applied on 2-ring stencils
+//!    ([`super::rings::shares_into`], [`super::rings::sweep_rings`]):
 //!    volume exact, whatever step 3 did to it.
 //!
 //! `H(P) = D(P) · R(P)` (Zhang et al. eq. 4): `D` the largest difference of two unit normals in

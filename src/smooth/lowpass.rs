@@ -1,24 +1,33 @@
 //! `vcs-lowpass`: Taubin's λ|μ low-pass displacement as the first step of Liu et al.'s 2-step
-//! approach, the volume restored exactly on vertex-ring stencils; see docs/quality-research.md for
-//! the definition, the evidence and the numbers. This is the engine's kernel ([`ring_of`],
-//! [`counts_into`], [`shares_into`], [`apply_ring`], [`sweep_rings`]), which
-//! `Method::VcsLowpass` runs patch by patch through `engine::iterate` (volume step shared with
-//! `stencil.rs`), and nothing else. The sequential whole-mesh prototype the kernel is tested
-//! against, and that of the automatic stop (`crate::engine::auto`), are independent references
-//! the library never runs, so they are test code (`tests/oracles/lowpass.rs`).
+//! approach (§4 of the paper: any operator may be the first step, the second restores the
+//! volume exactly), the volume restored block by block; see docs/quality-research.md for the
+//! evidence and the numbers. This is the engine's kernel ([`displacements_into`],
+//! [`sweep_blocks`]), which `Method::VcsLowpass` (and `vcs-guided`, with its own first step) runs
+//! patch by patch through `engine::iterate`. The sequential whole-mesh reference it is tested
+//! against is test code (`tests/oracles/lowpass.rs`).
 //!
 //! One iteration on positions `P`:
 //! 1. `D = T(P) − P`, `T` = Taubin's λ then μ umbrella step, Jacobi, fixed vertices kept.
-//! 2. Every movable vertex `v` owns the stencil `F_v` = the movable vertices within graph distance
-//!    [`RING_RADIUS`] of `v`; `c_u` = the number of stencils that contain `u`.
-//! 3. Gauss–Seidel over `v` in index order: `p_u += D_u / c_u` for `u ∈ F_v` (step 1), then the
-//!    common translation `w = n (V⁰ − V¹) / |n|²` of `F_v` that gives the faces touching `F_v`
-//!    their volume back exactly (step 2, DESIGN.md). Every vertex so receives its whole Taubin
-//!    displacement once per iteration, plus the volume translations of its stencils.
+//! 2. The vertices of each patch are cut into blocks of [`BLOCK`] consecutive ids of the plan's
+//!    (Morton) order. Gauss–Seidel over the blocks, ascending: the block's movable vertices `M`
+//!    move by `D` (step 1); then each `u ∈ M` moves by a common distance `s` along `e_u`, the
+//!    direction of the volume gradient of `u` (its faces' `p_b × p_c`, after step 1), with `s`
+//!    the root near zero of the faces' volume change, which is a cubic in `s` (step 2). The faces
+//!    touching `M` so keep their volume exactly, and with them the whole mesh.
 //!
-//! The ring must be wide: step 2 removes the free vertices' *mean* normal motion; over an edge
-//! (2 vertices) that is half of each vertex's denoising, over a 2-ring (~19 vertices) the noise
-//! averages out and mostly the low-frequency shrink/inflation is removed.
+//! Why blocks, and why an offset rather than a translation: step 2 removes the block's mean
+//! normal motion. Over a few vertices that is much of each vertex's denoising (noise changes
+//! sign from vertex to vertex); over thousands the noise averages out and what is removed is the
+//! low-frequency shrink or inflation, which is what should be removed. A common translation (the
+//! edge stencils' step 2) is linear in the volume but cancels on a block that wraps a thin part
+//! (its two sides' gradients point apart), where it would push the block sideways; an offset
+//! along each vertex's own normal pushes both sides out. Each face is visited twice per block
+//! (the volume and gradients, then the cubic's higher terms), so an iteration costs a small
+//! multiple of a Taubin iteration.
+//!
+//! What a block reads and writes (the schedule's conflict rule rests on it): it writes its own
+//! vertices, which are owned by its patch, and reads the corners of their faces (one ring out)
+//! and their step-1 displacements; the edge stencils' colouring covers that.
 
 use std::ops::Range;
 
@@ -28,415 +37,267 @@ use super::stencil::{self, Outcome};
 use super::{Field, SweepStats};
 use crate::topology::{Topology, TopologyParts, corners_after};
 
-/// Graph radius of the restoring stencils (1 fails the quality target, 2 meets it).
-pub const RING_RADIUS: usize = 2;
+/// Vertices per block: a block is this many consecutive vertices of a patch in the plan's
+/// (Morton) order, the last block of a patch shorter.
+pub const BLOCK: u32 = 4096;
 
-// ---------------------------------------------------------------------------------------------
-// The engine's kernel (`Method::VcsLowpass`): one ring stencil at a time, over a `Field`, so the
-// same code runs a whole mesh and the patches of one colour in parallel. What it reads and
-// writes (the schedule's conflict rule for this method rests on it, see `crate::schedule`):
-// - stencil `v` writes the positions of `F_v` (within 2 rings of `v`);
-// - it reads the positions of every corner of the faces touching `F_v` (within 3 rings) and the
-//   step-1 shares of `F_v`, which are computed before the sweep and only read during it.
+/// Rounds of a block under a deviation bound: each round leaves out the members that would end
+/// beyond it; a block that still has some after these is skipped.
+const DEVIATION_ROUNDS: usize = 8;
 
-/// A ring stencil's members: ascending, with a set beside them for membership, because a ring
-/// stencil asks "is this corner free?" for every face it touches (about six per member), and the
-/// 2-ring is found through its vertices' neighbour lists, which repeat most vertices. The set is
-/// a table indexed by the id's distance from the stencil's centre, which holds nearly every
-/// member because the plan's order keeps neighbours close, and a hash table for the others.
-/// Scratch space: one per thread, reused from stencil to stencil.
-#[derive(Debug, Clone)]
-pub struct Ring {
-    /// The members, ascending (after [`ring_of`]).
-    pub members: Vec<u32>,
-    /// The ids `centre − WINDOW / 2 .. centre + WINDOW / 2`: the stamp of the ring that holds
-    /// them (another stamp: not a member), so clearing is one increment.
-    window: Vec<u32>,
-    centre: u32,
-    /// Whether every vertex within two rings of the centre is movable (set by [`ring_of`]).
-    all_movable: bool,
-    /// Open addressing, linear probing: `stamp << 32 | vertex`, for the ids outside the window.
-    slots: Vec<u64>,
-    /// `32 − log2(slots.len())`: the hash keeps the product's top bits.
-    shift: u32,
-    stamp: u32,
-}
+/// Newton steps for the block's offset: the cubic is nearly linear (the offset is small against
+/// the block), so two steps reach rounding; the rest are a margin.
+const NEWTON_STEPS: usize = 4;
 
-/// The ids around a stencil's centre that [`Ring`] finds without hashing.
-const WINDOW: usize = 2048;
-
-impl Default for Ring {
-    fn default() -> Ring {
-        Ring {
-            members: Vec::with_capacity(64),
-            window: vec![0; WINDOW],
-            centre: 0,
-            all_movable: false,
-            slots: vec![0; 128],
-            shift: 32 - 7,
-            stamp: 1,
-        }
-    }
-}
-
-impl Ring {
-    /// An empty ring about `centre`.
-    fn clear(&mut self, centre: u32) {
-        self.members.clear();
-        self.centre = centre;
-        self.stamp = self.stamp.wrapping_add(1);
-        if self.stamp == 0 {
-            self.window.fill(0);
-            self.slots.fill(0);
-            self.stamp = 1;
-        }
-    }
-
-    /// Where `v` is in the window, if it is.
-    #[inline(always)]
-    fn in_window(&self, v: u32) -> Option<usize> {
-        let at = v.wrapping_sub(self.centre).wrapping_add(WINDOW as u32 / 2) as usize;
-        (at < WINDOW).then_some(at)
-    }
-
-    /// The slot of `v`: where it is, or the empty slot where it would go.
-    #[inline(always)]
-    fn slot(&self, v: u32) -> (usize, bool) {
-        let mask = self.slots.len() - 1;
-        // Fibonacci hashing: the top bits of the product spread consecutive ids.
-        let mut at = (v.wrapping_mul(0x9E37_79B9) >> self.shift) as usize;
-        let want = (self.stamp as u64) << 32 | v as u64;
-        loop {
-            let e = self.slots[at];
-            if e == want {
-                return (at, true);
-            }
-            if (e >> 32) as u32 != self.stamp {
-                return (at, false);
-            }
-            at = (at + 1) & mask;
-        }
-    }
-
-    /// Insert `v`; [`Ring::reserve`] must have made room for it.
-    #[inline(always)]
-    fn insert(&mut self, v: u32) {
-        if let Some(at) = self.in_window(v) {
-            if self.window[at] != self.stamp {
-                self.window[at] = self.stamp;
-                self.members.push(v);
-            }
-            return;
-        }
-        let (at, found) = self.slot(v);
-        if !found {
-            self.slots[at] = (self.stamp as u64) << 32 | v as u64;
-            self.members.push(v);
-        }
-    }
-
-    /// Room for `more` members beyond those held, the hash table at most half full.
-    #[inline(always)]
-    fn reserve(&mut self, more: usize) {
-        let need = (self.members.len() + more) * 2;
-        if need > self.slots.len() {
-            self.grow(need);
-        }
-    }
-
-    /// A hash table of at least `need` slots, the members outside the window placed again (a
-    /// vertex of unusually high valence).
-    #[cold]
-    fn grow(&mut self, need: usize) {
-        let len = need.next_power_of_two();
-        self.slots = vec![0; len];
-        self.shift = 32 - len.trailing_zeros();
-        for k in 0..self.members.len() {
-            let v = self.members[k];
-            if self.in_window(v).is_none() {
-                let (at, _) = self.slot(v);
-                self.slots[at] = (self.stamp as u64) << 32 | v as u64;
-            }
-        }
-    }
-
-    /// Whether `v` is a member.
-    #[inline(always)]
-    pub fn contains(&self, v: u32) -> bool {
-        match self.in_window(v) {
-            Some(at) => self.window[at] == self.stamp,
-            None => self.slot(v).1,
-        }
-    }
-}
-
-/// `F_v` into `ring` (cleared first): `v` and the movable vertices reachable from `v` in at most
-/// [`RING_RADIUS`] steps through movable vertices, ascending; empty when `v` is fixed. The
-/// relation is symmetric (a path of movable vertices reversed is one), so `u ∈ F_v ⇔ v ∈ F_u`
-/// and the number of stencils holding `u` is `|F_u|`: no per-vertex count has to be stored.
-/// With `sorted` false the members stay in the order found (enough for counting them).
-pub fn ring_of(topo: &TopologyParts, v: u32, ring: &mut Ring, sorted: bool) {
-    const { assert!(RING_RADIUS == 2, "ring_of walks exactly two rings") };
-    ring.clear(v);
-    if topo.is_fixed(v) {
-        return;
-    }
-    ring.reserve(1);
-    ring.insert(v);
-    let mut fixed_near = false;
-    for &u in topo.neighbors(v) {
-        if topo.is_fixed(u) {
-            fixed_near = true;
-            continue;
-        }
-        let around = topo.neighbors(u);
-        ring.reserve(1 + around.len());
-        ring.insert(u);
-        for &w in around {
-            // `v` is a neighbour of each of its neighbours, and already in.
-            if w == v {
-                continue;
-            }
-            if topo.is_fixed(w) {
-                fixed_near = true;
-            } else {
-                ring.insert(w);
-            }
-        }
-    }
-    ring.all_movable = !fixed_near;
-    if sorted {
-        ring.members.sort_unstable();
-    }
-}
-
-/// The sizes `|F_u|` of the vertices `first .. first + out.len()`, for [`shares_into`]: they
-/// depend on the topology alone, so a run counts them once. A size above 254 is kept as
-/// [`COUNT_AGAIN`] (the byte cannot hold it; such a stencil is counted again when needed).
-pub fn counts_into(topo: &Topology, out: &mut [u8], first: usize) {
-    let topo = topo.parts();
-    let mut ring = Ring::default();
-    for (k, o) in out.iter_mut().enumerate() {
-        let size = ring_size(&topo, (first + k) as u32, &mut ring);
-        *o = size.min(COUNT_AGAIN as usize) as u8;
-    }
-}
-
-/// `|F_v|`, `ring` being scratch space.
-fn ring_size(topo: &TopologyParts, v: u32, ring: &mut Ring) -> usize {
-    ring_of(topo, v, ring, false);
-    ring.members.len()
-}
-
-/// The size [`counts_into`] keeps for a stencil too large for its byte.
-pub const COUNT_AGAIN: u8 = u8::MAX;
-
-/// Step 1's share for the vertices `first .. first + out.len()`: `(t_u − p_u) / |F_u|`, with `t`
-/// the positions after one Jacobi λ|μ pair from `pos` (so summed over the `|F_u|` stencils that
-/// hold `u`, every vertex receives its whole Taubin displacement once); zero for a fixed vertex.
-/// `counts` holds the sizes from [`counts_into`] for the same vertices. Each entry depends only
-/// on `pos`, `taubin` and the topology, so any split of the range gives the same bits.
-pub fn shares_into(
+/// Step 1's displacement for the vertices `first .. first + out.len()`: `filtered − pos` (the
+/// low-pass step, or any first step), zero for a fixed vertex. Each entry depends only on the
+/// two fields and the topology, so any split gives the same bits.
+pub fn displacements_into(
     topo: &Topology,
     pos: &[DVec3],
-    taubin: &[DVec3],
-    counts: &[u8],
+    filtered: &[DVec3],
     out: &mut [DVec3],
     first: usize,
 ) {
-    let topo = topo.parts();
-    // Only a stencil too large for its byte is counted again: the scratch space is made then.
-    let mut ring: Option<Ring> = None;
-    for ((k, o), &count) in out.iter_mut().enumerate().zip(counts) {
+    for (k, o) in out.iter_mut().enumerate() {
         let u = first + k;
-        let count = match count {
-            COUNT_AGAIN => ring_size(&topo, u as u32, ring.get_or_insert_with(Ring::default)),
-            count => count as usize,
-        };
-        *o = if count == 0 {
+        *o = if topo.is_fixed(u as u32) {
             DVec3::ZERO
         } else {
-            (taubin[u] - pos[u]) * (1.0 / count as f64)
+            filtered[u] - pos[u]
         };
     }
 }
 
-/// Apply the ring stencil of `v`: every `u ∈ F_v` moves by its share `shares[u]` (step 1) plus
-/// the common translation `w` that gives the faces touching `F_v` their volume back exactly
-/// (step 2). The volume change and gradient are those of the edge and triangle stencils, face by
-/// face through `stencil::shared_face` about the origin `p_v`, and `w` and the degenerate test
-/// are `stencil::translation`'s, so a ring stencil restores its volume with the same arithmetic
-/// as `vcs`. With a `deviation` bound the stencil is skipped whole when it would leave a member
-/// farther than the limit from its input position (as `vcs`'s stencils are, so the volume stays
-/// exact). `ring` is scratch space. Writes only when the outcome is [`Outcome::Applied`].
-pub fn apply_ring<P: Field + ?Sized, D: Field + ?Sized>(
-    topo: &TopologyParts,
-    triangles: &[[u32; 3]],
-    pos: &mut P,
-    shares: &D,
-    v: u32,
-    deviation: Option<stencil::Deviation>,
-    ring: &mut Ring,
-) -> Outcome {
-    ring_of(topo, v, ring, true);
-    let ring = &*ring;
-    if ring.members.is_empty() {
-        return Outcome::SkippedFixed;
-    }
-    let origin = pos.get(v);
-    let share = |free: bool, u: u32| if free { shares.get(u) } else { DVec3::ZERO };
-    let (mut dv, mut n, mut scale) = (0.0, DVec3::ZERO, 0.0);
-    // Whether the member is `v` or one of its neighbours, walked beside the ascending members:
-    // then every movable neighbour of it is a member too (every neighbour, when no vertex within
-    // two rings of `v` is fixed), and the set need not be asked.
-    let around = topo.neighbors(v);
-    let mut next = 0;
-    for &a in &ring.members {
-        while next < around.len() && around[next] < a {
-            next += 1;
-        }
-        let near = a == v || around.get(next) == Some(&a);
-        let free = |u: u32| {
-            if near {
-                ring.all_movable || !topo.is_fixed(u)
-            } else {
-                ring.contains(u)
-            }
-        };
-        let (pa, sa) = (pos.get(a) - origin, shares.get(a));
-        for &t in topo.faces_of(a) {
-            let (b, c) = corners_after(triangles[t as usize], a);
-            let (b_free, c_free) = (free(b), free(c));
-            // Each face once: at its smallest free corner.
-            if (b_free && b < a) || (c_free && c < a) {
-                continue;
-            }
-            stencil::shared_face(
-                pa,
-                pos.get(b) - origin,
-                pos.get(c) - origin,
-                sa,
-                share(b_free, b),
-                share(c_free, c),
-                b_free,
-                c_free,
-                &mut dv,
-                &mut n,
-                &mut scale,
-            );
-        }
-    }
-    let Some(w) = stencil::translation(dv, n, scale) else {
-        return Outcome::SkippedDegenerate;
-    };
-    if !ring
-        .members
-        .iter()
-        .all(|&u| (shares.get(u) + w).is_finite())
-    {
-        return Outcome::SkippedDegenerate;
-    }
-    if let Some(bound) = deviation {
-        let limit2 = bound.limit * bound.limit;
-        let beyond = |u: u32| {
-            (pos.get(u) + shares.get(u) + w - bound.input[u as usize]).length_squared() > limit2
-        };
-        if ring.members.iter().any(|&u| beyond(u)) {
-            return Outcome::DeviationLimited;
-        }
-    }
-    for &u in &ring.members {
-        pos.add(u, shares.get(u) + w);
-    }
-    Outcome::Applied
+/// A block's scratch space, reused from block to block.
+#[derive(Debug, Default)]
+struct Scratch {
+    /// Per member: whether it moves (movable, and not left out by the deviation bound).
+    free: Vec<bool>,
+    /// Per member: its volume gradient after step 1, then that gradient's direction.
+    dir: Vec<DVec3>,
+    /// Per member: where step 1 puts it, about the block's origin.
+    moved: Vec<DVec3>,
+    /// The faces with two or three members, corners in the order [`corners_after`] gives from
+    /// the first: the only ones the cubic's higher terms need.
+    shared: Vec<[u32; 3]>,
 }
 
-/// The ring stencils of the vertices `owned`, in ascending order, Gauss–Seidel (each sees the
-/// latest positions); `shares` from [`shares_into`]; `deviation` as in [`apply_ring`].
-pub fn sweep_rings<P: Field + ?Sized, D: Field + ?Sized>(
+/// The blocks of the patch `owned`, ascending, Gauss–Seidel (each sees the latest positions):
+/// [`apply_block`] with step 1's displacement `disp` from [`displacements_into`].
+pub fn sweep_blocks<P: Field + ?Sized, D: Field + ?Sized>(
     topo: &Topology,
     triangles: &[[u32; 3]],
     pos: &mut P,
-    shares: &D,
+    disp: &D,
     owned: Range<u32>,
     deviation: Option<stencil::Deviation>,
 ) -> SweepStats {
     let topo = topo.parts();
     let mut stats = SweepStats::default();
-    let mut ring = Ring::default();
-    for v in owned {
-        let outcome = apply_ring(&topo, triangles, pos, shares, v, deviation, &mut ring);
+    let mut scratch = Scratch::default();
+    let mut lo = owned.start;
+    while lo < owned.end {
+        let hi = lo.saturating_add(BLOCK).min(owned.end);
+        let outcome = apply_block(&topo, triangles, pos, disp, lo..hi, deviation, &mut scratch);
         stencil::count(&mut stats, outcome);
+        lo = hi;
     }
     stats
+}
+
+/// One block (see the module doc): its free members move by `disp` (step 1), then each by the
+/// common distance `s` along its own unit volume gradient, `s` the root of the faces' volume
+/// change, a cubic in `s`, found by Newton from the linear solution. Under a deviation bound the
+/// members that would end beyond it are held back (they do not move) and the rest is solved
+/// again: the outcome is then [`Outcome::DeviationLimited`], though the others moved. Writes
+/// nothing when the outcome is a skip.
+fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
+    topo: &TopologyParts,
+    triangles: &[[u32; 3]],
+    pos: &mut P,
+    disp: &D,
+    block: Range<u32>,
+    deviation: Option<stencil::Deviation>,
+    scratch: &mut Scratch,
+) -> Outcome {
+    let (start, len) = (block.start, block.len());
+    scratch.free.clear();
+    scratch
+        .free
+        .extend(block.clone().map(|u| !topo.is_fixed(u)));
+    if !scratch.free.contains(&true) {
+        return Outcome::SkippedFixed;
+    }
+    let origin = pos.get(start);
+    let mut held_back = false;
+    for _ in 0..DEVIATION_ROUNDS {
+        let Scratch {
+            free,
+            dir,
+            moved,
+            shared,
+        } = &mut *scratch;
+        let free = &*free;
+        let member = |u: u32| {
+            let k = u.wrapping_sub(start) as usize;
+            k < len && free[k]
+        };
+        moved.clear();
+        moved.extend(block.clone().map(|u| pos.get(u) - origin + disp.get(u)));
+        let moved = &*moved;
+        // Where a corner is after step 1, about the origin.
+        let after = |u: u32, m: bool| {
+            if m {
+                moved[(u - start) as usize]
+            } else {
+                pos.get(u) - origin
+            }
+        };
+        // Pass 1: the volume change of step 1 and each member's gradient, every face touching a
+        // member once (at its smallest member corner).
+        dir.clear();
+        dir.resize(len, DVec3::ZERO);
+        shared.clear();
+        let mut dv = 0.0;
+        for a in block.clone() {
+            if !member(a) {
+                continue;
+            }
+            let (pa, qa) = (pos.get(a) - origin, moved[(a - start) as usize]);
+            for &t in topo.faces_of(a) {
+                let (b, c) = corners_after(triangles[t as usize], a);
+                let (mb, mc) = (member(b), member(c));
+                if (mb && b < a) || (mc && c < a) {
+                    continue;
+                }
+                let (pb, pc) = (pos.get(b) - origin, pos.get(c) - origin);
+                let (qb, qc) = (after(b, mb), after(c, mc));
+                let bc = qb.cross(qc);
+                dv += qa.dot(bc) - pa.dot(pb.cross(pc));
+                dir[(a - start) as usize] += bc;
+                if mb {
+                    dir[(b - start) as usize] += qc.cross(qa);
+                }
+                if mc {
+                    dir[(c - start) as usize] += qa.cross(qb);
+                }
+                if mb || mc {
+                    shared.push([a, b, c]);
+                }
+            }
+        }
+        // The offset's linear coefficient is Σ |gradient|; the directions are made unit.
+        let mut c1 = 0.0;
+        for g in dir.iter_mut() {
+            let l = g.length();
+            if l > 0.0 {
+                c1 += l;
+                *g /= l;
+            }
+        }
+        let dir = &*dir;
+        let unit = |u: u32| {
+            if member(u) {
+                dir[(u - start) as usize]
+            } else {
+                DVec3::ZERO
+            }
+        };
+        // Pass 2: the quadratic and cubic coefficients, from the faces with two or three members.
+        let (mut c2, mut c3) = (0.0, 0.0);
+        for &[a, b, c] in shared.iter() {
+            let (mb, mc) = (member(b), member(c));
+            let (qa, qb, qc) = (moved[(a - start) as usize], after(b, mb), after(c, mc));
+            let (ea, eb, ec) = (dir[(a - start) as usize], unit(b), unit(c));
+            let ebc = eb.cross(ec);
+            c2 += ea.dot(eb.cross(qc)) + ea.dot(qb.cross(ec)) + qa.dot(ebc);
+            c3 += ea.dot(ebc);
+        }
+        let Some(s) = offset(dv, c1, c2, c3) else {
+            return Outcome::SkippedDegenerate;
+        };
+        let moves = |u: u32| disp.get(u) + unit(u) * s;
+        if !block.clone().all(|u| !member(u) || moves(u).is_finite()) {
+            return Outcome::SkippedDegenerate;
+        }
+        if let Some(bound) = deviation {
+            let limit2 = bound.limit * bound.limit;
+            let beyond = |u: u32| {
+                member(u)
+                    && (pos.get(u) + moves(u) - bound.input[u as usize]).length_squared() > limit2
+            };
+            let out: Vec<u32> = block.clone().filter(|&u| beyond(u)).collect();
+            if !out.is_empty() {
+                for u in out {
+                    scratch.free[(u - start) as usize] = false;
+                }
+                held_back = true;
+                if !scratch.free.contains(&true) {
+                    return Outcome::DeviationLimited;
+                }
+                continue;
+            }
+        }
+        for u in block.clone() {
+            if member(u) {
+                pos.add(u, moves(u));
+            }
+        }
+        return if held_back {
+            Outcome::DeviationLimited
+        } else {
+            Outcome::Applied
+        };
+    }
+    Outcome::DeviationLimited
+}
+
+/// The root `s` near zero of `dv + c1 s + c2 s² + c3 s³` (the volume change after an offset
+/// `s`, times 6), by Newton from `−dv / c1`; `None` when the gradient vanishes or the steps do
+/// not settle to rounding.
+fn offset(dv: f64, c1: f64, c2: f64, c3: f64) -> Option<f64> {
+    // Negated so that a NaN counts as degenerate.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
+    if !(c1 > 0.0 && c1.is_finite() && dv.is_finite()) {
+        return None;
+    }
+    let f = |s: f64| dv + s * (c1 + s * (c2 + s * c3));
+    let mut s = -dv / c1;
+    for _ in 0..NEWTON_STEPS {
+        s -= f(s) / (c1 + s * (2.0 * c2 + 3.0 * s * c3));
+    }
+    // Settled: what is left is rounding against the terms summed.
+    let size = dv.abs() + c1 * s.abs();
+    (s.is_finite() && f(s).abs() <= 1e-9 * size.max(f64::MIN_POSITIVE)).then_some(s)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// A stencil too large for its byte is counted again: on a bipyramid of 300 equator vertices
-    /// every 2-ring is the whole mesh (302 vertices), and its shares divide by 302.
+    /// The offset solves the cubic to rounding, starting from the linear solution.
     #[test]
-    fn stencils_larger_than_a_byte_are_counted_again() {
-        let k = 300u32;
-        let (top, bottom) = (k, k + 1);
-        let mut positions: Vec<DVec3> = (0..k)
-            .map(|i| {
-                let a = std::f64::consts::TAU * i as f64 / k as f64;
-                DVec3::new(a.cos(), a.sin(), 0.0)
-            })
-            .collect();
-        positions.extend([DVec3::Z, -DVec3::Z]);
-        let triangles: Vec<[u32; 3]> = (0..k)
-            .flat_map(|i| [[i, (i + 1) % k, top], [(i + 1) % k, i, bottom]])
-            .collect();
-        let topo = Topology::build(positions.len(), &triangles).unwrap();
-        let n = positions.len();
-        let mut counts = vec![0; n];
-        counts_into(&topo, &mut counts, 0);
-        assert!(counts.iter().all(|&c| c == COUNT_AGAIN));
-        let taubin: Vec<DVec3> = positions.iter().map(|p| *p * 1.5).collect();
-        let mut shares = vec![DVec3::ZERO; n];
-        shares_into(&topo, &positions, &taubin, &counts, &mut shares, 0);
-        for u in 0..n {
-            assert_eq!(shares[u], (taubin[u] - positions[u]) * (1.0 / 302.0), "{u}");
+    fn the_offset_is_the_root_near_zero() {
+        for (dv, c1, c2, c3) in [
+            (1e-3, 2.0, 0.5, 0.1),
+            (-4.0, 3.0, -0.2, 0.01),
+            (0.0, 1.0, 5.0, 5.0),
+        ] {
+            let s = offset(dv, c1, c2, c3).unwrap();
+            let f = dv + c1 * s + c2 * s * s + c3 * s * s * s;
+            assert!(
+                f.abs() <= 1e-12 * (dv.abs() + c1 * s.abs()).max(1e-300),
+                "{f}"
+            );
+            assert!(
+                s.abs() <= 2.0 * dv.abs() / c1 + 1e-300,
+                "the root near zero: {s}"
+            );
         }
-    }
-
-    /// The ring's set through growth (a vertex of high valence) and many clears, with members
-    /// both in its window about the centre and in its hash table.
-    #[test]
-    fn a_ring_grows_and_clears() {
-        let mut ring = Ring::default();
-        let mut before: Vec<u32> = Vec::new();
-        for round in 0..300u32 {
-            let centre = 5000 + round * 13;
-            ring.clear(centre);
-            let size = if round % 50 == 0 { 1000 } else { 20 };
-            // Even k about the centre (the window), odd k far from it (the hash table).
-            let members: Vec<u32> = (0..size)
-                .map(|k| match k % 2 {
-                    0 => centre + k - size / 2,
-                    _ => k * 7919 + round + 100_000,
-                })
-                .collect();
-            for (k, &v) in members.iter().enumerate() {
-                // Room made in pieces, as `ring_of` makes it ring by ring.
-                if k % 10 == 0 {
-                    ring.reserve(10);
-                }
-                ring.insert(v);
-                ring.insert(v);
-            }
-            assert_eq!(ring.members, members);
-            assert!(members.iter().all(|&v| ring.contains(v)));
-            assert!(!ring.contains(centre + size / 2 + 1), "in the window");
-            assert!(!ring.contains(100_007 + round), "outside it");
-            let gone = before.iter().filter(|v| !members.contains(v));
-            assert!(round == 0 || gone.clone().count() > 0);
-            assert!(gone.clone().all(|&v| !ring.contains(v)), "cleared");
-            before = members;
-        }
+        assert_eq!(offset(1.0, 0.0, 1.0, 1.0), None);
+        assert_eq!(offset(f64::NAN, 1.0, 0.0, 0.0), None);
+        // No real root near zero: Newton does not settle.
+        assert_eq!(offset(1.0, 1e-3, 1.0, 0.0), None);
     }
 }

@@ -58,7 +58,7 @@ pub enum Footprint {
     /// Edge and triangle stencils: they write their free vertices and the neighbour sums of one
     /// ring, and read two rings.
     Edge,
-    /// Vertex-ring stencils of radius [`super::lowpass::RING_RADIUS`]: wider, their own colouring.
+    /// Vertex-ring stencils of radius [`super::rings::RING_RADIUS`]: wider, their own colouring.
     Ring,
 }
 
@@ -173,6 +173,10 @@ pub trait Smoother: Sync {
     fn stop_rule(&self, opts: &Options) -> StopRule;
     /// Whether the method takes `control`.
     fn accepts(&self, control: Control) -> bool;
+    /// Its second step size μ when none is asked for ([`Control::Mu`]; Taubin's own value).
+    fn default_mu(&self) -> f64 {
+        -0.53
+    }
 
     /// Once per run, before the first iteration: fill the method's byte field ([`Needs::counts`]).
     fn start(&self, _topo: &Topology, _exec: &mut dyn Exec, _counts: &mut [u8]) {}

@@ -12,7 +12,7 @@ use super::method::{
     Control, Exec, FaceFields, Footprint, Needs, PatchMesh, Schedule, Smoother, StopRule,
 };
 use super::stencil::{self, StencilParams};
-use super::{Options, SharedField, SweepStats, Topology, guided, laplacian, lowpass};
+use super::{Options, SharedField, SweepStats, Topology, guided, laplacian, lowpass, rings};
 
 /// Umbrella Laplacian, forward Euler `p += λ L(p)`, Jacobi (Liu et al. 2002, eq. 3–6). Shrinks.
 pub struct Laplacian;
@@ -49,13 +49,13 @@ impl Smoother for Taubin {
         "λ|μ: a λ step then a μ step (Taubin 1995)"
     }
     fn schedule(&self, opts: &Options) -> Schedule {
-        Schedule::Umbrella(vec![opts.lambda, opts.mu])
+        Schedule::Umbrella(vec![opts.lambda, opts.mu()])
     }
     fn keeps_volume(&self) -> bool {
         false
     }
     fn stop_rule(&self, opts: &Options) -> StopRule {
-        StopRule::Filter(vec![opts.lambda, opts.mu])
+        StopRule::Filter(vec![opts.lambda, opts.mu()])
     }
     fn accepts(&self, control: Control) -> bool {
         matches!(
@@ -183,9 +183,9 @@ impl Smoother for StencilMethod {
     }
 }
 
-/// Taubin's λ|μ displacement spread over 2-ring stencils, each restoring its faces' volume
-/// exactly ([`lowpass`]): keeps the volume as `vcs` does and the detail as `taubin` does
-/// (docs/quality-research.md). The default method.
+/// Taubin's λ|μ displacement, the volume restored exactly block by block ([`lowpass`]): keeps
+/// the volume as `vcs` does and the detail as `taubin` does (docs/quality-research.md). The
+/// default method.
 pub struct VcsLowpass;
 
 impl Smoother for VcsLowpass {
@@ -193,22 +193,16 @@ impl Smoother for VcsLowpass {
         "vcs-lowpass"
     }
     fn help(&self) -> &'static str {
-        "Taubin's λ|μ displacement, volume restored exactly on 2-ring stencils"
+        "Taubin's λ|μ displacement, volume restored exactly on blocks of 4096 vertices"
     }
     fn schedule(&self, _: &Options) -> Schedule {
-        Schedule::Stencils(Footprint::Ring)
+        Schedule::Stencils(Footprint::Edge)
     }
     fn keeps_volume(&self) -> bool {
         true
     }
-    fn needs(&self) -> Needs {
-        Needs {
-            counts: true,
-            ..Needs::default()
-        }
-    }
     fn stop_rule(&self, opts: &Options) -> StopRule {
-        StopRule::Filter(vec![opts.lambda, opts.mu])
+        StopRule::Filter(vec![opts.lambda, opts.mu()])
     }
     fn accepts(&self, control: Control) -> bool {
         matches!(
@@ -216,15 +210,14 @@ impl Smoother for VcsLowpass {
             Control::Lambda | Control::Mu | Control::SmoothBoundary
         )
     }
-    /// The stencil sizes, which depend on the topology alone.
-    fn start(&self, topo: &Topology, exec: &mut dyn Exec, counts: &mut [u8]) {
-        exec.vertex_pass_u8(counts, &|first, out| lowpass::counts_into(topo, out, first));
+    /// Closer to −λ than Taubin's: the filter inflates mid frequencies less (its gain at small
+    /// k is `1 − (λ + μ) k`), and the blocks restore what it shrinks (docs/quality-research.md).
+    fn default_mu(&self) -> f64 {
+        -0.52
     }
-    /// The step-1 shares into `sums` (see [`lowpass::shares_into`]): a λ|μ pair from `pos`
-    /// through `sums` into `spare`, each step exchanged, then the shares from `pos` and `spare`.
-    /// Every entry depends only on `pos`, so any split gives the same bits. A stencil of an owned
-    /// vertex reaches two rings out, whose shares other processes own: the last pass is
-    /// exchanged too.
+    /// Step 1's displacement into `sums` (see [`lowpass::displacements_into`]): a λ|μ pair from
+    /// `pos` through `sums` into `spare`, each step exchanged, then the difference. Every entry
+    /// depends only on `pos`, so any split gives the same bits.
     fn prepare(
         &self,
         mesh: PatchMesh,
@@ -233,11 +226,11 @@ impl Smoother for VcsLowpass {
         pos: &[DVec3],
         sums: &mut [DVec3],
         spare: &mut [DVec3],
-        counts: &[u8],
+        _: &[u8],
         _: FaceFields,
     ) {
         let topo = mesh.topo;
-        let (lambda, mu) = (opts.lambda, opts.mu);
+        let (lambda, mu) = (opts.lambda, opts.mu());
         exec.vertex_pass(sums, &|first, out| {
             laplacian::jacobi_step(topo, pos, out, first, lambda);
         });
@@ -247,11 +240,10 @@ impl Smoother for VcsLowpass {
         });
         let pair: &[DVec3] = spare;
         exec.vertex_pass(sums, &|first, out| {
-            let counts = &counts[first..first + out.len()];
-            lowpass::shares_into(topo, pos, pair, counts, out, first)
+            lowpass::displacements_into(topo, pos, pair, out, first)
         });
     }
-    /// The ring stencils of the patch's vertices, ascending; its boundary stencils run after
+    /// The blocks of the patch's vertices, ascending; its boundary stencils run after
     /// ([`Smoother::boundary_pass`]).
     fn sweep_patch(
         &self,
@@ -263,7 +255,7 @@ impl Smoother for VcsLowpass {
         params: StencilParams,
         _: Option<&Loops>,
     ) -> SweepStats {
-        lowpass::sweep_rings(mesh.topo, mesh.tris, pos, sums, vertices, params.deviation)
+        lowpass::sweep_blocks(mesh.topo, mesh.tris, pos, sums, vertices, params.deviation)
     }
     fn boundary_pass(&self) -> bool {
         true
@@ -271,8 +263,8 @@ impl Smoother for VcsLowpass {
 }
 
 /// Guided normal filtering, the vertices fitted to the filtered normals, and that displacement
-/// spread over `vcs-lowpass`'s 2-ring stencils, each restoring its faces' volume exactly
-/// ([`guided`]): keeps sharp edges and the volume.
+/// spread over 2-ring stencils, each restoring its faces' volume exactly ([`guided`],
+/// [`rings`]): keeps sharp edges and the volume.
 pub struct VcsGuided;
 
 impl Smoother for VcsGuided {
@@ -302,12 +294,13 @@ impl Smoother for VcsGuided {
     fn accepts(&self, control: Control) -> bool {
         matches!(control, Control::SmoothBoundary)
     }
+    /// The stencil sizes, which depend on the topology alone.
     fn start(&self, topo: &Topology, exec: &mut dyn Exec, counts: &mut [u8]) {
-        VcsLowpass.start(topo, exec, counts)
+        exec.vertex_pass_u8(counts, &|first, out| rings::counts_into(topo, out, first));
     }
     /// Steps 1–3 of [`guided`] into `spare` (the vertex steps alternate between `spare` and
-    /// `sums`, ending in `spare`), then the shares of that displacement into `sums`, as
-    /// `vcs-lowpass` makes them. Every pass is a Jacobi pass, so any split gives the same bits.
+    /// `sums`, ending in `spare`), then the shares of that displacement into `sums`
+    /// ([`rings::shares_into`]). Every pass is a Jacobi pass, so any split gives the same bits.
     fn prepare(
         &self,
         mesh: PatchMesh,
@@ -374,20 +367,20 @@ impl Smoother for VcsGuided {
         let fitted: &[DVec3] = spare;
         exec.vertex_pass(sums, &|first, out| {
             let counts = &counts[first..first + out.len()];
-            lowpass::shares_into(topo, pos, fitted, counts, out, first)
+            rings::shares_into(topo, pos, fitted, counts, out, first)
         });
     }
     fn sweep_patch(
         &self,
         mesh: PatchMesh,
         vertices: Range<u32>,
-        triangles: Range<u32>,
+        _: Range<u32>,
         pos: &mut SharedField,
         sums: &mut SharedField,
         params: StencilParams,
-        loops: Option<&Loops>,
+        _: Option<&Loops>,
     ) -> SweepStats {
-        VcsLowpass.sweep_patch(mesh, vertices, triangles, pos, sums, params, loops)
+        rings::sweep_rings(mesh.topo, mesh.tris, pos, sums, vertices, params.deviation)
     }
     fn boundary_pass(&self) -> bool {
         true

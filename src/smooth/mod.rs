@@ -34,6 +34,7 @@ pub mod lowpass;
 pub mod method;
 mod methods;
 pub mod noise;
+pub mod rings;
 pub mod stencil;
 pub mod tiled;
 
@@ -180,7 +181,7 @@ impl FromStr for Method {
 /// | `iterations` | 10 | every method; with `auto_stop`, the cap |
 /// | `auto_stop` | false | every method: stop when the noise is gone (see [`crate::engine::auto`]) |
 /// | `lambda` | 0.5 | `laplacian` (its step), `taubin` and `vcs-lowpass` (their first step) |
-/// | `mu` | −0.53 | `taubin` and `vcs-lowpass` (their second step; negative, `|μ| > λ`) |
+/// | `mu` | the method's: −0.53 for `taubin`, −0.52 for `vcs-lowpass` | `taubin` and `vcs-lowpass` (their second step; negative, `|μ| > λ`) |
 /// | `reject_energy_increase` | false | `lem`, `vcs`, `vcs-triangle` |
 /// | `crease_angle` | none | every method: vertices on edges whose faces' normals differ by more than this many degrees (measured on the input) are fixed |
 /// | `max_deviation` | none | every method: no vertex ends farther than this from its input position (see below) |
@@ -203,8 +204,9 @@ pub struct Options {
     pub auto_stop: bool,
     /// Laplacian step size λ (`laplacian`, and the first step of `taubin`).
     pub lambda: f64,
-    /// Taubin's second step size μ (negative).
-    pub mu: f64,
+    /// Taubin's second step size μ (negative); `None`: the method's own
+    /// ([`Smoother::default_mu`](method::Smoother::default_mu)), read through [`Options::mu`].
+    pub mu: Option<f64>,
     /// Skip a stencil whose 2-step result has a higher stencil energy than before (§3.1).
     pub reject_energy_increase: bool,
     /// Crease angle in degrees, in (0, 180): an edge of two triangles whose normals differ by
@@ -213,8 +215,9 @@ pub struct Options {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub crease_angle: Option<f64>,
     /// Largest distance, in model units (> 0, finite), a vertex may end from its input position.
-    /// The stencil methods skip a stencil that would move a free vertex farther (their volume
-    /// stays exact; counted in [`SweepStats::deviation_limited`]); `laplacian` and `taubin`
+    /// The stencil methods skip a stencil that would move a free vertex farther, `vcs-lowpass`
+    /// and `vcs-guided` hold such vertices of a block back and restore the block's volume with
+    /// the others (their volume stays exact; counted in [`SweepStats::deviation_limited`]); `laplacian` and `taubin`
     /// clamp each vertex to the ball of this radius around its input position, which does not
     /// keep the volume (they never did). `None`: no bound.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -267,6 +270,20 @@ impl FromStr for Boundary {
 }
 
 impl Options {
+    /// Taubin's second step size: the one asked for, or the method's own.
+    pub fn mu(&self) -> f64 {
+        self.mu.unwrap_or_else(|| self.method.unit().default_mu())
+    }
+
+    /// The same options with every default the method decides written out (`mu`), as a report
+    /// shows them.
+    pub fn resolved(self) -> Options {
+        Options {
+            mu: Some(self.mu()),
+            ..self
+        }
+    }
+
     /// Whether a run keeps the input positions beside the working ones: for a deviation bound,
     /// or because the method reads them ([`method::Needs::input`]).
     pub fn keeps_input(&self) -> bool {
@@ -276,7 +293,7 @@ impl Options {
     /// Check the options: the step sizes in their ranges (see [`check_step`]).
     pub fn check(&self) -> crate::Result<()> {
         check_step("lambda", self.lambda)?;
-        check_step("mu", self.mu)?;
+        check_step("mu", self.mu())?;
         if let Some(a) = self.crease_angle {
             if !(a > 0.0 && a < 180.0) {
                 return Err(crate::Error::parameter(
@@ -347,7 +364,7 @@ impl Default for Options {
             iterations: 10,
             auto_stop: false,
             lambda: 0.5,
-            mu: -0.53,
+            mu: None,
             reject_energy_increase: false,
             crease_angle: None,
             max_deviation: None,
@@ -532,7 +549,7 @@ mod tests {
         assert!(Options::default().check().is_ok());
         let with = |lambda, mu| Options {
             lambda,
-            mu,
+            mu: Some(mu),
             ..Options::default()
         };
         assert!(with(1.0, -1.0).check().is_ok());

@@ -1,5 +1,5 @@
-//! The sequential prototype of `vcs-lowpass` (its ring stencils, one whole-mesh iteration with
-//! its own volume arithmetic) and of `--iterations auto` ([`AutoStop`], the rule for filters),
+//! The sequential prototype of `vcs-lowpass` (one whole-mesh iteration, its blocks with their
+//! own volume arithmetic) and of `--iterations auto` ([`AutoStop`], the rule for filters),
 //! kept as the independent references that the kernel (`vcsmooth::smooth::lowpass`) and the
 //! engine's rule (`vcsmooth::engine::auto`) are tested against: here, in `engine` and in `auto`.
 //! The method is defined in the kernel's module doc and in docs/quality-research.md.
@@ -7,80 +7,16 @@
 use glam::DVec3;
 use vcsmooth::Topology;
 
-/// The ring stencils of a mesh: `members[offsets[v]..offsets[v + 1]]` is `F_v` (empty for a fixed
-/// vertex), `share[u] = 1 / c_u` (0 for a vertex in no stencil).
-#[derive(Debug, Clone)]
-pub struct RingStencils {
-    pub offsets: Vec<usize>,
-    pub members: Vec<u32>,
-    pub share: Vec<f64>,
-}
-
-impl RingStencils {
-    /// Stencils of graph radius `radius` around every movable vertex.
-    pub fn build(topo: &Topology, radius: usize) -> RingStencils {
-        let n = topo.len();
-        let mut offsets = Vec::with_capacity(n + 1);
-        offsets.push(0);
-        let mut members: Vec<u32> = Vec::new();
-        let mut count = vec![0u32; n];
-        let mut seen = vec![u32::MAX; n];
-        let mut frontier = Vec::new();
-        let mut next = Vec::new();
-        for v in 0..n as u32 {
-            if !topo.is_fixed(v) {
-                let start = members.len();
-                members.push(v);
-                seen[v as usize] = v;
-                frontier.clear();
-                frontier.push(v);
-                for _ in 0..radius {
-                    next.clear();
-                    for &u in &frontier {
-                        for &w in topo.neighbors(u) {
-                            if seen[w as usize] != v && !topo.is_fixed(w) {
-                                seen[w as usize] = v;
-                                members.push(w);
-                                next.push(w);
-                            }
-                        }
-                    }
-                    std::mem::swap(&mut frontier, &mut next);
-                }
-                for &u in &members[start..] {
-                    count[u as usize] += 1;
-                }
-            }
-            offsets.push(members.len());
-        }
-        let share = count
-            .iter()
-            .map(|&c| if c > 0 { 1.0 / c as f64 } else { 0.0 })
-            .collect();
-        RingStencils {
-            offsets,
-            members,
-            share,
-        }
-    }
-
-    /// `F_v`.
-    pub fn of(&self, v: u32) -> &[u32] {
-        &self.members[self.offsets[v as usize]..self.offsets[v as usize + 1]]
-    }
-}
-
 /// Reusable buffers of [`lowpass_iteration`].
 #[derive(Debug, Default)]
 pub struct Scratch {
     d: Vec<DVec3>,
     q: Vec<DVec3>,
-    vmark: Vec<u32>,
     fmark: Vec<u32>,
     faces: Vec<u32>,
 }
 
-/// Stencils applied and skipped (degenerate volume gradient) in one iteration.
+/// Blocks applied and skipped (degenerate volume gradient) in one iteration.
 #[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
 pub struct Counts {
     pub applied: usize,
@@ -125,92 +61,119 @@ pub fn taubin_pair(
     }));
 }
 
-/// Volume (relative to `o`) of `faces` and its gradient for a common translation of the vertices
-/// whose `vmark` equals `stamp`.
-fn local_volume(
+/// Six times the volume (relative to `o`) of `faces` with the vertices of `moved` displaced by
+/// `s` along their `dir`.
+fn offset_volume(
     p: &[DVec3],
     tris: &[[u32; 3]],
     faces: &[u32],
-    vmark: &[u32],
-    stamp: u32,
+    moved: &dyn Fn(u32) -> Option<DVec3>,
+    s: f64,
     o: DVec3,
-) -> (f64, DVec3) {
-    let mut vol = 0.0;
-    let mut grad = DVec3::ZERO;
-    for &f in faces {
-        let t = tris[f as usize];
-        let q = [
-            p[t[0] as usize] - o,
-            p[t[1] as usize] - o,
-            p[t[2] as usize] - o,
-        ];
-        vol += q[0].dot(q[1].cross(q[2]));
-        for k in 0..3 {
-            if vmark[t[k] as usize] == stamp {
-                grad += q[(k + 1) % 3].cross(q[(k + 2) % 3]);
-            }
-        }
-    }
-    (vol / 6.0, grad / 6.0)
+) -> f64 {
+    faces
+        .iter()
+        .map(|&f| {
+            let q =
+                tris[f as usize].map(|v| p[v as usize] - o + moved(v).unwrap_or(DVec3::ZERO) * s);
+            q[0].dot(q[1].cross(q[2]))
+        })
+        .sum()
 }
 
-/// One `vcs-lowpass` iteration over the whole mesh (see the module doc).
+/// One `vcs-lowpass` iteration over the whole mesh, as one patch cut into blocks of `block`
+/// consecutive vertices (see the kernel's module doc): each block's movable vertices take their
+/// whole Taubin displacement, then the common offset along their unit volume gradients that
+/// gives the block's faces their volume back, found here by the secant method on the volume
+/// itself (the kernel solves the cubic's coefficients).
+#[allow(clippy::needless_range_loop)] // The blocks are ranges of ids: plainest as such.
 pub fn lowpass_iteration(
     topo: &Topology,
     tris: &[[u32; 3]],
-    stencils: &RingStencils,
     p: &mut [DVec3],
     lambda: f64,
     mu: f64,
+    block: usize,
     s: &mut Scratch,
 ) -> Counts {
     let n = p.len();
     taubin_pair(topo, p, lambda, mu, &mut s.q, &mut s.d);
-    for ((d, q), share) in s.d.iter_mut().zip(p.iter()).zip(&stencils.share) {
-        *d = (*d - *q) * share;
+    for (v, (d, q)) in s.d.iter_mut().zip(p.iter()).enumerate() {
+        *d = if topo.is_fixed(v as u32) {
+            DVec3::ZERO
+        } else {
+            *d - *q
+        };
     }
-    s.vmark.clear();
-    s.vmark.resize(n, 0);
     s.fmark.clear();
-    s.fmark.resize(tris.len(), 0);
+    s.fmark.resize(tris.len(), u32::MAX);
     let mut counts = Counts::default();
-    for v in 0..n as u32 {
-        let free = stencils.of(v);
-        if free.is_empty() {
+    for (k, lo) in (0..n).step_by(block).enumerate() {
+        let hi = (lo + block).min(n);
+        let free = |u: u32| (lo..hi).contains(&(u as usize)) && !topo.is_fixed(u);
+        if !(lo..hi).any(|u| free(u as u32)) {
             continue;
         }
-        let stamp = v + 1;
         s.faces.clear();
-        for &u in free {
-            s.vmark[u as usize] = stamp;
-            for &f in topo.faces_of(u) {
-                if s.fmark[f as usize] != stamp {
-                    s.fmark[f as usize] = stamp;
-                    s.faces.push(f);
+        for u in lo..hi {
+            if free(u as u32) {
+                for &f in topo.faces_of(u as u32) {
+                    if s.fmark[f as usize] != k as u32 {
+                        s.fmark[f as usize] = k as u32;
+                        s.faces.push(f);
+                    }
                 }
             }
         }
-        let o = p[v as usize];
-        let (v0, _) = local_volume(p, tris, &s.faces, &s.vmark, stamp, o);
-        let mut scale: f64 = 0.0;
-        for &u in free {
-            p[u as usize] += s.d[u as usize];
-            scale = scale.max((p[u as usize] - o).length_squared());
+        let o = p[lo];
+        let none = |_: u32| None;
+        let v0 = offset_volume(p, tris, &s.faces, &none, 0.0, o);
+        for u in lo..hi {
+            if free(u as u32) {
+                p[u] += s.d[u];
+            }
         }
-        let (v1, grad) = local_volume(p, tris, &s.faces, &s.vmark, stamp, o);
-        let gg = grad.length_squared();
-        // |n| has the units of an area: skip a stencil whose gradient vanishes at its scale
-        let usable = gg > 1e-24 * scale * scale && gg.is_finite() && v1.is_finite();
-        if !usable {
-            for &u in free {
-                p[u as usize] -= s.d[u as usize];
+        // Each free vertex's unit volume gradient after step 1.
+        let dir: Vec<DVec3> = (lo..hi)
+            .map(|u| {
+                let mut g = DVec3::ZERO;
+                if free(u as u32) {
+                    for &f in topo.faces_of(u as u32) {
+                        let t = tris[f as usize];
+                        let k = t.iter().position(|&x| x as usize == u).unwrap();
+                        let (b, c) = (t[(k + 1) % 3] as usize, t[(k + 2) % 3] as usize);
+                        g += (p[b] - o).cross(p[c] - o);
+                    }
+                }
+                g.normalize_or_zero()
+            })
+            .collect();
+        let moved = |u: u32| free(u).then(|| dir[u as usize - lo]);
+        let f = |x: f64| offset_volume(p, tris, &s.faces, &moved, x, o) - v0;
+        let (mut a, mut b) = (0.0, 1e-6 * (p[lo] - p[hi - 1]).length().max(1e-300));
+        let (mut fa, mut fb) = (f(a), f(b));
+        for _ in 0..50 {
+            if fb == fa {
+                break;
+            }
+            let c = b - fb * (b - a) / (fb - fa);
+            (a, fa) = (b, fb);
+            b = c;
+            fb = f(b);
+        }
+        if !b.is_finite() || !fb.is_finite() {
+            for u in lo..hi {
+                if free(u as u32) {
+                    p[u] -= s.d[u];
+                }
             }
             counts.skipped_degenerate += 1;
             continue;
         }
-        let w = grad * ((v0 - v1) / gg);
-        for &u in free {
-            p[u as usize] += w;
+        for u in lo..hi {
+            if free(u as u32) {
+                p[u] += dir[u - lo] * b;
+            }
         }
         counts.applied += 1;
     }
@@ -430,7 +393,7 @@ pub fn scalar_taubin_pair(
 mod tests {
     use vcsmooth::engine::{self, EngineSettings, Quiet};
     use vcsmooth::shapes::{add_normal_noise, icosphere};
-    use vcsmooth::smooth::lowpass::{RING_RADIUS, Ring, ring_of};
+    use vcsmooth::smooth::lowpass::BLOCK;
     use vcsmooth::{Method, Options, metrics};
 
     use super::*;
@@ -453,12 +416,12 @@ mod tests {
         let tris = mesh.triangles.to_vec();
         let mut p = mesh.positions.to_vec();
         let topo = Topology::build(p.len(), &tris).unwrap();
-        let st = RingStencils::build(&topo, RING_RADIUS);
         let (v0, e0) = (volume(&p, &tris), rms_radius_error(&p));
         let mut s = Scratch::default();
         for _ in 0..10 {
-            let c = lowpass_iteration(&topo, &tris, &st, &mut p, 0.5, -0.53, &mut s);
-            assert_eq!(c.skipped_degenerate, 0);
+            // Blocks of 300: nine of them, most of their faces shared with another.
+            let c = lowpass_iteration(&topo, &tris, &mut p, 0.5, -0.53, 300, &mut s);
+            assert_eq!((c.applied, c.skipped_degenerate), (9, 0));
         }
         assert!(((volume(&p, &tris) - v0) / v0).abs() < 1e-12);
         assert!(
@@ -470,55 +433,27 @@ mod tests {
     }
 
     #[test]
-    fn rings_are_symmetric_and_exclude_fixed_vertices() {
-        let mut mesh = icosphere(2);
-        let tris: Vec<[u32; 3]> = mesh
-            .triangles
-            .iter()
-            .copied()
-            .filter(|t| !t.contains(&0))
-            .collect();
-        mesh.triangles = tris.clone().into();
-        let topo = Topology::build(mesh.positions.len(), &tris).unwrap();
-        let st = RingStencils::build(&topo, RING_RADIUS);
-        let (mut a, mut b) = (Ring::default(), Ring::default());
-        for v in 0..topo.len() as u32 {
-            ring_of(&topo.parts(), v, &mut a, true);
-            let mut want = st.of(v).to_vec();
-            want.sort_unstable();
-            assert_eq!(a.members, want, "vertex {v}");
-            for &u in &a.members {
-                assert!(!topo.is_fixed(u));
-                ring_of(&topo.parts(), u, &mut b, false);
-                assert!(b.contains(v));
-                assert!(b.members.contains(&v));
-            }
-            for u in 0..topo.len() as u32 {
-                assert_eq!(a.contains(u), want.contains(&u), "{u} in the ring of {v}");
-            }
-        }
-    }
-
-    #[test]
     fn the_engine_kernel_follows_the_prototype_and_keeps_volume() {
-        // Same order of work (the engine in the input's own order: one patch, the ring stencils
-        // in index order), different rounding (the kernel sums each face's volume change through
-        // the edge stencils' code, the prototype subtracts two volumes): the positions agree to
-        // rounding, and both keep the volume.
-        let mut mesh = icosphere(4);
+        // Same order of work (the engine in the input's own order: one patch, its blocks in
+        // index order), different arithmetic (the kernel solves the cubic's coefficients, the
+        // prototype the volume itself by the secant method): the positions agree to rounding,
+        // and both keep the volume. 10,242 vertices: three blocks.
+        let mut mesh = icosphere(5);
         add_normal_noise(&mut mesh, 0.3, 7);
         let offset = DVec3::new(3.0, -2.0, 5.0);
         let p0: Vec<DVec3> = mesh.positions.iter().map(|p| *p + offset).collect();
         mesh.positions = p0.clone().into();
         let tris = mesh.triangles.to_vec();
         let topo = Topology::build(p0.len(), &tris).unwrap();
-        let st = RingStencils::build(&topo, RING_RADIUS);
         let iterations = 8;
+        let blocks = topo.len().div_ceil(BLOCK as usize);
+        assert_eq!(blocks, 3);
         let mut proto = p0.clone();
         let mut s = Scratch::default();
         for _ in 0..iterations {
-            let c = lowpass_iteration(&topo, &tris, &st, &mut proto, 0.5, -0.53, &mut s);
-            assert_eq!(c.applied, topo.len());
+            let mu = Method::VcsLowpass.unit().default_mu();
+            let c = lowpass_iteration(&topo, &tris, &mut proto, 0.5, mu, BLOCK as usize, &mut s);
+            assert_eq!(c.applied, blocks);
         }
         let opts = Options {
             method: Method::VcsLowpass,
@@ -530,7 +465,7 @@ mod tests {
                 .unwrap();
         assert_eq!(report.records.len(), iterations);
         for r in &report.records {
-            assert_eq!(r.stencils.applied as usize, topo.len(), "{}", r.iteration);
+            assert_eq!(r.stencils.applied as usize, blocks, "{}", r.iteration);
         }
         let kernel = mesh.positions.to_vec();
         let far = proto
@@ -557,12 +492,11 @@ mod tests {
             .collect();
         let mut p = mesh.positions.to_vec();
         let topo = Topology::build(p.len(), &tris).unwrap();
-        let st = RingStencils::build(&topo, RING_RADIUS);
         let before = p.clone();
         let v0 = volume(&p, &tris);
         let mut s = Scratch::default();
         for _ in 0..5 {
-            lowpass_iteration(&topo, &tris, &st, &mut p, 0.5, -0.53, &mut s);
+            lowpass_iteration(&topo, &tris, &mut p, 0.5, -0.53, 100, &mut s);
         }
         for v in 0..p.len() as u32 {
             if topo.is_fixed(v) {
@@ -587,12 +521,11 @@ mod tests {
         let mut auto = AutoStop::new(&topo, &tris, &p, 1);
         let rel = auto.sigma() / (0.3 * clean_edge);
         assert!((0.8..1.2).contains(&rel), "sigma estimate off by {rel}");
-        let st = RingStencils::build(&topo, RING_RADIUS);
         let mut s = Scratch::default();
         let mut tmp = Vec::new();
         let mut stopped = None;
         for k in 1..=100 {
-            lowpass_iteration(&topo, &tris, &st, &mut p, 0.5, -0.53, &mut s);
+            lowpass_iteration(&topo, &tris, &mut p, 0.5, -0.53, BLOCK as usize, &mut s);
             scalar_taubin_pair(&topo, auto.synthetic_mut(), 0.5, -0.53, &mut tmp);
             if auto.observe(&p).stop {
                 stopped = Some(k);

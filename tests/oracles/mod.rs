@@ -3,3 +3,4 @@
 //! unlikely. The library never runs them; each module also tests its references themselves.
 
 pub mod lowpass;
+pub mod rings;

@@ -15,7 +15,7 @@ use crate::cli::pictures::{Drawn, PictureArgs, PictureConfig, Sheet, print_drawn
 use crate::cli::plot::file_name;
 use crate::cli::progress::Progress;
 use crate::cli::report::{defined, fixed, num, print_deviation, print_rows};
-use crate::cli::shared::{DeviationArgs, tolerance_verdict};
+use crate::cli::shared::{DeviationArgs, check_deviation_field, tolerance_verdict};
 use crate::engine::{DeviationSettings, Meter, Observer, Phase, deviation};
 use crate::error::{Error, Result};
 use crate::mesh::{Mesh, Storage};
@@ -64,8 +64,7 @@ impl CompareConfig {
     pub fn from_args(a: CompareArgs) -> Result<CompareConfig> {
         if let Some(f) = &a.deviation_field {
             mesh_output(f)?;
-            crate::io::check_vertex_values(f, a.deviation.deviation_colours)
-                .map_err(|what| Error::invalid(f, format!("--deviation-field: {what}")))?;
+            check_deviation_field(f, a.deviation.deviation_colours)?;
             check_files(
                 &[("A", &a.a), ("B", &a.b)],
                 None,

@@ -131,7 +131,8 @@ pub struct CurvesDoc {
     /// `--iterations auto`: every curve ends where its method stopped.
     pub auto_stop: bool,
     pub lambda: f64,
-    pub mu: f64,
+    /// `--mu`, or null: each method's own.
+    pub mu: Option<f64>,
     pub reject_energy_increase: bool,
     pub plot: String,
     pub curves: Vec<CurveDoc>,

@@ -144,7 +144,7 @@ pub fn run(cfg: &SlurmScriptConfig, out: &mut dyn Write) -> Result<()> {
         "--lambda".into(),
         a.params.lambda.to_string().into(),
         "--mu".into(),
-        a.params.mu.to_string().into(),
+        cfg.smooth.options.mu().to_string().into(),
     ];
     if a.params.reject_energy_increase {
         flags.push("--reject-energy-increase".into());

@@ -16,7 +16,10 @@ use crate::cli::pictures::{PictureArgs, PictureConfig, RunPictures, Sheet, print
 use crate::cli::plot::{Curve, file_name, volume_curve, write_volume_plot};
 use crate::cli::progress::Progress;
 use crate::cli::report::{count, fixed, iterations_run, percent_text, print_deviation};
-use crate::cli::shared::{DeviationArgs, InOut, PinArgs, SmoothingArgs, tolerance_verdict};
+use crate::cli::shared::{
+    DeviationArgs, InOut, PinArgs, SmoothingArgs, check_deviation_field, fixed_warning,
+    tolerance_verdict,
+};
 use crate::engine::{self, EngineSettings, IterationRecord, Statistics};
 use crate::error::{Error, Result};
 use crate::report::{SmoothReport, Summary};
@@ -128,10 +131,7 @@ impl SmoothConfig {
             check_work_dir(("--checkpoint", dir), &files)?;
         }
         if a.deviation_field {
-            crate::io::check_vertex_values(&a.files.output, a.deviation.deviation_colours)
-                .map_err(|what| {
-                    Error::invalid(&a.files.output, format!("--deviation-field: {what}"))
-                })?;
+            check_deviation_field(&a.files.output, a.deviation.deviation_colours)?;
         }
         let mut engine = a.smoothing.engine.resolve()?;
         engine.pins = a.pins.resolve()?;
@@ -353,7 +353,7 @@ fn report(
     };
     progress.finish();
     if cfg.options.iterations > 0
-        && let Some(line) = run.plan.fixed.warning(!cfg.options.boundary.is_fixed())
+        && let Some(line) = fixed_warning(&run.plan.fixed, !cfg.options.boundary.is_fixed())
     {
         // Not `eprintln!`: stderr may be a closed pipe, and this must not panic.
         let _ = writeln!(
