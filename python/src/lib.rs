@@ -19,8 +19,8 @@ use numpy::PyArray2;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 use serde::Serialize;
-use vcsmooth::report::{InfoDoc, SmoothReport, undefined_as_nan};
 use vcsmooth::engine::{self, Statistics};
+use vcsmooth::report::{InfoDoc, SmoothReport, undefined_as_nan};
 use vcsmooth::{Mesh, Method, Topology};
 
 mod arrays;

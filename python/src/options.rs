@@ -121,6 +121,8 @@ impl Settings {
                 }
             })?;
         }
+        // The method's own defaults written out, as the command line's report shows them.
+        s.options = s.options.resolved();
         Ok(s)
     }
 }
