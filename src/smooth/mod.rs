@@ -216,8 +216,7 @@ pub struct Options {
     pub crease_angle: Option<f64>,
     /// Largest distance, in model units (> 0, finite), a vertex may end from its input position.
     /// The stencil methods skip a stencil that would move a free vertex farther, `vcs-lowpass`
-    /// and `vcs-guided` hold such vertices of a block back and restore the block's volume with
-    /// the others (their volume stays exact; counted in [`SweepStats::deviation_limited`]); `laplacian` and `taubin`
+    /// holds such vertices of a block back and restores the block's volume with the others (their volume stays exact; counted in [`SweepStats::deviation_limited`]); `laplacian` and `taubin`
     /// clamp each vertex to the ball of this radius around its input position, which does not
     /// keep the volume (they never did). `None`: no bound.
     #[serde(skip_serializing_if = "Option::is_none")]
