@@ -1,8 +1,7 @@
 //! `vcs-lowpass`: Taubin's λ|μ low-pass displacement as the first step of Liu et al.'s 2-step
 //! approach (§4 of the paper: any operator may be the first step, the second restores the
 //! volume exactly), the volume restored block by block; see docs/quality-research.md for the
-//! evidence and the numbers. This is the engine's kernel ([`displacements_into`],
-//! [`sweep_blocks`]), which `Method::VcsLowpass` (and `vcs-guided`, with its own first step) runs
+//! evidence and the numbers. This is the engine's kernel ([`sweep_blocks`]), which `Method::VcsLowpass` (and `vcs-guided`, with its own first step) runs
 //! patch by patch through `engine::iterate`. The sequential whole-mesh reference it is tested
 //! against is test code (`tests/oracles/lowpass.rs`).
 //!
@@ -49,26 +48,6 @@ const DEVIATION_ROUNDS: usize = 8;
 /// the block), so two steps reach rounding; the rest are a margin.
 const NEWTON_STEPS: usize = 4;
 
-/// Step 1's displacement for the vertices `first .. first + out.len()`: `filtered − pos` (the
-/// low-pass step, or any first step), zero for a fixed vertex. Each entry depends only on the
-/// two fields and the topology, so any split gives the same bits.
-pub fn displacements_into(
-    topo: &Topology,
-    pos: &[DVec3],
-    filtered: &[DVec3],
-    out: &mut [DVec3],
-    first: usize,
-) {
-    for (k, o) in out.iter_mut().enumerate() {
-        let u = first + k;
-        *o = if topo.is_fixed(u as u32) {
-            DVec3::ZERO
-        } else {
-            filtered[u] - pos[u]
-        };
-    }
-}
-
 /// A block's scratch space, reused from block to block.
 #[derive(Debug, Default)]
 struct Scratch {
@@ -84,12 +63,13 @@ struct Scratch {
 }
 
 /// The blocks of the patch `owned`, ascending, Gauss–Seidel (each sees the latest positions):
-/// [`apply_block`] with step 1's displacement `disp` from [`displacements_into`].
+/// [`apply_block`], step 1 taking each vertex to `filtered` (the first step's result from the
+/// iteration's positions, e.g. Taubin's λ|μ pair).
 pub fn sweep_blocks<P: Field + ?Sized, D: Field + ?Sized>(
     topo: &Topology,
     triangles: &[[u32; 3]],
     pos: &mut P,
-    disp: &D,
+    filtered: &D,
     owned: Range<u32>,
     deviation: Option<stencil::Deviation>,
 ) -> SweepStats {
@@ -99,14 +79,23 @@ pub fn sweep_blocks<P: Field + ?Sized, D: Field + ?Sized>(
     let mut lo = owned.start;
     while lo < owned.end {
         let hi = lo.saturating_add(BLOCK).min(owned.end);
-        let outcome = apply_block(&topo, triangles, pos, disp, lo..hi, deviation, &mut scratch);
+        let outcome = apply_block(
+            &topo,
+            triangles,
+            pos,
+            filtered,
+            lo..hi,
+            deviation,
+            &mut scratch,
+        );
         stencil::count(&mut stats, outcome);
         lo = hi;
     }
     stats
 }
 
-/// One block (see the module doc): its free members move by `disp` (step 1), then each by the
+/// One block (see the module doc): its free members move to `filtered` (step 1: a vertex is
+/// moved only by its own block, so its position is still the iteration's), then each by the
 /// common distance `s` along its own unit volume gradient, `s` the root of the faces' volume
 /// change, a cubic in `s`, found by Newton from the linear solution. Under a deviation bound the
 /// members that would end beyond it are held back (they do not move) and the rest is solved
@@ -116,7 +105,7 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
     topo: &TopologyParts,
     triangles: &[[u32; 3]],
     pos: &mut P,
-    disp: &D,
+    filtered: &D,
     block: Range<u32>,
     deviation: Option<stencil::Deviation>,
     scratch: &mut Scratch,
@@ -139,12 +128,14 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
             shared,
         } = &mut *scratch;
         let free = &*free;
+        // Step 1's displacement (computed here rather than stored: one pass over memory less).
+        let disp = |u: u32| filtered.get(u) - pos.get(u);
         let member = |u: u32| {
             let k = u.wrapping_sub(start) as usize;
             k < len && free[k]
         };
         moved.clear();
-        moved.extend(block.clone().map(|u| pos.get(u) - origin + disp.get(u)));
+        moved.extend(block.clone().map(|u| pos.get(u) - origin + disp(u)));
         let moved = &*moved;
         // Where a corner is after step 1, about the origin.
         let after = |u: u32, m: bool| {
@@ -217,7 +208,7 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
         let Some(s) = offset(dv, c1, c2, c3) else {
             return Outcome::SkippedDegenerate;
         };
-        let moves = |u: u32| disp.get(u) + unit(u) * s;
+        let moves = |u: u32| disp(u) + unit(u) * s;
         if !block.clone().all(|u| !member(u) || moves(u).is_finite()) {
             return Outcome::SkippedDegenerate;
         }
@@ -239,10 +230,13 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
                 continue;
             }
         }
-        for u in block.clone() {
-            if member(u) {
-                pos.add(u, moves(u));
-            }
+        let steps: Vec<(u32, DVec3)> = block
+            .clone()
+            .filter(|&u| member(u))
+            .map(|u| (u, moves(u)))
+            .collect();
+        for (u, d) in steps {
+            pos.add(u, d);
         }
         return if held_back {
             Outcome::DeviationLimited

@@ -215,9 +215,9 @@ impl Smoother for VcsLowpass {
     fn default_mu(&self) -> f64 {
         -0.52
     }
-    /// Step 1's displacement into `sums` (see [`lowpass::displacements_into`]): a λ|μ pair from
-    /// `pos` through `sums` into `spare`, each step exchanged, then the difference. Every entry
-    /// depends only on `pos`, so any split gives the same bits.
+    /// Step 1's target into `sums`: a λ|μ pair from `pos` through `spare`, each step exchanged
+    /// (the blocks take the difference from `pos`). Every entry depends only on `pos`, so any
+    /// split gives the same bits.
     fn prepare(
         &self,
         mesh: PatchMesh,
@@ -231,16 +231,12 @@ impl Smoother for VcsLowpass {
     ) {
         let topo = mesh.topo;
         let (lambda, mu) = (opts.lambda, opts.mu());
-        exec.vertex_pass(sums, &|first, out| {
+        exec.vertex_pass(spare, &|first, out| {
             laplacian::jacobi_step(topo, pos, out, first, lambda);
         });
-        let half: &[DVec3] = sums;
-        exec.vertex_pass(spare, &|first, out| {
-            laplacian::jacobi_step(topo, half, out, first, mu);
-        });
-        let pair: &[DVec3] = spare;
+        let half: &[DVec3] = spare;
         exec.vertex_pass(sums, &|first, out| {
-            lowpass::displacements_into(topo, pos, pair, out, first)
+            laplacian::jacobi_step(topo, half, out, first, mu);
         });
     }
     /// The blocks of the patch's vertices, ascending; its boundary stencils run after
