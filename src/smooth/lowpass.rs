@@ -1,9 +1,10 @@
 //! `vcs-lowpass`: Taubin's λ|μ low-pass displacement as the first step of Liu et al.'s 2-step
 //! approach (§4 of the paper: any operator may be the first step, the second restores the
 //! volume exactly), the volume restored block by block; see docs/quality-research.md for the
-//! evidence and the numbers. This is the engine's kernel ([`sweep_blocks`]), which `Method::VcsLowpass` (and `vcs-guided`, with its own first step) runs
-//! patch by patch through `engine::iterate`. The sequential whole-mesh reference it is tested
-//! against is test code (`tests/oracles/lowpass.rs`).
+//! evidence and the numbers. This is the engine's kernel ([`sweep_blocks`]), which
+//! `Method::VcsLowpass` runs patch by patch through `engine::iterate` (`vcs-guided` keeps the
+//! 2-ring stencils of [`super::rings`]). The sequential whole-mesh reference it is tested against
+//! is test code (`tests/oracles/lowpass.rs`).
 //!
 //! One iteration on positions `P`:
 //! 1. `D = T(P) − P`, `T` = Taubin's λ then μ umbrella step, Jacobi, fixed vertices kept.
@@ -26,7 +27,7 @@
 //!
 //! What a block reads and writes (the schedule's conflict rule rests on it): it writes its own
 //! vertices, which are owned by its patch, and reads the corners of their faces (one ring out)
-//! and their step-1 displacements; the edge stencils' colouring covers that.
+//! and their own filtered positions; the edge stencils' colouring covers that.
 
 use std::ops::Range;
 
@@ -57,6 +58,8 @@ struct Scratch {
     dir: Vec<DVec3>,
     /// Per member: where step 1 puts it, about the block's origin.
     moved: Vec<DVec3>,
+    /// Per member: its whole move (step 1 and the offset; zero for one that does not move).
+    step: Vec<DVec3>,
     /// The faces with two or three members, corners in the order [`corners_after`] gives from
     /// the first: the only ones the cubic's higher terms need.
     shared: Vec<[u32; 3]>,
@@ -125,6 +128,7 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
             free,
             dir,
             moved,
+            step,
             shared,
         } = &mut *scratch;
         let free = &*free;
@@ -208,21 +212,26 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
         let Some(s) = offset(dv, c1, c2, c3) else {
             return Outcome::SkippedDegenerate;
         };
-        let moves = |u: u32| disp(u) + unit(u) * s;
-        if !block.clone().all(|u| !member(u) || moves(u).is_finite()) {
+        step.clear();
+        step.extend(block.clone().map(|u| match member(u) {
+            true => disp(u) + unit(u) * s,
+            false => DVec3::ZERO,
+        }));
+        if !scratch.step.iter().all(|d| d.is_finite()) {
             return Outcome::SkippedDegenerate;
         }
         if let Some(bound) = deviation {
             let limit2 = bound.limit * bound.limit;
-            let beyond = |u: u32| {
-                member(u)
-                    && (pos.get(u) + moves(u) - bound.input[u as usize]).length_squared() > limit2
-            };
-            let out: Vec<u32> = block.clone().filter(|&u| beyond(u)).collect();
-            if !out.is_empty() {
-                for u in out {
-                    scratch.free[(u - start) as usize] = false;
+            let mut out = false;
+            for (k, u) in block.clone().enumerate() {
+                let end = pos.get(u) + scratch.step[k];
+                let beyond = (end - bound.input[u as usize]).length_squared();
+                if scratch.free[k] && beyond > limit2 {
+                    scratch.free[k] = false;
+                    out = true;
                 }
+            }
+            if out {
                 held_back = true;
                 if !scratch.free.contains(&true) {
                     return Outcome::DeviationLimited;
@@ -230,13 +239,10 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
                 continue;
             }
         }
-        let steps: Vec<(u32, DVec3)> = block
-            .clone()
-            .filter(|&u| member(u))
-            .map(|u| (u, moves(u)))
-            .collect();
-        for (u, d) in steps {
-            pos.add(u, d);
+        for (k, u) in block.clone().enumerate() {
+            if scratch.free[k] {
+                pos.add(u, scratch.step[k]);
+            }
         }
         return if held_back {
             Outcome::DeviationLimited
