@@ -1132,8 +1132,9 @@ fn generate_mesh_refuses_a_non_ply_output() {
 
 /// A run in which most vertices cannot move says so in one warning line, with why and what to
 /// try; one in which none can says its output has the input's positions. A triangle soup (every
-/// corner its own vertex, as an unmerged STL or a texture-seamed file) fixes every vertex; a closed
-/// sphere warns of nothing. The report carries the counts (`plan.fixed`).
+/// corner its own vertex, as an unmerged STL or a texture-seamed file) is welded and smoothed
+/// like the sphere it comes from; with `--no-weld` it fixes every vertex; a closed sphere warns of
+/// nothing. The report carries the counts (`plan.fixed`).
 #[test]
 fn a_run_says_when_most_vertices_cannot_move() {
     let dir = tempfile::tempdir().unwrap();
@@ -1177,16 +1178,44 @@ fn a_run_says_when_most_vertices_cannot_move() {
     assert!(!err.contains("warning"), "{err}");
     assert_eq!(read_json(&report)["plan"]["fixed"]["fixed"], 0);
 
+    // Welded (the default): every copy moves, each with the others of its position, as the
+    // sphere's vertex does (Taubin's sums read the same neighbours, in another order).
+    let n = soup.positions.len();
+    let smoothed = |input: &Path| {
+        run(input, &["--method", "taubin"]);
+        vcsmooth::io::read_mesh(&out).unwrap().positions
+    };
+    let (whole, welded) = (smoothed(&closed), smoothed(&loose));
+    for (k, t) in sphere.triangles.iter().enumerate() {
+        for c in 0..3 {
+            let (a, b) = (welded[3 * k + c], whole[t[c] as usize]);
+            assert!((a - b).length() < 1e-12, "corner {c} of {k}: {a} vs {b}");
+        }
+    }
     let err = run(&loose, &[]);
+    assert!(!err.contains("warning"), "{err}");
+    let r = read_json(&report);
+    assert_eq!(r["plan"]["fixed"]["fixed"], 0);
+    assert_eq!(
+        r["plan"]["fixed"]["welded"].as_u64(),
+        Some((n - sphere.positions.len()) as u64)
+    );
+    let (v0, v1) = (
+        r["input"]["stats"]["volume"].as_f64().unwrap(),
+        r["output"]["stats"]["volume"].as_f64().unwrap(),
+    );
+    // Exact before the write; the file stores single precision.
+    assert!(((v1 - v0) / v0).abs() < 1e-7, "{v0} -> {v1}");
+
+    let err = run(&loose, &["--no-weld"]);
     let lines: Vec<&str> = err.lines().filter(|l| l.contains("warning")).collect();
     assert_eq!(lines.len(), 1, "{err}");
-    let n = soup.positions.len();
     for part in [
         "vcsmooth: warning: ",
         "soup.ply: ",
         &format!("none of the {n} vertices can move"),
         "boundary edges",
-        "merge the duplicate vertices",
+        "without --no-weld",
         "--boundary smooth",
     ] {
         assert!(lines[0].contains(part), "{part}: {}", lines[0]);

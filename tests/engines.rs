@@ -5,8 +5,8 @@
 #[allow(dead_code)]
 mod util;
 
-use std::path::{Path, PathBuf};
 use std::os::unix::process::CommandExt;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
 use util::{BIN, command, generate_sphere, iterations_done, ok, root, scan};
@@ -144,7 +144,10 @@ fn mpi_run_killed_and_resumed_equals_uninterrupted() {
         std::thread::sleep(std::time::Duration::from_millis(5));
     }
     let group = format!("-{}", child.id());
-    ok(Command::new("kill").args(["-KILL", "--", &group]).output().unwrap());
+    ok(Command::new("kill")
+        .args(["-KILL", "--", &group])
+        .output()
+        .unwrap());
     child.wait().unwrap();
     std::thread::sleep(std::time::Duration::from_millis(500));
     let at = done();

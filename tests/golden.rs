@@ -470,6 +470,31 @@ fn golden_outputs_are_unchanged() {
         hash_file(run.name, &out);
     }
 
+    // A seamed mesh (the sphere split along its equator, as texture seams split files), welded:
+    // the default method and vcs, with its seam-free twin's settings.
+    let seamed = p("seamed4.ply");
+    let one = vcsmooth::io::read_mesh(&sphere).unwrap();
+    vcsmooth::io::write_mesh(&seamed, &crate::util::seamed(&one).0).unwrap();
+    hash_file("gen-seamed4", &seamed);
+    for (name, method) in [
+        ("seamed4-vcs-lowpass", "vcs-lowpass"),
+        ("seamed4-vcs", "vcs"),
+    ] {
+        let out = p(&format!("{name}.ply"));
+        ok(vcsmooth([
+            "smooth",
+            seamed.to_str().unwrap(),
+            out.to_str().unwrap(),
+            "--method",
+            method,
+            "--iterations",
+            "4",
+            "--patch-size",
+            "300",
+        ]));
+        hash_file(name, &out);
+    }
+
     // The paper's adaptive refinement: subdivide + vcs rounds.
     let refined = p("fertility-refine.ply");
     ok(vcsmooth([

@@ -76,6 +76,48 @@ fn bit_identical_for_any_thread_count_and_any_storage() {
     );
 }
 
+/// A mesh split along a seam (as texture seams split files) is welded: each copy ends where its
+/// original does, the vertices along the seam move (without welding they are boundary and stay),
+/// the volume is kept, and the result is bit-identical for any thread count and storage.
+#[test]
+fn seams_are_welded_for_any_thread_count_and_any_storage() {
+    let sphere = noisy_sphere(4, 0.4, 3);
+    let (mesh, copy_of) = crate::util::seamed(&sphere);
+    let copies = mesh.positions.len() - sphere.positions.len();
+    assert!(copies > 40, "{copies}");
+    let scratch = tempfile::tempdir().unwrap();
+    let mapped = Storage::scratch(scratch.path()).unwrap();
+    for method in Method::ALL {
+        let opts = Options {
+            method,
+            iterations: 2,
+            ..Options::default()
+        };
+        let (reference, _, plan) = run(&mesh, &Storage::heap(), 300, &opts, 1);
+        assert_eq!(plan.reordered.welded, copies);
+        for (v, &of) in copy_of.iter().enumerate() {
+            assert_eq!(reference[v], reference[of as usize], "{method}: copy {v}");
+        }
+        // The seam's originals (those with a copy) move.
+        let seam = copy_of[sphere.positions.len()..].iter();
+        let moved = seam
+            .filter(|&&v| reference[v as usize] != mesh.positions[v as usize])
+            .count();
+        assert_eq!(moved, copies, "{method}: seam vertices that moved");
+        if method.keeps_volume() {
+            let (v0, v1) = (
+                metrics::volume(&sphere.positions, &sphere.triangles),
+                metrics::volume(&reference, &sphere.triangles),
+            );
+            assert!(((v1 - v0) / v0).abs() < 1e-12, "{method}: {v0} -> {v1}");
+        }
+        let (out, _, _) = run(&mesh, &Storage::heap(), 300, &opts, 3);
+        assert!(out == reference, "{method}: 3 threads differ from 1");
+        let (out, _, _) = run(&mesh, &mapped, 300, &opts, 2);
+        assert!(out == reference, "{method}: mapped storage differs");
+    }
+}
+
 #[test]
 fn every_stencil_is_applied_once_across_many_small_patches_and_volume_is_kept() {
     for name in ["armadillo-86k.ply", "stanford-bunny.ply"] {

@@ -196,6 +196,43 @@ pub fn noisy_sphere(level: u32, sigma: f64, seed: u64) -> Mesh {
     m
 }
 
+/// `mesh` split along a seam as a textured file splits it: the vertices shared by triangles on
+/// both sides of `z = 0` (by centroid) get a copy (appended after the originals), which the
+/// triangles above use, so that the two halves meet only at equal positions. Returns the mesh
+/// and, per vertex, the vertex it copies (itself for the originals).
+pub fn seamed(mesh: &Mesh) -> (Mesh, Vec<u32>) {
+    let above = |t: &[u32; 3]| t.iter().map(|&v| mesh.positions[v as usize].z).sum::<f64>() > 0.0;
+    let mut sides = vec![[false; 2]; mesh.positions.len()];
+    for t in mesh.triangles.iter() {
+        for &v in t {
+            sides[v as usize][above(t) as usize] = true;
+        }
+    }
+    let mut positions = mesh.positions.to_vec();
+    let mut copy_of: Vec<u32> = (0..positions.len() as u32).collect();
+    let mut copies = std::collections::HashMap::new();
+    let triangles = mesh
+        .triangles
+        .iter()
+        .map(|t| {
+            if !above(t) {
+                return *t;
+            }
+            t.map(|v| {
+                if sides[v as usize] != [true; 2] {
+                    return v;
+                }
+                *copies.entry(v).or_insert_with(|| {
+                    positions.push(mesh.positions[v as usize]);
+                    copy_of.push(v);
+                    (positions.len() - 1) as u32
+                })
+            })
+        })
+        .collect();
+    (Mesh::new(positions, triangles), copy_of)
+}
+
 /// The octahedron of [`vcsmooth::shapes::octahedron`] as a file holds it: `f32` corners ...
 pub fn octa_v() -> Vec<[f32; 3]> {
     let m = vcsmooth::shapes::octahedron();

@@ -21,7 +21,7 @@ use pyo3::types::{PyDict, PyTuple};
 use serde::Serialize;
 use vcsmooth::engine::{self, Statistics};
 use vcsmooth::report::{InfoDoc, SmoothReport, undefined_as_nan};
-use vcsmooth::{Mesh, Method, Topology};
+use vcsmooth::{Mesh, Method};
 
 mod arrays;
 mod errors;
@@ -125,6 +125,9 @@ fn smooth_arrays<'py>(
 /// - ``max_deviation`` (None): no vertex ends farther than this from its input position.
 /// - ``boundary`` (``"fixed"``): ``"smooth"`` smooths each boundary loop keeping each hole's
 ///   size (with the methods that take it, which ``vcsmooth smooth --help`` lists).
+/// - ``weld`` (True): vertices at exactly one position (a texture seam's or unmerged corners'
+///   copies) are one vertex to smooth, and each copy gets the same new position; False keeps
+///   them apart, each seam a boundary that never moves.
 /// - ``pinned`` (None): vertices that do not move: indices, or a boolean mask of length n.
 /// - ``threads`` (None: all cores), ``patch_size`` (16384: part of the result's definition).
 /// - ``stats`` (``"last"`` here): which iterations measure volume and area; the positions are
@@ -291,11 +294,10 @@ fn info<'py>(
 ) -> PyResult<Bound<'py, PyAny>> {
     let mesh = mesh_of(vertices, faces)?;
     let doc = without_gil(py, false, |_| {
-        let topo = Topology::build(mesh.positions.len(), &mesh.triangles)?;
         Ok(InfoDoc {
             path: IN_MEMORY.to_string(),
             format: None,
-            info: undefined_as_nan(&vcsmooth::metrics::info(&mesh, &topo)?),
+            info: undefined_as_nan(&vcsmooth::engine::mesh_info(&mesh, true)?),
             carries: Default::default(),
         })
     })?;

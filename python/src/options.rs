@@ -58,6 +58,7 @@ const KWARGS: &[Kwarg] = &[
     Kwarg { name: "crease_angle", scope: Smoothing, set: |v, s| { s.options.crease_angle = v.extract()?; Ok(()) } },
     Kwarg { name: "max_deviation", scope: Smoothing, set: |v, s| { s.options.max_deviation = v.extract()?; Ok(()) } },
     Kwarg { name: "boundary", scope: Smoothing, set: |v, s| { s.options.boundary = boundary(v)?; Ok(()) } },
+    Kwarg { name: "weld", scope: Smoothing, set: |v, s| { s.options.weld = v.extract()?; Ok(()) } },
     Kwarg { name: "pinned", scope: Smoothing, set: |v, s| set_pins(s, arrays::pins(v)?) },
     Kwarg { name: "pin", scope: File, set: |v, s| set_pins(s, Pins::File(v.extract()?)) },
     Kwarg { name: "pin_property", scope: File, set: |v, s| set_pins(s, Pins::Property(v.extract()?)) },

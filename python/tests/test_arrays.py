@@ -95,6 +95,20 @@ def test_boundary_vertices_do_not_move():
     assert np.array_equal(out[boundary], v[boundary])
 
 
+def test_split_corners_are_welded_unless_asked_not_to(kitten):
+    v, f = kitten
+    # Every corner its own vertex, as an unmerged STL or a seamed texture layout gives it.
+    soup_v, soup_f = v[f.reshape(-1)], np.arange(3 * len(f)).reshape(-1, 3)
+    indexed = vcsmooth.smooth(v, f, method="taubin", iterations=3)
+    welded = vcsmooth.smooth(soup_v, soup_f, method="taubin", iterations=3)
+    assert np.allclose(welded, indexed[f.reshape(-1)], rtol=0, atol=1e-12)
+    default = vcsmooth.smooth(soup_v, soup_f, iterations=3)
+    assert relative_volume_change(soup_v, default, soup_f) <= 1e-9
+    assert np.all(np.any(default != soup_v, axis=1))
+    apart = vcsmooth.smooth(soup_v, soup_f, iterations=3, weld=False)
+    assert np.array_equal(apart, soup_v)
+
+
 def test_crease_angle_and_max_deviation(kitten):
     v, f = kitten
     out = vcsmooth.smooth(v, f, max_deviation=0.01)

@@ -15,6 +15,7 @@ RUNS = [
     ("kitten-25k.ply", "obj", dict(method="taubin", iterations=7, threads=1), ["--method", "taubin", "--iterations", "7", "--threads", "1"]),
     ("fertility-9k.ply", "stl", dict(method="vcs-triangle", crease_angle=40.0, patch_size=2048), ["--method", "vcs-triangle", "--crease-angle", "40", "--patch-size", "2048"]),
     ("demosthenes-17k.ply", "ply", dict(method="lem", max_deviation=0.01, reject_energy_increase=True, stats="last"), ["--method", "lem", "--max-deviation", "0.01", "--reject-energy-increase", "--stats", "last"]),
+    ("horse.ply", "stl", dict(weld=False, iterations=2), ["--no-weld", "--iterations", "2"]),
     ("fidelity/textured.obj", "obj", dict(iterations=3, lam=0.3, mu=-0.4, method="vcs-lowpass"), ["--iterations", "3", "--lambda", "0.3", "--mu", "-0.4", "--method", "vcs-lowpass"]),
 ]
 

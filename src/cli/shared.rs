@@ -126,6 +126,9 @@ pub struct MethodParams {
     /// Boundary loops of open meshes: fixed, or smooth (each loop is smoothed as a curve).
     #[arg(long, value_enum, value_name = "MODE", default_value_t = Boundary::Fixed, help = boundary_help())]
     pub boundary: Boundary,
+    /// Keep vertices that share a position apart: a texture seam or unmerged STL corners stay boundary that never moves, as in results version 4 and before [default: copies are one vertex to smooth, and each takes the same new position].
+    #[arg(long)]
+    pub no_weld: bool,
 }
 
 /// `--mu`'s defaults, each method's own.
@@ -190,6 +193,7 @@ impl MethodParams {
             crease_angle: self.crease_angle,
             max_deviation: self.max_deviation,
             boundary: self.boundary,
+            weld: !self.no_weld,
         };
         options.check()?;
         Ok(options)
@@ -469,13 +473,17 @@ pub fn check_deviation_field(path: &std::path::Path, colours: bool) -> Result<()
 
 /// One line for a run in which more than half of the vertices of its triangles cannot move
 /// freely (or none can): how many, why, and what to try; `None` otherwise. `boundary_smooth`:
-/// the run moves boundary vertices along their loops.
+/// the run moves boundary vertices along their loops; `weld`: the run welds copies (no
+/// `--no-weld`).
 pub fn fixed_warning(
     fixed: &crate::engine::plan::FixedVertices,
     boundary_smooth: bool,
+    weld: bool,
 ) -> Option<String> {
-    // Vertices of no triangle are not part of the surface.
-    let n = fixed.vertices.saturating_sub(fixed.unreferenced);
+    // Vertices of no triangle are not part of the surface; welded copies move with another.
+    let n = fixed
+        .vertices
+        .saturating_sub(fixed.unreferenced + fixed.welded);
     let f = fixed.fixed.saturating_sub(fixed.unreferenced);
     if n == 0 || 2 * f <= n {
         return None;
@@ -483,11 +491,24 @@ pub fn fixed_warning(
     let mut why = Vec::new();
     let mut try_ = Vec::new();
     if fixed.boundary_edges > 0 {
-        why.push(format!(
-            "{} boundary edges (open borders, or seams where the file splits vertices: texture seams, unmerged corners)",
-            fixed.boundary_edges
-        ));
-        try_.push("merge the duplicate vertices of seams before smoothing".to_string());
+        match weld {
+            true => {
+                why.push(format!(
+                    "{} boundary edges (open borders, or seams whose copies are not at exactly one position)",
+                    fixed.boundary_edges
+                ));
+                try_.push(
+                    "merge the near-duplicate vertices of seams before smoothing".to_string(),
+                );
+            }
+            false => {
+                why.push(format!(
+                    "{} boundary edges (open borders, or seams where the file splits vertices: texture seams, unmerged corners)",
+                    fixed.boundary_edges
+                ));
+                try_.push("without --no-weld, to smooth across seams".to_string());
+            }
+        }
         if !boundary_smooth {
             try_.push(format!(
                 "--boundary smooth ({}) to move boundary vertices along their loops",

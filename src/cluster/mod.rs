@@ -198,7 +198,7 @@ pub fn run_file(
                 colours.len(),
                 halo,
                 doc.crossing_edge_stencils,
-                engine::plan::FixedVertices::of(&doc.topology),
+                engine::plan::FixedVertices::of(&doc.topology, doc.welded),
             )
         }),
         memory: MemoryStats {
@@ -342,7 +342,8 @@ fn write_output(
         last = rounded;
     }
     for (new, &old) in plan.order.iter().enumerate() {
-        mesh.positions[old as usize] = last[new];
+        let source = plan.welded_to.get(new).map_or(new, |&to| to as usize);
+        mesh.positions[old as usize] = last[source];
     }
     let bytes_read = std::fs::metadata(input).map_or(0, |m| m.len());
     let measure = engine
@@ -374,6 +375,9 @@ fn output_stats(
         return Ok(None);
     };
     let mut positions = storage.copy_of(last)?;
+    for (new, &to) in plan.welded_to.iter().enumerate() {
+        positions[new] = positions[to as usize];
+    }
     let (tris, topo) = (&plan.triangles, &plan.topology);
     Ok(engine::run::stored_output_stats(
         info,

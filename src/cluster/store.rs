@@ -6,7 +6,8 @@
 //! - `plan.json`: what the arrays hold and what they were made from (the SHA-256 of the input
 //!   and of the files it names, method options, patch size, pins). Written last: a directory without it holds no usable plan.
 //! - `order.u32` (reordered → input vertex), `triangles.u32` (reordered, smallest vertex first),
-//!   `vv_offsets.u64`, `vv.u32`, `vf_offsets.u64`, `vf.u32`, `fixed.u8` (the adjacency).
+//!   `vv_offsets.u64`, `vv.u32`, `vf_offsets.u64`, `vf.u32`, `fixed.u8` (the adjacency);
+//!   `welded.u32` (reordered → the vertex whose position it takes), only when some are welded.
 //! - `positions-0.f64`, `positions-1.f64`: two slots of `3 × f64` per reordered vertex. An
 //!   iteration's positions go to the slot that `state.json` does not name; only when every rank
 //!   has written and synced its part does rank 0 switch `state.json` (atomic rename) to it. A run
@@ -31,15 +32,17 @@ use crate::metrics::MeshInfo;
 use crate::partition::Patch;
 use crate::topology::{Topology, TopologyStats};
 
-const FORMAT: u32 = 1;
+/// 2: vertices welded (a plan of format 1 is made again).
+const FORMAT: u32 = 2;
 const PLAN: &str = "plan.json";
 const STATE: &str = "state.json";
 const INPUT: &str = "input.f64";
 const LOOPS: &str = "loops.u32";
+const WELDED: &str = "welded.u32";
 
 /// Every file a run writes in its work directory (and removes from it after a run without
 /// `--checkpoint`): no other file of the run may be one of them.
-pub const FILES: [&str; 13] = [
+pub const FILES: [&str; 14] = [
     PLAN,
     STATE,
     "order.u32",
@@ -53,6 +56,7 @@ pub const FILES: [&str; 13] = [
     "positions-1.f64",
     INPUT,
     LOOPS,
+    WELDED,
 ];
 
 /// What a plan was made from; a plan is reused only when all of it matches.
@@ -107,6 +111,9 @@ impl PlanKey {
         if !opts.boundary.is_fixed() {
             options["boundary"] = opts.boundary.name().into();
         }
+        if !opts.weld {
+            options["weld"] = false.into();
+        }
         let mut files = vec![input.to_path_buf()];
         files.extend(
             io::referenced_files(input)
@@ -153,6 +160,9 @@ pub struct PlanDoc {
     /// Directed boundary edges stored in `loops.u32` (`boundary: smooth`; 0 otherwise).
     #[serde(default)]
     pub boundary_edges: usize,
+    /// Welded copies ([`crate::partition::Reordered::welded`]); `welded.u32` is stored when not 0.
+    #[serde(default)]
+    pub welded: usize,
     pub crossing_edge_stencils: u64,
     pub topology: TopologyStats,
     /// Input statistics, when the run that made the plan measured them.
@@ -196,6 +206,8 @@ pub struct StoredPlan {
     pub topology: Topology,
     pub triangles: Buf<[u32; 3]>,
     pub order: Buf<u32>,
+    /// [`crate::partition::Reordered::welded_to`]: empty when no vertex is welded.
+    pub welded_to: Buf<u32>,
 }
 
 /// Paths in the work directory.
@@ -274,6 +286,9 @@ impl WorkDir {
         if !loops.is_empty() {
             self.write_array(LOOPS, loops)?;
         }
+        if made.reordered.welded > 0 {
+            self.write_array(WELDED, &made.reordered.welded_to)?;
+        }
         self.write_state(&StateDoc::default())?;
         // The crossing edge stencils do not depend on the method.
         let stats = made.stats(crate::smooth::method::Footprint::Edge);
@@ -298,6 +313,7 @@ impl WorkDir {
             ring_colours: made.schedule.ring_colours.clone(),
             ring_halo: made.schedule.ring_halo.clone(),
             boundary_edges: loops.len(),
+            welded: made.reordered.welded,
             crossing_edge_stencils: stats.crossing_edge_stencils,
             topology: made.topology.stats,
             input_stats,
@@ -345,7 +361,18 @@ impl WorkDir {
         if !patches_ok {
             return Err(Error::invalid(&plan_path, "patches out of range"));
         }
+        let welded_to = match doc.welded {
+            0 => Buf::default(),
+            _ => {
+                let to: Buf<u32> = Buf::map_file(&m(WELDED), n)?;
+                if to.iter().any(|&v| v as usize >= n) {
+                    return Err(Error::invalid(m(WELDED), "names a vertex out of range"));
+                }
+                to
+            }
+        };
         Ok(StoredPlan {
+            welded_to,
             triangles: Buf::map_file(&m("triangles.u32"), t)?,
             order: Buf::map_file(&m("order.u32"), n)?,
             topology,

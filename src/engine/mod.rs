@@ -34,7 +34,9 @@ pub use deviation::DeviationSettings;
 pub use iterate::Reference;
 pub use observer::{IterationRecord, Meter, Moment, Observer, Phase, Quiet, Statistics, Unit};
 pub use pins::{PinSet, Pins};
-pub use plan::{DEFAULT_PATCH_SIZE, FixedVertices, Layout, Plan, PlanStats, PrepTimings};
+pub use plan::{
+    DEFAULT_PATCH_SIZE, FixedVertices, Layout, Plan, PlanStats, PrepTimings, mesh_info,
+};
 pub use run::{ClusterStats, EngineSettings, MemoryStats, PhaseTimings, Report, run_file};
 pub(crate) use run::{run_file_with, storage_for};
 

@@ -308,9 +308,18 @@ impl Plan {
         if pins.is_empty() {
             return;
         }
-        let order = &self.reordered.order;
-        self.topology
-            .pin(|new| pins.contains(order[new as usize] as usize));
+        let r = &self.reordered;
+        // A vertex is pinned when it or any of its welded copies is (a copy itself never moves).
+        let mut by_copy = std::collections::HashSet::new();
+        for (new, &to) in r.welded_to.iter().enumerate() {
+            if to as usize != new && pins.contains(r.order[new] as usize) {
+                by_copy.insert(to);
+            }
+        }
+        self.topology.pin(|new| {
+            r.source_of(new as usize) == new as usize
+                && (pins.contains(r.order[new as usize] as usize) || by_copy.contains(&new))
+        });
     }
 
     /// Fix the vertices on creases sharper than `angle` degrees (see [`Topology::crease`]),

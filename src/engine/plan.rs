@@ -96,24 +96,46 @@ pub struct FixedVertices {
     pub boundary_edges: usize,
     pub non_manifold_edges: usize,
     pub non_manifold_vertices: usize,
+    /// Vertices of no triangle, welded copies not included.
     pub unreferenced: usize,
+    /// Welded copies: vertices at the position of another, which move with it.
+    pub welded: usize,
     pub pinned: usize,
     pub on_creases: usize,
 }
 
 impl FixedVertices {
-    pub fn of(stats: &crate::topology::TopologyStats) -> FixedVertices {
+    /// The counts of a plan's topology `stats`, whose `welded` copies it counts as unreferenced
+    /// and fixed: here they are neither (they move with the vertex they are welded to).
+    pub fn of(stats: &crate::topology::TopologyStats, welded: usize) -> FixedVertices {
         FixedVertices {
             vertices: stats.vertices,
-            fixed: stats.fixed_vertices.min(stats.vertices),
+            fixed: stats
+                .fixed_vertices
+                .min(stats.vertices)
+                .saturating_sub(welded),
             boundary_edges: stats.boundary_edges,
             non_manifold_edges: stats.non_manifold_edges,
             non_manifold_vertices: stats.non_manifold_vertices,
-            unreferenced: stats.unreferenced_vertices,
+            unreferenced: stats.unreferenced_vertices.saturating_sub(welded),
+            welded,
             pinned: stats.pinned_vertices,
             on_creases: stats.crease_vertices,
         }
     }
+}
+
+/// The statistics of `mesh` as a run sees it: its copies welded if `weld` (see
+/// [`crate::partition`]), its faces oriented; in the input's order, in memory (what `info`
+/// prints).
+pub fn mesh_info(mesh: &crate::Mesh, weld: bool) -> Result<crate::metrics::MeshInfo> {
+    let storage = Storage::heap();
+    let mut r = Reordered::in_input_order(&storage, &mesh.positions, &mesh.triangles, weld)?;
+    let mut topology = Topology::build(mesh.positions.len(), &r.triangles)?;
+    topology.orient(&mut r.triangles, &r.positions);
+    let mut info = crate::metrics::info_of(&r.positions, &r.triangles, &mesh.source, &topology)?;
+    info.count_welded(r.welded);
+    Ok(info)
 }
 
 impl Plan {
@@ -125,7 +147,7 @@ impl Plan {
         triangles: &[[u32; 3]],
         layout: Layout,
     ) -> Result<Plan> {
-        Plan::new_observed(storage, positions, triangles, layout, &mut Quiet)
+        Plan::new_observed(storage, positions, triangles, layout, true, &mut Quiet)
     }
 
     /// [`Plan::new`], telling `observer` how far each phase is ([`Phase::Reorder`],
@@ -135,6 +157,7 @@ impl Plan {
         positions: &[DVec3],
         triangles: &[[u32; 3]],
         layout: Layout,
+        weld: bool,
         observer: &mut dyn Observer,
     ) -> Result<Plan> {
         let (n, t) = (positions.len() as u64, triangles.len() as u64);
@@ -151,18 +174,10 @@ impl Plan {
                     observer,
                     Phase::Reorder,
                     partition::REORDER_PASSES.items(n, t),
-                    |m| partition::reorder_metered(storage, positions, triangles, m),
+                    |m| partition::reorder_metered(storage, positions, triangles, weld, m),
                 )?
             }
-            Layout::Whole => Reordered {
-                order: {
-                    let mut order = storage.zeroed::<u32>(positions.len())?;
-                    order.iter_mut().zip(0..).for_each(|(o, v)| *o = v);
-                    order
-                },
-                positions: storage.copy_of(positions)?,
-                triangles: storage.copy_of(triangles)?,
-            },
+            Layout::Whole => Reordered::in_input_order(storage, positions, triangles, weld)?,
         };
         let reorder = clock.elapsed().as_secs_f64();
         let clock = Instant::now();
@@ -225,8 +240,8 @@ impl Plan {
         self.len() == 0
     }
 
-    /// Copy the plan's (smoothed) positions into `out` in the input's vertex order, on the
-    /// current pool.
+    /// Copy the plan's (smoothed) positions into `out` in the input's vertex order, each welded
+    /// copy at its vertex's position, on the current pool.
     pub fn positions_in_input_order(&self, out: &mut [DVec3]) {
         self.positions_in_input_order_metered(out, &Meter::default());
     }
@@ -234,10 +249,23 @@ impl Plan {
     /// [`Plan::positions_in_input_order`], counting its work into `meter` (see
     /// [`partition::scatter_metered`]).
     pub fn positions_in_input_order_metered(&self, out: &mut [DVec3], meter: &Meter) {
+        let r = &self.reordered;
+        partition::scatter_metered(out, &r.order, |new| r.positions[r.source_of(new)], meter);
+    }
+
+    /// Move each welded copy to the position of the vertex it is welded to (see
+    /// [`Reordered::welded_to`]): after smoothing, so that the plan's positions are the output's.
+    pub fn follow_welds(&mut self) {
         let Reordered {
-            order, positions, ..
-        } = &self.reordered;
-        partition::scatter_metered(out, order, |new| positions[new], meter);
+            positions,
+            welded_to,
+            ..
+        } = &mut self.reordered;
+        for (new, &to) in welded_to.iter().enumerate() {
+            if to as usize != new {
+                positions[new] = positions[to as usize];
+            }
+        }
     }
 
     /// Set the plan's positions from `input`, given in the input's vertex order (to smooth the
@@ -278,6 +306,7 @@ impl Plan {
             &self.topology,
             storage,
         )?;
+        info.count_welded(self.reordered.welded);
         meter.add(1);
         info.set_geometry(self.geometry());
         meter.add(1);
@@ -319,7 +348,7 @@ impl Plan {
                 .par_iter()
                 .map(|p| p.crossing_edges(&self.topology))
                 .sum(),
-            FixedVertices::of(&self.topology.stats),
+            FixedVertices::of(&self.topology.stats, self.reordered.welded),
         )
     }
 }

@@ -441,6 +441,7 @@ pub(crate) fn prepare(
             &mesh.positions,
             &mesh.triangles,
             engine.layout(),
+            opts.weld,
             observer,
         )
         .map_err(|e| e.in_file(input))?;
@@ -568,8 +569,14 @@ pub(crate) fn run_mesh(
     let mut t = PhaseTimings::default();
     let pins = engine.pins.resolve(mesh, None)?.unwrap_or_default();
     let smoothed = pool.install(|| -> Result<_> {
-        let mut plan =
-            Plan::new_observed(&storage, &mesh.positions, &mesh.triangles, layout, observer)?;
+        let mut plan = Plan::new_observed(
+            &storage,
+            &mesh.positions,
+            &mesh.triangles,
+            layout,
+            opts.weld,
+            observer,
+        )?;
         plan.pin(&pins);
         plan.crease(opts.crease_angle);
         let mut smoothed = smooth_planned(
@@ -656,6 +663,7 @@ fn smooth_planned(
     }
     observer.phase_end(Phase::Smooth);
     let (records, auto_stop) = stopped?;
+    plan.follow_welds();
     t.smoothing = clock.elapsed().as_secs_f64();
 
     Ok(Smoothed {

@@ -57,7 +57,12 @@ pub struct MeshInfo {
     /// Connected components of the (non-degenerate) triangles, through shared vertices;
     /// unreferenced vertices are not components.
     pub components: usize,
+    /// Vertices of no triangle (welded copies not included).
     pub unreferenced_vertices: usize,
+    /// Vertices at exactly the position of another (texture seams, unmerged corners), welded to
+    /// it for smoothing: they move with it (see [`crate::partition`]); 0 with `weld` off.
+    #[serde(default)]
+    pub welded_vertices: usize,
     /// Every edge has exactly two triangles (no boundary, no non-manifold edge), and there is at
     /// least one triangle.
     pub closed: bool,
@@ -89,6 +94,16 @@ pub fn info(mesh: &Mesh, topo: &Topology) -> Result<MeshInfo> {
     let (mut topo, mut triangles) = (topo.clone(), mesh.triangles.to_vec());
     topo.orient(&mut triangles, &mesh.positions);
     info_of(&mesh.positions, &triangles, &mesh.source, &topo)
+}
+
+impl MeshInfo {
+    /// Count `welded` copies (vertices of no triangle once welded, so counted by the topology as
+    /// unreferenced and fixed) as welded instead.
+    pub fn count_welded(&mut self, welded: usize) {
+        self.welded_vertices = welded;
+        self.unreferenced_vertices -= welded;
+        self.fixed_vertices -= welded;
+    }
 }
 
 /// [`info`] from the parts of a mesh (e.g. the reordered arrays of the patch engine; every count

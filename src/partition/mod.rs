@@ -5,6 +5,11 @@
 //!   nearby pages; triangles are renumbered, rotated so that their smallest vertex comes first
 //!   (a cyclic rotation keeps the orientation), and sorted. The permutation is kept so that the
 //!   output can be written in the input's vertex order.
+//! - Vertices at exactly one position are *welded* (unless asked not to): the triangles of every
+//!   copy name the first of them on the curve (the smallest input id), so that a texture seam or
+//!   an unmerged STL is one surface to smooth; the copies stay in the plan, unreferenced, and each
+//!   takes its first's position when the output is written ([`Reordered::welded_to`]). A mesh
+//!   without copies gives the plan it gave before welding existed.
 //! - [`patches`] cuts the reordered vertices into ranges of `patch_size` and assigns each stencil
 //!   to exactly one patch, the one holding its smallest vertex: an edge stencil `(i, j)`, `i < j`,
 //!   belongs to the patch of `i`; a triangle stencil to the patch of its first (smallest) vertex.
@@ -30,6 +35,142 @@ pub struct Reordered {
     /// Triangles in new ids, smallest vertex first, sorted ascending (sorted by first vertex only
     /// once [`Topology::orient`] has flipped some: it swaps the last two corners).
     pub triangles: Buf<[u32; 3]>,
+    /// `welded_to[new]`: the vertex whose position `new` takes in the output, itself unless it is a
+    /// welded copy. Empty when no vertex is (the usual case: no memory spent).
+    pub welded_to: Buf<u32>,
+    /// How many vertices are welded copies of another.
+    pub welded: usize,
+}
+
+impl Reordered {
+    /// The vertex whose position `new` takes in the output (see [`Reordered::welded_to`]).
+    #[inline]
+    pub fn source_of(&self, new: usize) -> usize {
+        match self.welded_to.is_empty() {
+            true => new,
+            false => self.welded_to[new] as usize,
+        }
+    }
+
+    /// The input's own order as one patch, welded like [`reorder`] if `weld` (ties between copies
+    /// go to the smallest id, as on the curve).
+    pub fn in_input_order(
+        storage: &Storage,
+        positions: &[DVec3],
+        triangles: &[[u32; 3]],
+        weld: bool,
+    ) -> Result<Reordered> {
+        let mut order = storage.zeroed::<u32>(positions.len())?;
+        order.iter_mut().zip(0..).for_each(|(o, v)| *o = v);
+        let mut tris = storage.copy_of(triangles)?;
+        let (welded_to, welded) = match weld {
+            true => {
+                let ids: Vec<u32> = (0..positions.len() as u32).collect();
+                let pairs = copies_sorted(ids, |v| positions[v as usize]);
+                welded_from_pairs(storage, positions.len(), &pairs)?
+            }
+            false => (Buf::default(), 0),
+        };
+        if welded > 0 {
+            tris.par_iter_mut()
+                .for_each(|t| *t = t.map(|v| welded_to[v as usize]));
+        }
+        Ok(Reordered {
+            order,
+            positions: storage.copy_of(positions)?,
+            triangles: tris,
+            welded_to,
+            welded,
+        })
+    }
+}
+
+/// A position's bits, with −0 read as +0 (the two are one position).
+fn position_bits(p: DVec3) -> [u64; 3] {
+    (p + DVec3::ZERO).to_array().map(f64::to_bits)
+}
+
+/// `(copy, first)` for each vertex of `run` (ids in a deterministic order, copies of one position
+/// ordered by id) whose position, read by `at`, equals an earlier one's. Short runs compare every
+/// pair; long ones (a mesh collapsed to a point) sort by position.
+fn copies_in_run(run: &[u32], at: impl Fn(u32) -> DVec3) -> Vec<(u32, u32)> {
+    let mut pairs = Vec::new();
+    if run.len() <= 32 {
+        for (k, &v) in run.iter().enumerate() {
+            if let Some(&first) = run[..k].iter().find(|&&u| at(u) == at(v)) {
+                pairs.push((v, first));
+            }
+        }
+        return pairs;
+    }
+    copies_sorted(run.to_vec(), at)
+}
+
+/// [`copies_in_run`] by sorting `ids` by position, then id.
+fn copies_sorted(mut ids: Vec<u32>, at: impl Fn(u32) -> DVec3) -> Vec<(u32, u32)> {
+    let mut pairs = Vec::new();
+    ids.sort_unstable_by_key(|&v| (position_bits(at(v)), v));
+    let Some(&start) = ids.first() else {
+        return pairs;
+    };
+    let mut first = start;
+    for w in ids.windows(2) {
+        match at(w[1]) == at(w[0]) {
+            true => pairs.push((w[1], first)),
+            false => first = w[1],
+        }
+    }
+    pairs
+}
+
+/// [`Reordered::welded_to`] and the copies' count from the `(copy, first)` pairs.
+fn welded_from_pairs(
+    storage: &Storage,
+    n: usize,
+    pairs: &[(u32, u32)],
+) -> Result<(Buf<u32>, usize)> {
+    if pairs.is_empty() {
+        return Ok((Buf::default(), 0));
+    }
+    let mut to: Buf<u32> = storage.zeroed(n)?;
+    to.par_iter_mut()
+        .enumerate()
+        .for_each(|(v, t)| *t = v as u32);
+    for &(copy, first) in pairs {
+        to[copy as usize] = first;
+    }
+    Ok((to, pairs.len()))
+}
+
+/// The `(copy, first)` pairs of the curve: copies of a position share its curve key, so each run
+/// of one key (sorted by input id within) is searched alone. A chunk takes the runs that start in
+/// it, so each run is searched once whatever the threads.
+fn copies_on_curve(keys: &[[u64; 2]], positions: &[DVec3]) -> Vec<(u32, u32)> {
+    let n = keys.len();
+    let starts_run = |i: usize| i == 0 || keys[i - 1][0] != keys[i][0];
+    (0..n.div_ceil(STEP))
+        .into_par_iter()
+        .flat_map_iter(|c| {
+            let mut pairs = Vec::new();
+            let mut i = c * STEP;
+            let end = ((c + 1) * STEP).min(n);
+            while i < end && !starts_run(i) {
+                i += 1;
+            }
+            while i < end {
+                let mut j = i + 1;
+                while j < n && !starts_run(j) {
+                    j += 1;
+                }
+                if j - i > 1 {
+                    let run: Vec<u32> = (i as u32..j as u32).collect();
+                    pairs.extend(copies_in_run(&run, |v| positions[v as usize]));
+                }
+                i = j;
+            }
+            pairs
+        })
+        .collect()
 }
 
 /// Reorder `positions` and `triangles` along the Morton curve (see the module doc). Deterministic:
@@ -39,7 +180,7 @@ pub fn reorder(
     positions: &[DVec3],
     triangles: &[[u32; 3]],
 ) -> Result<Reordered> {
-    reorder_metered(storage, positions, triangles, &Meter::default())
+    reorder_metered(storage, positions, triangles, true, &Meter::default())
 }
 
 /// The passes [`reorder_metered`] counts: the curve keys, their sort, the permutation and its
@@ -49,12 +190,13 @@ pub const REORDER_PASSES: Passes = Passes {
     triangles: 2,
 };
 
-/// [`reorder`], counting its work into `meter` ([`REORDER_PASSES`] over the mesh; the sorts
-/// count when they end). The same result.
+/// [`reorder`], welding copies only if `weld`, counting its work into `meter` ([`REORDER_PASSES`]
+/// over the mesh; the sorts count when they end). The same result.
 pub fn reorder_metered(
     storage: &Storage,
     positions: &[DVec3],
     triangles: &[[u32; 3]],
+    weld: bool,
     meter: &Meter,
 ) -> Result<Reordered> {
     let n = positions.len();
@@ -94,7 +236,6 @@ pub fn reorder_metered(
         .par_iter_mut()
         .zip(keys.par_iter())
         .for_each(|(o, k)| *o = k[1] as u32);
-    drop(keys);
     let mut rank: Buf<u32> = storage.zeroed(n)?;
     scatter(&mut rank, &order, |new| new as u32);
     meter.add(n as u64);
@@ -109,6 +250,16 @@ pub fn reorder_metered(
             }
             meter.add(p.len() as u64);
         });
+
+    let (welded_to, welded) = match weld {
+        true => welded_from_pairs(storage, n, &copies_on_curve(&keys, &new_pos))?,
+        false => (Buf::default(), 0),
+    };
+    drop(keys);
+    if welded > 0 {
+        rank.par_iter_mut()
+            .for_each(|r| *r = welded_to[*r as usize]);
+    }
 
     // Renumbered, smallest vertex first, and sorted by a bucket sort on that vertex.
     let renumbered = |t: usize| {
@@ -131,6 +282,8 @@ pub fn reorder_metered(
         order,
         positions: new_pos,
         triangles: tris,
+        welded_to,
+        welded,
     })
 }
 
@@ -380,6 +533,53 @@ mod tests {
             );
         }
         assert!(r.triangles.windows(2).all(|w| w[0] <= w[1]));
+    }
+
+    /// Copies (−0 and +0 one position; a run of many on one curve key) are welded to the first by
+    /// input id on the curve and in the input order alike; a mesh without copies spends nothing.
+    #[test]
+    fn copies_are_welded_to_their_first() {
+        let mut pos: Vec<DVec3> = (0..40).map(|k| DVec3::new(k as f64, 0.0, 1.0)).collect();
+        pos.extend((0..50).map(|_| DVec3::new(3.0, 1.0, 1.0)));
+        pos[7] = DVec3::new(3.0, 1.0, 1.0);
+        pos[2] = DVec3::new(0.0, -0.0, 1.0);
+        pos[0] = DVec3::new(0.0, 0.0, 1.0);
+        let tris: Vec<[u32; 3]> = (0..88).map(|k| [k, k + 1, k + 2]).collect();
+        let first = |v: usize| match v {
+            2 => 0,
+            40.. => 7,
+            v => v,
+        };
+        for whole in [false, true] {
+            let r = match whole {
+                false => reorder(&Storage::heap(), &pos, &tris).unwrap(),
+                true => Reordered::in_input_order(&Storage::heap(), &pos, &tris, true).unwrap(),
+            };
+            assert_eq!(r.welded, 51);
+            let rank: std::collections::HashMap<u32, usize> = r
+                .order
+                .iter()
+                .enumerate()
+                .map(|(new, &old)| (old, new))
+                .collect();
+            for (new, &old) in r.order.iter().enumerate() {
+                let want = rank[&(first(old as usize) as u32)];
+                assert_eq!(r.source_of(new), want, "{old} (whole: {whole})");
+            }
+            // No triangle names a copy.
+            assert!(
+                r.triangles
+                    .iter()
+                    .flatten()
+                    .all(|&v| r.source_of(v as usize) == v as usize)
+            );
+            let unwelded =
+                reorder_metered(&Storage::heap(), &pos, &tris, false, &Meter::default()).unwrap();
+            assert_eq!((unwelded.welded, unwelded.welded_to.len()), (0, 0));
+        }
+        let distinct: Vec<DVec3> = (0..9).map(|k| DVec3::splat(k as f64)).collect();
+        let r = reorder(&Storage::heap(), &distinct, &[[0, 1, 2]]).unwrap();
+        assert_eq!((r.welded, r.welded_to.len()), (0, 0));
     }
 
     #[test]

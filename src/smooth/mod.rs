@@ -224,6 +224,15 @@ pub struct Options {
     /// What happens to the boundary loops of an open mesh (see [`Boundary`]).
     #[serde(skip_serializing_if = "Boundary::is_fixed")]
     pub boundary: Boundary,
+    /// Vertices at exactly one position are one vertex to smooth: a texture seam's or an
+    /// unmerged STL's copies move together instead of being boundary that never moves (see
+    /// [`crate::partition`]); the file keeps its vertices. In JSON only when off.
+    #[serde(skip_serializing_if = "is_true")]
+    pub weld: bool,
+}
+
+fn is_true(b: &bool) -> bool {
+    *b
 }
 
 /// What happens to the boundary loops of an open mesh.
@@ -368,6 +377,7 @@ impl Default for Options {
             crease_angle: None,
             max_deviation: None,
             boundary: Boundary::Fixed,
+            weld: true,
         }
     }
 }

@@ -17,7 +17,11 @@ const STRIDE: usize = 24;
 /// A sphere's glTF: its JSON (buffer 0 without a uri) and its binary buffer. Layout of the buffer:
 /// interleaved positions and normals, then UVs, then RGBA8 colours, then `u16` indices.
 fn sphere() -> (Value, Vec<u8>) {
-    let m = noisy_sphere(2, 0.3, 7);
+    sphere_of(&noisy_sphere(2, 0.3, 7))
+}
+
+/// [`sphere`]'s glTF of any mesh `m` (each vertex its own UV).
+fn sphere_of(m: &vcsmooth::Mesh) -> (Value, Vec<u8>) {
     let n = m.positions.len();
     let mut bin = Vec::new();
     let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
@@ -241,6 +245,48 @@ fn glb_keeps_everything_but_positions_and_normals() {
     ]);
     fails(&o, 1, &["x.gltf", "a GLB input is written as .glb"]);
     assert!(!dir.path().join("x.glb").exists() && !dir.path().join("x.gltf").exists());
+}
+
+/// A texture seam (the sphere split along its equator, each copy with its own UV) is welded:
+/// every vertex moves, each copy exactly as its original, and the UVs, colours and indices keep
+/// their bytes; with `--no-weld` the seam stays where it was.
+#[test]
+fn a_texture_seam_is_smoothed_and_keeps_its_uvs() {
+    let dir = tempfile::tempdir().unwrap();
+    let whole = noisy_sphere(2, 0.3, 7);
+    let (m, copy_of) = crate::util::seamed(&whole);
+    let (json, bin) = sphere_of(&m);
+    let input = dir.path().join("seamed.glb");
+    std::fs::write(&input, glb(&json, &bin)).unwrap();
+    let output = dir.path().join("smooth.glb");
+    smooth(&input, &output);
+    let (json_after, bin_after) = unglb(&std::fs::read(&output).unwrap());
+    check_smoothed(&json, &bin, &json_after, &bin_after);
+    let before = io::read_mesh(&input).unwrap().positions;
+    let after = io::read_mesh(&output).unwrap().positions;
+    for (v, &of) in copy_of.iter().enumerate() {
+        assert_ne!(after[v], before[v], "vertex {v} did not move");
+        assert_eq!(after[v], after[of as usize], "copy {v} of {of}");
+    }
+
+    let apart = dir.path().join("apart.glb");
+    ok(vcsmooth([
+        "smooth".as_ref(),
+        input.as_os_str(),
+        apart.as_os_str(),
+        "--no-weld".as_ref(),
+    ]));
+    let after = io::read_mesh(&apart).unwrap().positions;
+    let copies = whole.positions.len()..m.positions.len();
+    assert!(copies.len() > 10);
+    for v in copies {
+        let of = copy_of[v] as usize;
+        assert_eq!(after[v], before[v], "copy {v} moved without welding");
+        assert_eq!(
+            after[of], before[of],
+            "seam vertex {of} moved without welding"
+        );
+    }
 }
 
 #[test]

@@ -12,9 +12,8 @@ use crate::cli::progress::Progress;
 use crate::cli::report::{UNDEFINED, count, fixed, num, print_rows};
 use crate::error::Result;
 use crate::mesh::Carried;
-use crate::metrics::{self, MeshInfo};
+use crate::metrics::MeshInfo;
 use crate::report::{InfoDoc, format_name, undefined_as_nan};
-use crate::topology::Topology;
 
 /// `vcsmooth info IN [--json]`
 #[derive(Debug, Clone, ClapArgs)]
@@ -25,6 +24,9 @@ pub struct InfoArgs {
     /// Print JSON instead of a table [default: table].
     #[arg(long)]
     pub json: bool,
+    /// Count vertices that share a position apart, as `smooth --no-weld` smooths them [default: copies of a position are one vertex, as smooth welds them].
+    #[arg(long)]
+    pub no_weld: bool,
 }
 
 /// `vcsmooth info`, resolved.
@@ -32,6 +34,7 @@ pub struct InfoArgs {
 pub struct InfoConfig {
     pub input: PathBuf,
     pub json: bool,
+    pub weld: bool,
 }
 
 impl InfoConfig {
@@ -39,6 +42,7 @@ impl InfoConfig {
         Ok(InfoConfig {
             input: a.input,
             json: a.json,
+            weld: !a.no_weld,
         })
     }
 }
@@ -47,14 +51,12 @@ impl InfoConfig {
 pub fn run(cfg: &InfoConfig, progress: &mut Progress, out: &mut dyn Write) -> Result<()> {
     progress.phase(format!("reading {}", cfg.input.display()));
     let mesh = crate::io::read_mesh(&cfg.input)?;
-    progress.phase("building topology");
-    let topo = Topology::build(mesh.positions.len(), &mesh.triangles)
-        .map_err(|e| e.in_file(&cfg.input))?;
     progress.phase("measuring");
+    let info = crate::engine::mesh_info(&mesh, cfg.weld).map_err(|e| e.in_file(&cfg.input))?;
     let doc = InfoDoc {
         path: cfg.input.display().to_string(),
         format: mesh.source.format.map(format_name),
-        info: undefined_as_nan(&metrics::info(&mesh, &topo).map_err(|e| e.in_file(&cfg.input))?),
+        info: undefined_as_nan(&info),
         carries: mesh
             .source
             .layout
@@ -107,6 +109,13 @@ fn print_info(out: &mut dyn Write, doc: &InfoDoc) -> Result<()> {
     }
     rows.push(("components", i.components.to_string()));
     rows.push(("unreferenced vertices", i.unreferenced_vertices.to_string()));
+    rows.push((
+        "welded vertices",
+        match i.welded_vertices {
+            0 => "0".to_string(),
+            w => format!("{w} (copies of another vertex's position: smoothed as one)"),
+        },
+    ));
     rows.push(("closed", if i.closed { "yes" } else { "no" }.to_string()));
     rows.push(("signed volume", num(i.volume)));
     rows.push(("area", num(i.area)));

@@ -353,7 +353,11 @@ fn report(
     };
     progress.finish();
     if cfg.options.iterations > 0
-        && let Some(line) = fixed_warning(&run.plan.fixed, !cfg.options.boundary.is_fixed())
+        && let Some(line) = fixed_warning(
+            &run.plan.fixed,
+            !cfg.options.boundary.is_fixed(),
+            cfg.options.weld,
+        )
     {
         // Not `eprintln!`: stderr may be a closed pipe, and this must not panic.
         let _ = writeln!(
