@@ -66,7 +66,12 @@ fn mpi_ranks_1_2_3_are_bit_identical_to_one_process() {
     let auto: Vec<String> = ["--iterations", "auto", "--boundary", "smooth"]
         .map(String::from)
         .to_vec();
+    // A seamed sphere: the welded copies follow their vertices on every rank count.
+    let seamed = tmp.path().join("seamed.ply");
+    let one = vcsmooth::io::read_mesh(&sphere).unwrap();
+    vcsmooth::io::write_mesh(&seamed, &util::seamed(&one).0).unwrap();
     for (input, args) in [
+        (&seamed, three("vcs-lowpass")),
         (&armadillo, three("vcs")),
         (&sphere, three("taubin")),
         (&sphere, three("vcs-triangle")),
