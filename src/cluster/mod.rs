@@ -342,8 +342,7 @@ fn write_output(
         last = rounded;
     }
     for (new, &old) in plan.order.iter().enumerate() {
-        let source = plan.welded_to.get(new).map_or(new, |&to| to as usize);
-        mesh.positions[old as usize] = last[source];
+        mesh.positions[old as usize] = last[crate::partition::source_of(&plan.welded_to, new)];
     }
     let bytes_read = std::fs::metadata(input).map_or(0, |m| m.len());
     let measure = engine
@@ -375,9 +374,7 @@ fn output_stats(
         return Ok(None);
     };
     let mut positions = storage.copy_of(last)?;
-    for (new, &to) in plan.welded_to.iter().enumerate() {
-        positions[new] = positions[to as usize];
-    }
+    crate::partition::follow_welds(&mut positions, &plan.welded_to);
     let (tris, topo) = (&plan.triangles, &plan.topology);
     Ok(engine::run::stored_output_stats(
         info,

@@ -256,16 +256,8 @@ impl Plan {
     /// Move each welded copy to the position of the vertex it is welded to (see
     /// [`Reordered::welded_to`]): after smoothing, so that the plan's positions are the output's.
     pub fn follow_welds(&mut self) {
-        let Reordered {
-            positions,
-            welded_to,
-            ..
-        } = &mut self.reordered;
-        for (new, &to) in welded_to.iter().enumerate() {
-            if to as usize != new {
-                positions[new] = positions[to as usize];
-            }
-        }
+        let r = &mut self.reordered;
+        partition::follow_welds(&mut r.positions, &r.welded_to);
     }
 
     /// Set the plan's positions from `input`, given in the input's vertex order (to smooth the

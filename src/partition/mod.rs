@@ -42,14 +42,25 @@ pub struct Reordered {
     pub welded: usize,
 }
 
+/// The vertex whose position `new` takes in the output, given [`Reordered::welded_to`] (empty:
+/// itself).
+#[inline]
+pub fn source_of(welded_to: &[u32], new: usize) -> usize {
+    welded_to.get(new).map_or(new, |&to| to as usize)
+}
+
+/// Move each welded copy of `positions` (plan order) to its vertex's position.
+pub fn follow_welds(positions: &mut [DVec3], welded_to: &[u32]) {
+    for (new, &to) in welded_to.iter().enumerate() {
+        positions[new] = positions[to as usize];
+    }
+}
+
 impl Reordered {
     /// The vertex whose position `new` takes in the output (see [`Reordered::welded_to`]).
     #[inline]
     pub fn source_of(&self, new: usize) -> usize {
-        match self.welded_to.is_empty() {
-            true => new,
-            false => self.welded_to[new] as usize,
-        }
+        source_of(&self.welded_to, new)
     }
 
     /// The input's own order as one patch, welded like [`reorder`] if `weld` (ties between copies
