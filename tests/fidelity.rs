@@ -5,3 +5,4 @@
 mod gltf;
 mod obj;
 mod off_stl;
+mod packed;

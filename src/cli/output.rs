@@ -15,15 +15,28 @@ pub fn output_format(path: &Path) -> Option<Format> {
 
 /// Check that a mesh can be written to `path`: known extension, existing directory.
 pub fn mesh_output(path: &Path) -> Result<()> {
-    if output_format(path).is_none() {
-        let what = match path.extension() {
-            Some(e) => format!("unknown output format '.{}'", e.to_string_lossy()),
-            None => "output file has no extension".to_string(),
-        };
-        return Err(Error::invalid(
-            path,
-            format!("{what} (expected .ply, .obj, .off, .stl, .gltf or .glb)"),
-        ));
+    match output_format(path) {
+        None => {
+            let what = match path.extension() {
+                Some(e) => format!("unknown output format '.{}'", e.to_string_lossy()),
+                None => "output file has no extension".to_string(),
+            };
+            return Err(Error::invalid(
+                path,
+                format!(
+                    "{what} (expected .ply, .obj, .off, .stl, .gltf or .glb; .gz after the first \
+                     four compresses)"
+                ),
+            ));
+        }
+        Some(Format::Gltf | Format::Glb) if crate::io::is_gz_name(path) => {
+            return Err(Error::invalid(
+                path,
+                "a glTF output is not gzip-compressed (its buffers are separate files or in a \
+                 .glb): drop the .gz",
+            ));
+        }
+        Some(_) => {}
     }
     parent_exists(path)
 }

@@ -14,10 +14,10 @@ use crate::smooth::{Boundary, Control, Method, Options};
 /// `IN OUT` of the commands that turn one mesh file into another (`smooth`, `subdivide`, `refine`).
 #[derive(Debug, Clone, ClapArgs)]
 pub struct InOut {
-    /// Input mesh (PLY, OBJ, OFF, STL, glTF or GLB).
+    /// Input mesh (PLY, OBJ, OFF, STL, glTF or GLB; any of them gzip-compressed).
     #[arg(value_name = "IN")]
     pub input: PathBuf,
-    /// Output mesh; .ply, .obj, .off, .stl, or .gltf/.glb for a glTF input. Written atomically, never on failure.
+    /// Output mesh; .ply, .obj, .off, .stl (each with .gz to compress), or .gltf/.glb for a glTF input. Written atomically, never on failure.
     #[arg(value_name = "OUT")]
     pub output: PathBuf,
 }

@@ -735,9 +735,7 @@ pub(crate) fn storage_for(
     budget: u64,
     opts: &Options,
 ) -> Result<Storage> {
-    let size = std::fs::metadata(input)
-        .map_err(|e| Error::io(input, e))?
-        .len();
+    let size = io::content_size(input)?;
     let field = engine.deviation.is_on();
     let by_size = memory::in_core_bytes_of_run(size, opts, field);
     let (by_counts, vertices) = match io::header_counts(input) {

@@ -7,8 +7,8 @@
 //! (a stream's before the rest of it is read, so that `/dev/zero` is refused at once):
 //!
 //! 1. nothing, or only zero bytes (an unwritten or zeroed file): refused;
-//! 2. a compression or archive signature (gzip, zip, bzip2, xz, zstd, 7-Zip) or a UTF-16/UTF-32
-//!    byte-order mark: refused, saying what to do;
+//! 2. a compression or archive signature (zip, bzip2, xz, zstd, 7-Zip; gzip where the caller has
+//!    not decompressed it already) or a UTF-16/UTF-32 byte-order mark: refused, saying what to do;
 //! 3. the line `ply` (after an optional UTF-8 byte-order mark), or GLB's magic `glTF`;
 //! 4. a binary STL, by its exact size `84 + 50·n` (its 80-byte header is free-form, so it is
 //!    recognised before any text rule can misread it);
@@ -88,6 +88,18 @@ const SIGNATURES: &[(&[u8], &str)] = &[
     (b"\xff\xfe", "UTF-16 text: save it as UTF-8"),
     (b"\xfe\xff", "UTF-16 text: save it as UTF-8"),
 ];
+
+/// The format of the `len` bytes `head` starts with, decompressed from the gzip file `path`: as
+/// [`detect`] would see them in a file named without `.gz`; gzip inside gzip is refused.
+pub(super) fn detect_inner(head: &[u8], len: u64, path: &Path) -> Result<Format, String> {
+    if len == 0 {
+        return Err("gzip-compressed, and holds nothing".into());
+    }
+    if super::gzip::is_gzip(head) {
+        return Err("gzip-compressed twice: decompress the outer layer first".into());
+    }
+    detect(head, len, &super::gzip::inner_name(path))
+}
 
 /// The format of a file of `len` bytes whose first bytes are `head` (all of them when the file is
 /// shorter than [`HEAD`]), or why it is refused. `path` gives the extension for OBJ.

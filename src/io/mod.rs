@@ -3,11 +3,11 @@
 //! - [`read_mesh`] reads only regular files. It recognises the file from its first 64 KiB before
 //!   anything else is read (`detect`): `ply` magic, GLB's `glTF` magic, `OFF` magic, a binary
 //!   STL whose size is exactly `84 + 50·n`, an ASCII STL starting with `solid`, and otherwise the
-//!   extension (`.obj`, `.gltf`); compressed data, UTF-16 text and zeroed files are refused
-//!   there. Then it maps the file (one `unsafe` boundary, with a plain-read fallback) and
-//!   decodes it.
+//!   extension (`.obj`, `.gltf`); gzip is decompressed first and what it holds recognised so
+//!   (`gzip`); other compressed data, UTF-16 text and zeroed files are refused there. Then it maps
+//!   the file (one `unsafe` boundary, with a plain-read fallback) and decodes it.
 //! - [`write_mesh`] picks the writer from the output's extension (`.ply .obj .off .stl .gltf
-//!   .glb`, any case) and writes atomically: a temporary file beside the target, flushed, synced
+//!   .glb`, any case; the first four with `.gz` after it are gzip-compressed) and writes atomically: a temporary file beside the target, flushed, synced
 //!   and renamed into place only when complete; on failure nothing is left under the target's
 //!   name (a `.gltf` output's new buffer files are each written so, before it).
 //! - [`write_ply_streamed`] writes a mesh larger than memory as binary PLY, its vertices and
@@ -18,7 +18,7 @@
 //!
 //! | format | read | write |
 //! |---|---|---|
-//! | PLY | binary little/big-endian (memory-mapped, own header parser, stride decode); ASCII (own strict parser, see `ply::ascii`) | the input's layout when it came from PLY, else binary little-endian `x y z float` (or `double`, see [`Precision`]) + `list uchar int vertex_indices` |
+//! | PLY | binary little/big-endian (memory-mapped, own header parser, stride decode); ASCII (own strict parser, see `ply::ascii`); faces or triangle strips (`tristrips`, kept as they are for a PLY output) | the input's layout when it came from PLY, else binary little-endian `x y z float` (or `double`, see [`Precision`]) + `list uchar int vertex_indices` |
 //! | OBJ | `v` (first three numbers), `f` with `i`, `i/t`, `i//n`, `i/t/n` and negative (relative) indices (`vt`/`vn` references checked too); every other statement whose keyword is a name kept (see `obj`) | the input's text with only the `v` positions and the `vn` normals rewritten when it came from OBJ (see `obj::layout`), else `v` + `f` |
 //! | OFF | `OFF` and its `C`/`N`/`ST` variants (vertex colours, normals, texture coordinates, face colours), `#` comments | the input's text with new `x y z` (and normals) when it carried colours, normals or texture coordinates, else `OFF` |
 //! | STL | binary and ASCII (keywords in any case) | binary (with the input's header and attribute bytes when it came from binary STL); ASCII with the input's solid names when it came from ASCII STL |
@@ -67,7 +67,7 @@
 //! corners, truncated data, trailing non-whitespace after the data, a missing `end_header`, tokens
 //! that are not numbers, unknown formats, and any file in which nothing was recognised: anything
 //! but a regular file (a directory, a device such as `/dev/zero`, a named pipe), a file of zero
-//! bytes, compressed data or an archive, UTF-16 or UTF-32 text, lines ending in a bare carriage
+//! bytes, compressed data (but gzip) or an archive, UTF-16 or UTF-32 text, lines ending in a bare carriage
 //! return, an OBJ without a single `v` or `f` statement or with a line that starts with something
 //! other than a keyword (binary data, prose with punctuation). Each says what the file looks like,
 //! e.g. `gzip-compressed data: decompress it first`. A well-formed empty mesh (`OFF` with
@@ -101,6 +101,7 @@ mod atomic;
 mod detect;
 mod digest;
 mod gltf;
+mod gzip;
 mod obj;
 mod off;
 mod ply;
@@ -112,6 +113,7 @@ mod text;
 pub(crate) use atomic::{Destination, destination, write_atomically};
 pub use digest::{Sha256, sha256_counted, sha256_file};
 pub(crate) use gltf::{buffer_name_of, referenced_files};
+pub(crate) use gzip::has_gz_extension as is_gz_name;
 
 use std::fs::File;
 use std::io::{Read, Write};
@@ -132,6 +134,17 @@ pub(crate) use text::{
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
 use crate::meter::{Counted, Meter};
+
+/// The size of the bytes an input file holds: its length, or for a gzip-compressed file a guess
+/// at its decompressed length (see `gzip`), for the choice between memory and scratch.
+pub fn content_size(path: &Path) -> Result<u64> {
+    match gzip::guessed_size(path) {
+        Some(size) => Ok(size),
+        None => Ok(std::fs::metadata(path)
+            .map_err(|e| Error::io(path, e))?
+            .len()),
+    }
+}
 
 /// Read a mesh file onto the heap.
 pub fn read_mesh(path: &Path) -> Result<Mesh> {
@@ -391,12 +404,25 @@ fn write_mesh_counted(
                 })
             }
             Format::Stl => stl::check_writable(mesh),
+            Format::Gltf | Format::Glb if gzip::has_gz_extension(path) => Err(
+                "a glTF output is not gzip-compressed (its buffers are separate files or in a \
+                 .glb): drop the .gz"
+                    .to_string(),
+            ),
             Format::Gltf | Format::Glb => gltf::check_writable(mesh, format),
         })
         .map_err(|what| Error::invalid(path, format!("cannot write: {what}")))?;
     if let Format::Gltf | Format::Glb = format {
         // Also writes buffer files beside the output, each atomically.
         return gltf::write(path, mesh, values.and_then(|v| v.colours));
+    }
+    if gzip::has_gz_extension(path) {
+        // The meter counts the bytes before compression: the estimate it started from is theirs.
+        return atomic::write_atomically(path, |out| {
+            let mut gz = gzip::encoder(out);
+            write_as(format, &mut Counted::new(&mut gz, meter), mesh, values)?;
+            gz.finish().map(|_| ())
+        });
     }
     atomic::write_atomically(path, |out| {
         write_as(format, &mut Counted::new(out, meter), mesh, values)
@@ -573,20 +599,45 @@ fn read_open(
     Read::take(&mut *file, detect::HEAD as u64)
         .read_to_end(&mut head)
         .map_err(|e| Error::io(path, e))?;
+    if gzip::is_gzip(&head) {
+        // The compressed bytes are what `meter` counts; the decode of what they hold is not.
+        let contents = match gzip::inflate(file, path, storage, meter)? {
+            gzip::Inflated::Memory(bytes) => Contents::Read(bytes),
+            gzip::Inflated::Scratch(mut scratch, len) => {
+                std::io::Seek::rewind(&mut scratch).map_err(|e| Error::io(path, e))?;
+                Contents::load(&mut scratch, Vec::new(), len).map_err(|e| Error::io(path, e))?
+            }
+        };
+        let len = contents.len() as u64;
+        let format = detect::detect_inner(&contents, len, path)
+            .map_err(|what| Error::invalid(path, what))?;
+        return decode_contents(&contents, format, path, storage, &Meter::default());
+    }
     let format = detect::detect(&head, len, path).map_err(|what| Error::invalid(path, what))?;
     let contents = Contents::load(file, head, len).map_err(|e| Error::io(path, e))?;
+    decode_contents(&contents, format, path, storage, meter)
+}
+
+/// Decodes a whole input's bytes with the reader of `format`.
+fn decode_contents(
+    contents: &Contents,
+    format: Format,
+    path: &Path,
+    storage: &crate::mesh::Storage,
+    meter: &Meter,
+) -> Result<Mesh> {
     match format {
-        Format::Ply => ply::read_metered(&contents, storage, meter).map_err(|e| match e {
+        Format::Ply => ply::read_metered(contents, storage, meter).map_err(|e| match e {
             ply::ReadError::Invalid(what) => Error::invalid(path, what),
             ply::ReadError::Storage(e) => e,
         }),
         // External buffers are relative to the file's directory.
         Format::Gltf | Format::Glb => {
             let dir = path.parent().unwrap_or(Path::new(""));
-            gltf::read(&contents, format == Format::Glb, Some(dir))
+            gltf::read(contents, format == Format::Glb, Some(dir))
                 .map_err(|what| Error::invalid(path, what))
         }
-        format => decode(&contents, format).map_err(|what| Error::invalid(path, what)),
+        format => decode(contents, format).map_err(|what| Error::invalid(path, what)),
     }
 }
 
@@ -620,6 +671,13 @@ fn read_stream(file: &mut File, path: &Path) -> Result<Mesh> {
             Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
             Err(e) => return Err(Error::io(path, e)),
         };
+        if !checked && gzip::is_gzip(&bytes) && (bytes.len() >= 2 || n == 0) {
+            let mut rest =
+                flate2::read::MultiGzDecoder::new(std::io::Cursor::new(bytes).chain(file));
+            let inflated = gzip::inflate_in_memory(&mut rest, detect::STREAM_LIMIT)
+                .map_err(|failure| Error::invalid(path, failure.message()))?;
+            return parse(&inflated, path).map_err(|what| Error::invalid(path, what));
+        }
         if !checked && (bytes.len() >= detect::HEAD || n == 0) {
             // What the first bytes show decides now; only a binary STL has no signature, and
             // then its triangle count bounds the read.
@@ -672,6 +730,15 @@ fn read_stream(file: &mut File, path: &Path) -> Result<Mesh> {
 
 /// Decode a whole file's bytes; the error is the message without the path.
 fn parse(bytes: &[u8], path: &Path) -> std::result::Result<Mesh, String> {
+    if gzip::is_gzip(bytes) {
+        let inflated =
+            gzip::inflate_in_memory(&mut flate2::read::MultiGzDecoder::new(bytes), u64::MAX)
+                .map_err(|failure| failure.message())?;
+        return decode(
+            &inflated,
+            detect::detect_inner(&inflated, inflated.len() as u64, path)?,
+        );
+    }
     decode(bytes, detect::detect(bytes, bytes.len() as u64, path)?)
 }
 

@@ -85,8 +85,14 @@ pub fn write_ply_streamed_in(
     let layout = records.layout(n_vertices, n_triangles, meta);
 
     let mut refused = None;
-    let written = atomic::write_atomically(path, |out| {
-        ply::write_header(out, &layout, |_, el| el.count, None)?;
+    let gz = super::gzip::has_gz_extension(path);
+    let written = atomic::write_atomically(path, |file| {
+        let mut compressed = None;
+        let out: &mut dyn Write = match gz {
+            true => compressed.insert(super::gzip::encoder(file)),
+            false => file,
+        };
+        ply::write_header(&mut &mut *out, &layout, |_, el| el.count, None)?;
         let mut stream = PlyStream {
             out,
             records,
@@ -99,7 +105,11 @@ pub fn write_ply_streamed_in(
         };
         let result = produce(&mut stream).and_then(|()| stream.finish());
         refused = stream.refused.take();
-        result
+        result?;
+        match compressed {
+            Some(gz) => gz.finish().map(|_| ()),
+            None => Ok(()),
+        }
     });
     match (written, refused) {
         (Err(_), Some(what)) => Err(Error::invalid(path, format!("cannot write: {what}"))),

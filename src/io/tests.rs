@@ -1227,9 +1227,9 @@ fn unrecognised_bytes_are_refused_under_every_name() {
             "the file is 300 zero bytes: not a mesh file",
         ),
         (
-            "gzip",
-            [&b"\x1f\x8b\x08\x00"[..], &obj].concat(),
-            "gzip-compressed data: decompress it first",
+            "xz",
+            [&b"\xfd7zXZ\x00"[..], &obj].concat(),
+            "xz-compressed data: decompress it first",
         ),
         ("utf16", utf16.clone(), "UTF-16 text: save it as UTF-8"),
         (
@@ -1583,4 +1583,260 @@ fn round_within_keeps_the_bound_for_every_stored_type() {
     }
     // The nearest stored value is beyond the bound for many of them: the rule did work.
     assert!(moved > 1000, "{moved}");
+}
+
+// ---------------------------------------------------------------------------------------------
+// gzip
+
+fn gz(bytes: &[u8]) -> Vec<u8> {
+    let mut e = gzip::encoder(Vec::new());
+    e.write_all(bytes).unwrap();
+    e.finish().unwrap()
+}
+
+fn same_mesh(a: &Mesh, b: &Mesh) -> bool {
+    a.positions[..] == b.positions[..] && a.triangles[..] == b.triangles[..]
+}
+
+#[test]
+fn gzip_inputs_read_as_what_they_hold_in_memory_in_scratch_and_from_a_stream() {
+    let dir = tempfile::tempdir().unwrap();
+    for name in ["o.ply", "o.obj", "o.off", "o.stl"] {
+        let plain = write_bytes(&octahedron(), name);
+        let want = parse_as(&plain, name).unwrap();
+        let packed = gz(&plain);
+        // Bytes: named with `.gz` or as the format (OBJ has no signature: its name tells).
+        for n in [format!("{name}.gz"), name.to_string()] {
+            assert!(same_mesh(&parse_as(&packed, &n).unwrap(), &want), "{n}");
+        }
+        // Two members one after another are one stream, as zcat reads them.
+        let (a, b) = plain.split_at(plain.len() / 3);
+        let members = [gz(a), gz(b)].concat();
+        assert!(same_mesh(
+            &parse_as(&members, &format!("{name}.gz")).unwrap(),
+            &want
+        ));
+        // Files: onto the heap, into scratch files (an out-of-core run), and read again.
+        let path = dir.path().join(format!("{name}.gz"));
+        std::fs::write(&path, &members).unwrap();
+        assert!(same_mesh(&read_mesh(&path).unwrap(), &want), "{name}");
+        let scratch = crate::mesh::Storage::scratch(dir.path()).unwrap();
+        let meter = Meter::new(members.len() as u64);
+        let (mesh, kept) = read_mesh_kept(&path, &scratch, &meter).unwrap();
+        assert!(same_mesh(&mesh, &want), "{name} in scratch");
+        assert_eq!(
+            meter.done(),
+            members.len() as u64,
+            "the compressed bytes are counted"
+        );
+        let again = kept
+            .unwrap()
+            .read_again(&scratch, &Meter::default())
+            .unwrap();
+        assert!(same_mesh(&again, &want));
+        // A pipe.
+        #[cfg(unix)]
+        {
+            let fifo = dir.path().join(format!("pipe-{name}"));
+            let made = std::process::Command::new("mkfifo")
+                .arg(&fifo)
+                .status()
+                .unwrap();
+            assert!(made.success());
+            let writer = {
+                let (fifo, members) = (fifo.clone(), members.clone());
+                std::thread::spawn(move || std::fs::write(fifo, members).unwrap())
+            };
+            let from_pipe = read_mesh(&fifo);
+            writer.join().unwrap();
+            assert!(same_mesh(&from_pipe.unwrap(), &want), "{name} from a pipe");
+        }
+    }
+    // Nothing of the scratch files is left behind.
+    let left: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().contains("scratch"))
+        .collect();
+    assert!(left.is_empty(), "{left:?}");
+}
+
+#[test]
+fn damaged_gzip_inputs_say_what_is_wrong() {
+    let plain = write_bytes(&octahedron(), "o.ply");
+    let packed = gz(&plain);
+    let cut = &packed[..packed.len() - 10];
+    let mut bad_crc = packed.clone();
+    let n = bad_crc.len();
+    bad_crc[n - 8] ^= 1;
+    let mut bad_data = packed.clone();
+    bad_data[12] ^= 0xff;
+    let twice = gz(&packed);
+    let empty = gz(b"");
+    for (what, bytes, message) in [
+        (
+            "cut",
+            cut.to_vec(),
+            "gzip data ends early: the file is cut short",
+        ),
+        ("crc", bad_crc, "gzip data is damaged ("),
+        ("data", bad_data, "gzip data is damaged ("),
+        (
+            "twice",
+            twice,
+            "gzip-compressed twice: decompress the outer layer first",
+        ),
+        ("empty", empty, "gzip-compressed, and holds nothing"),
+        ("header only", b"\x1f\x8b".to_vec(), "gzip data "),
+    ] {
+        let e = parse_as(&bytes, "o.ply.gz").map(|_| ()).unwrap_err();
+        assert!(e.starts_with(message) && !e.contains('\n'), "{what}: {e}");
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("o.ply.gz");
+        std::fs::write(&path, &bytes).unwrap();
+        let e = read_mesh(&path).map(|_| ()).unwrap_err().to_string();
+        assert!(
+            e.contains("o.ply.gz: ") && e.contains(message),
+            "{what}: {e}"
+        );
+    }
+}
+
+#[test]
+fn gz_outputs_are_compressed_and_hold_the_plain_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    let mesh = octahedron();
+    for name in ["o.ply", "o.obj", "o.off", "o.stl"] {
+        let plain = write_bytes(&mesh, name);
+        let path = dir.path().join(format!("{name}.gz"));
+        write_mesh(&path, &mesh).unwrap();
+        let packed = std::fs::read(&path).unwrap();
+        assert!(gzip::is_gzip(&packed), "{name}");
+        let mut inflated = Vec::new();
+        flate2::read::GzDecoder::new(&packed[..])
+            .read_to_end(&mut inflated)
+            .unwrap();
+        assert_eq!(inflated, plain, "{name}");
+        assert_eq!(
+            Format::from_extension(&path),
+            Format::from_extension(Path::new(name))
+        );
+    }
+    // The streamed writer too.
+    let streamed = dir.path().join("s.ply.gz");
+    write_ply_streamed_in(&streamed, Precision::Float, 6, 8, &[], |out| {
+        for p in mesh.positions.iter() {
+            out.vertex(*p)?;
+        }
+        for t in mesh.triangles.iter() {
+            out.triangle(*t)?;
+        }
+        Ok(())
+    })
+    .unwrap();
+    let back = read_mesh(&streamed).unwrap();
+    assert_eq!(back.triangles[..], mesh.triangles[..]);
+    // glTF is refused, and nothing is written.
+    let glb = dir.path().join("o.glb.gz");
+    let e = write_mesh(&glb, &mesh).unwrap_err().to_string();
+    assert!(e.contains("drop the .gz"), "{e}");
+    assert!(!glb.exists());
+}
+
+// ---------------------------------------------------------------------------------------------
+// Triangle strips
+
+/// A PLY of the octahedron's vertices and `strips` (one record each) in a `tristrips` element.
+fn strips_ply(ascii: bool, strips: &[&[i32]]) -> Vec<u8> {
+    let m = octahedron();
+    let format = if ascii {
+        "ascii"
+    } else {
+        "binary_little_endian"
+    };
+    let mut out = format!(
+        "ply\nformat {format} 1.0\nelement vertex 6\nproperty double x\nproperty double y\n\
+         property double z\nelement tristrips {}\nproperty list int int vertex_indices\n\
+         end_header\n",
+        strips.len()
+    )
+    .into_bytes();
+    for p in m.positions.iter() {
+        if ascii {
+            out.extend(format!("{} {} {}\n", p.x, p.y, p.z).bytes());
+        } else {
+            p.to_array()
+                .iter()
+                .for_each(|c| out.extend(c.to_le_bytes()));
+        }
+    }
+    for s in strips {
+        if ascii {
+            let ids: Vec<String> = s.iter().map(|v| v.to_string()).collect();
+            out.extend(format!("{} {}\n", s.len(), ids.join(" ")).bytes());
+        } else {
+            out.extend((s.len() as i32).to_le_bytes());
+            s.iter().for_each(|v| out.extend(v.to_le_bytes()));
+        }
+    }
+    out
+}
+
+#[test]
+fn triangle_strips_become_triangles_of_one_orientation_and_are_written_back() {
+    // Triangle k of a strip v0 v1 v2 … is (vk, vk+1, vk+2), every odd one turned to
+    // (vk+1, vk, vk+2): 0 1 2 3 → (0,1,2) (2,1,3); after the restart 1 0 5 3 4 → (1,0,5) (5,0,3)
+    // (5,3,4).
+    let strip: &[i32] = &[0, 1, 2, 3, -1, 1, 0, 5, 3, 4, 4, 4, 5];
+    let want = vec![
+        [0, 1, 2],
+        [2, 1, 3],
+        [1, 0, 5],
+        [5, 0, 3],
+        [5, 3, 4],
+        // 3 4 4, 4 4 4 and 4 4 5 repeat a vertex: joins, left out.
+    ];
+    for ascii in [false, true] {
+        let bytes = strips_ply(ascii, &[strip, &[4, 3, 5]]);
+        let mesh = parse_as(&bytes, "s.ply").unwrap();
+        let mut all = want.clone();
+        all.push([4, 3, 5]);
+        assert_eq!(mesh.triangles[..], all[..], "ascii {ascii}");
+        // Written back: the strips as they were, only the positions new.
+        let mut moved = mesh.clone();
+        for p in moved.positions.iter_mut() {
+            *p *= 2.0;
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("s.ply");
+        write_mesh(&path, &moved).unwrap();
+        let out = std::fs::read(&path).unwrap();
+        let header_end = |b: &[u8]| b.windows(11).position(|w| w == b"end_header\n").unwrap();
+        assert_eq!(out[..header_end(&out)], bytes[..header_end(&bytes)]);
+        let back = read_mesh(&path).unwrap();
+        assert_eq!(back.triangles[..], all[..]);
+        assert_eq!(back.positions[..], moved.positions[..]);
+        // Other connectivity cannot be written as those strips.
+        let mut other = mesh.clone();
+        other.triangles.truncate(2);
+        let e = write_mesh(&path, &other).unwrap_err().to_string();
+        assert!(e.contains("triangle strips"), "{e}");
+    }
+    // Bad ids are named; a face element beside strips is refused.
+    let e = parse_as(&strips_ply(true, &[&[0, 1, 6]]), "s.ply")
+        .map(|_| ())
+        .unwrap_err();
+    assert!(e.contains("tristrips 0") && e.contains("6"), "{e}");
+    let e = parse_as(&strips_ply(true, &[&[0, 1, -2]]), "s.ply")
+        .map(|_| ())
+        .unwrap_err();
+    assert!(e.contains("tristrips 0") && e.contains("-2"), "{e}");
+    let both = String::from_utf8(strips_ply(true, &[&[0, 1, 2]]))
+        .unwrap()
+        .replace(
+            "end_header",
+            "element face 0\nproperty list uchar int vertex_indices\nend_header",
+        );
+    let e = parse_as(both.as_bytes(), "s.ply").map(|_| ()).unwrap_err();
+    assert!(e.contains("both a face and a tristrips element"), "{e}");
 }

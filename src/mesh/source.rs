@@ -22,9 +22,16 @@ pub enum Format {
 }
 
 impl Format {
-    /// The format a file name's extension stands for (`.ply .obj .off .stl .gltf .glb`, any case).
+    /// The format a file name's extension stands for (`.ply .obj .off .stl .gltf .glb`, any case),
+    /// looking through a final `.gz` (`scan.ply.gz` is PLY, gzip-compressed).
     pub fn from_extension(path: &Path) -> Option<Format> {
-        let ext = path.extension()?.to_str()?.to_ascii_lowercase();
+        let mut ext = path.extension()?.to_str()?.to_ascii_lowercase();
+        if ext == "gz" {
+            ext = Path::new(path.file_stem()?)
+                .extension()?
+                .to_str()?
+                .to_ascii_lowercase();
+        }
         match ext.as_str() {
             "ply" => Some(Format::Ply),
             "obj" => Some(Format::Obj),

@@ -190,6 +190,23 @@ impl Storage {
         })
     }
 
+    /// An empty file in the scratch directory, already unlinked (nothing is left behind on any
+    /// exit), for data of a size not known in advance (a decompressed input); `None` on the heap.
+    pub(crate) fn unnamed_file(&self) -> Option<Result<std::fs::File>> {
+        let dir = self.scratch.as_ref()?;
+        let n = self.counter.fetch_add(1, Ordering::Relaxed);
+        let path = dir.join(format!(".vcsmooth-scratch-{}-{n}", std::process::id()));
+        let made = Temporary::create(path.clone(), |p| {
+            OpenOptions::new()
+                .read(true)
+                .write(true)
+                .create_new(true)
+                .open(p)
+        })
+        .and_then(|(temp, file)| temp.remove().map(|()| file));
+        Some(made.map_err(|e| Error::io(&path, e)))
+    }
+
     /// A zero-filled working array that is dropped soon after use: on the heap, an anonymous
     /// mapping ([`Buf::sparse`]) whose pages go back to the system when it is dropped. A freed heap
     /// block below glibc's mapping threshold (up to 32 MiB) stays with the process for reuse, and

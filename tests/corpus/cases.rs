@@ -515,25 +515,55 @@ pub fn octa_with_bom() -> Vec<(&'static str, Vec<u8>)> {
     ]
 }
 
+/// `bytes`, gzip-compressed.
+fn gz(bytes: &[u8]) -> Vec<u8> {
+    use std::io::Write;
+    let mut e = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+    e.write_all(bytes).unwrap();
+    e.finish().unwrap()
+}
+
 /// Files in which no mesh format is recognised, or whose text encoding is not one the readers
 /// take: each refused with what it looks like, never read as an empty mesh. And the text quirks
 /// that are accepted (a UTF-8 byte-order mark, keywords in any case, `-0.0` in STL).
 fn recognition() -> Vec<Case> {
+    // `v 0 0 0`, `v 1 0 0`, `v 0 1 0`, `f 1 2 3`, gzip-compressed.
     const GZIP: &[u8] = b"\x1f\x8b\x08\x00\x00\x00\x00\x00\x02\x03\x2b\x53\x30\x00\x41\xae\x32\x05\x43\x28\x6d\x00\x62\x71\xa5\x01\x49\x23\x05\x63\x2e\x00\x43\xf9\x6e\x2a\x20\x00\x00\x00";
+    // GZIP compressed again.
+    const GZIP_TWICE: &[u8] = b"\x1f\x8b\x08\x00\x00\x00\x00\x00\x02\x03\x93\xef\xe6\x60\x00\x01\x26\x66\xed\x60\x03\x06\xc7\x75\x46\xac\xce\x1a\xb9\x0c\x49\x85\x4b\x19\x3d\x95\x59\x93\xf5\x18\x9c\x7f\xe6\x69\x29\x00\xe5\x01\xf8\xac\x4e\x2d\x28\x00\x00\x00";
     let junk =
         |magic: &[u8]| [magic, &b"\x00\x17\xa9junk that follows a magic number"[..]].concat();
     let obj = octa_obj("\n");
-    let gzip = "gzip-compressed data: decompress it first";
     let in_utf16 = "UTF-16 text: save it as UTF-8";
     let bare_cr =
         "lines end with a bare carriage return (classic Mac OS): convert the line endings to LF";
     let no_obj = "no OBJ vertex or face found";
     let mut cases = vec![
         // --- compressed data and archives, whatever the name
-        error("gzip.obj", GZIP, gzip),
-        error("gzip.ply", GZIP, gzip),
-        error("gzip.stl", GZIP, gzip),
-        error("mesh.obj.gz", GZIP, gzip),
+        // --- gzip: what it holds is read (an OBJ here), whatever the name; damage is named
+        valid("gzip.obj", gz(&obj)),
+        valid("mesh.obj.gz", gz(&obj)),
+        valid("mesh.ply.gz", gz(&octa_ply(&[]))),
+        error(
+            "gzip.ply",
+            GZIP,
+            "not a PLY file (the first line is not 'ply')",
+        ),
+        error(
+            "gzip.stl",
+            GZIP,
+            "not an STL file: text that does not start with 'solid'",
+        ),
+        error(
+            "cut.obj.gz",
+            &GZIP[..GZIP.len() - 12],
+            "gzip data ends early: the file is cut short",
+        ),
+        error(
+            "twice.obj.gz",
+            GZIP_TWICE,
+            "gzip-compressed twice: decompress the outer layer first",
+        ),
         error(
             "zip.obj",
             junk(b"PK\x03\x04"),

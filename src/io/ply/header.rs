@@ -232,11 +232,20 @@ pub(crate) fn header_counts(path: &std::path::Path) -> Option<(u64, u64)> {
         return None;
     }
     let mut head = Vec::new();
-    std::fs::File::open(path)
-        .ok()?
+    let mut file = std::fs::File::open(path).ok()?;
+    (&mut file)
         .take(MAX_HEADER as u64)
         .read_to_end(&mut head)
         .ok()?;
+    if crate::io::gzip::is_gzip(&head) {
+        // A `.ply.gz`: the header is the start of what it holds.
+        std::io::Seek::rewind(&mut file).ok()?;
+        head.clear();
+        // A header cut short by the limit fails to parse below, as it would uncompressed.
+        let _ = flate2::read::MultiGzDecoder::new(std::io::BufReader::new(file))
+            .take(MAX_HEADER as u64)
+            .read_to_end(&mut head);
+    }
     if !has_magic(crate::io::without_bom(&head)) {
         return None;
     }
@@ -414,16 +423,21 @@ fn word(w: &[u8]) -> Result<String, String> {
     }
 }
 
-/// Where the mesh lives in the elements: the vertex element with its `x y z`, the face element.
+/// Where the mesh lives in the elements: the vertex element with its `x y z`, the face element,
+/// or instead of it triangle strips.
 pub(super) struct Roles {
     pub(super) vertex: usize,
     /// The vertex count, which fits 32-bit indices.
     pub(super) vertices: u32,
     pub(super) xyz: [usize; 3],
     pub(super) face: Option<FaceRole>,
+    /// A `tristrips` element (as Stanford's and Cyberware's scans have): each record one or more
+    /// strips of vertex ids, `-1` starting a new one. Its records are always kept and written
+    /// back as they are: smoothing changes no connectivity.
+    pub(super) strips: Option<FaceRole>,
 }
 
-/// The face element, its index list property and the list's count and index types.
+/// The face (or strips) element, its index list property and the list's count and index types.
 #[derive(Clone, Copy)]
 pub(super) struct FaceRole {
     pub(super) element: usize,
@@ -452,35 +466,17 @@ impl Roles {
                 .filter(|&k| matches!(v.props[k].kind, Kind::Scalar(_)))
                 .ok_or_else(|| format!("the vertex element has no scalar property '{name}'"))?;
         }
-        let face = match elements.iter().position(|e| e.name == "face") {
-            None => None,
-            Some(f) => {
-                let el = &elements[f];
-                let list = el
-                    .prop("vertex_indices")
-                    .or_else(|| el.prop("vertex_index"))
-                    .ok_or("the face element has no 'vertex_indices' property")?;
-                match el.props[list].kind {
-                    Kind::List(count, index) if index.int_range().is_some() => Some(FaceRole {
-                        element: f,
-                        list,
-                        count,
-                        index,
-                    }),
-                    _ => {
-                        return Err(format!(
-                            "'{}' is not a list of integers",
-                            el.props[list].name
-                        ));
-                    }
-                }
-            }
-        };
+        let face = index_lists(elements, "face")?;
+        let strips = index_lists(elements, "tristrips")?;
+        if face.is_some() && strips.is_some() {
+            return Err("both a face and a tristrips element: only one of them is read".into());
+        }
         Ok(Roles {
             vertex,
             vertices,
             xyz,
             face,
+            strips,
         })
     }
 
@@ -494,6 +490,30 @@ impl Roles {
         } else {
             self.face.is_some_and(|f| f.element == e) && el.props.len() == 1
         }
+    }
+}
+
+/// The element called `name` and its list of vertex ids, if the file has that element.
+fn index_lists(elements: &[Element], name: &str) -> Fallible<Option<FaceRole>> {
+    let Some(e) = elements.iter().position(|e| e.name == name) else {
+        return Ok(None);
+    };
+    let el = &elements[e];
+    let list = el
+        .prop("vertex_indices")
+        .or_else(|| el.prop("vertex_index"))
+        .ok_or_else(|| format!("the {name} element has no 'vertex_indices' property"))?;
+    match el.props[list].kind {
+        Kind::List(count, index) if index.int_range().is_some() => Ok(Some(FaceRole {
+            element: e,
+            list,
+            count,
+            index,
+        })),
+        _ => Err(format!(
+            "'{}' is not a list of integers",
+            el.props[list].name
+        )),
     }
 }
 

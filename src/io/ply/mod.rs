@@ -99,6 +99,10 @@ impl crate::mesh::FileLayout for PlyLayout {
         face_of: &[u32],
     ) -> Option<std::sync::Arc<dyn crate::mesh::FileLayout>> {
         let roles = header::Roles::find(&self.elements).ok()?;
+        // Strips cannot be split: the subdivided mesh is written as plain faces.
+        if roles.strips.is_some() {
+            return None;
+        }
         let mut elements = Vec::with_capacity(self.elements.len());
         for (e, el) in self.elements.iter().enumerate() {
             let mut el = el.clone();

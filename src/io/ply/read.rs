@@ -253,6 +253,12 @@ impl Decoded<'_> {
             )?;
             self.faces = Some(faces);
             len
+        } else if let Some(strips) = roles.strips.filter(|s| s.element == e) {
+            let mut faces = FaceBuilder::with_capacity(0);
+            let len = decode_strips(&data, el, strips, roles.vertices, origin, &mut faces)?;
+            self.meter.add(len as u64);
+            self.faces = Some(faces);
+            len
         } else {
             extent(&data, el, origin)?
         };
@@ -597,6 +603,56 @@ fn faces_any(
             corners.push(v as u32);
         }
         faces.polygon(&corners);
+        pos = end;
+    }
+    Ok(pos)
+}
+
+/// Decodes triangle strips into triangles, validating every id against the `vertices` count;
+/// returns the element's length in bytes. In a strip `v0 v1 v2 v3 …` triangle `k` is
+/// `(vk, vk+1, vk+2)`, every second one turned (`(vk+1, vk, vk+2)`) so that all keep one
+/// orientation; `-1` ends a strip and starts the next. Triangles with a repeated vertex only join
+/// strips together and are left out, as MeshLab leaves them out.
+pub(super) fn decode_strips(
+    data: &[u8],
+    el: &Element,
+    strips: FaceRole,
+    vertices: u32,
+    origin: Origin,
+    faces: &mut FaceBuilder,
+) -> Fallible<usize> {
+    let FaceRole {
+        list,
+        count,
+        index: item,
+        ..
+    } = strips;
+    let mut fields = Vec::new();
+    let mut pos = 0;
+    for i in 0..el.count {
+        let end = walk_record(data, pos, &el.props, false, &mut fields)
+            .map_err(|e| walk_failed(el, i, origin, pos, e))?;
+        let Field { at, n } = fields[list];
+        // The last two ids of the strip so far, and its length.
+        let (mut a, mut b, mut run) = (0u32, 0u32, 0usize);
+        for k in 0..n {
+            // In bounds: `walk_record` checked the list; an integer type converts exactly.
+            let v = item
+                .get(&data[at + count.size() + k * item.size()..])
+                .unwrap_or(-2.0) as i64;
+            if v == -1 {
+                run = 0;
+                continue;
+            }
+            if !(0..i64::from(vertices)).contains(&v) {
+                return Err(fail(el, i, origin, pos, bad_index(v, vertices as usize)));
+            }
+            let c = v as u32;
+            if run >= 2 && a != b && b != c && a != c {
+                faces.triangle(if run % 2 == 0 { [a, b, c] } else { [b, a, c] });
+            }
+            (a, b, run) = (b, c, run + 1);
+        }
         pos = end;
     }
     Ok(pos)

@@ -6,7 +6,7 @@ use std::io::{self, Write};
 use glam::DVec3;
 
 use super::header::{Element, FaceRole, Kind, Property, Roles, Scalar, walk_record};
-use super::read::{Origin, decode_faces};
+use super::read::{Origin, decode_faces, decode_strips};
 use super::{Fallible, PlyEncoding, PlyLayout, ascii};
 use crate::io::{FaceBuilder, Faces, Precision, VertexValues, vertex_normals};
 use crate::mesh::Mesh;
@@ -164,6 +164,29 @@ pub(crate) fn check_writable(mesh: &Mesh) -> Fallible<()> {
                 t.name()
             ));
         }
+    }
+    if let Some(strips) = roles.strips {
+        let el = &layout.elements[strips.element];
+        let mut faces = FaceBuilder::with_capacity(0);
+        let same = el.records.as_ref().is_some_and(|records| {
+            decode_strips(
+                records,
+                el,
+                strips,
+                roles.vertices,
+                Origin::Byte(0),
+                &mut faces,
+            )
+            .is_ok_and(|_| faces.triangles() == &mesh.triangles[..])
+        });
+        if !same {
+            return Err(
+                "the triangles no longer match the PLY source's triangle strips; clear \
+                 mesh.source.layout after changing connectivity"
+                    .into(),
+            );
+        }
+        return Ok(());
     }
     let Some(face) = roles.face else {
         if !mesh.triangles.is_empty() {
