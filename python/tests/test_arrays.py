@@ -226,7 +226,10 @@ def test_indices_out_of_range(kitten):
         (dict(threads=0), r"^threads must be in 1..=4096"),
         (dict(threads=5000), r"^threads must be in 1..=4096"),
         (dict(patch_size=0), r"^patch_size must be in"),
-        (dict(iterations=-1), r"^iterations is out of range"),
+        (dict(iterations=-1), r'^iterations must be a non-negative integer or "auto", got -1$'),
+        (dict(iterations=10**30), r'^iterations must be a non-negative integer or "auto", got 1000000000000000000000000000000$'),
+        (dict(threads=-2), r"^threads must be a positive integer or None, got -2$"),
+        (dict(patch_size=-5), r"^patch_size must be a positive integer, got -5$"),
         (dict(method="smoothest"), r"unknown method 'smoothest'"),
         (dict(stats="some"), r"stats must be 'every' or 'last'"),
     ],
@@ -240,9 +243,16 @@ def test_wrong_keywords_and_types(kitten):
     v, f = kitten
     bad(TypeError, r"smooth\(\) got an unexpected keyword argument 'lambda'", v, f, **{"lambda": 0.5})
     bad(TypeError, r"unexpected keyword argument 'memory_budget'", v, f, memory_budget="1G")
-    bad(TypeError, r"^iterations: ", v, f, iterations=2.5)
-    bad(ValueError, r"^iterations must be a whole number or 'auto', got 'ten'", v, f, iterations="ten")
-    bad(TypeError, r"^method: ", v, f, method=3)
+    bad(TypeError, r'^iterations must be a non-negative integer or "auto", got 2.5$', v, f, iterations=2.5)
+    # A bool is an int to Python, but never a count.
+    bad(TypeError, r'^iterations must be a non-negative integer or "auto", got True$', v, f, iterations=True)
+    bad(ValueError, r'^iterations must be a non-negative integer or "auto", got \'ten\'$', v, f, iterations="ten")
+    bad(TypeError, r"^method must be one of vcsmooth.METHODS, got 3$", v, f, method=3)
+    bad(TypeError, r"^lam must be a number, got 'x'$", v, f, lam="x")
+    bad(TypeError, r"^weld must be True or False, got 'no'$", v, f, weld="no")
+    bad(TypeError, r'^stats must be "every" or "last", got 1$', v, f, stats=1)
+    # NumPy's integers are counts.
+    assert np.array_equal(vcsmooth.smooth(v, f, iterations=np.int64(2)), vcsmooth.smooth(v, f, iterations=2))
     with pytest.raises(TypeError, match=r"smooth_report\(\) got an unexpected keyword argument 'report'"):
         vcsmooth.smooth_report(v, f, report="r.json")
 
@@ -308,7 +318,7 @@ def test_boundary_smooth_moves_the_rims_and_refuses_the_jacobi_methods():
 @pytest.mark.parametrize(
     "kwargs, match",
     [
-        (dict(iterations="sometimes"), r"iterations must be a whole number or 'auto'"),
+        (dict(iterations="sometimes"), r'iterations must be a non-negative integer or "auto"'),
         (dict(boundary="wavy"), r"boundary: unknown boundary mode 'wavy'"),
     ],
 )

@@ -68,6 +68,8 @@ def test_smooth_file_pins_and_budget(tmp_path, kitten_path):
     assert np.array_equal(w[[5, 6]], v[[5, 6]])
     with pytest.raises(ValueError, match="memory_budget"):
         vcsmooth.smooth_file(kitten_path, out, memory_budget=1000)
+    with pytest.raises(ValueError, match=r'^memory_budget must be a number of bytes, a size such as "2G", or None, got -1$'):
+        vcsmooth.smooth_file(kitten_path, out, memory_budget=-1)
     with pytest.raises(ValueError, match="cannot both be given"):
         vcsmooth.smooth_file(kitten_path, out, pin=pins, pinned=[1])
 
