@@ -1,6 +1,8 @@
-# Type stubs of the native module; `vcsmooth/__init__.py` re-exports every name. The keyword
-# arguments are keyword-only (the native functions take them as **options) and mirror the
-# `vcsmooth smooth` flags; their defaults are the library's (see help(vcsmooth.smooth)).
+# Type stubs of the native module. The package's functions (vcsmooth/_api.py) wrap these with
+# the same keywords and defaults (tests/test_package.py checks both against the native calls)
+# and take mesh objects and polygons too; the native ones take (n, 3) vertices and (m, 3)
+# triangles. The keyword arguments are keyword-only (the native functions take them as
+# **options) and mirror the `vcsmooth smooth` flags; their defaults are the library's.
 from os import PathLike
 from typing import Any, Dict, Literal, Optional, Tuple, Union
 
@@ -75,6 +77,10 @@ def smooth_file(
     stats: Literal["every", "last"] = "every",
     memory_budget: Union[int, str, None] = None,
     scratch: Optional[_Path] = None,
+    deviation_field: bool = False,
+    deviation_colours: bool = False,
+    deviation_stats: bool = False,
+    tolerance: Optional[float] = None,
     report: Optional[_Path] = None,
     progress: bool = False,
 ) -> _Report: ...
