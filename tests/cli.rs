@@ -1228,6 +1228,44 @@ fn a_run_says_when_most_vertices_cannot_move() {
     );
     assert!(std::fs::read(&out).is_ok());
 
+    // Corners an exporter rounded apart (each copy a few micrometres off; edges are about 0.1):
+    // exact welding leaves them, and the warning says how to weld them; a tolerance welds them.
+    let mut rounded = soup.clone();
+    for (i, p) in rounded.positions.iter_mut().enumerate() {
+        *p += glam::DVec3::new(1.0, -1.0, 0.5) * (i % 3) as f64 * 2e-6;
+    }
+    let jittered = dir.path().join("rounded.ply");
+    vcsmooth::io::write_mesh(&jittered, &rounded).unwrap();
+    let err = run(&jittered, &[]);
+    assert!(
+        err.contains("none of the") && err.contains("--weld-tolerance D"),
+        "{err}"
+    );
+    let err = run(&jittered, &["--weld-tolerance", "1e-4"]);
+    assert!(!err.contains("warning"), "{err}");
+    let r = read_json(&report);
+    assert_eq!(r["options"]["weld_tolerance"].as_f64(), Some(1e-4));
+    assert_eq!(
+        r["plan"]["fixed"]["welded"].as_u64(),
+        Some((n - sphere.positions.len()) as u64)
+    );
+    let info = crate::util::ok(vcsmooth([
+        "info",
+        &jittered.display().to_string(),
+        "--weld-tolerance",
+        "1e-4",
+    ]));
+    assert!(info.contains("boundary edges         0"), "{info}");
+    let o = vcsmooth([
+        "smooth",
+        &jittered.display().to_string(),
+        &out.display().to_string(),
+        "--no-weld",
+        "--weld-tolerance",
+        "1e-4",
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stderr));
+
     // Most vertices pinned: the warning names the pins.
     let pins = dir.path().join("pins.txt");
     let many: String = (0..sphere.positions.len() * 3 / 4)

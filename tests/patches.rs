@@ -26,11 +26,13 @@ fn run(
     threads: usize,
 ) -> (Vec<DVec3>, Vec<engine::IterationRecord>, Plan) {
     pool(threads).install(|| {
-        let mut plan = Plan::new(
+        let mut plan = Plan::new_observed(
             storage,
             &mesh.positions,
             &mesh.triangles,
             Layout::Patches(patch_size),
+            opts.welding(),
+            &mut Quiet,
         )
         .unwrap();
         let records = plan
@@ -116,6 +118,57 @@ fn seams_are_welded_for_any_thread_count_and_any_storage() {
         let (out, _, _) = run(&mesh, &mapped, 300, &opts, 2);
         assert!(out == reference, "{method}: mapped storage differs");
     }
+}
+
+#[test]
+fn seams_rounded_apart_are_welded_within_a_tolerance() {
+    let sphere = noisy_sphere(4, 0.4, 3);
+    let (exact, copy_of) = crate::util::seamed(&sphere);
+    let copies = exact.positions.len() - sphere.positions.len();
+    // The copies as an exporter that rounds each attribute set on its own leaves them: a few
+    // units in the last place apart (the sphere's edges are about 0.1 long).
+    let mut rounded = exact.clone();
+    for (v, &of) in copy_of.iter().enumerate() {
+        if v != of as usize {
+            rounded.positions[v] += DVec3::new(3e-7, -2e-7, 1e-7);
+        }
+    }
+    let opts = Options {
+        iterations: 2,
+        ..Options::default()
+    };
+    let (reference, _, _) = run(&exact, &Storage::heap(), 300, &opts, 1);
+    let (apart, _, plan) = run(&rounded, &Storage::heap(), 300, &opts, 1);
+    assert_eq!(plan.reordered.welded, 0);
+    assert!(apart != reference);
+    // Within the tolerance: welded onto the originals, so the very run of the exact seam.
+    let within = Options {
+        weld_tolerance: 1e-6,
+        ..opts
+    };
+    let scratch = tempfile::tempdir().unwrap();
+    let mapped = Storage::scratch(scratch.path()).unwrap();
+    for (storage, threads) in [(&Storage::heap(), 1), (&Storage::heap(), 3), (&mapped, 2)] {
+        let (out, _, plan) = run(&rounded, storage, 300, &within, threads);
+        assert_eq!(plan.reordered.welded, copies);
+        assert!(
+            out == reference,
+            "{threads} threads, mapped {}",
+            storage.is_mapped()
+        );
+    }
+    // A tolerance below the rounding welds nothing.
+    let below = Options {
+        weld_tolerance: 1e-7,
+        ..opts
+    };
+    assert_eq!(
+        run(&rounded, &Storage::heap(), 300, &below, 1)
+            .2
+            .reordered
+            .welded,
+        0
+    );
 }
 
 #[test]

@@ -297,7 +297,7 @@ fn info<'py>(
         Ok(InfoDoc {
             path: IN_MEMORY.to_string(),
             format: None,
-            info: undefined_as_nan(&vcsmooth::engine::mesh_info(&mesh, true)?),
+            info: undefined_as_nan(&vcsmooth::engine::mesh_info(&mesh, vcsmooth::partition::Weld::Exact)?),
             carries: Default::default(),
         })
     })?;

@@ -61,6 +61,7 @@ const KWARGS: &[Kwarg] = &[
     Kwarg { name: "max_deviation", scope: Smoothing, what: "a number or None", set: |v, s| { s.options.max_deviation = v.extract()?; Ok(()) } },
     Kwarg { name: "boundary", scope: Smoothing, what: "\"fixed\" or \"smooth\"", set: |v, s| { s.options.boundary = boundary(v)?; Ok(()) } },
     Kwarg { name: "weld", scope: Smoothing, what: "True or False", set: |v, s| { s.options.weld = v.extract()?; Ok(()) } },
+    Kwarg { name: "weld_tolerance", scope: Smoothing, what: "a number or None", set: |v, s| { s.options.weld_tolerance = v.extract::<Option<f64>>()?.unwrap_or(0.0); Ok(()) } },
     Kwarg { name: "pinned", scope: Smoothing, what: "vertex indices, a boolean mask or None", set: |v, s| set_pins(s, arrays::pins(v)?) },
     Kwarg { name: "pin", scope: File, what: "a path or None", set: |v, s| set_pins(s, Pins::File(v.extract()?)) },
     Kwarg { name: "pin_property", scope: File, what: "a PLY vertex property name or None", set: |v, s| set_pins(s, Pins::Property(v.extract()?)) },

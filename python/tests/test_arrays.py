@@ -107,6 +107,15 @@ def test_split_corners_are_welded_unless_asked_not_to(kitten):
     assert np.all(np.any(default != soup_v, axis=1))
     apart = vcsmooth.smooth(soup_v, soup_f, iterations=3, weld=False)
     assert np.array_equal(apart, soup_v)
+    # Corners rounded apart (kitten's edges are about 0.5 long): welded within a tolerance only.
+    rounded = soup_v + (np.arange(len(soup_v)) % 3)[:, None] * np.array([1e-6, -1e-6, 5e-7])
+    assert np.array_equal(vcsmooth.smooth(rounded, soup_f, iterations=3), rounded)
+    within = vcsmooth.smooth(rounded, soup_f, iterations=3, weld_tolerance=1e-4)
+    assert np.all(np.any(within != rounded, axis=1))
+    with pytest.raises(ValueError, match="weld_tolerance"):
+        vcsmooth.smooth(rounded, soup_f, weld_tolerance=-1.0)
+    with pytest.raises(ValueError, match="weld_tolerance"):
+        vcsmooth.smooth(rounded, soup_f, weld_tolerance=1e-4, weld=False)
 
 
 def test_crease_angle_and_max_deviation(kitten):

@@ -55,6 +55,8 @@ of range raises a ``ValueError`` that names it):
 - ``weld``: vertices at exactly one position (a texture seam's or unmerged corners' copies) are
   one vertex to smooth, and each copy gets the same new position; ``False`` keeps them apart,
   each seam a boundary that never moves.
+- ``weld_tolerance``: also weld vertices closer than this (> 0), the copies of a seam that an
+  exporter rounded apart; ``None``: exactly equal positions only.
 - ``pinned``: vertices that do not move: indices, or a boolean mask of length n.
 - ``threads``: worker threads, 1 to 4096; ``None``: all cores. The result is the same for any.
 - ``patch_size``: vertices per patch (part of the result's definition).
@@ -75,6 +77,7 @@ def smooth(
     max_deviation: Optional[float] = None,
     boundary: str = "fixed",
     weld: bool = True,
+    weld_tolerance: Optional[float] = None,
     pinned: Optional[ArrayLike] = None,
     threads: Optional[int] = None,
     patch_size: int = 16384,
@@ -120,6 +123,7 @@ def smooth_report(
     max_deviation: Optional[float] = None,
     boundary: str = "fixed",
     weld: bool = True,
+    weld_tolerance: Optional[float] = None,
     pinned: Optional[ArrayLike] = None,
     threads: Optional[int] = None,
     patch_size: int = 16384,
@@ -161,6 +165,7 @@ def smooth_file(
     max_deviation: Optional[float] = None,
     boundary: str = "fixed",
     weld: bool = True,
+    weld_tolerance: Optional[float] = None,
     pinned: Optional[ArrayLike] = None,
     pin: Optional[Path] = None,
     pin_property: Optional[str] = None,

@@ -129,6 +129,9 @@ pub struct MethodParams {
     /// Keep vertices that share a position apart: a texture seam or unmerged STL corners stay boundary that never moves, as in results version 4 and before [default: copies are one vertex to smooth, and each takes the same new position].
     #[arg(long)]
     pub no_weld: bool,
+    /// Also weld vertices closer than D (model units, > 0): the copies of a seam that an exporter rounded apart. Each vertex joins the nearest earlier one within D that is not itself joined; a chain of vertices each within D of the next is not pulled together [default: exactly equal positions only].
+    #[arg(long, value_name = "D", value_parser = length, allow_hyphen_values = true, conflicts_with = "no_weld")]
+    pub weld_tolerance: Option<f64>,
 }
 
 /// `--mu`'s defaults, each method's own.
@@ -194,6 +197,7 @@ impl MethodParams {
             max_deviation: self.max_deviation,
             boundary: self.boundary,
             weld: !self.no_weld,
+            weld_tolerance: self.weld_tolerance.unwrap_or(0.0),
         };
         options.check()?;
         Ok(options)
@@ -498,7 +502,8 @@ pub fn fixed_warning(
                     fixed.boundary_edges
                 ));
                 try_.push(
-                    "merge the near-duplicate vertices of seams before smoothing".to_string(),
+                    "--weld-tolerance D to weld the copies of seams that lie within D of each other"
+                        .to_string(),
                 );
             }
             false => {

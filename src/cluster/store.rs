@@ -114,6 +114,9 @@ impl PlanKey {
         if !opts.weld {
             options["weld"] = false.into();
         }
+        if opts.weld_tolerance > 0.0 {
+            options["weld_tolerance"] = opts.weld_tolerance.into();
+        }
         let mut files = vec![input.to_path_buf()];
         files.extend(
             io::referenced_files(input)

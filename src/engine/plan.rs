@@ -12,7 +12,7 @@ use super::observer::{Meter, Observer, Phase, Quiet, metered};
 use super::reduce;
 use crate::error::{Error, Result};
 use crate::mesh::Storage;
-use crate::partition::{self, Patch, Reordered};
+use crate::partition::{self, Patch, Reordered, Weld};
 use crate::schedule::{self, Schedule};
 use crate::smooth::method::Footprint;
 use crate::topology::Topology;
@@ -125,10 +125,10 @@ impl FixedVertices {
     }
 }
 
-/// The statistics of `mesh` as a run sees it: its copies welded if `weld` (see
+/// The statistics of `mesh` as a run sees it: its copies welded as `weld` says (see
 /// [`crate::partition`]), its faces oriented; in the input's order, in memory (what `info`
 /// prints).
-pub fn mesh_info(mesh: &crate::Mesh, weld: bool) -> Result<crate::metrics::MeshInfo> {
+pub fn mesh_info(mesh: &crate::Mesh, weld: Weld) -> Result<crate::metrics::MeshInfo> {
     let storage = Storage::heap();
     let mut r = Reordered::in_input_order(&storage, &mesh.positions, &mesh.triangles, weld)?;
     let mut topology = Topology::build(mesh.positions.len(), &r.triangles)?;
@@ -147,7 +147,14 @@ impl Plan {
         triangles: &[[u32; 3]],
         layout: Layout,
     ) -> Result<Plan> {
-        Plan::new_observed(storage, positions, triangles, layout, true, &mut Quiet)
+        Plan::new_observed(
+            storage,
+            positions,
+            triangles,
+            layout,
+            Weld::Exact,
+            &mut Quiet,
+        )
     }
 
     /// [`Plan::new`], telling `observer` how far each phase is ([`Phase::Reorder`],
@@ -157,7 +164,7 @@ impl Plan {
         positions: &[DVec3],
         triangles: &[[u32; 3]],
         layout: Layout,
-        weld: bool,
+        weld: Weld,
         observer: &mut dyn Observer,
     ) -> Result<Plan> {
         let (n, t) = (positions.len() as u64, triangles.len() as u64);

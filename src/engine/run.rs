@@ -441,7 +441,7 @@ pub(crate) fn prepare(
             &mesh.positions,
             &mesh.triangles,
             engine.layout(),
-            opts.weld,
+            opts.welding(),
             observer,
         )
         .map_err(|e| e.in_file(input))?;
@@ -574,7 +574,7 @@ pub(crate) fn run_mesh(
             &mesh.positions,
             &mesh.triangles,
             layout,
-            opts.weld,
+            opts.welding(),
             observer,
         )?;
         plan.pin(&pins);

@@ -9,7 +9,8 @@
 //!   copy name the first of them on the curve (the smallest input id), so that a texture seam or
 //!   an unmerged STL is one surface to smooth; the copies stay in the plan, unreferenced, and each
 //!   takes its first's position when the output is written ([`Reordered::welded_to`]). A mesh
-//!   without copies gives the plan it gave before welding existed.
+//!   without copies gives the plan it gave before welding existed. With a tolerance
+//!   ([`Weld::Within`]), vertices closer than it are welded too (see [`Weld`]).
 //! - [`patches`] cuts the reordered vertices into ranges of `patch_size` and assigns each stencil
 //!   to exactly one patch, the one holding its smallest vertex: an edge stencil `(i, j)`, `i < j`,
 //!   belongs to the patch of `i`; a triangle stencil to the patch of its first (smallest) vertex.
@@ -24,6 +25,21 @@ use crate::error::Result;
 use crate::mesh::{Buf, Storage};
 use crate::meter::{Meter, Passes, STEP};
 use crate::topology::Topology;
+
+/// Which vertices are one vertex to smooth.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Weld {
+    /// None: every vertex on its own.
+    Off,
+    /// Vertices at exactly one position (`-0` and `+0` are one value).
+    Exact,
+    /// Vertices within this distance (positive, finite): each vertex in input order is welded to
+    /// the nearest earlier vertex within it that was not itself welded (the smallest id among
+    /// equally near ones), else it stays a vertex of its own. Greedy, so a chain of vertices each
+    /// just within the tolerance of the next is not pulled onto one point; deterministic, and
+    /// sequential (one pass over a grid of cells of that size).
+    Within(f64),
+}
 
 /// A mesh renumbered along the Morton curve.
 #[derive(Debug)]
@@ -69,19 +85,20 @@ impl Reordered {
         storage: &Storage,
         positions: &[DVec3],
         triangles: &[[u32; 3]],
-        weld: bool,
+        weld: Weld,
     ) -> Result<Reordered> {
         let mut order = storage.zeroed::<u32>(positions.len())?;
         order.iter_mut().zip(0..).for_each(|(o, v)| *o = v);
         let mut tris = storage.copy_of(triangles)?;
-        let (welded_to, welded) = match weld {
-            true => {
+        let pairs = match weld {
+            Weld::Off => Vec::new(),
+            Weld::Exact => {
                 let ids: Vec<u32> = (0..positions.len() as u32).collect();
-                let pairs = copies_sorted(ids, |v| positions[v as usize]);
-                welded_from_pairs(storage, positions.len(), &pairs)?
+                copies_sorted(ids, |v| positions[v as usize])
             }
-            false => (Buf::default(), 0),
+            Weld::Within(d) => copies_within(positions, d),
         };
+        let (welded_to, welded) = welded_from_pairs(storage, positions.len(), &pairs)?;
         if welded > 0 {
             tris.par_iter_mut()
                 .for_each(|t| *t = t.map(|v| welded_to[v as usize]));
@@ -129,6 +146,37 @@ fn copies_sorted(mut ids: Vec<u32>, at: impl Fn(u32) -> DVec3) -> Vec<(u32, u32)
         match at(w[1]) == at(w[0]) {
             true => pairs.push((w[1], first)),
             false => first = w[1],
+        }
+    }
+    pairs
+}
+
+/// The `(copy, first)` pairs of [`Weld::Within`] `d`, in input ids.
+fn copies_within(positions: &[DVec3], d: f64) -> Vec<(u32, u32)> {
+    // A vertex within `d` of another lies in its cell or a neighbouring one.
+    let cell = |p: DVec3| (p / d).floor().as_i64vec3().to_array();
+    let mut firsts: std::collections::HashMap<[i64; 3], Vec<u32>> = Default::default();
+    let mut pairs = Vec::new();
+    for (v, &p) in positions.iter().enumerate() {
+        let c = cell(p);
+        let mut nearest: Option<(f64, u32)> = None;
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    let at = [c[0] + dx, c[1] + dy, c[2] + dz];
+                    for &u in firsts.get(&at).map_or(&[][..], Vec::as_slice) {
+                        let far = positions[u as usize].distance(p);
+                        let nearer = nearest.is_none_or(|(f, w)| far < f || (far == f && u < w));
+                        if far <= d && nearer {
+                            nearest = Some((far, u));
+                        }
+                    }
+                }
+            }
+        }
+        match nearest {
+            Some((_, first)) => pairs.push((v as u32, first)),
+            None => firsts.entry(c).or_default().push(v as u32),
         }
     }
     pairs
@@ -191,7 +239,13 @@ pub fn reorder(
     positions: &[DVec3],
     triangles: &[[u32; 3]],
 ) -> Result<Reordered> {
-    reorder_metered(storage, positions, triangles, true, &Meter::default())
+    reorder_metered(
+        storage,
+        positions,
+        triangles,
+        Weld::Exact,
+        &Meter::default(),
+    )
 }
 
 /// The passes [`reorder_metered`] counts: the curve keys, their sort, the permutation and its
@@ -201,13 +255,13 @@ pub const REORDER_PASSES: Passes = Passes {
     triangles: 2,
 };
 
-/// [`reorder`], welding copies only if `weld`, counting its work into `meter` ([`REORDER_PASSES`]
-/// over the mesh; the sorts count when they end). The same result.
+/// [`reorder`], welding as `weld` says, counting its work into `meter` ([`REORDER_PASSES`] over
+/// the mesh; the sorts count when they end). The same result.
 pub fn reorder_metered(
     storage: &Storage,
     positions: &[DVec3],
     triangles: &[[u32; 3]],
-    weld: bool,
+    weld: Weld,
     meter: &Meter,
 ) -> Result<Reordered> {
     let n = positions.len();
@@ -262,10 +316,15 @@ pub fn reorder_metered(
             meter.add(p.len() as u64);
         });
 
-    let (welded_to, welded) = match weld {
-        true => welded_from_pairs(storage, n, &copies_on_curve(&keys, &new_pos))?,
-        false => (Buf::default(), 0),
+    let pairs = match weld {
+        Weld::Off => Vec::new(),
+        Weld::Exact => copies_on_curve(&keys, &new_pos),
+        Weld::Within(d) => copies_within(positions, d)
+            .into_iter()
+            .map(|(copy, first)| (rank[copy as usize], rank[first as usize]))
+            .collect(),
     };
+    let (welded_to, welded) = welded_from_pairs(storage, n, &pairs)?;
     drop(keys);
     if welded > 0 {
         rank.par_iter_mut()
@@ -564,7 +623,9 @@ mod tests {
         for whole in [false, true] {
             let r = match whole {
                 false => reorder(&Storage::heap(), &pos, &tris).unwrap(),
-                true => Reordered::in_input_order(&Storage::heap(), &pos, &tris, true).unwrap(),
+                true => {
+                    Reordered::in_input_order(&Storage::heap(), &pos, &tris, Weld::Exact).unwrap()
+                }
             };
             assert_eq!(r.welded, 51);
             let rank: std::collections::HashMap<u32, usize> = r
@@ -585,12 +646,48 @@ mod tests {
                     .all(|&v| r.source_of(v as usize) == v as usize)
             );
             let unwelded =
-                reorder_metered(&Storage::heap(), &pos, &tris, false, &Meter::default()).unwrap();
+                reorder_metered(&Storage::heap(), &pos, &tris, Weld::Off, &Meter::default())
+                    .unwrap();
             assert_eq!((unwelded.welded, unwelded.welded_to.len()), (0, 0));
         }
         let distinct: Vec<DVec3> = (0..9).map(|k| DVec3::splat(k as f64)).collect();
         let r = reorder(&Storage::heap(), &distinct, &[[0, 1, 2]]).unwrap();
         assert_eq!((r.welded, r.welded_to.len()), (0, 0));
+    }
+
+    /// Within a tolerance: each vertex joins the nearest earlier unjoined one (ties to the
+    /// smallest id), a chain is not pulled together, and the curve gives the welds that the
+    /// input order gives.
+    #[test]
+    fn vertices_within_a_tolerance_are_welded_greedily_in_input_order() {
+        let p = |x: f64| DVec3::new(x, 0.5, -0.25);
+        // 0 and 1 weld (0.6 apart); 2 is 0.6 from 1 but 1.2 from 0: its own; 3 is as near to
+        // 0 as to 2 (0.6): the smaller id; 4 is nearer to 2 than to 0.
+        let pos = vec![p(0.0), p(0.6), p(1.2), p(0.6), p(1.0), p(10.0)];
+        assert_eq!(copies_within(&pos, 1.0), vec![(1, 0), (3, 0), (4, 2)]);
+        let tris = vec![[0, 2, 5], [1, 4, 5], [3, 2, 5]];
+        let r =
+            Reordered::in_input_order(&Storage::heap(), &pos, &tris, Weld::Within(1.0)).unwrap();
+        assert_eq!(r.welded, 3);
+        assert_eq!(r.triangles[..], [[0, 2, 5], [0, 2, 5], [0, 2, 5]]);
+        let curve = reorder_metered(
+            &Storage::heap(),
+            &pos,
+            &tris,
+            Weld::Within(1.0),
+            &Meter::default(),
+        )
+        .unwrap();
+        assert_eq!(curve.welded, 3);
+        for new in 0..pos.len() {
+            let old = curve.order[new] as usize;
+            let to = curve.order[curve.source_of(new)] as usize;
+            assert_eq!(to, r.source_of(old), "vertex {old}");
+        }
+        // Exactly equal positions weld at any tolerance; none is welded with none.
+        assert_eq!(copies_within(&[p(0.0), p(0.0)], 1e-300), vec![(1, 0)]);
+        let none = Reordered::in_input_order(&Storage::heap(), &pos, &tris, Weld::Off).unwrap();
+        assert_eq!((none.welded, none.welded_to.len()), (0, 0));
     }
 
     #[test]

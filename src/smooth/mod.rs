@@ -185,6 +185,7 @@ impl FromStr for Method {
 /// | `reject_energy_increase` | false | `lem`, `vcs`, `vcs-triangle` |
 /// | `crease_angle` | none | every method: vertices on edges whose faces' normals differ by more than this many degrees (measured on the input) are fixed |
 /// | `max_deviation` | none | every method: no vertex ends farther than this from its input position (see below) |
+/// | `weld`, `weld_tolerance` | true, 0 | every method: vertices at one position (or, with a tolerance, closer than it) are smoothed as one |
 ///
 /// The stencil methods (`lem`, `vcs`, `vcs-triangle`) have no step size: each stencil is moved to
 /// its local energy minimum (and, for `vcs`, translated back to its volume).
@@ -229,6 +230,15 @@ pub struct Options {
     /// [`crate::partition`]); the file keeps its vertices. In JSON only when off.
     #[serde(skip_serializing_if = "is_true")]
     pub weld: bool,
+    /// With `weld`, also weld vertices closer than this (a seam whose copies an exporter rounded
+    /// apart; see [`crate::partition::Weld::Within`]). 0: exactly equal positions only. In JSON
+    /// only when above 0.
+    #[serde(skip_serializing_if = "is_no_tolerance")]
+    pub weld_tolerance: f64,
+}
+
+fn is_no_tolerance(x: &f64) -> bool {
+    *x == 0.0
 }
 
 fn is_true(b: &bool) -> bool {
@@ -298,6 +308,16 @@ impl Options {
         self.max_deviation.is_some() || self.method.unit().needs().input
     }
 
+    /// Which vertices are welded into one to smooth (`weld`, `weld_tolerance`).
+    pub fn welding(&self) -> crate::partition::Weld {
+        use crate::partition::Weld;
+        match (self.weld, self.weld_tolerance) {
+            (false, _) => Weld::Off,
+            (true, d) if d > 0.0 => Weld::Within(d),
+            (true, _) => Weld::Exact,
+        }
+    }
+
     /// Check the options: the step sizes in their ranges (see [`check_step`]).
     pub fn check(&self) -> crate::Result<()> {
         check_step("lambda", self.lambda)?;
@@ -319,6 +339,19 @@ impl Options {
                     Method::names_accepting(Control::SmoothBoundary, "and"),
                     self.method
                 ),
+            ));
+        }
+        let d = self.weld_tolerance;
+        if !(d >= 0.0 && d.is_finite()) {
+            return Err(crate::Error::parameter(
+                "weld_tolerance",
+                format!("must be a finite number of at least 0, got {d}"),
+            ));
+        }
+        if d > 0.0 && !self.weld {
+            return Err(crate::Error::parameter(
+                "weld_tolerance",
+                "welds vertices, which weld off does not: give one of them",
             ));
         }
         if let Some(d) = self.max_deviation {
@@ -378,6 +411,7 @@ impl Default for Options {
             max_deviation: None,
             boundary: Boundary::Fixed,
             weld: true,
+            weld_tolerance: 0.0,
         }
     }
 }

@@ -27,6 +27,9 @@ pub struct InfoArgs {
     /// Count vertices that share a position apart, as `smooth --no-weld` smooths them [default: copies of a position are one vertex, as smooth welds them].
     #[arg(long)]
     pub no_weld: bool,
+    /// Also count vertices closer than D as one, as `smooth --weld-tolerance D` welds them.
+    #[arg(long, value_name = "D", value_parser = crate::cli::shared::length, allow_hyphen_values = true, conflicts_with = "no_weld")]
+    pub weld_tolerance: Option<f64>,
 }
 
 /// `vcsmooth info`, resolved.
@@ -34,7 +37,7 @@ pub struct InfoArgs {
 pub struct InfoConfig {
     pub input: PathBuf,
     pub json: bool,
-    pub weld: bool,
+    pub weld: crate::partition::Weld,
 }
 
 impl InfoConfig {
@@ -42,7 +45,11 @@ impl InfoConfig {
         Ok(InfoConfig {
             input: a.input,
             json: a.json,
-            weld: !a.no_weld,
+            weld: match (a.no_weld, a.weld_tolerance) {
+                (true, _) => crate::partition::Weld::Off,
+                (false, Some(d)) => crate::partition::Weld::Within(d),
+                (false, None) => crate::partition::Weld::Exact,
+            },
         })
     }
 }
