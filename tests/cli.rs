@@ -1264,7 +1264,12 @@ fn a_run_says_when_most_vertices_cannot_move() {
         "--weld-tolerance",
         "1e-4",
     ]);
-    assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(
+        o.status.code(),
+        Some(2),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
 
     // Most vertices pinned: the warning names the pins.
     let pins = dir.path().join("pins.txt");
@@ -1277,4 +1282,55 @@ fn a_run_says_when_most_vertices_cannot_move() {
         err.contains("cannot move freely") && err.contains("pinned") && err.contains("pin fewer"),
         "{err}"
     );
+}
+
+/// A conversion that cannot carry what the input had says so in one note, and the report lists
+/// it; the same format keeps everything and says nothing.
+#[test]
+fn a_conversion_says_what_it_drops() {
+    let dir = tempfile::tempdir().unwrap();
+    for f in ["textured.obj", "textured.mtl"] {
+        std::fs::copy(
+            crate::util::scan(&format!("fidelity/{f}")),
+            dir.path().join(f),
+        )
+        .unwrap();
+    }
+    let input = dir.path().join("textured.obj");
+    let report = dir.path().join("r.json");
+    let run = |out: &str| {
+        let o = vcsmooth([
+            "smooth",
+            &input.display().to_string(),
+            &dir.path().join(out).display().to_string(),
+            "--report",
+            &report.display().to_string(),
+        ]);
+        assert_eq!(o.status.code(), Some(0));
+        let err = String::from_utf8_lossy(&o.stderr).to_string();
+        let notes: Vec<String> = err
+            .lines()
+            .filter(|l| l.starts_with("vcsmooth: note: "))
+            .map(String::from)
+            .collect();
+        (notes, read_json(&report)["output"]["dropped"].clone())
+    };
+    let (notes, dropped) = run("out.ply");
+    assert_eq!(notes.len(), 1, "{notes:?}");
+    for part in [
+        "out.ply: written without the input's texture coordinates, colours, normals, materials",
+        "PLY written from OBJ",
+        "write .obj to keep them",
+    ] {
+        assert!(notes[0].contains(part), "{part}: {}", notes[0]);
+    }
+    assert_eq!(dropped[0], "texture coordinates");
+    let (notes, _) = run("out.stl");
+    assert!(
+        notes[0].contains("polygons (written as their triangles)"),
+        "{notes:?}"
+    );
+    let (notes, dropped) = run("out.obj");
+    assert!(notes.is_empty(), "{notes:?}");
+    assert!(dropped.is_null(), "{dropped}");
 }

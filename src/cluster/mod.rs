@@ -151,6 +151,7 @@ pub fn run_file(
     drop(smoothing_sampler);
 
     // 4. Rank 0 writes the output in the input's order.
+    let mut dropped = Vec::new();
     let written = if comm.rank() == 0 {
         write_output(
             &work,
@@ -161,6 +162,7 @@ pub fn run_file(
             &start,
             &mut t,
             observer,
+            &mut dropped,
         )
     } else {
         Ok(None)
@@ -226,6 +228,7 @@ pub fn run_file(
         }),
         deviation: None,
         input_sha256,
+        dropped,
     };
     // Every rank unmaps the plan before rank 0 removes it (on NFS a file still mapped somewhere
     // is kept as a hidden `.nfs*` file, and its directory cannot go).
@@ -313,6 +316,7 @@ fn write_output(
     start: &run::Start,
     t: &mut PhaseTimings,
     observer: &mut dyn Observer,
+    dropped: &mut Vec<String>,
 ) -> Result<Option<metrics::MeshInfo>> {
     // Assembling the output keeps no per-run arrays beside the mesh: the default options' model.
     let storage = engine::storage_for(
@@ -345,6 +349,7 @@ fn write_output(
         mesh.positions[old as usize] = last[crate::partition::source_of(&plan.welded_to, new)];
     }
     let bytes_read = std::fs::metadata(input).map_or(0, |m| m.len());
+    *dropped = io::not_carried(&mesh.source, output);
     let measure = engine
         .with_stats
         .then_some(|| output_stats(plan, &storage, output, &mesh, &last));

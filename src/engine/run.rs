@@ -113,6 +113,9 @@ pub struct Report {
     /// of its checkpoint by content.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub input_sha256: Option<String>,
+    /// What the input carried that the output does not ([`io::not_carried`]), for a file run.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub dropped: Vec<String>,
 }
 
 /// What a run of the cluster engine ([`crate::cluster`]) adds to its [`Report`].
@@ -360,7 +363,9 @@ pub(crate) fn run_file_with(
         bytes_read,
         bytes_written: std::fs::metadata(output).map(|m| m.len()).unwrap_or(0),
     };
-    Ok(smoothed.report(&mesh, start.pool.current_num_threads(), memory, t))
+    let mut report = smoothed.report(&mesh, start.pool.current_num_threads(), memory, t);
+    report.dropped = io::not_carried(&mesh.source, output);
+    Ok(report)
 }
 
 /// What every file run sets up first, once: the options checked, the memory budget parsed and
@@ -702,6 +707,7 @@ impl Smoothed {
             cluster: None,
             deviation: self.deviation,
             input_sha256: None,
+            dropped: Vec::new(),
         }
     }
 }

@@ -146,6 +146,45 @@ pub fn content_size(path: &Path) -> Result<u64> {
     }
 }
 
+/// What a mesh read from a file carried that its output at `path` will not: texture coordinates,
+/// colours, normals, materials and the file's other properties when the output is another format
+/// (which is written plain: positions and faces), polygons when it is one that holds triangles
+/// only. Empty when nothing is lost (the same format keeps everything; a mesh from no file
+/// carried nothing). For the one line that tells a user so.
+pub fn not_carried(source: &Source, path: &Path) -> Vec<String> {
+    let (Some(from), Some(to)) = (source.format, Format::from_extension(path)) else {
+        return Vec::new();
+    };
+    let mut lost = Vec::new();
+    if from != to {
+        let carried = source
+            .layout
+            .as_ref()
+            .map(|l| l.carries())
+            .unwrap_or_default();
+        for (had, what) in [
+            (carried.uvs, "texture coordinates"),
+            (carried.colours, "colours"),
+            (carried.normals, "normals"),
+            (carried.materials, "materials"),
+        ] {
+            if had {
+                lost.push(what.to_string());
+            }
+        }
+        if !carried.other.is_empty() {
+            lost.push(format!("other data ({})", carried.other.join(", ")));
+        }
+    }
+    if source.polygons_triangulated > 0 && matches!(to, Format::Stl | Format::Gltf | Format::Glb) {
+        lost.push(format!(
+            "{} polygons (written as their triangles)",
+            source.polygons_triangulated
+        ));
+    }
+    lost
+}
+
 /// Read a mesh file onto the heap.
 pub fn read_mesh(path: &Path) -> Result<Mesh> {
     read_mesh_in(path, &crate::mesh::Storage::heap())

@@ -41,6 +41,10 @@ pub struct FileStats {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub sha256: Option<String>,
     pub stats: MeshInfo,
+    /// An output's: what the input carried that this file's format does not (texture
+    /// coordinates, colours, normals, materials, other properties, polygons); absent when none.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub dropped: Vec<String>,
 }
 
 impl FileStats {
@@ -50,6 +54,7 @@ impl FileStats {
             format: format.map(format_name),
             sha256: None,
             stats: undefined_as_nan(&stats),
+            dropped: Vec::new(),
         }
     }
 }
@@ -209,11 +214,14 @@ impl SmoothReport {
             options,
             engine: settings,
             input: FileStats::new(files.0, run.input_format, stats(&run.input_stats)),
-            output: FileStats::new(
-                files.1,
-                Format::from_extension(files.1),
-                stats(&run.output_stats),
-            ),
+            output: FileStats {
+                dropped: run.dropped.clone(),
+                ..FileStats::new(
+                    files.1,
+                    Format::from_extension(files.1),
+                    stats(&run.output_stats),
+                )
+            },
             plan: run.plan.clone(),
             memory: run.memory.clone(),
             timings: run.timings,

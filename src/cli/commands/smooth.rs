@@ -3,7 +3,7 @@
 //! [`crate::cli::multires`].
 
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use clap::Args as ClapArgs;
 
@@ -367,6 +367,16 @@ fn report(
         );
     }
 
+    if !run.dropped.is_empty() {
+        let _ = writeln!(
+            std::io::stderr(),
+            "vcsmooth: note: {}: written without the input's {}: {}",
+            cfg.output.display(),
+            run.dropped.join(", "),
+            keep_advice(run.input_format, &cfg.output)
+        );
+    }
+
     let s = Summary::of_run(records, multires.as_ref());
     let text = format!(
         "{} -> {}: {}, {}, {} vertices, {} triangles; volume {}, area {}\n",
@@ -484,4 +494,21 @@ fn print_iterations(out: &mut dyn Write, records: &[IterationRecord]) -> Result<
         );
     }
     out.write_all(text.as_bytes()).map_err(stdout_error)
+}
+
+/// How to keep what a conversion from `input` (a file of that format) to `output` drops.
+fn keep_advice(input: Option<crate::io::Format>, output: &Path) -> String {
+    let name = |f: Option<crate::io::Format>| {
+        f.map_or("?".to_string(), |f| {
+            crate::report::format_name(f).to_uppercase()
+        })
+    };
+    let (from, to) = (name(input), name(crate::io::Format::from_extension(output)));
+    match from == to {
+        true => format!("{to} holds triangles only"),
+        false => format!(
+            "{to} written from {from} holds positions and faces only; write .{} to keep them",
+            from.to_lowercase()
+        ),
+    }
 }
