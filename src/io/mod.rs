@@ -41,7 +41,10 @@
 //!   connectivity. STL coordinates are single precision by definition; ASCII STL values are
 //!   rounded to `f32` before merging.
 //! - Positions are `f64` in memory. A `float` output rounds them to `f32`; ASCII outputs print the
-//!   shortest text that reads back to the same value (`f32` or `f64` as the precision says).
+//!   shortest text that reads back to the same value (`f32` or `f64` as the precision says), or,
+//!   for an OBJ or OFF input whose coordinates all had one number of decimals (at least 4: a
+//!   fixed-point export), the shortest text of the value rounded to those decimals
+//!   ([`Source::decimals`]).
 //!
 //! # PLY round trip
 //!
@@ -127,8 +130,8 @@ pub(crate) use ply::header_counts;
 pub use ply::{PlyEncoding, PlyLayout};
 pub use stream::{PlyStream, write_ply_streamed, write_ply_streamed_in};
 pub(crate) use text::{
-    F32, F64, MAX_HEADER_LINE, bad_index, fits_single, integer, lines, number, show, text_position,
-    tokens, vertex_normals, without_bom, write_xyz,
+    Digits, F32, F64, Fixed, MAX_HEADER_LINE, Spelling, bad_index, fits_single, integer, lines,
+    number, show, text_position, tokens, vertex_normals, without_bom, write_xyz,
 };
 
 use crate::error::{Error, Result};
@@ -501,6 +504,9 @@ enum Axis {
     Binary(ply::Scalar),
     /// Text in single precision (OBJ, OFF): the shortest text of the `f32`, read back as `f64`.
     SingleText,
+    /// Text rounded to this many decimals (OBJ, OFF of a fixed-point input, see
+    /// [`Source::decimals`]), read back as `f64`.
+    Decimals(u8),
 }
 
 impl Stored {
@@ -508,9 +514,10 @@ impl Stored {
     /// when it would not write it (an unknown extension, a PLY layout without coordinates).
     pub fn of(path: &Path, mesh: &Mesh) -> Option<Stored> {
         use ply::Scalar::{F32, F64};
-        let text = match mesh.source.precision {
-            Precision::Float => Axis::SingleText,
-            Precision::Double => Axis::Binary(F64),
+        let text = match (mesh.source.decimals, mesh.source.precision) {
+            (Some(d), _) => Axis::Decimals(d),
+            (None, Precision::Float) => Axis::SingleText,
+            (None, Precision::Double) => Axis::Binary(F64),
         };
         Some(Stored(match Format::from_extension(path)? {
             Format::Ply => ply::coordinate_types(mesh)?.map(Axis::Binary),
@@ -535,11 +542,18 @@ impl Stored {
                 t.put(x, &mut bytes);
                 t.get(&bytes).unwrap_or(x)
             }
+            // The writers' text, on the stack: this runs for every coordinate of an output.
             Axis::SingleText => {
-                // The writers' text, on the stack: this runs for every coordinate of an output.
                 let mut text = [0u8; 48];
                 let mut rest = &mut text[..];
                 let _ = write!(rest, "{}", F32(x as f32));
+                let len = 48 - rest.len();
+                number(&text[..len]).unwrap_or(x)
+            }
+            Axis::Decimals(d) => {
+                let mut text = [0u8; 48];
+                let mut rest = &mut text[..];
+                let _ = write!(rest, "{}", Fixed(x, d));
                 let len = 48 - rest.len();
                 number(&text[..len]).unwrap_or(x)
             }
@@ -594,6 +608,10 @@ impl Stored {
         let next = match self.0[i] {
             Axis::Binary(ply::Scalar::F64) => return x,
             Axis::Binary(t) if t.int_range().is_some() => x + if up { 1.0 } else { -1.0 },
+            Axis::Decimals(d) => {
+                let step = 10f64.powi(-i32::from(d));
+                x + if up { step } else { -step }
+            }
             // `x` reads back from an `f32` (its text, for text), which it rounds to again.
             Axis::Binary(_) | Axis::SingleText => {
                 let f = x as f32;

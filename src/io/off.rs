@@ -14,8 +14,8 @@ use std::io::{self, Write};
 use std::sync::Arc;
 
 use super::{
-    FaceBuilder, Faces, Format, MAX_HEADER_LINE, Precision, Source, bad_index, integer, number,
-    show, text_position, tokens, vertex_normals, without_bom, write_xyz,
+    Digits, FaceBuilder, Faces, Format, MAX_HEADER_LINE, Source, Spelling, bad_index, integer,
+    number, show, text_position, tokens, vertex_normals, without_bom, write_xyz,
 };
 use crate::mesh::{Carried, FileLayout, Mesh};
 
@@ -159,7 +159,7 @@ pub(crate) fn read(bytes: &[u8]) -> Result<Mesh, String> {
         )));
     }
 
-    let mut precision = Precision::Float;
+    let mut digits = Digits::default();
     // Reserved up to what the file can hold (a vertex line takes at least 6 bytes, "0 0 0\n", a
     // face line 8): a count the file cannot back fails at the file's real end.
     let mut positions = Vec::with_capacity(nv.min(bytes.len() / 6));
@@ -176,7 +176,7 @@ pub(crate) fn read(bytes: &[u8]) -> Result<Mesh, String> {
         if i == 0 {
             vertex_line = n;
         }
-        let p = text_position(tokens(line), &mut precision)
+        let p = text_position(tokens(line), &mut digits)
             .map_err(|what| format!("vertex {i} (line {n}): {what}"))?;
         extra_vertex_columns |= tokens(line).nth(columns).is_some();
         positions.push(p);
@@ -206,7 +206,8 @@ pub(crate) fn read(bytes: &[u8]) -> Result<Mesh, String> {
     });
     let source = Source {
         format: Some(Format::Off),
-        precision,
+        precision: digits.precision(),
+        decimals: digits.decimals(),
         layout,
         ..Source::default()
     };
@@ -315,7 +316,11 @@ fn write_layout(out: &mut impl Write, mesh: &Mesh, layout: &OffLayout) -> io::Re
     } else {
         Vec::new()
     };
-    let precision = mesh.source.precision;
+    let spelling = Spelling::of(&mesh.source);
+    let normal = Spelling {
+        decimals: None,
+        ..spelling
+    };
     let mut v = 0;
     // Line numbers as the reader counted them (a byte-order mark adds no line).
     for (i, line) in layout.text.split_inclusive(|&b| b == b'\n').enumerate() {
@@ -329,11 +334,11 @@ fn write_layout(out: &mut impl Write, mesh: &Mesh, layout: &OffLayout) -> io::Re
             continue;
         }
         out.write_all(&line[..spans[0].0])?;
-        write_xyz(out, mesh.positions[v], precision)?;
+        write_xyz(out, mesh.positions[v], spelling)?;
         let mut rest = spans[2].1;
         if layout.normals && spans.len() >= 6 {
             out.write_all(&line[rest..spans[3].0])?;
-            write_xyz(out, normals[v], precision)?;
+            write_xyz(out, normals[v], normal)?;
             rest = spans[5].1;
         }
         out.write_all(&line[rest..])?;
@@ -367,7 +372,7 @@ fn write_plain(out: &mut impl Write, mesh: &Mesh) -> io::Result<()> {
     let faces = Faces::of(mesh);
     writeln!(out, "OFF\n{} {} 0", mesh.positions.len(), faces.len())?;
     for &p in &mesh.positions {
-        write_xyz(out, p, mesh.source.precision)?;
+        write_xyz(out, p, Spelling::of(&mesh.source))?;
         out.write_all(b"\n")?;
     }
     faces.try_for_each(|corners| {

@@ -1840,3 +1840,81 @@ fn triangle_strips_become_triangles_of_one_orientation_and_are_written_back() {
     let e = parse_as(both.as_bytes(), "s.ply").map(|_| ()).unwrap_err();
     assert!(e.contains("both a face and a tristrips element"), "{e}");
 }
+
+// ---------------------------------------------------------------------------------------------
+// The precision of a fixed-point text input
+
+#[test]
+fn a_fixed_point_text_input_is_written_at_its_own_decimals() {
+    let mesh = octahedron();
+    let dir = tempfile::tempdir().unwrap();
+    let fixed = |p: DVec3| format!("{:.6} {:.6} {:.6}", p.x, p.y, p.z);
+    let obj: String = mesh
+        .positions
+        .iter()
+        .map(|&p| format!("v {}\n", fixed(p)))
+        .collect::<String>()
+        + &mesh
+            .triangles
+            .iter()
+            .map(|t| format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1))
+            .collect::<String>();
+    let off = format!(
+        "OFF\n6 8 0\n{}",
+        mesh.positions
+            .iter()
+            .map(|&p| fixed(p) + "\n")
+            .collect::<String>()
+    ) + &mesh
+        .triangles
+        .iter()
+        .map(|t| format!("3 {} {} {}\n", t[0], t[1], t[2]))
+        .collect::<String>();
+    for (name, text) in [("o.obj", obj), ("o.off", off)] {
+        let mut read = parse_as(text.as_bytes(), name).unwrap();
+        assert_eq!(read.source.decimals, Some(6), "{name}");
+        // Smoothed positions: no longer six decimals.
+        for p in read.positions.iter_mut() {
+            *p += DVec3::new(1.0 / 3.0, -1.0 / 7.0, 1e-9);
+        }
+        let path = dir.path().join(name);
+        write_mesh(&path, &read).unwrap();
+        let written = std::fs::read_to_string(&path).unwrap();
+        let back = read_mesh(&path).unwrap();
+        let stored = Stored::of(&path, &read).unwrap();
+        for (a, b) in read.positions.iter().zip(back.positions.iter()) {
+            assert_eq!(
+                stored.round(*a),
+                *b,
+                "{name}: the statistics' rounding is the file's"
+            );
+            assert!(
+                (*a - *b).abs().max_element() <= 5e-7 + 1e-12,
+                "{name}: {a} -> {b}"
+            );
+        }
+        let longest = written
+            .split_whitespace()
+            .filter_map(|t| t.split_once('.'))
+            .map(|(_, decimals)| decimals.len())
+            .max();
+        assert_eq!(longest, Some(6), "{name}:\n{written}");
+        // The deviation bound holds in the file too.
+        let (p, origin) = (read.positions[0], mesh.positions[0]);
+        let limit = p.distance(origin) - 1e-9;
+        let within = stored.round_within(
+            origin + (p - origin) * (limit / p.distance(origin)),
+            origin,
+            limit,
+        );
+        assert!(within.distance(origin) <= limit, "{name}");
+        assert_eq!(stored.round(within), within);
+    }
+    // Mixed decimals: the shortest text, as before.
+    let mixed = parse_as(
+        b"v 0.1 0.25 0.125\nv 1.5 0 0\nv 0 1.0000 0\nf 1 2 3\n",
+        "m.obj",
+    )
+    .unwrap();
+    assert_eq!(mixed.source.decimals, None);
+}

@@ -70,6 +70,11 @@ pub struct Source {
     /// Coordinate precision of the input: `Double` for PLY `double` coordinates and for text whose
     /// numbers an `f32` cannot reproduce, else `Float`. Set it to ask a writer for double precision.
     pub precision: Precision,
+    /// The decimals every coordinate of a text input (OBJ, OFF) was written with, when that was one
+    /// number, at least 4 (a fixed-point export such as `%.6f`): OBJ and OFF outputs then write
+    /// coordinates rounded to it, in the shortest text of the rounded value, so that the output is
+    /// as precise as the input and no longer. `None`: the shortest text of `precision`.
+    pub decimals: Option<u8>,
     /// Corner count of every input face, in order; kept only when some face had more than 3
     /// corners. The mesh's triangles are then the fans of these polygons, which lets writers put the
     /// polygons back.

@@ -26,7 +26,7 @@ use std::io::{self, Write};
 use glam::DVec3;
 
 use super::NO_NORMAL;
-use crate::io::{Faces, Precision, tokens, without_bom, write_xyz};
+use crate::io::{Faces, Spelling, tokens, without_bom, write_xyz};
 use crate::mesh::{Carried, FileLayout, Mesh};
 
 /// An OBJ input's text without the numbers of its `v` and `vn` lines, and where they go back (see
@@ -133,16 +133,16 @@ impl ObjLayout {
             .enumerate()
         {
             while let Some((&n_cut, &n)) = normals.next_if(|&(&c, _)| c < cut) {
-                at = self.put(out, at, n_cut, n, Precision::Float)?;
+                at = self.put(out, at, n_cut, n, Spelling::NORMAL)?;
             }
-            at = self.put(out, at, cut, p, mesh.source.precision)?;
+            at = self.put(out, at, cut, p, Spelling::of(&mesh.source))?;
             if let Some(colour) = colours {
                 super::write_colour(out, colour(i))?;
                 at = after_numbers(&self.text, at);
             }
         }
         for (&n_cut, &n) in normals {
-            at = self.put(out, at, n_cut, n, Precision::Float)?;
+            at = self.put(out, at, n_cut, n, Spelling::NORMAL)?;
         }
         out.write_all(&self.text[at..])
     }
@@ -154,11 +154,11 @@ impl ObjLayout {
         at: usize,
         cut: u64,
         p: DVec3,
-        precision: Precision,
+        spelling: Spelling,
     ) -> io::Result<usize> {
         let cut = cut as usize;
         out.write_all(&self.text[at..cut])?;
-        write_xyz(out, p, precision)?;
+        write_xyz(out, p, spelling)?;
         Ok(cut)
     }
 

@@ -35,8 +35,8 @@ use glam::DVec3;
 pub(crate) use layout::check_writable;
 
 use super::{
-    FaceBuilder, Faces, Format, Precision, Source, integer, lines, show, text_position, tokens,
-    without_bom, write_xyz,
+    Digits, FaceBuilder, Faces, Format, Source, Spelling, integer, lines, show, text_position,
+    tokens, without_bom, write_xyz,
 };
 use crate::mesh::{Carried, Mesh};
 
@@ -117,7 +117,7 @@ pub(crate) fn read(bytes: &[u8]) -> Result<Mesh, String> {
     let bytes = without_bom(bytes);
     let mut positions: Vec<DVec3> = Vec::new();
     let mut faces = FaceBuilder::with_capacity(0);
-    let mut precision = Precision::Float;
+    let mut digits = Digits::default();
     let mut corners = Vec::new();
     let mut vertex = Indexed::new("vertex", "vertex");
     let mut texture = Indexed::new("texture", "texture coordinate");
@@ -138,7 +138,7 @@ pub(crate) fn read(bytes: &[u8]) -> Result<Mesh, String> {
             Some(b"v") => {
                 let i = positions.len();
                 let mut numbers = 0;
-                let p = text_position(words.inspect(|_| numbers += 1), &mut precision)
+                let p = text_position(words.inspect(|_| numbers += 1), &mut digits)
                     .map_err(|what| format!("vertex {i} (line {n}): {what}"))?;
                 positions.push(p);
                 bare &= numbers == 3;
@@ -192,7 +192,7 @@ pub(crate) fn read(bytes: &[u8]) -> Result<Mesh, String> {
                 bare = false;
             }
             Some(b"vn") => {
-                text_position(words, &mut Precision::Float)
+                text_position(words, &mut Digits::default())
                     .map_err(|what| format!("normal {} (line {n}): {what}", normal.defined))?;
                 normal.defined += 1;
                 carried.normals = true;
@@ -232,7 +232,8 @@ pub(crate) fn read(bytes: &[u8]) -> Result<Mesh, String> {
     normal.check()?;
     let source = Source {
         format: Some(Format::Obj),
-        precision,
+        precision: digits.precision(),
+        decimals: digits.decimals(),
         ..Source::default()
     };
     let mut mesh = faces.into_mesh(positions, source);
@@ -264,7 +265,7 @@ pub(crate) fn write(
     )?;
     for (i, &p) in mesh.positions.iter().enumerate() {
         out.write_all(b"v ")?;
-        write_xyz(out, p, mesh.source.precision)?;
+        write_xyz(out, p, Spelling::of(&mesh.source))?;
         if let Some(colour) = colours {
             write_colour(out, colour(i))?;
         }
