@@ -53,6 +53,7 @@ use serde_json::Value;
 
 use crate::mesh::{Carried, FileLayout};
 
+mod draco;
 mod read;
 mod runs;
 mod uri;
@@ -70,7 +71,8 @@ pub(super) fn has_magic(head: &[u8]) -> bool {
 const CHUNK_JSON: u32 = 0x4E4F_534A;
 const CHUNK_BIN: u32 = 0x004E_4942;
 const FLOAT: u64 = 5126;
-const COMPRESSIONS: [&str; 2] = ["KHR_draco_mesh_compression", "EXT_meshopt_compression"];
+/// Meshopt compression, refused (Draco is decoded: see `draco`).
+const MESHOPT: &str = "EXT_meshopt_compression";
 
 /// What a glTF input holds beyond the mesh: its JSON, the buffers the geometry lives in, and where
 /// each vertex range and normal array sits in them.
@@ -88,12 +90,17 @@ pub struct GltfLayout {
     carried: Carried,
     /// The directory the input's external files are relative to, when it came from a file.
     dir: Option<PathBuf>,
+    /// Whether the input had Draco-compressed primitives (decoded on read; written uncompressed).
+    decompressed: bool,
 }
 
 /// One buffer's bytes and where they came from.
 struct Loaded {
     bytes: Vec<u8>,
     origin: Origin,
+    /// Decoded Draco data was appended: the buffer is written out even if no geometry in it
+    /// changed.
+    extended: bool,
 }
 
 enum Origin {
@@ -125,7 +132,29 @@ impl fmt::Debug for GltfLayout {
             .field("normals", &self.normals.len())
             .field("vertices", &self.vertices)
             .field("triangles", &self.triangles)
+            .field("decompressed", &self.decompressed)
             .finish()
+    }
+}
+
+impl GltfLayout {
+    /// Whether the input had Draco-compressed (`KHR_draco_mesh_compression`) primitives. They
+    /// were decoded on read and a glTF output holds them uncompressed (larger than the input):
+    /// a caller writing one should say so, e.g. `note: OUT: written without Draco compression`.
+    ///
+    /// For a mesh, see [`GltfLayout::decompressed_in`].
+    pub fn decompressed(&self) -> bool {
+        self.decompressed
+    }
+
+    /// Whether `mesh` was read from a glTF with Draco-compressed primitives (see
+    /// [`GltfLayout::decompressed`]); false for any other mesh, or once its layout is cleared.
+    pub fn decompressed_in(mesh: &crate::mesh::Mesh) -> bool {
+        mesh.source
+            .layout
+            .as_deref()
+            .and_then(|l| l.as_any().downcast_ref::<GltfLayout>())
+            .is_some_and(GltfLayout::decompressed)
     }
 }
 

@@ -11,7 +11,7 @@ use serde_json::Value;
 use super::runs::runs;
 use super::uri::{base64_decode, percent_decode};
 use super::{
-    CHUNK_BIN, CHUNK_JSON, COMPRESSIONS, FLOAT, GltfLayout, Loaded, Origin, Span, array, field,
+    CHUNK_BIN, CHUNK_JSON, FLOAT, MESHOPT, GltfLayout, Loaded, Origin, Span, array, field,
     has_magic, index,
 };
 use crate::io::FaceBuilder;
@@ -30,14 +30,16 @@ pub(crate) fn read(
     } else {
         (crate::io::without_bom(bytes), None)
     };
-    let json: Value = serde_json::from_slice(json).map_err(|e| format!("glTF JSON: {e}"))?;
+    let mut json: Value = serde_json::from_slice(json).map_err(|e| format!("glTF JSON: {e}"))?;
+    Reader::new(&json, chunk, dir).check_top()?;
+    // Draco primitives become plain ones, their data decoded into the buffers loaded so far.
+    let (buffers, decompressed) = super::draco::decompress(&mut json, chunk, dir)?;
     let mut reader = Reader {
         json: &json,
         chunk,
         dir,
-        buffers: Vec::new(),
+        buffers,
     };
-    reader.check_top()?;
     let mut prims: Vec<Primitive> = Vec::new();
     let mut checked: HashSet<usize> = HashSet::new();
     // Each primitive's triangles in its own POSITION accessor's numbering until the vertices are
@@ -57,10 +59,8 @@ pub(crate) fn read(
             for name in attributes.into_iter().flat_map(|a| a.keys()) {
                 note_attribute(&mut carried, name);
             }
-            if let Some(ext) = prim.get("extensions").and_then(Value::as_object) {
-                if let Some(c) = COMPRESSIONS.iter().find(|c| ext.contains_key(**c)) {
-                    return Err(at(format!("{c} compression is not supported")));
-                }
+            if prim.pointer(&format!("/extensions/{MESHOPT}")).is_some() {
+                return Err(at(meshopt_refused()));
             }
             if prim.get("mode").map_or(Some(4), Value::as_u64) != Some(4) {
                 continue;
@@ -147,6 +147,7 @@ pub(crate) fn read(
         triangles: corners.len(),
         carried,
         dir: dir.map(Path::to_path_buf),
+        decompressed,
     };
     let source = Source {
         format: Some(if binary { Format::Glb } else { Format::Gltf }),
@@ -202,7 +203,13 @@ fn glb_chunks(bytes: &[u8]) -> std::result::Result<(&[u8], Option<&[u8]>), Strin
     }
 }
 
-struct Reader<'a> {
+/// Meshopt is not decoded: what a file using it is told.
+fn meshopt_refused() -> String {
+    format!("{MESHOPT} (meshopt-compressed geometry) is not supported")
+}
+
+/// Reads accessors and loads buffers (each once) of a glTF's JSON.
+pub(super) struct Reader<'a> {
     json: &'a Value,
     chunk: Option<&'a [u8]>,
     dir: Option<&'a Path>,
@@ -210,7 +217,22 @@ struct Reader<'a> {
 }
 
 impl<'a> Reader<'a> {
-    /// The version and the extensions the whole file needs.
+    /// A reader of `json` with no buffer loaded yet.
+    pub(super) fn new(json: &'a Value, chunk: Option<&'a [u8]>, dir: Option<&'a Path>) -> Self {
+        Reader {
+            json,
+            chunk,
+            dir,
+            buffers: Vec::new(),
+        }
+    }
+
+    /// The buffers loaded (index = the JSON's buffer index; `None` for the others).
+    pub(super) fn into_buffers(self) -> Vec<Option<Loaded>> {
+        self.buffers
+    }
+
+    /// The version, and no meshopt (Draco is decoded: see `draco`).
     fn check_top(&self) -> std::result::Result<(), String> {
         let version = self
             .json
@@ -223,12 +245,8 @@ impl<'a> Reader<'a> {
             ));
         }
         for key in ["extensionsUsed", "extensionsRequired"] {
-            let names = array(self.json, key);
-            if let Some(c) = COMPRESSIONS
-                .iter()
-                .find(|c| names.iter().any(|n| n.as_str() == Some(**c)))
-            {
-                return Err(format!("{c} compression is not supported"));
+            if array(self.json, key).iter().any(|n| n.as_str() == Some(MESHOPT)) {
+                return Err(meshopt_refused());
             }
         }
         Ok(())
@@ -360,7 +378,7 @@ impl<'a> Reader<'a> {
     }
 
     /// Loads buffer `i` (once) and returns its bytes, at most its `byteLength`.
-    fn load(&mut self, i: usize) -> std::result::Result<&[u8], String> {
+    pub(super) fn load(&mut self, i: usize) -> std::result::Result<&[u8], String> {
         let buffers = array(self.json, "buffers");
         let b = buffers
             .get(i)
@@ -391,7 +409,11 @@ impl<'a> Reader<'a> {
                 ));
             }
             bytes.truncate(length);
-            self.buffers[i] = Some(Loaded { bytes, origin });
+            self.buffers[i] = Some(Loaded {
+                bytes,
+                origin,
+                extended: false,
+            });
         }
         Ok(self.bytes(i))
     }

@@ -70,7 +70,12 @@ pub(crate) fn write(
         .iter()
         .map(|b| b.as_ref().map(|b| b.bytes.clone()))
         .collect();
-    let mut changed = vec![false; buffers.len()];
+    // Buffers holding decoded Draco data are new bytes, whatever else changed.
+    let mut changed: Vec<bool> = layout
+        .buffers
+        .iter()
+        .map(|b| b.as_ref().is_some_and(|b| b.extended))
+        .collect();
     for &(span, base) in &layout.positions {
         let bytes = buffers[span.buffer].as_mut().expect("a loaded buffer");
         let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
