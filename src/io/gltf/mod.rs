@@ -34,17 +34,29 @@
 //! bytes and values (the JSON is re-serialised, so key order and spacing may change). A changed
 //! buffer is written as the GLB's binary chunk, re-encoded into its `data:` URI, or, when it was
 //! an external file, written beside the output as `<output stem>.bin` (`<stem>-1.bin`, … for
-//! more than one) and its `uri` updated: the input's files are never overwritten. Unchanged
+//! more than one) and its `uri` updated: the input's files are never overwritten. A buffer that
+//! received decoded Draco data is always written so. Unchanged
 //! external files (textures, other buffers) keep their relative URIs, so they must be beside the
 //! output too. Tangents (`TANGENT`) and morph targets are carried as they were.
 //!
+//! # Draco
+//!
+//! Draco-compressed primitives (`KHR_draco_mesh_compression`) are decoded first (see `draco`:
+//! each attribute into its accessor's own type, appended as plain views to the buffer that held
+//! the compressed data, the extension removed from the primitive and the file), so the rest of
+//! the reader, the smoothing and the writer see an ordinary glTF: a glTF output is therefore
+//! written uncompressed, and [`GltfLayout::decompressed`] tells a caller to say so. The
+//! compressed bytes stay in their buffer, unused. Data several primitives share is decoded once.
+//! A Draco attribute whose type is not its accessor's, counts that differ from the accessors',
+//! and Draco on a primitive that is not triangles are refused, and data that does not decode is
+//! one line: `mesh M primitive P: Draco data could not be decoded (<the decoder's message>)`.
+//!
 //! # Refused
 //!
-//! Sparse accessors on positions or indices, Draco (`KHR_draco_mesh_compression`) and meshopt
-//! (`EXT_meshopt_compression`) compression, non-float positions (`KHR_mesh_quantization`),
-//! missing buffers, accessors and indices out of range, truncated GLB chunks, NaN or infinite
-//! positions, and external buffers when the file's directory is unknown (bytes not read from a
-//! file).
+//! Sparse accessors on positions or indices, meshopt compression (`EXT_meshopt_compression`),
+//! non-float positions (`KHR_mesh_quantization`), missing buffers, accessors and indices out of
+//! range, truncated GLB chunks, NaN or infinite positions, and external buffers when the file's
+//! directory is unknown (bytes not read from a file).
 
 use std::fmt;
 use std::path::PathBuf;
