@@ -111,7 +111,7 @@ fn draco_left(json: &Value) -> bool {
 fn smooth(input: &Path, output: &Path, extra: &[&str]) -> String {
     let mut args: Vec<&std::ffi::OsStr> =
         vec!["smooth".as_ref(), input.as_os_str(), output.as_os_str()];
-    args.extend(extra.iter().map(|a| std::ffi::OsStr::new(a)));
+    args.extend(extra.iter().map(std::ffi::OsStr::new));
     ok(vcsmooth(args))
 }
 
@@ -190,7 +190,10 @@ fn draco_reads_to_the_original_triangles() {
                 class[j]
             })
             .collect();
-        assert!(worst <= bound, "{name}: a position is {worst} away (bound {bound})");
+        assert!(
+            worst <= bound,
+            "{name}: a position is {worst} away (bound {bound})"
+        );
         let mut got: HashMap<[usize; 3], i32> = HashMap::new();
         for t in mesh.triangles.iter() {
             *got.entry(key(t.map(|v| nearest[v as usize]))).or_default() += 1;
@@ -233,7 +236,10 @@ fn draco_glb_is_smoothed_and_written_uncompressed() {
         let (pp, tp) = read(&plain);
         let (po, to) = read(&output);
         assert_eq!(tp, to, "{name}: triangles changed");
-        assert!(pp.iter().zip(&po).any(|(a, b)| a != b), "{name}: nothing moved");
+        assert!(
+            pp.iter().zip(&po).any(|(a, b)| a != b),
+            "{name}: nothing moved"
+        );
         let (v0, v1) = (volume(&input), volume(&output));
         assert!(
             ((v1 - v0) / v0).abs() <= VOLUME,
@@ -310,7 +316,10 @@ fn shared_draco_data_is_decoded_once() {
         .as_array_mut()
         .unwrap()
         .push(json!({"mesh": 2, "translation": [5.0, 0.0, 0.0]}));
-    json["scenes"][0]["nodes"].as_array_mut().unwrap().push(json!(nodes));
+    json["scenes"][0]["nodes"]
+        .as_array_mut()
+        .unwrap()
+        .push(json!(nodes));
     let input = dir.path().join("twice.glb");
     std::fs::write(&input, glb(&json, &bin)).unwrap();
     let once = io::read_mesh(&formats(DRACO[0])).unwrap();
@@ -320,12 +329,14 @@ fn shared_draco_data_is_decoded_once() {
     let output = dir.path().join("out.glb");
     smooth(&input, &output, &[]);
     let (after, out_bin) = unglb(&std::fs::read(&output).unwrap());
-    let (single, single_bin) = unglb(&std::fs::read(&{
-        let o = dir.path().join("single.glb");
-        smooth(&formats(DRACO[0]), &o, &[]);
-        o
-    })
-    .unwrap());
+    let (single, single_bin) = unglb(
+        &std::fs::read(&{
+            let o = dir.path().join("single.glb");
+            smooth(&formats(DRACO[0]), &o, &[]);
+            o
+        })
+        .unwrap(),
+    );
     assert_eq!(out_bin.len(), single_bin.len(), "decoded twice");
     assert_eq!(
         after["meshes"][2]["primitives"][0]["attributes"],
@@ -344,7 +355,9 @@ fn damaged_draco_and_meshopt_are_refused_in_one_line() {
     let (json, bin) = unglb(&std::fs::read(formats(DRACO[0])).unwrap());
     let ext = "/meshes/0/primitives/0/extensions/KHR_draco_mesh_compression/bufferView";
     let view = json.pointer(ext).unwrap().as_u64().unwrap() as usize;
-    let offset = json["bufferViews"][view]["byteOffset"].as_u64().unwrap_or(0) as usize;
+    let offset = json["bufferViews"][view]["byteOffset"]
+        .as_u64()
+        .unwrap_or(0) as usize;
     let length = json["bufferViews"][view]["byteLength"].as_u64().unwrap() as usize;
     let mut truncated = json.clone();
     truncated["bufferViews"][view]["byteLength"] = json!(length / 2);
@@ -379,7 +392,11 @@ fn damaged_draco_and_meshopt_are_refused_in_one_line() {
         (
             "count.glb",
             glb(&count, &bin),
-            vec!["mesh 0 primitive 0: POSITION", "count is 1000", "1617 points"],
+            vec![
+                "mesh 0 primitive 0: POSITION",
+                "count is 1000",
+                "1617 points",
+            ],
         ),
         (
             "meshopt.glb",

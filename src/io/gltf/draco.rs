@@ -14,6 +14,7 @@
 //! decoded once; an accessor several primitives name is filled once.
 
 use std::collections::HashMap;
+use std::collections::hash_map::Entry;
 use std::path::Path;
 
 use draco_core::{
@@ -88,7 +89,10 @@ pub(super) fn decompress(
     let accessors = array(json, "accessors");
     let get = |job: &Job, what: &str, k: usize| {
         accessors.get(k).ok_or_else(|| {
-            job.at(format_args!("{what} accessor {k} out of range (0..{})", accessors.len()))
+            job.at(format_args!(
+                "{what} accessor {k} out of range (0..{})",
+                accessors.len()
+            ))
         })
     };
     for job in &jobs {
@@ -98,8 +102,11 @@ pub(super) fn decompress(
             .map(|a| (a.1, a.2))
             .chain(job.indices.map(|k| (k, u32::MAX)))
             .collect();
-        if named.iter().all(|&(k, _)| accessors.get(k).is_some_and(|a| a.get("bufferView").is_some()))
-            && job.indices.is_some()
+        if named.iter().all(|&(k, _)| {
+            accessors
+                .get(k)
+                .is_some_and(|a| a.get("bufferView").is_some())
+        }) && job.indices.is_some()
         {
             continue; // the uncompressed fallback is complete: read as the file has it
         }
@@ -118,13 +125,16 @@ pub(super) fn decompress(
         if !todo && job.indices.is_some() {
             continue; // all shared with primitives already decoded
         }
-        if !decoded.contains_key(&job.view) {
-            let bytes = view_bytes(json, &mut reader, job.view).map_err(|e| job.at(e))?;
-            let mesh = decode(bytes)
-                .map_err(|e| job.at(format_args!("Draco data could not be decoded ({e})")))?;
-            decoded.insert(job.view, mesh);
-        }
-        let mesh = &decoded[&job.view];
+        let mesh =
+            match decoded.entry(job.view) {
+                Entry::Occupied(known) => known.into_mut(),
+                Entry::Vacant(new) => {
+                    let bytes = view_bytes(json, &mut reader, job.view).map_err(|e| job.at(e))?;
+                    new.insert(decode(bytes).map_err(|e| {
+                        job.at(format_args!("Draco data could not be decoded ({e})"))
+                    })?)
+                }
+            };
         let buffer = view_buffer(json, job.view).map_err(|e| job.at(e))?;
         for (name, accessor, id) in &job.attributes {
             if source.contains_key(accessor) {
@@ -152,7 +162,10 @@ pub(super) fn decompress(
                     source.insert(k, (job.view, u32::MAX));
                     Accessor::Existing(k)
                 }
-                None => Accessor::NewIndices { mesh: job.mesh, primitive: job.primitive },
+                None => Accessor::NewIndices {
+                    mesh: job.mesh,
+                    primitive: job.primitive,
+                },
             };
             filled.push(Filled {
                 accessor,
@@ -185,7 +198,8 @@ fn jobs(json: &Value) -> std::result::Result<Vec<Job>, String> {
                     prim["mode"]
                 )));
             }
-            let view = field(ext, "bufferView", None).map_err(|e| at(format!("{EXTENSION}: {e}")))?;
+            let view =
+                field(ext, "bufferView", None).map_err(|e| at(format!("{EXTENSION}: {e}")))?;
             let ids = ext
                 .get("attributes")
                 .and_then(Value::as_object)
@@ -208,7 +222,9 @@ fn jobs(json: &Value) -> std::result::Result<Vec<Job>, String> {
             }
             let indices = match prim.get("indices") {
                 None => None,
-                Some(i) => Some(index(i).ok_or_else(|| at("indices is not an accessor index".into()))?),
+                Some(i) => {
+                    Some(index(i).ok_or_else(|| at("indices is not an accessor index".into()))?)
+                }
             };
             jobs.push(Job {
                 mesh: m,
@@ -226,7 +242,10 @@ fn jobs(json: &Value) -> std::result::Result<Vec<Job>, String> {
 fn view_buffer(json: &Value, view: usize) -> std::result::Result<usize, String> {
     let views = array(json, "bufferViews");
     let v = views.get(view).ok_or_else(|| {
-        format!("{EXTENSION}: bufferView {view} out of range (0..{})", views.len())
+        format!(
+            "{EXTENSION}: bufferView {view} out of range (0..{})",
+            views.len()
+        )
     })?;
     field(v, "buffer", None).map_err(|e| format!("bufferView {view}: {e}"))
 }
@@ -248,7 +267,9 @@ fn view_bytes<'r>(
         .checked_add(length)
         .and_then(|end| bytes.get(offset..end))
         .ok_or_else(|| {
-            format!("bufferView {view}: bytes {offset}..+{length} beyond buffer {buffer} ({have} bytes)")
+            format!(
+                "bufferView {view}: bytes {offset}..+{length} beyond buffer {buffer} ({have} bytes)"
+            )
         })?;
     Ok(bytes)
 }
@@ -264,7 +285,8 @@ fn decode(bytes: &[u8]) -> std::result::Result<DracoMesh, String> {
     let mut mesh = DracoMesh::new();
     MeshDecoder::new()
         .decode(&mut buffer, &mut mesh)
-        .map_err(|e| e.to_string())?;
+        // On one line whatever the decoder says.
+        .map_err(|e| e.to_string().replace(['\n', '\r'], " "))?;
     Ok(mesh)
 }
 
@@ -356,7 +378,9 @@ fn attribute_bytes(
                 .checked_mul(step)
                 .and_then(|b| b.checked_add(from))
                 .and_then(|b| data.get(b..b.checked_add(element)?))
-                .ok_or_else(|| format!("point {p} names value {v}, which the data does not hold"))?;
+                .ok_or_else(|| {
+                    format!("point {p} names value {v}, which the data does not hold")
+                })?;
             out.extend_from_slice(value);
             out.resize(out.len() + stride - element, 0);
         }
@@ -366,10 +390,7 @@ fn attribute_bytes(
 
 /// The triangles' corners in accessor `a`'s component type when they fit it (else `u32`, returned
 /// as the type to set), checked against the points and the accessor's count.
-fn index_bytes(
-    mesh: &DracoMesh,
-    a: Option<&Value>,
-) -> std::result::Result<(Vec<u8>, u64), String> {
+fn index_bytes(mesh: &DracoMesh, a: Option<&Value>) -> std::result::Result<(Vec<u8>, u64), String> {
     let faces = mesh.faces();
     let points = mesh.num_points();
     if let Some(a) = a {
@@ -387,11 +408,11 @@ fn index_bytes(
         top = top.max(x.0).max(y.0).max(z.0);
     }
     if !faces.is_empty() && top as usize >= points {
-        return Err(format!(
-            "the Draco data names point {top} of {points}"
-        ));
+        return Err(format!("the Draco data names point {top} of {points}"));
     }
-    let declared = a.and_then(|a| a.get("componentType")).and_then(Value::as_u64);
+    let declared = a
+        .and_then(|a| a.get("componentType"))
+        .and_then(Value::as_u64);
     let ct = match declared {
         Some(5121) if top <= u32::from(u8::MAX) => 5121,
         Some(5123) if top <= u32::from(u16::MAX) => 5123,

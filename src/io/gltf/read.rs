@@ -11,7 +11,7 @@ use serde_json::Value;
 use super::runs::runs;
 use super::uri::{base64_decode, percent_decode};
 use super::{
-    CHUNK_BIN, CHUNK_JSON, FLOAT, MESHOPT, GltfLayout, Loaded, Origin, Span, array, field,
+    CHUNK_BIN, CHUNK_JSON, FLOAT, GltfLayout, Loaded, MESHOPT, Origin, Span, array, field,
     has_magic, index,
 };
 use crate::io::FaceBuilder;
@@ -245,7 +245,10 @@ impl<'a> Reader<'a> {
             ));
         }
         for key in ["extensionsUsed", "extensionsRequired"] {
-            if array(self.json, key).iter().any(|n| n.as_str() == Some(MESHOPT)) {
+            if array(self.json, key)
+                .iter()
+                .any(|n| n.as_str() == Some(MESHOPT))
+            {
                 return Err(meshopt_refused());
             }
         }

@@ -198,3 +198,55 @@ fn runs_join_spans_naming_the_same_elements_only() {
     );
     assert_eq!(runs[2].byte(10), 124);
 }
+
+/// A Draco GLB's binary chunk as a `data:` URI of a `.gltf`: decoded into that buffer, which is
+/// written re-encoded (the decoded data with it) and reads back to the same mesh, uncompressed.
+#[test]
+fn draco_in_a_data_uri_is_decoded_into_it() {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/data/formats/torus_box.draco_sequential.glb"
+    );
+    let glb = std::fs::read(path).unwrap();
+    let draco = read(&glb, true, None).unwrap();
+    let word = |at: usize| u32::from_le_bytes(glb[at..at + 4].try_into().unwrap()) as usize;
+    let json_len = word(12);
+    let mut json: serde_json::Value = serde_json::from_slice(&glb[20..20 + json_len]).unwrap();
+    let bin = &glb[28 + json_len..28 + json_len + word(20 + json_len)];
+    json["buffers"][0]["uri"] = format!(
+        "data:application/octet-stream;base64,{}",
+        base64_encode(bin)
+    )
+    .into();
+    let mesh = read(&serde_json::to_vec(&json).unwrap(), false, None).unwrap();
+    assert_eq!(mesh.positions.to_vec(), draco.positions.to_vec());
+    assert_eq!(mesh.triangles.to_vec(), draco.triangles.to_vec());
+    let layout = mesh.source.layout.as_deref().unwrap();
+    let layout = layout.as_any().downcast_ref::<GltfLayout>().unwrap();
+    assert!(layout.decompressed());
+    assert!(matches!(
+        layout.buffers[0].as_ref().map(|b| (&b.origin, b.extended)),
+        Some((Origin::Data(_), true))
+    ));
+    assert!(!layout.json.to_string().contains(super::draco::EXTENSION));
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out.gltf");
+    write(&out, &mesh, None).unwrap();
+    let files: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(
+        files,
+        ["out.gltf"],
+        "the decoded data stays in the data URI"
+    );
+    let back = read(&std::fs::read(&out).unwrap(), false, None).unwrap();
+    assert_eq!(back.triangles.to_vec(), mesh.triangles.to_vec());
+    let back_layout = back.source.layout.as_deref().unwrap();
+    let back_layout = back_layout.as_any().downcast_ref::<GltfLayout>().unwrap();
+    assert!(
+        !back_layout.decompressed(),
+        "already plain: nothing to decode"
+    );
+}
