@@ -149,10 +149,14 @@ pub fn content_size(path: &Path) -> Result<u64> {
     }
 }
 
+/// What [`not_carried`] names for a glTF input's Draco compression, which a glTF output does not
+/// keep (its geometry is written uncompressed).
+pub const DRACO_DROPPED: &str = "Draco compression";
+
 /// What a mesh read from a file carried that its output at `path` will not: texture coordinates,
 /// colours, normals, materials and the file's other properties when the output is another format
 /// (which is written plain: positions and faces), polygons when it is one that holds triangles
-/// only. Empty when nothing is lost (the same format keeps everything; a mesh from no file
+/// only, and a glTF input's Draco compression ([`DRACO_DROPPED`]). Empty when nothing is lost (the same format keeps everything; a mesh from no file
 /// carried nothing). For the one line that tells a user so.
 pub fn not_carried(source: &Source, path: &Path) -> Vec<String> {
     let (Some(from), Some(to)) = (source.format, Format::from_extension(path)) else {
@@ -178,6 +182,14 @@ pub fn not_carried(source: &Source, path: &Path) -> Vec<String> {
         if !carried.other.is_empty() {
             lost.push(format!("other data ({})", carried.other.join(", ")));
         }
+    }
+    let draco = source
+        .layout
+        .as_deref()
+        .and_then(|l| l.as_any().downcast_ref::<GltfLayout>())
+        .is_some_and(GltfLayout::decompressed);
+    if draco && matches!(to, Format::Gltf | Format::Glb) {
+        lost.push(DRACO_DROPPED.to_string());
     }
     if source.polygons_triangulated > 0 && matches!(to, Format::Stl | Format::Gltf | Format::Glb) {
         lost.push(format!(

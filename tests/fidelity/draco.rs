@@ -218,7 +218,16 @@ fn draco_glb_is_smoothed_and_written_uncompressed() {
         let plain = dir.path().join(format!("plain-{name}"));
         let output = dir.path().join(format!("out-{name}"));
         smooth(&input, &plain, &["--iterations", "0"]);
-        smooth(&input, &output, &[]);
+        // The one note that says the output is not compressed.
+        let out = vcsmooth(["smooth".as_ref(), input.as_os_str(), output.as_os_str()]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        let notes: Vec<&str> = err.lines().filter(|l| l.contains("note:")).collect();
+        assert!(out.status.success(), "{err}");
+        assert_eq!(notes.len(), 1, "{err}");
+        assert!(
+            notes[0].contains("written without the input's Draco compression"),
+            "{err}"
+        );
         let (jp, bp) = unglb(&std::fs::read(&plain).unwrap());
         let (jo, bo) = unglb(&std::fs::read(&output).unwrap());
         for j in [&jp, &jo] {

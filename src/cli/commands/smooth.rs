@@ -373,7 +373,7 @@ fn report(
             "vcsmooth: note: {}: written without the input's {}: {}",
             cfg.output.display(),
             run.dropped.join(", "),
-            keep_advice(run.input_format, &cfg.output)
+            keep_advice(run.input_format, &cfg.output, &run.dropped)
         );
     }
 
@@ -497,7 +497,7 @@ fn print_iterations(out: &mut dyn Write, records: &[IterationRecord]) -> Result<
 }
 
 /// How to keep what a conversion from `input` (a file of that format) to `output` drops.
-fn keep_advice(input: Option<crate::io::Format>, output: &Path) -> String {
+fn keep_advice(input: Option<crate::io::Format>, output: &Path, dropped: &[String]) -> String {
     let name = |f: Option<crate::io::Format>| {
         f.map_or("?".to_string(), |f| {
             crate::report::format_name(f).to_uppercase()
@@ -505,6 +505,11 @@ fn keep_advice(input: Option<crate::io::Format>, output: &Path) -> String {
     };
     let (from, to) = (name(input), name(crate::io::Format::from_extension(output)));
     match from == to {
+        true if dropped.iter().any(|d| d == crate::io::DRACO_DROPPED) => {
+            "vcsmooth decodes Draco and writes glTF uncompressed; compress the output again \
+             (e.g. gltf-transform draco) where size matters"
+                .to_string()
+        }
         true => format!("{to} holds triangles only"),
         false => format!(
             "{to} written from {from} holds positions and faces only; write .{} to keep them",
