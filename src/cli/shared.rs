@@ -17,7 +17,7 @@ pub struct InOut {
     /// Input mesh (PLY, OBJ, OFF, STL, glTF or GLB; any of them gzip-compressed).
     #[arg(value_name = "IN")]
     pub input: PathBuf,
-    /// Output mesh; .ply, .obj, .off, .stl (each with .gz to compress), or .gltf/.glb for a glTF input. Written atomically, never on failure.
+    /// Output mesh; .ply, .obj, .off, .stl (each with .gz to compress), .gltf or .glb (a glTF input keeps its scene in its own kind). Written atomically, never on failure.
     #[arg(value_name = "OUT")]
     pub output: PathBuf,
 }

@@ -22,7 +22,7 @@
 //! | OBJ | `v` (first three numbers), `f` with `i`, `i/t`, `i//n`, `i/t/n` and negative (relative) indices (`vt`/`vn` references checked too); every other statement whose keyword is a name kept (see `obj`) | the input's text with only the `v` positions and the `vn` normals rewritten when it came from OBJ (see `obj::layout`), else `v` + `f` |
 //! | OFF | `OFF` and its `C`/`N`/`ST` variants (vertex colours, normals, texture coordinates, face colours), `#` comments | the input's text with new `x y z` (and normals) when it carried colours, normals or texture coordinates, else `OFF` |
 //! | STL | binary and ASCII (keywords in any case) | binary (with the input's header and attribute bytes when it came from binary STL); ASCII with the input's solid names when it came from ASCII STL |
-//! | glTF 2.0 | `.glb`, and `.gltf` with external or `data:` URI buffers: the triangle primitives of every mesh (see `gltf`) | only from a glTF input, to the same kind: its JSON and buffers with new positions and normals |
+//! | glTF 2.0 | `.glb`, and `.gltf` with external or `data:` URI buffers: the triangle primitives of every mesh, Draco-compressed ones decoded (see `gltf`) | from a glTF input, to the same kind: its JSON and buffers with new positions and normals; from any other, a plain glTF (positions, normals, indices) |
 //!
 //! Text (OBJ, OFF, ASCII STL, a PLY header) is ASCII or UTF-8, with an optional UTF-8 byte-order
 //! mark, which is skipped; lines end with LF or CRLF. A header line (PLY, OFF's magic and counts,
@@ -155,7 +155,7 @@ pub const DRACO_DROPPED: &str = "Draco compression";
 
 /// What a mesh read from a file carried that its output at `path` will not: texture coordinates,
 /// colours, normals, materials and the file's other properties when the output is another format
-/// (which is written plain: positions and faces), polygons when it is one that holds triangles
+/// (which is written plain: positions and faces, and normals into glTF), polygons when it is one that holds triangles
 /// only, and a glTF input's Draco compression ([`DRACO_DROPPED`]). Empty when nothing is lost (the same format keeps everything; a mesh from no file
 /// carried nothing). For the one line that tells a user so.
 pub fn not_carried(source: &Source, path: &Path) -> Vec<String> {
@@ -172,7 +172,11 @@ pub fn not_carried(source: &Source, path: &Path) -> Vec<String> {
         for (had, what) in [
             (carried.uvs, "texture coordinates"),
             (carried.colours, "colours"),
-            (carried.normals, "normals"),
+            // A plain glTF has its own (recomputed) normals.
+            (
+                carried.normals && !matches!(to, Format::Gltf | Format::Glb),
+                "normals",
+            ),
             (carried.materials, "materials"),
         ] {
             if had {

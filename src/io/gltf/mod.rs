@@ -22,9 +22,11 @@
 //!
 //! # What is written
 //!
-//! Only to the input's own kind: a GLB input as `.glb`, a `.gltf` input as `.gltf`; a mesh that
-//! was not read from glTF is refused (glTF output keeps a glTF input's scene; a glTF input can be
-//! written to PLY, OBJ, OFF or STL as a plain mesh). The JSON and every buffer are carried
+//! A glTF input only to its own kind: a GLB input as `.glb`, a `.gltf` input as `.gltf` (a glTF
+//! input can be written to PLY, OBJ, OFF or STL as a plain mesh). A mesh that was not read from
+//! glTF is written as a plain glTF ([`GltfLayout::plain`]: one primitive of float `POSITION` and
+//! `NORMAL` and `u32` indices, in the GLB's chunk or a `.bin` beside the `.gltf`), through the same
+//! writer. The JSON and every buffer are carried
 //! through: the smoothed positions overwrite the `POSITION` data in place (same accessor, buffer
 //! view and byte layout: shared data stays one copy, so every accessor naming a vertex reads
 //! its one smoothed position and every index stays valid), `NORMAL` data is recomputed from
@@ -122,6 +124,9 @@ enum Origin {
     Data(String),
     /// An external file, as resolved against the input's directory.
     File(PathBuf),
+    /// Made for the output ([`GltfLayout::plain`]): the GLB's binary chunk, or a `.bin` beside a
+    /// `.gltf`.
+    New,
 }
 
 /// Where a float `VEC3` accessor's elements are: `count` elements of 12 bytes every `stride`

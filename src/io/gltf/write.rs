@@ -25,11 +25,16 @@ fn layout_of(mesh: &Mesh) -> Option<&GltfLayout> {
         .and_then(|l| l.as_any().downcast_ref::<GltfLayout>())
 }
 
-/// Whether `mesh` (already checked by `io::check_mesh`) can be written as `format`.
+/// Whether `mesh` (already checked by `io::check_mesh`) can be written as `format`: a glTF input
+/// to its own kind, any other mesh with at least one triangle as a plain glTF
+/// ([`GltfLayout::plain`]).
 pub(crate) fn check_writable(mesh: &Mesh, format: Format) -> std::result::Result<(), String> {
-    let layout = layout_of(mesh).ok_or(
-        "glTF output needs a glTF input (it keeps the input's scene); write .ply, .obj, .off or .stl",
-    )?;
+    let Some(layout) = layout_of(mesh) else {
+        if mesh.triangles.is_empty() {
+            return Err("a glTF primitive needs at least one triangle".into());
+        }
+        return crate::io::fits_single(mesh);
+    };
     match (layout.binary, format) {
         (true, Format::Glb) | (false, Format::Gltf) => {}
         (true, _) => return Err("a GLB input is written as .glb".into()),
@@ -61,8 +66,13 @@ pub(crate) fn write(
     mesh: &Mesh,
     colours: Option<&(dyn Fn(usize) -> [u8; 3] + Sync + '_)>,
 ) -> Result<()> {
-    let Some(layout) = layout_of(mesh) else {
-        return Err(Error::invalid(path, "cannot write: not a glTF mesh"));
+    let plain;
+    let layout = match layout_of(mesh) {
+        Some(layout) => layout,
+        None => {
+            plain = GltfLayout::plain(mesh, Format::from_extension(path) == Some(Format::Glb));
+            &plain
+        }
     };
     let mut json = layout.json.clone();
     let mut buffers: Vec<Option<Vec<u8>>> = layout
@@ -131,11 +141,12 @@ pub(crate) fn write(
         let bytes = buffers[i].take().expect("a loaded buffer");
         match &loaded.origin {
             Origin::Chunk => chunk = Some(bytes),
+            Origin::New if layout.binary => chunk = Some(bytes),
             Origin::Data(head) => {
                 json["buffers"][i]["uri"] =
                     Value::String(format!("{head},{}", base64_encode(&bytes)));
             }
-            Origin::File(_) => {
+            Origin::File(_) | Origin::New => {
                 let bin = bin_path(&beside, &chosen, layout);
                 staged.push(crate::io::atomic::stage(&bin, |out| out.write_all(&bytes))?);
                 chosen.push(bin.clone());
@@ -406,4 +417,62 @@ fn write_glb(out: &mut impl Write, json: &[u8], bin: Option<&[u8]>) -> std::io::
         out.write_all(&[0; 3][..pad(bin.len())])?;
     }
     Ok(())
+}
+
+impl GltfLayout {
+    /// A glTF of `mesh` alone, for a mesh that was not read from glTF: one node of one mesh of one
+    /// triangle primitive, float `POSITION` and `NORMAL` (filled by [`write`]) and `u32` indices in
+    /// one buffer, the GLB's binary chunk (`binary`) or a `.bin` beside the `.gltf`.
+    pub(super) fn plain(mesh: &Mesh, binary: bool) -> GltfLayout {
+        let (n, t) = (mesh.positions.len(), mesh.triangles.len());
+        let mut bytes = vec![0u8; 24 * n];
+        bytes.reserve(12 * t);
+        for tri in mesh.triangles.iter() {
+            tri.iter()
+                .for_each(|v| bytes.extend_from_slice(&v.to_le_bytes()));
+        }
+        let view = |offset: usize, length: usize, target: u32| serde_json::json!({"buffer": 0, "byteOffset": offset, "byteLength": length, "target": target});
+        let vec3 = |view: usize| serde_json::json!({"bufferView": view, "componentType": super::FLOAT, "count": n, "type": "VEC3"});
+        let json = serde_json::json!({
+            "asset": {"version": "2.0", "generator": concat!("vcsmooth ", env!("CARGO_PKG_VERSION"))},
+            "scene": 0,
+            "scenes": [{"nodes": [0]}],
+            "nodes": [{"mesh": 0}],
+            "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1}, "indices": 2, "mode": 4}]}],
+            "accessors": [
+                vec3(0),
+                vec3(1),
+                {"bufferView": 2, "componentType": 5125, "count": 3 * t, "type": "SCALAR"},
+            ],
+            "bufferViews": [
+                view(0, 12 * n, 34962),
+                view(12 * n, 12 * n, 34962),
+                view(24 * n, 12 * t, 34963),
+            ],
+            "buffers": [{"byteLength": bytes.len()}],
+        });
+        let span = |accessor: usize| super::Span {
+            accessor,
+            buffer: 0,
+            offset: 12 * n * accessor,
+            stride: 12,
+            count: n,
+        };
+        GltfLayout {
+            json,
+            binary,
+            buffers: vec![Some(super::Loaded {
+                bytes,
+                origin: Origin::New,
+                extended: true,
+            })],
+            positions: vec![(span(0), 0)],
+            normals: vec![(span(1), 0)],
+            vertices: n,
+            triangles: t,
+            carried: Default::default(),
+            dir: None,
+            decompressed: false,
+        }
+    }
 }
