@@ -22,7 +22,7 @@ use crate::smooth::{Method, Options};
 /// `vcsmooth curves IN --plot FILE.svg ...`
 #[derive(Debug, Clone, ClapArgs)]
 pub struct CurvesArgs {
-    /// Input mesh (PLY, OBJ, OFF, STL, glTF or GLB).
+    /// Input mesh (PLY, OBJ, OFF, STL, glTF or GLB; any of them gzip-compressed).
     #[arg(value_name = "IN")]
     pub input: PathBuf,
     /// Comma-separated methods to run, each from the same input.

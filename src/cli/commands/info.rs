@@ -18,7 +18,7 @@ use crate::report::{InfoDoc, format_name, undefined_as_nan};
 /// `vcsmooth info IN [--json]`
 #[derive(Debug, Clone, ClapArgs)]
 pub struct InfoArgs {
-    /// Mesh to describe.
+    /// Mesh to describe (PLY, OBJ, OFF, STL, glTF or GLB; any of them gzip-compressed).
     #[arg(value_name = "IN")]
     pub input: PathBuf,
     /// Print JSON instead of a table [default: table].
