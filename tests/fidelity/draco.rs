@@ -31,7 +31,7 @@ fn formats(name: &str) -> PathBuf {
 }
 
 /// The JSON and binary chunk of a GLB.
-fn unglb(bytes: &[u8]) -> (Value, Vec<u8>) {
+pub(super) fn unglb(bytes: &[u8]) -> (Value, Vec<u8>) {
     let word = |at: usize| u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap()) as usize;
     assert_eq!(&bytes[..4], b"glTF");
     assert_eq!(word(8), bytes.len(), "GLB length");
@@ -66,7 +66,7 @@ fn glb(json: &Value, bin: &[u8]) -> Vec<u8> {
 
 /// An accessor's elements as floats (float or unsigned normalised-or-not components), read from
 /// `bin` (the GLB's buffer 0).
-fn elements(json: &Value, bin: &[u8], accessor: usize) -> Vec<Vec<f64>> {
+pub(super) fn elements(json: &Value, bin: &[u8], accessor: usize) -> Vec<Vec<f64>> {
     let a = &json["accessors"][accessor];
     let v = &json["bufferViews"][a["bufferView"].as_u64().unwrap() as usize];
     assert_eq!(v["buffer"], 0);
@@ -275,7 +275,7 @@ fn draco_glb_is_smoothed_and_written_uncompressed() {
 }
 
 /// The accessor of attribute `name` of mesh `mesh`'s first primitive.
-fn attribute(json: &Value, mesh: usize, name: &str) -> usize {
+pub(super) fn attribute(json: &Value, mesh: usize, name: &str) -> usize {
     json["meshes"][mesh]["primitives"][0]["attributes"][name]
         .as_u64()
         .unwrap_or_else(|| panic!("no {name}")) as usize
