@@ -169,9 +169,15 @@ pub fn not_carried(source: &Source, path: &Path) -> Vec<String> {
             .as_ref()
             .map(|l| l.carries())
             .unwrap_or_default();
+        // A plain glTF takes per-vertex colours and texture coordinates.
+        let gltf = matches!(to, Format::Gltf | Format::Glb);
+        let (colours, uvs) = match (gltf, source.layout.as_deref()) {
+            (true, Some(l)) => l.has_vertex_attributes(),
+            _ => (false, false),
+        };
         for (had, what) in [
-            (carried.uvs, "texture coordinates"),
-            (carried.colours, "colours"),
+            (carried.uvs && !uvs, "texture coordinates"),
+            (carried.colours && !colours, "colours"),
             // A plain glTF has its own (recomputed) normals.
             (
                 carried.normals && !matches!(to, Format::Gltf | Format::Glb),

@@ -94,6 +94,21 @@ pub trait FileLayout: fmt::Debug + Send + Sync {
     fn carries(&self) -> Carried {
         Carried::default()
     }
+    /// Whether [`FileLayout::vertex_colours`] and [`FileLayout::vertex_uvs`] give values (cheap:
+    /// nothing is read).
+    fn has_vertex_attributes(&self) -> (bool, bool) {
+        (false, false)
+    }
+    /// One RGB colour per vertex, each channel in `0..=1`, when the file has them per vertex (a
+    /// plain glTF output writes them as `COLOR_0`).
+    fn vertex_colours(&self) -> Option<Vec<[f32; 3]>> {
+        None
+    }
+    /// One texture coordinate per vertex, as the file has them (origin at the image's bottom
+    /// left), when it has them per vertex (a plain glTF output writes them as `TEXCOORD_0`).
+    fn vertex_uvs(&self) -> Option<Vec<[f32; 2]>> {
+        None
+    }
     /// This layout after a subdivision appended vertices at edge midpoints (`parents[i]`: the two
     /// endpoints of vertex `n + i`, `n` the vertex count before; each may itself be a new vertex
     /// earlier in the list) and replaced the faces by `triangles` (`face_of[t]`: the input face

@@ -874,3 +874,50 @@ fn deviation_colours_go_into_color_0() {
     fails(&o, 2, &["bare.glb", "COLOR_0", "--deviation-colours"]);
     assert!(!bare.exists());
 }
+
+/// A plain glTF from a PLY with per-vertex colours and texture coordinates carries them
+/// (`COLOR_0` in 0..=1, `TEXCOORD_0` turned to glTF's top-left origin), and says nothing dropped.
+#[test]
+fn a_plain_gltf_carries_a_ply_s_vertex_colours_and_uvs() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = dir.path().join("tet.ply");
+    let rows = [
+        "0 0 0 255 0 0 0 0",
+        "1 0 0 0 255 0 1 0.25",
+        "0 1 0 0 0 255 0 1",
+        "0 0 1 51 102 204 0.5 0.75",
+    ];
+    std::fs::write(
+        &ply,
+        format!(
+            "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n\
+             property float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\n\
+             property float s\nproperty float t\nelement face 4\n\
+             property list uchar int vertex_indices\nend_header\n{}\n\
+             3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n",
+            rows.join("\n")
+        ),
+    )
+    .unwrap();
+    let glb = dir.path().join("tet.glb");
+    let out = vcsmooth(["smooth".as_ref(), ply.as_os_str(), glb.as_os_str()]);
+    assert!(out.status.success());
+    assert!(
+        !String::from_utf8_lossy(&out.stderr).contains("note:"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (json, bin) = super::draco::unglb(&std::fs::read(&glb).unwrap());
+    let colours = super::draco::elements(&json, &bin, super::draco::attribute(&json, 0, "COLOR_0"));
+    let uvs = super::draco::elements(&json, &bin, super::draco::attribute(&json, 0, "TEXCOORD_0"));
+    for (i, row) in rows.iter().enumerate() {
+        let v: Vec<f64> = row.split(' ').map(|t| t.parse().unwrap()).collect();
+        for c in 0..3 {
+            assert!(
+                (colours[i][c] - v[3 + c] / 255.0).abs() < 1e-6,
+                "vertex {i}"
+            );
+        }
+        assert!((uvs[i][0] - v[6]).abs() < 1e-7 && (uvs[i][1] - (1.0 - v[7])).abs() < 1e-7);
+    }
+}

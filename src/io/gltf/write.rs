@@ -422,7 +422,9 @@ fn write_glb(out: &mut impl Write, json: &[u8], bin: Option<&[u8]>) -> std::io::
 impl GltfLayout {
     /// A glTF of `mesh` alone, for a mesh that was not read from glTF: one node of one mesh of one
     /// triangle primitive, float `POSITION` and `NORMAL` (filled by [`write`]) and `u32` indices in
-    /// one buffer, the GLB's binary chunk (`binary`) or a `.bin` beside the `.gltf`.
+    /// one buffer, the GLB's binary chunk (`binary`) or a `.bin` beside the `.gltf`; and the
+    /// per-vertex colours (float `COLOR_0`) and texture coordinates (`TEXCOORD_0`, turned to
+    /// glTF's top-left origin) of its file when it had them ([`crate::mesh::FileLayout`]).
     pub(super) fn plain(mesh: &Mesh, binary: bool) -> GltfLayout {
         let (n, t) = (mesh.positions.len(), mesh.triangles.len());
         let mut bytes = vec![0u8; 24 * n];
@@ -451,6 +453,34 @@ impl GltfLayout {
             ],
             "buffers": [{"byteLength": bytes.len()}],
         });
+        let file = mesh.source.layout.as_deref();
+        let mut json = json;
+        let mut bytes = bytes;
+        let mut add = |json: &mut Value, name: &str, kind: &str, values: Vec<f32>| {
+            let offset = bytes.len();
+            values
+                .iter()
+                .for_each(|v| bytes.extend_from_slice(&v.to_le_bytes()));
+            let views = json["bufferViews"].as_array_mut().expect("an array");
+            views.push(view(offset, 4 * values.len(), 34962));
+            let view = views.len() - 1;
+            let accessors = json["accessors"].as_array_mut().expect("an array");
+            accessors.push(serde_json::json!(
+                {"bufferView": view, "componentType": super::FLOAT, "count": n, "type": kind}
+            ));
+            json["meshes"][0]["primitives"][0]["attributes"][name] = (accessors.len() - 1).into();
+        };
+        if let Some(colours) = file
+            .and_then(|f| f.vertex_colours())
+            .filter(|c| c.len() == n)
+        {
+            add(&mut json, "COLOR_0", "VEC3", colours.concat());
+        }
+        if let Some(uvs) = file.and_then(|f| f.vertex_uvs()).filter(|u| u.len() == n) {
+            let flipped: Vec<f32> = uvs.iter().flat_map(|&[u, v]| [u, 1.0 - v]).collect();
+            add(&mut json, "TEXCOORD_0", "VEC2", flipped);
+        }
+        json["buffers"][0]["byteLength"] = bytes.len().into();
         let span = |accessor: usize| super::Span {
             accessor,
             buffer: 0,

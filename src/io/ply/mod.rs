@@ -87,6 +87,37 @@ impl crate::mesh::FileLayout for PlyLayout {
         carried
     }
 
+    fn has_vertex_attributes(&self) -> (bool, bool) {
+        (
+            self.vertex_columns(&COLOUR_NAMES).is_some(),
+            self.vertex_columns(&UV_NAMES).is_some(),
+        )
+    }
+
+    fn vertex_colours(&self) -> Option<Vec<[f32; 3]>> {
+        let ([r, g, b], el, records) = self.vertex_columns(&COLOUR_NAMES)?;
+        // Integer channels span their type (`uchar`: 0..=255); float ones are 0..=1 already.
+        let channel = |k: usize, record: &[u8]| {
+            let t = el.scalar(k);
+            let v = t.get(&record[el.offset(k)..]).unwrap_or(0.0);
+            let max = t.int_range().map_or(1.0, |(_, max)| max as f64);
+            (v / max).clamp(0.0, 1.0) as f32
+        };
+        Some(
+            records
+                .map(|rec| [channel(r, rec), channel(g, rec), channel(b, rec)])
+                .collect(),
+        )
+    }
+
+    fn vertex_uvs(&self) -> Option<Vec<[f32; 2]>> {
+        let ([u, v], el, records) = self.vertex_columns(&UV_NAMES)?;
+        let value = |k: usize, record: &[u8]| {
+            el.scalar(k).get(&record[el.offset(k)..]).unwrap_or(0.0) as f32
+        };
+        Some(records.map(|rec| [value(u, rec), value(v, rec)]).collect())
+    }
+
     /// A new vertex's scalar properties are the mean of its edge's two endpoints', rounded to
     /// the property's type (integers to nearest, half away from zero); coordinates and normals
     /// are rewritten from the mesh anyway. A child face keeps its input face's properties, with
@@ -259,5 +290,43 @@ impl PlyLayout {
             mesh.source.precision,
         );
         records.layout(mesh.positions.len(), faces.len(), Vec::new())
+    }
+}
+
+/// The names a vertex's colour channels go by, in order of preference.
+const COLOUR_NAMES: [[&str; 3]; 3] = [
+    ["red", "green", "blue"],
+    ["r", "g", "b"],
+    ["diffuse_red", "diffuse_green", "diffuse_blue"],
+];
+
+/// The names a vertex's texture coordinates go by, in order of preference.
+const UV_NAMES: [[&str; 2]; 4] = [
+    ["u", "v"],
+    ["s", "t"],
+    ["texture_u", "texture_v"],
+    ["texture_s", "texture_t"],
+];
+
+impl PlyLayout {
+    /// The first of `names` whose properties the vertex element has, all scalars, with the element
+    /// and its records (kept, without lists), one slice a vertex.
+    fn vertex_columns<const N: usize>(
+        &self,
+        names: &[[&str; N]],
+    ) -> Option<([usize; N], &Element, std::slice::ChunksExact<'_, u8>)> {
+        let el = self.elements.iter().find(|e| e.name == "vertex")?;
+        let stride = el.stride()?;
+        let records = el.records.as_ref()?;
+        let columns = names.iter().find_map(|set| {
+            let ks = set.map(|name| el.prop(name));
+            ks.iter()
+                .all(Option::is_some)
+                .then(|| ks.map(|k| k.unwrap_or(0)))
+        })?;
+        let rows = records
+            .get(..el.count * stride)?
+            .chunks_exact(stride.max(1));
+        Some((columns, el, rows))
     }
 }
