@@ -163,7 +163,13 @@ fn copies_within(positions: &[DVec3], d: f64) -> Vec<(u32, u32)> {
         for dx in -1..=1 {
             for dy in -1..=1 {
                 for dz in -1..=1 {
-                    let at = [c[0] + dx, c[1] + dy, c[2] + dz];
+                    // Saturating: cells beyond `i64` (a tolerance far below the coordinates)
+                    // share the last one, and the distance decides.
+                    let at = [
+                        c[0].saturating_add(dx),
+                        c[1].saturating_add(dy),
+                        c[2].saturating_add(dz),
+                    ];
                     for &u in firsts.get(&at).map_or(&[][..], Vec::as_slice) {
                         let far = positions[u as usize].distance(p);
                         let nearer = nearest.is_none_or(|(f, w)| far < f || (far == f && u < w));
