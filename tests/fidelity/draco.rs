@@ -12,6 +12,7 @@ use glam::DVec3;
 use serde_json::{Value, json};
 use vcsmooth::io;
 
+use super::gltf::{glb, unglb};
 use crate::util::{fails, json as parse_json, ok, root, vcsmooth};
 
 const DRACO: [&str; 3] = [
@@ -28,40 +29,6 @@ const VOLUME: f64 = 1e-8;
 
 fn formats(name: &str) -> PathBuf {
     root().join("tests/data/formats").join(name)
-}
-
-/// The JSON and binary chunk of a GLB.
-pub(super) fn unglb(bytes: &[u8]) -> (Value, Vec<u8>) {
-    let word = |at: usize| u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap()) as usize;
-    assert_eq!(&bytes[..4], b"glTF");
-    assert_eq!(word(8), bytes.len(), "GLB length");
-    let json_len = word(12);
-    assert_eq!(&bytes[16..20], b"JSON");
-    let json = serde_json::from_slice(&bytes[20..20 + json_len]).unwrap();
-    let at = 20 + json_len;
-    assert_eq!(&bytes[at + 4..at + 8], b"BIN\0");
-    (json, bytes[at + 8..at + 8 + word(at)].to_vec())
-}
-
-fn glb(json: &Value, bin: &[u8]) -> Vec<u8> {
-    let mut text = serde_json::to_vec(json).unwrap();
-    while text.len() % 4 != 0 {
-        text.push(b' ');
-    }
-    let mut bin = bin.to_vec();
-    while bin.len() % 4 != 0 {
-        bin.push(0);
-    }
-    let mut out = b"glTF".to_vec();
-    out.extend_from_slice(&2u32.to_le_bytes());
-    out.extend_from_slice(&((12 + 8 + text.len() + 8 + bin.len()) as u32).to_le_bytes());
-    out.extend_from_slice(&(text.len() as u32).to_le_bytes());
-    out.extend_from_slice(b"JSON");
-    out.extend_from_slice(&text);
-    out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
-    out.extend_from_slice(b"BIN\0");
-    out.extend_from_slice(&bin);
-    out
 }
 
 /// An accessor's elements as floats (float or unsigned normalised-or-not components), read from

@@ -95,11 +95,15 @@ fn sphere_of(m: &vcsmooth::Mesh) -> (Value, Vec<u8>) {
     (json, bin)
 }
 
-/// A GLB of `json` and `bin`.
-fn glb(json: &Value, bin: &[u8]) -> Vec<u8> {
+/// A GLB of `json` and `bin` (each chunk padded to 4 bytes).
+pub(super) fn glb(json: &Value, bin: &[u8]) -> Vec<u8> {
     let mut text = serde_json::to_vec(json).unwrap();
     while text.len() % 4 != 0 {
         text.push(b' ');
+    }
+    let mut bin = bin.to_vec();
+    while bin.len() % 4 != 0 {
+        bin.push(0);
     }
     let mut out = b"glTF".to_vec();
     out.extend_from_slice(&2u32.to_le_bytes());
@@ -109,12 +113,12 @@ fn glb(json: &Value, bin: &[u8]) -> Vec<u8> {
     out.extend_from_slice(&text);
     out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
     out.extend_from_slice(b"BIN\0");
-    out.extend_from_slice(bin);
+    out.extend_from_slice(&bin);
     out
 }
 
 /// The JSON and binary chunk of a GLB (checking its header and lengths).
-fn unglb(bytes: &[u8]) -> (Value, Vec<u8>) {
+pub(super) fn unglb(bytes: &[u8]) -> (Value, Vec<u8>) {
     let word = |at: usize| u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap()) as usize;
     assert_eq!(&bytes[..4], b"glTF");
     assert_eq!(word(4), 2);
@@ -907,7 +911,7 @@ fn a_plain_gltf_carries_a_ply_s_vertex_colours_and_uvs() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let (json, bin) = super::draco::unglb(&std::fs::read(&glb).unwrap());
+    let (json, bin) = unglb(&std::fs::read(&glb).unwrap());
     let colours = super::draco::elements(&json, &bin, super::draco::attribute(&json, 0, "COLOR_0"));
     let uvs = super::draco::elements(&json, &bin, super::draco::attribute(&json, 0, "TEXCOORD_0"));
     for (i, row) in rows.iter().enumerate() {

@@ -146,7 +146,7 @@ fn a_uv_seam_rounded_apart_is_welded_within_a_tolerance() {
         let after = io::read_mesh(&out).unwrap();
         // Only POSITION and NORMAL are rewritten: the UVs are the input's.
         let uvs = |path: &Path| {
-            let (json, bin) = super::draco::unglb(&std::fs::read(path).unwrap());
+            let (json, bin) = super::gltf::unglb(&std::fs::read(path).unwrap());
             super::draco::elements(&json, &bin, super::draco::attribute(&json, 0, "TEXCOORD_0"))
         };
         assert_eq!(uvs(&out), uvs(&input));

@@ -575,34 +575,50 @@ fn faces_any(
     origin: Origin,
     faces: &mut FaceBuilder,
 ) -> Fallible<usize> {
-    let FaceRole {
-        list,
-        count,
-        index: item,
-        ..
-    } = face;
-    let mut fields = Vec::new();
     let mut corners = Vec::new();
-    let mut pos = 0;
-    for i in 0..el.count {
-        let end = walk_record(data, pos, &el.props, false, &mut fields)
-            .map_err(|e| walk_failed(el, i, origin, pos, e))?;
-        let Field { at, n } = fields[list];
-        if n < 3 {
-            return Err(fail(el, i, origin, pos, too_few(n)));
+    each_index_list(data, el, face, origin, |i, pos, ids| {
+        if ids.len() < 3 {
+            return Err(fail(el, i, origin, pos, too_few(ids.len())));
         }
         corners.clear();
-        for k in 0..n {
-            // In bounds: `walk_record` checked the list; an integer type converts exactly.
-            let v = item
-                .get(&data[at + count.size() + k * item.size()..])
-                .unwrap_or(-1.0) as i64;
+        for v in ids {
             if !(0..i64::from(vertices)).contains(&v) {
                 return Err(fail(el, i, origin, pos, bad_index(v, vertices as usize)));
             }
             corners.push(v as u32);
         }
         faces.polygon(&corners);
+        Ok(())
+    })
+}
+
+/// Walks the records of `el` (any layout), handing `each` a record's number, its start and the
+/// ids of `role`'s list; returns the element's length in bytes.
+fn each_index_list(
+    data: &[u8],
+    el: &Element,
+    role: FaceRole,
+    origin: Origin,
+    mut each: impl FnMut(usize, usize, &mut dyn ExactSizeIterator<Item = i64>) -> Fallible<()>,
+) -> Fallible<usize> {
+    let FaceRole {
+        list,
+        count,
+        index: item,
+        ..
+    } = role;
+    let mut fields = Vec::new();
+    let mut pos = 0;
+    for i in 0..el.count {
+        let end = walk_record(data, pos, &el.props, false, &mut fields)
+            .map_err(|e| walk_failed(el, i, origin, pos, e))?;
+        let Field { at, n } = fields[list];
+        // In bounds: `walk_record` checked the list; an integer type converts exactly.
+        let mut ids = (0..n).map(|k| {
+            item.get(&data[at + count.size() + k * item.size()..])
+                .unwrap_or(-2.0) as i64
+        });
+        each(i, pos, &mut ids)?;
         pos = end;
     }
     Ok(pos)
@@ -621,25 +637,10 @@ pub(super) fn decode_strips(
     origin: Origin,
     faces: &mut FaceBuilder,
 ) -> Fallible<usize> {
-    let FaceRole {
-        list,
-        count,
-        index: item,
-        ..
-    } = strips;
-    let mut fields = Vec::new();
-    let mut pos = 0;
-    for i in 0..el.count {
-        let end = walk_record(data, pos, &el.props, false, &mut fields)
-            .map_err(|e| walk_failed(el, i, origin, pos, e))?;
-        let Field { at, n } = fields[list];
+    each_index_list(data, el, strips, origin, |i, pos, ids| {
         // The last two ids of the strip so far, and its length.
         let (mut a, mut b, mut run) = (0u32, 0u32, 0usize);
-        for k in 0..n {
-            // In bounds: `walk_record` checked the list; an integer type converts exactly.
-            let v = item
-                .get(&data[at + count.size() + k * item.size()..])
-                .unwrap_or(-2.0) as i64;
+        for v in ids {
             if v == -1 {
                 run = 0;
                 continue;
@@ -653,7 +654,6 @@ pub(super) fn decode_strips(
             }
             (a, b, run) = (b, c, run + 1);
         }
-        pos = end;
-    }
-    Ok(pos)
+        Ok(())
+    })
 }
