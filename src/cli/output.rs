@@ -41,17 +41,6 @@ pub fn mesh_output(path: &Path) -> Result<()> {
     parent_exists(path)
 }
 
-/// [`mesh_output`] in the words of `subdivide` and `refine`.
-pub fn refined_mesh_output(path: &Path) -> Result<()> {
-    if output_format(path).is_none() {
-        return Err(Error::invalid(
-            path,
-            "unknown or missing output format (expected .ply, .obj, .off or .stl)",
-        ));
-    }
-    parent_exists(path)
-}
-
 /// Check that a plot can be written to `path`: `.svg`, existing directory.
 pub fn svg_output(path: &Path) -> Result<()> {
     let ok = path

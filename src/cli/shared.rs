@@ -27,7 +27,7 @@ impl InOut {
     /// can hold a refined mesh, and the files (see [`crate::cli::output::check_files`]).
     pub fn check_refined(&self, max_edge: f64) -> Result<()> {
         crate::modes::refine::check_max_edge(max_edge)?;
-        crate::cli::output::refined_mesh_output(&self.output)?;
+        crate::cli::output::mesh_output(&self.output)?;
         crate::cli::output::check_files(&[("IN", &self.input)], Some(("OUT", &self.output)), &[])
     }
 }

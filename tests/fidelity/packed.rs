@@ -161,3 +161,39 @@ fn a_uv_seam_rounded_apart_is_welded_within_a_tolerance() {
     assert!(moved(&[]) < n - 100, "exact welding leaves the seam");
     assert_eq!(moved(&["--weld-tolerance", "1e-5"]), n);
 }
+
+/// `subdivide` and `generate` write plain glTF as `smooth` does, and gzip where asked.
+#[test]
+fn subdivide_and_generate_write_glb_and_gz() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = |name: &str| dir.path().join(name);
+    ok(vcsmooth([
+        "subdivide",
+        &arg(&scan("fertility-9k.ply")),
+        &arg(&d("sub.glb")),
+        "--max-edge",
+        "4",
+    ]));
+    ok(vcsmooth([
+        "subdivide",
+        &arg(&scan("fertility-9k.ply")),
+        &arg(&d("sub.ply.gz")),
+        "--max-edge",
+        "4",
+    ]));
+    let (glb, gz) = (
+        io::read_mesh(&d("sub.glb")).unwrap(),
+        io::read_mesh(&d("sub.ply.gz")).unwrap(),
+    );
+    assert!(glb.triangles.len() > 9000);
+    assert_eq!(glb.triangles[..], gz.triangles[..]);
+    assert_eq!(glb.positions[..], gz.positions[..]);
+    ok(vcsmooth([
+        "generate",
+        "sphere",
+        &arg(&d("g.glb")),
+        "--subdivisions",
+        "3",
+    ]));
+    assert_eq!(io::read_mesh(&d("g.glb")).unwrap().triangles.len(), 1280);
+}

@@ -34,7 +34,7 @@ pub struct GenerateArgs {
     /// Shape to generate.
     #[arg(value_enum)]
     pub shape: Shape,
-    /// Output mesh; .ply, .obj, .off or .stl, each with .gz to compress (.ply only with --subdivide).
+    /// Output mesh; .ply, .obj, .off or .stl (each with .gz to compress), .gltf or .glb (.ply only with --subdivide).
     #[arg(value_name = "OUT")]
     pub output: PathBuf,
     /// Subdivision level K of sphere or torus (sphere: 20·4^K triangles; K = 2 is the paper's 162-vertex sphere).
