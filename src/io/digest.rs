@@ -58,11 +58,9 @@ impl Sha256 {
             compress(&mut self.state, &block);
             self.filled = 0;
         }
-        let mut blocks = data.chunks_exact(64);
-        for b in &mut blocks {
-            compress(&mut self.state, b.try_into().expect("64 bytes"));
-        }
-        let rest = blocks.remainder();
+        let whole = data.len() - data.len() % 64;
+        compress_blocks(&mut self.state, &data[..whole]);
+        let rest = &data[whole..];
         self.block[..rest.len()].copy_from_slice(rest);
         self.filled = rest.len();
     }
@@ -76,6 +74,75 @@ impl Sha256 {
         self.update(&pad);
         debug_assert_eq!(self.filled, 0);
         self.state.iter().map(|w| format!("{w:08x}")).collect()
+    }
+}
+
+/// Compress `blocks` (a multiple of 64 bytes) into `state`: with the processor's SHA instructions
+/// where it has them (about 5× faster), else in portable code; the same state either way.
+fn compress_blocks(state: &mut [u32; 8], blocks: &[u8]) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("sha")
+        && std::arch::is_x86_feature_detected!("sse4.1")
+        && std::arch::is_x86_feature_detected!("ssse3")
+    {
+        // SAFETY: the features the function is compiled for were just detected.
+        unsafe { ni::compress_blocks(state, blocks) };
+        return;
+    }
+    for b in blocks.chunks_exact(64) {
+        compress(state, b.try_into().expect("64 bytes"));
+    }
+}
+
+/// SHA-256 with the x86 SHA extensions: the message schedule four words at a time
+/// (`sha256msg1`/`sha256msg2`), two rounds an instruction (`sha256rnds2`), the state held as
+/// the two halves those instructions take (ABEF and CDGH).
+#[cfg(target_arch = "x86_64")]
+mod ni {
+    use std::arch::x86_64::*;
+
+    #[target_feature(enable = "sha,sse2,ssse3,sse4.1")]
+    pub(super) unsafe fn compress_blocks(state: &mut [u32; 8], blocks: &[u8]) {
+        // SAFETY (every load and store): unaligned 16-byte accesses within `state` (32 bytes),
+        // `K` (256 bytes) and each 64-byte block.
+        unsafe {
+            let dcba = _mm_loadu_si128(state.as_ptr().cast());
+            let hgfe = _mm_loadu_si128(state.as_ptr().add(4).cast());
+            let cdab = _mm_shuffle_epi32(dcba, 0xB1);
+            let efgh = _mm_shuffle_epi32(hgfe, 0x1B);
+            let mut abef = _mm_alignr_epi8(cdab, efgh, 8);
+            let mut cdgh = _mm_blend_epi16(efgh, cdab, 0xF0);
+            // Big-endian words of the block into lanes.
+            let order = _mm_set_epi64x(0x0c0d0e0f_08090a0b, 0x04050607_00010203);
+            for block in blocks.chunks_exact(64) {
+                let (abef_in, cdgh_in) = (abef, cdgh);
+                let mut w = [0, 1, 2, 3].map(|k: usize| {
+                    _mm_shuffle_epi8(_mm_loadu_si128(block.as_ptr().add(16 * k).cast()), order)
+                });
+                for i in 0..16 {
+                    if i >= 4 {
+                        // W[t] = σ1(W[t-2]) + W[t-7] + σ0(W[t-15]) + W[t-16], four at a time.
+                        let t = _mm_sha256msg1_epu32(w[i % 4], w[(i + 1) % 4]);
+                        let t =
+                            _mm_add_epi32(t, _mm_alignr_epi8(w[(i + 3) % 4], w[(i + 2) % 4], 4));
+                        w[i % 4] = _mm_sha256msg2_epu32(t, w[(i + 3) % 4]);
+                    }
+                    let k = _mm_loadu_si128(super::K.as_ptr().add(4 * i).cast());
+                    let msg = _mm_add_epi32(w[i % 4], k);
+                    cdgh = _mm_sha256rnds2_epu32(cdgh, abef, msg);
+                    abef = _mm_sha256rnds2_epu32(abef, cdgh, _mm_shuffle_epi32(msg, 0x0E));
+                }
+                abef = _mm_add_epi32(abef, abef_in);
+                cdgh = _mm_add_epi32(cdgh, cdgh_in);
+            }
+            let feba = _mm_shuffle_epi32(abef, 0x1B);
+            let dchg = _mm_shuffle_epi32(cdgh, 0xB1);
+            _mm_storeu_si128(state.as_mut_ptr().cast(), _mm_blend_epi16(feba, dchg, 0xF0));
+            _mm_storeu_si128(
+                state.as_mut_ptr().add(4).cast(),
+                _mm_alignr_epi8(dchg, feba, 8),
+            );
+        }
     }
 }
 
@@ -169,6 +236,21 @@ mod tests {
             of(&vec![b'a'; 1_000_000]),
             "cdc76e5c9914fb9281a1c7e284d73e67f1809a48a497200e046d39ccc7112cd0"
         );
+    }
+
+    /// The SHA instructions (where the processor has them) give the portable code's state.
+    #[test]
+    fn every_block_compresses_as_the_portable_code_does() {
+        let data: Vec<u8> = (0..64 * 37u32)
+            .map(|i| (i.wrapping_mul(2654435761) >> 13) as u8)
+            .collect();
+        let mut portable = Sha256::default().state;
+        for b in data.chunks_exact(64) {
+            compress(&mut portable, b.try_into().unwrap());
+        }
+        let mut dispatched = Sha256::default().state;
+        compress_blocks(&mut dispatched, &data);
+        assert_eq!(dispatched, portable);
     }
 
     #[test]
