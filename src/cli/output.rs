@@ -29,14 +29,11 @@ pub fn mesh_output(path: &Path) -> Result<()> {
                 ),
             ));
         }
-        Some(Format::Gltf | Format::Glb) if crate::io::is_gz_name(path) => {
-            return Err(Error::invalid(
-                path,
-                "a glTF output is not gzip-compressed (its buffers are separate files or in a \
-                 .glb): drop the .gz",
-            ));
+        Some(format) => {
+            if let Some(why) = crate::io::refused_output(format, path) {
+                return Err(Error::invalid(path, why));
+            }
         }
-        Some(_) => {}
     }
     parent_exists(path)
 }

@@ -35,6 +35,16 @@ pub(crate) fn has_gz_extension(path: &Path) -> bool {
         .is_some_and(|e| e.eq_ignore_ascii_case("gz"))
 }
 
+/// Why an output at `path`, of `format` (from its name), cannot be what its name asks: a glTF
+/// output named `….gz` (its buffers are separate files or a GLB's chunk).
+pub(crate) fn refused_output(format: crate::mesh::Format, path: &Path) -> Option<&'static str> {
+    use crate::mesh::Format::{Glb, Gltf};
+    (matches!(format, Gltf | Glb) && has_gz_extension(path)).then_some(
+        "a glTF output is not gzip-compressed (its buffers are separate files or in a .glb): \
+         drop the .gz",
+    )
+}
+
 /// The name of what a `.gz` file holds (`scan.ply.gz` → `scan.ply`); other names as they are.
 pub(crate) fn inner_name(path: &Path) -> PathBuf {
     match has_gz_extension(path) {

@@ -116,7 +116,7 @@ mod text;
 pub(crate) use atomic::{Destination, destination, write_atomically};
 pub use digest::{Sha256, sha256_counted, sha256_file};
 pub(crate) use gltf::{buffer_name_of, referenced_files};
-pub(crate) use gzip::has_gz_extension as is_gz_name;
+pub(crate) use gzip::refused_output;
 
 use std::fs::File;
 use std::io::{Read, Write};
@@ -155,14 +155,16 @@ pub const DRACO_DROPPED: &str = "Draco compression";
 
 /// What a mesh read from a file carried that its output at `path` will not: texture coordinates,
 /// colours, normals, materials and the file's other properties when the output is another format
-/// (which is written plain: positions and faces, and normals into glTF), polygons when it is one that holds triangles
-/// only, and a glTF input's Draco compression ([`DRACO_DROPPED`]). Empty when nothing is lost (the same format keeps everything; a mesh from no file
-/// carried nothing). For the one line that tells a user so.
+/// (which is written plain: positions and faces, and into glTF normals and a PLY's per-vertex
+/// colours and texture coordinates), polygons when it holds triangles only, and a glTF input's
+/// Draco compression ([`DRACO_DROPPED`]). Empty when nothing is lost (the same format keeps
+/// everything; a mesh from no file carried nothing). For the one line that tells a user so.
 pub fn not_carried(source: &Source, path: &Path) -> Vec<String> {
     let (Some(from), Some(to)) = (source.format, Format::from_extension(path)) else {
         return Vec::new();
     };
     let mut lost = Vec::new();
+    let gltf = matches!(to, Format::Gltf | Format::Glb);
     if from != to {
         let carried = source
             .layout
@@ -170,7 +172,6 @@ pub fn not_carried(source: &Source, path: &Path) -> Vec<String> {
             .map(|l| l.carries())
             .unwrap_or_default();
         // A plain glTF takes per-vertex colours and texture coordinates.
-        let gltf = matches!(to, Format::Gltf | Format::Glb);
         let (colours, uvs) = match (gltf, source.layout.as_deref()) {
             (true, Some(l)) => l.has_vertex_attributes(),
             _ => (false, false),
@@ -179,10 +180,7 @@ pub fn not_carried(source: &Source, path: &Path) -> Vec<String> {
             (carried.uvs && !uvs, "texture coordinates"),
             (carried.colours && !colours, "colours"),
             // A plain glTF has its own (recomputed) normals.
-            (
-                carried.normals && !matches!(to, Format::Gltf | Format::Glb),
-                "normals",
-            ),
+            (carried.normals && !gltf, "normals"),
             (carried.materials, "materials"),
         ] {
             if had {
@@ -193,15 +191,10 @@ pub fn not_carried(source: &Source, path: &Path) -> Vec<String> {
             lost.push(format!("other data ({})", carried.other.join(", ")));
         }
     }
-    let draco = source
-        .layout
-        .as_deref()
-        .and_then(|l| l.as_any().downcast_ref::<GltfLayout>())
-        .is_some_and(GltfLayout::decompressed);
-    if draco && matches!(to, Format::Gltf | Format::Glb) {
+    if gltf && GltfLayout::of(source).is_some_and(GltfLayout::decompressed) {
         lost.push(DRACO_DROPPED.to_string());
     }
-    if source.polygons_triangulated > 0 && matches!(to, Format::Stl | Format::Gltf | Format::Glb) {
+    if source.polygons_triangulated > 0 && (gltf || to == Format::Stl) {
         lost.push(format!(
             "{} polygons (written as their triangles)",
             source.polygons_triangulated
@@ -468,12 +461,10 @@ fn write_mesh_counted(
                 })
             }
             Format::Stl => stl::check_writable(mesh),
-            Format::Gltf | Format::Glb if gzip::has_gz_extension(path) => Err(
-                "a glTF output is not gzip-compressed (its buffers are separate files or in a \
-                 .glb): drop the .gz"
-                    .to_string(),
-            ),
-            Format::Gltf | Format::Glb => gltf::check_writable(mesh, format),
+            Format::Gltf | Format::Glb => match gzip::refused_output(format, path) {
+                Some(why) => Err(why.to_string()),
+                None => gltf::check_writable(mesh, format),
+            },
         })
         .map_err(|what| Error::invalid(path, format!("cannot write: {what}")))?;
     if let Format::Gltf | Format::Glb = format {
@@ -564,21 +555,8 @@ impl Stored {
                 t.put(x, &mut bytes);
                 t.get(&bytes).unwrap_or(x)
             }
-            // The writers' text, on the stack: this runs for every coordinate of an output.
-            Axis::SingleText => {
-                let mut text = [0u8; 48];
-                let mut rest = &mut text[..];
-                let _ = write!(rest, "{}", F32(x as f32));
-                let len = 48 - rest.len();
-                number(&text[..len]).unwrap_or(x)
-            }
-            Axis::Decimals(d) => {
-                let mut text = [0u8; 48];
-                let mut rest = &mut text[..];
-                let _ = write!(rest, "{}", Fixed(x, d));
-                let len = 48 - rest.len();
-                number(&text[..len]).unwrap_or(x)
-            }
+            Axis::SingleText => reread(F32(x as f32), x),
+            Axis::Decimals(d) => reread(Fixed(x, d), x),
         };
         let [a, b, c] = self.0;
         glam::DVec3::new(axis(a, p.x), axis(b, p.y), axis(c, p.z))
@@ -649,6 +627,16 @@ impl Stored {
             false => x,
         }
     }
+}
+
+/// The value a writer's `text` of `x` reads back as, the text made on the stack: this runs for
+/// every coordinate of an output.
+fn reread(text: impl std::fmt::Display, x: f64) -> f64 {
+    let mut bytes = [0u8; 48];
+    let mut rest = &mut bytes[..];
+    let _ = write!(rest, "{text}");
+    let len = 48 - rest.len();
+    number(&bytes[..len]).unwrap_or(x)
 }
 
 /// The `f32` next to the finite `f`, above it when `up`, else below (`f32::next_up` and
@@ -750,12 +738,12 @@ fn read_stream(file: &mut File, path: &Path) -> Result<Mesh> {
             Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
             Err(e) => return Err(Error::io(path, e)),
         };
-        if !checked && gzip::is_gzip(&bytes) && (bytes.len() >= 2 || n == 0) {
+        if !checked && gzip::is_gzip(&bytes) {
             let mut rest =
                 flate2::read::MultiGzDecoder::new(std::io::Cursor::new(bytes).chain(file));
             let inflated = gzip::inflate_in_memory(&mut rest, detect::STREAM_LIMIT)
                 .map_err(|failure| Error::invalid(path, failure.message()))?;
-            return parse(&inflated, path).map_err(|what| Error::invalid(path, what));
+            return parse_inflated(&inflated, path).map_err(|what| Error::invalid(path, what));
         }
         if !checked && (bytes.len() >= detect::HEAD || n == 0) {
             // What the first bytes show decides now; only a binary STL has no signature, and
@@ -813,12 +801,17 @@ fn parse(bytes: &[u8], path: &Path) -> std::result::Result<Mesh, String> {
         let inflated =
             gzip::inflate_in_memory(&mut flate2::read::MultiGzDecoder::new(bytes), u64::MAX)
                 .map_err(|failure| failure.message())?;
-        return decode(
-            &inflated,
-            detect::detect_inner(&inflated, inflated.len() as u64, path)?,
-        );
+        return parse_inflated(&inflated, path);
     }
     decode(bytes, detect::detect(bytes, bytes.len() as u64, path)?)
+}
+
+/// Decode what the gzip data `path` held decompressed to (gzip again is refused).
+fn parse_inflated(inflated: &[u8], path: &Path) -> std::result::Result<Mesh, String> {
+    decode(
+        inflated,
+        detect::detect_inner(inflated, inflated.len() as u64, path)?,
+    )
 }
 
 /// Decode bytes with one format's reader; the error is the message without the path.

@@ -152,19 +152,8 @@ impl Storage {
         let Some(dir) = &self.scratch else {
             return self.heap_zeroed(len).map(Buf::from_vec);
         };
-        let n = self.counter.fetch_add(1, Ordering::Relaxed);
-        let path = dir.join(format!(".vcsmooth-scratch-{}-{n}", std::process::id()));
-        // Registered until unlinked, so that a signal in between removes it too.
-        let (temp, file) = Temporary::create(path.clone(), |p| {
-            OpenOptions::new()
-                .read(true)
-                .write(true)
-                .create_new(true)
-                .open(p)
-        })
-        .map_err(|e| Error::io(&path, e))?;
-        // Unlink at once: the mapping keeps the data alive, and nothing is left behind on any exit.
-        temp.remove().map_err(|e| Error::io(&path, e))?;
+        // The mapping keeps the unlinked file's data alive.
+        let (file, path) = self.scratch_file(dir)?;
         reserve(&file, bytes as u64).map_err(|e| {
             Error::resource(format!(
                 "{}: cannot reserve {} of scratch space ({e}); free space there or choose another scratch directory",
@@ -194,17 +183,25 @@ impl Storage {
     /// exit), for data of a size not known in advance (a decompressed input); `None` on the heap.
     pub(crate) fn unnamed_file(&self) -> Option<Result<std::fs::File>> {
         let dir = self.scratch.as_ref()?;
+        Some(self.scratch_file(dir).map(|(file, _)| file))
+    }
+
+    /// A new file in `dir`, opened and unlinked at once (nothing is left behind on any exit), and
+    /// the name it had (for messages).
+    fn scratch_file(&self, dir: &Path) -> Result<(std::fs::File, PathBuf)> {
         let n = self.counter.fetch_add(1, Ordering::Relaxed);
         let path = dir.join(format!(".vcsmooth-scratch-{}-{n}", std::process::id()));
-        let made = Temporary::create(path.clone(), |p| {
+        // Registered until unlinked, so that a signal in between removes it too.
+        let (temp, file) = Temporary::create(path.clone(), |p| {
             OpenOptions::new()
                 .read(true)
                 .write(true)
                 .create_new(true)
                 .open(p)
         })
-        .and_then(|(temp, file)| temp.remove().map(|()| file));
-        Some(made.map_err(|e| Error::io(&path, e)))
+        .map_err(|e| Error::io(&path, e))?;
+        temp.remove().map_err(|e| Error::io(&path, e))?;
+        Ok((file, path))
     }
 
     /// A zero-filled working array that is dropped soon after use: on the heap, an anonymous

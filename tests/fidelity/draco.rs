@@ -12,8 +12,8 @@ use glam::DVec3;
 use serde_json::{Value, json};
 use vcsmooth::io;
 
-use super::gltf::{glb, unglb};
-use crate::util::{fails, json as parse_json, ok, root, vcsmooth};
+use super::gltf::{glb, unglb, volume};
+use crate::util::{fails, ok, root, vcsmooth};
 
 const DRACO: [&str; 3] = [
     "torus_box.draco_edgebreaker.glb",
@@ -80,16 +80,6 @@ fn smooth(input: &Path, output: &Path, extra: &[&str]) -> String {
         vec!["smooth".as_ref(), input.as_os_str(), output.as_os_str()];
     args.extend(extra.iter().map(std::ffi::OsStr::new));
     ok(vcsmooth(args))
-}
-
-fn volume(path: &Path) -> f64 {
-    parse_json(&ok(vcsmooth([
-        "info".as_ref(),
-        path.as_os_str(),
-        "--json".as_ref(),
-    ])))["volume"]
-        .as_f64()
-        .unwrap()
 }
 
 /// The positions and triangles of a glTF file, as the library reads it.

@@ -139,7 +139,8 @@ fn smooth(input: &Path, output: &Path) {
     ]));
 }
 
-fn volume(path: &Path) -> f64 {
+/// The volume `vcsmooth info` measures on the mesh file at `path`.
+pub(super) fn volume(path: &Path) -> f64 {
     parse_json(&ok(vcsmooth([
         "info".as_ref(),
         path.as_os_str(),

@@ -167,11 +167,15 @@ impl GltfLayout {
     /// Whether `mesh` was read from a glTF with Draco-compressed primitives (see
     /// [`GltfLayout::decompressed`]); false for any other mesh, or once its layout is cleared.
     pub fn decompressed_in(mesh: &crate::mesh::Mesh) -> bool {
-        mesh.source
+        GltfLayout::of(&mesh.source).is_some_and(GltfLayout::decompressed)
+    }
+
+    /// The layout a mesh read from glTF carries in its `source`, if any.
+    pub(crate) fn of(source: &crate::mesh::Source) -> Option<&GltfLayout> {
+        source
             .layout
             .as_deref()
             .and_then(|l| l.as_any().downcast_ref::<GltfLayout>())
-            .is_some_and(GltfLayout::decompressed)
     }
 }
 

@@ -19,10 +19,7 @@ fn write_vec3(bytes: &mut [u8], at: usize, v: [f32; 3]) {
 
 /// The layout a mesh read from glTF carries, if any.
 fn layout_of(mesh: &Mesh) -> Option<&GltfLayout> {
-    mesh.source
-        .layout
-        .as_deref()
-        .and_then(|l| l.as_any().downcast_ref::<GltfLayout>())
+    GltfLayout::of(&mesh.source)
 }
 
 /// Whether `mesh` (already checked by `io::check_mesh`) can be written as `format`: a glTF input
@@ -435,7 +432,7 @@ impl GltfLayout {
         }
         let view = |offset: usize, length: usize, target: u32| serde_json::json!({"buffer": 0, "byteOffset": offset, "byteLength": length, "target": target});
         let vec3 = |view: usize| serde_json::json!({"bufferView": view, "componentType": super::FLOAT, "count": n, "type": "VEC3"});
-        let json = serde_json::json!({
+        let mut json = serde_json::json!({
             "asset": {"version": "2.0", "generator": concat!("vcsmooth ", env!("CARGO_PKG_VERSION"))},
             "scene": 0,
             "scenes": [{"nodes": [0]}],
@@ -451,11 +448,10 @@ impl GltfLayout {
                 view(12 * n, 12 * n, 34962),
                 view(24 * n, 12 * t, 34963),
             ],
-            "buffers": [{"byteLength": bytes.len()}],
+            // Its byteLength once every view is in.
+            "buffers": [{}],
         });
         let file = mesh.source.layout.as_deref();
-        let mut json = json;
-        let mut bytes = bytes;
         let mut add = |json: &mut Value, name: &str, kind: &str, values: Vec<f32>| {
             let offset = bytes.len();
             values
@@ -463,10 +459,10 @@ impl GltfLayout {
                 .for_each(|v| bytes.extend_from_slice(&v.to_le_bytes()));
             let views = json["bufferViews"].as_array_mut().expect("an array");
             views.push(view(offset, 4 * values.len(), 34962));
-            let view = views.len() - 1;
+            let at = views.len() - 1;
             let accessors = json["accessors"].as_array_mut().expect("an array");
             accessors.push(serde_json::json!(
-                {"bufferView": view, "componentType": super::FLOAT, "count": n, "type": kind}
+                {"bufferView": at, "componentType": super::FLOAT, "count": n, "type": kind}
             ));
             json["meshes"][0]["primitives"][0]["attributes"][name] = (accessors.len() - 1).into();
         };

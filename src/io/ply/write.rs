@@ -165,28 +165,26 @@ pub(crate) fn check_writable(mesh: &Mesh) -> Fallible<()> {
             ));
         }
     }
+    // Kept records (strips always, faces with other properties) are written as they are: they
+    // must still decode to the mesh's triangles.
+    let unchanged = |what: &str, capacity, decode: &dyn Fn(&mut FaceBuilder) -> Fallible<usize>| {
+        let mut faces = FaceBuilder::with_capacity(capacity);
+        match decode(&mut faces).is_ok_and(|_| faces.triangles() == &mesh.triangles[..]) {
+            true => Ok(()),
+            false => Err(format!(
+                "the triangles no longer match the PLY source's {what}; clear \
+                 mesh.source.layout after changing connectivity"
+            )),
+        }
+    };
     if let Some(strips) = roles.strips {
         let el = &layout.elements[strips.element];
-        let mut faces = FaceBuilder::with_capacity(0);
-        let same = el.records.as_ref().is_some_and(|records| {
-            decode_strips(
-                records,
-                el,
-                strips,
-                roles.vertices,
-                Origin::Byte(0),
-                &mut faces,
-            )
-            .is_ok_and(|_| faces.triangles() == &mesh.triangles[..])
+        return unchanged("triangle strips", 0, &|faces| match el.records.as_deref() {
+            Some(records) => {
+                decode_strips(records, el, strips, roles.vertices, Origin::Byte(0), faces)
+            }
+            None => Err("no records".into()),
         });
-        if !same {
-            return Err(
-                "the triangles no longer match the PLY source's triangle strips; clear \
-                 mesh.source.layout after changing connectivity"
-                    .into(),
-            );
-        }
-        return Ok(());
     }
     let Some(face) = roles.face else {
         if !mesh.triangles.is_empty() {
@@ -196,25 +194,18 @@ pub(crate) fn check_writable(mesh: &Mesh) -> Fallible<()> {
     };
     let el = &layout.elements[face.element];
     if let Some(records) = &el.records {
-        let mut faces = FaceBuilder::with_capacity(el.count);
-        let same = decode_faces(
-            records,
-            el,
-            face,
-            roles.vertices,
-            Origin::Byte(0),
-            &mut faces,
-            &Meter::default(),
-        )
-        .is_ok_and(|_| faces.triangles() == &mesh.triangles[..]);
-        if !same {
-            return Err(
-                "the triangles no longer match the PLY source's faces; clear \
-                        mesh.source.layout after changing connectivity"
-                    .into(),
-            );
-        }
-        return Ok(());
+        return unchanged("faces", el.count, &|faces| {
+            let meter = Meter::default();
+            decode_faces(
+                records,
+                el,
+                face,
+                roles.vertices,
+                Origin::Byte(0),
+                faces,
+                &meter,
+            )
+        });
     }
     let faces = Faces::of(mesh);
     faces.check()?;
