@@ -640,6 +640,8 @@ impl<'a> RankRun<'a> {
         let mesh = Sweep {
             topo: &plan.topology,
             tris: &plan.triangles,
+            // A cluster's plan is always laid out in patches.
+            sorted: true,
             patches: &patches,
             colours: &plan.doc.colours,
             ring_colours: &plan.doc.ring_colours,

@@ -81,6 +81,9 @@ fn volume_area(mesh: &Sweep, pos: &[DVec3], origin: DVec3, share: &dyn Share) ->
 pub struct Sweep<'a> {
     pub topo: &'a Topology,
     pub tris: &'a [[u32; 3]],
+    /// Whether `tris` are sorted by their first corner, which is their smallest (the plan's
+    /// Morton layout, not the input's own order).
+    pub sorted: bool,
     pub patches: &'a [Patch],
     pub colours: &'a [Vec<u32>],
     /// The colours of the wider ring stencils ([`Footprint::Ring`], see [`crate::schedule`]).
@@ -286,6 +289,7 @@ impl Run<'_, '_> {
             let patch_mesh = PatchMesh {
                 topo: mesh.topo,
                 tris: mesh.tris,
+                sorted: mesh.sorted,
             };
             let faces = FaceFields {
                 vectors: face_vectors,
@@ -765,14 +769,14 @@ fn sweep_patches(
     params: StencilParams,
     loops: Option<&Loops>,
 ) -> SweepStats {
-    let (topo, tris) = (mesh.topo, mesh.tris);
+    let (topo, tris, sorted) = (mesh.topo, mesh.tris, mesh.sorted);
     patches
         .par_iter()
         .map(|patch| {
             let (mut pv, mut sv) = (pos, sums);
             match (pass, loops) {
                 (Pass::Stencils(unit), _) => unit.sweep_patch(
-                    PatchMesh { topo, tris },
+                    PatchMesh { topo, tris, sorted },
                     patch.vertices.clone(),
                     patch.triangles.clone(),
                     &mut pv,

@@ -163,6 +163,7 @@ impl Plan {
             schedule,
             in_memory,
             stored,
+            layout,
             ..
         } = self;
         let n = reordered.positions.len();
@@ -206,6 +207,7 @@ impl Plan {
             let mesh = iterate::Sweep {
                 topo,
                 tris,
+                sorted: !matches!(layout, Layout::Whole),
                 patches,
                 colours: &schedule.colours,
                 ring_colours: &schedule.ring_colours,

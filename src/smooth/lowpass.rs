@@ -34,8 +34,9 @@ use std::ops::Range;
 use glam::DVec3;
 
 use super::stencil::{self, Outcome};
+use super::method::PatchMesh;
 use super::{Field, SweepStats};
-use crate::topology::{Topology, TopologyParts, corners_after};
+use crate::topology::{TopologyParts, corners_after};
 
 /// Vertices per block: a block is this many consecutive vertices of a patch in the plan's
 /// (Morton) order, the last block of a patch shorter.
@@ -69,25 +70,30 @@ struct Scratch {
 /// [`apply_block`], step 1 taking each vertex to `filtered` (the first step's result from the
 /// iteration's positions, e.g. Taubin's λ|μ pair).
 pub fn sweep_blocks<P: Field + ?Sized, D: Field + ?Sized>(
-    topo: &Topology,
-    triangles: &[[u32; 3]],
+    mesh: PatchMesh,
     pos: &mut P,
     filtered: &D,
     owned: Range<u32>,
     deviation: Option<stencil::Deviation>,
 ) -> SweepStats {
-    let topo = topo.parts();
+    let (topo, triangles) = (mesh.topo.parts(), mesh.tris);
     let mut stats = SweepStats::default();
     let mut scratch = Scratch::default();
     let mut lo = owned.start;
     while lo < owned.end {
         let hi = lo.saturating_add(BLOCK).min(owned.end);
+        // The faces whose smallest corner is in the block, when the triangles are sorted by it.
+        let own = mesh.sorted.then(|| {
+            let from = |v: u32| triangles.partition_point(|t| t[0] < v) as u32;
+            from(lo)..from(hi)
+        });
         let outcome = apply_block(
             &topo,
             triangles,
             pos,
             filtered,
             lo..hi,
+            own,
             deviation,
             &mut scratch,
         );
@@ -110,6 +116,7 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
     pos: &mut P,
     filtered: &D,
     block: Range<u32>,
+    own: Option<Range<u32>>,
     deviation: Option<stencil::Deviation>,
     scratch: &mut Scratch,
 ) -> Outcome {
@@ -132,6 +139,7 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
             shared,
         } = &mut *scratch;
         let free = &*free;
+        let own = own.clone().filter(|_| free.iter().all(|&f| f));
         // Step 1's displacement (computed here rather than stored: one pass over memory less).
         let disp = |u: u32| filtered.get(u) - pos.get(u);
         let member = |u: u32| {
@@ -150,22 +158,17 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
             }
         };
         // Pass 1: the volume change of step 1 and each member's gradient, every face touching a
-        // member once (at its smallest member corner).
+        // member once (at its smallest member corner), in the order of the members and of each
+        // member's faces (ascending).
         dir.clear();
         dir.resize(len, DVec3::ZERO);
         shared.clear();
         let mut dv = 0.0;
-        for a in block.clone() {
-            if !member(a) {
-                continue;
-            }
-            let (pa, qa) = (pos.get(a) - origin, moved[(a - start) as usize]);
-            for &t in topo.faces_of(a) {
-                let (b, c) = corners_after(triangles[t as usize], a);
-                let (mb, mc) = (member(b), member(c));
-                if (mb && b < a) || (mc && c < a) {
-                    continue;
-                }
+        // A macro rather than a closure: the compiler would not inline the closure here.
+        macro_rules! face {
+            ($a:expr, $b:expr, $c:expr, $mb:expr, $mc:expr) => {{
+                let (a, b, c, mb, mc): (u32, u32, u32, bool, bool) = ($a, $b, $c, $mb, $mc);
+                let (pa, qa) = (pos.get(a) - origin, moved[(a - start) as usize]);
                 let (pb, pc) = (pos.get(b) - origin, pos.get(c) - origin);
                 let (qb, qc) = (after(b, mb), after(c, mc));
                 let bc = qb.cross(qc);
@@ -179,6 +182,44 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
                 }
                 if mb || mc {
                     shared.push([a, b, c]);
+                }
+            }};
+        }
+        if let Some(own) = own {
+            // Every member free: a face is taken at its smallest corner in the block. Those whose
+            // smallest corner is in the block are `own` (sorted by first corner, which is the
+            // smallest), a run per member, after its faces from below the block, which come
+            // first in its ascending list: the same faces in the same order as the general walk.
+            let mut next = own.start as usize;
+            for a in block.clone() {
+                for &t in topo.faces_of(a) {
+                    if t >= own.start {
+                        break;
+                    }
+                    let (b, c) = corners_after(triangles[t as usize], a);
+                    let (mb, mc) = (member(b), member(c));
+                    if !((mb && b < a) || (mc && c < a)) {
+                        face!(a, b, c, mb, mc);
+                    }
+                }
+                while next < own.end as usize && triangles[next][0] == a {
+                    let [_, b, c] = triangles[next];
+                    face!(a, b, c, member(b), member(c));
+                    next += 1;
+                }
+            }
+            debug_assert_eq!(next, own.end as usize, "the block's faces are a run");
+        } else {
+            for a in block.clone() {
+                if !member(a) {
+                    continue;
+                }
+                for &t in topo.faces_of(a) {
+                    let (b, c) = corners_after(triangles[t as usize], a);
+                    let (mb, mc) = (member(b), member(c));
+                    if !((mb && b < a) || (mc && c < a)) {
+                        face!(a, b, c, mb, mc);
+                    }
                 }
             }
         }

@@ -118,6 +118,9 @@ pub struct PatchMesh<'a> {
     pub topo: &'a Topology,
     /// The plan's triangles (consistently oriented): the stencils' volumes read them.
     pub tris: &'a [[u32; 3]],
+    /// Whether `tris` are sorted by their first corner, which is their smallest (the plan's
+    /// Morton layout, not the input's own order).
+    pub sorted: bool,
 }
 
 /// What the passes of a [`Schedule::TwoPass`] method read.

@@ -251,7 +251,7 @@ impl Smoother for VcsLowpass {
         params: StencilParams,
         _: Option<&Loops>,
     ) -> SweepStats {
-        lowpass::sweep_blocks(mesh.topo, mesh.tris, pos, sums, vertices, params.deviation)
+        lowpass::sweep_blocks(mesh, pos, sums, vertices, params.deviation)
     }
     fn boundary_pass(&self) -> bool {
         true
