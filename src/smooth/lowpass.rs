@@ -50,6 +50,13 @@ const DEVIATION_ROUNDS: usize = 8;
 /// the block), so two steps reach rounding; the rest are a margin.
 const NEWTON_STEPS: usize = 4;
 
+/// One block: its vertices, and the triangles whose smallest corner it holds when the triangles
+/// are sorted by it (a run of the array).
+struct Block {
+    vertices: Range<u32>,
+    own: Option<Range<u32>>,
+}
+
 /// A block's scratch space, reused from block to block.
 #[derive(Debug, Default)]
 struct Scratch {
@@ -87,16 +94,11 @@ pub fn sweep_blocks<P: Field + ?Sized, D: Field + ?Sized>(
             let from = |v: u32| triangles.partition_point(|t| t[0] < v) as u32;
             from(lo)..from(hi)
         });
-        let outcome = apply_block(
-            &topo,
-            triangles,
-            pos,
-            filtered,
-            lo..hi,
+        let block = Block {
+            vertices: lo..hi,
             own,
-            deviation,
-            &mut scratch,
-        );
+        };
+        let outcome = apply_block(&topo, triangles, pos, filtered, block, deviation, &mut scratch);
         stencil::count(&mut stats, outcome);
         lo = hi;
     }
@@ -115,11 +117,11 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
     triangles: &[[u32; 3]],
     pos: &mut P,
     filtered: &D,
-    block: Range<u32>,
-    own: Option<Range<u32>>,
+    block: Block,
     deviation: Option<stencil::Deviation>,
     scratch: &mut Scratch,
 ) -> Outcome {
+    let Block { vertices: block, own } = block;
     let (start, len) = (block.start, block.len());
     scratch.free.clear();
     scratch
