@@ -57,6 +57,14 @@ struct Block {
     own: Option<Range<u32>>,
 }
 
+/// A face with two or three members: its corners, and whether `b` and `c` are members (`a` is).
+#[derive(Debug, Clone, Copy)]
+struct Shared {
+    corners: [u32; 3],
+    mb: bool,
+    mc: bool,
+}
+
 /// A block's scratch space, reused from block to block.
 #[derive(Debug, Default)]
 struct Scratch {
@@ -70,7 +78,7 @@ struct Scratch {
     step: Vec<DVec3>,
     /// The faces with two or three members, corners in the order [`corners_after`] gives from
     /// the first: the only ones the cubic's higher terms need.
-    shared: Vec<[u32; 3]>,
+    shared: Vec<Shared>,
 }
 
 /// The blocks of the patch `owned`, ascending, Gauss–Seidel (each sees the latest positions):
@@ -141,12 +149,13 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
             shared,
         } = &mut *scratch;
         let free = &*free;
-        let own = own.clone().filter(|_| free.iter().all(|&f| f));
+        let all_free = free.iter().all(|&f| f);
+        let own = own.clone().filter(|_| all_free);
         // Step 1's displacement (computed here rather than stored: one pass over memory less).
         let disp = |u: u32| filtered.get(u) - pos.get(u);
         let member = |u: u32| {
             let k = u.wrapping_sub(start) as usize;
-            k < len && free[k]
+            k < len && (all_free || free[k])
         };
         moved.clear();
         moved.extend(block.clone().map(|u| pos.get(u) - origin + disp(u)));
@@ -168,9 +177,9 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
         let mut dv = 0.0;
         // A macro rather than a closure: the compiler would not inline the closure here.
         macro_rules! face {
-            ($a:expr, $b:expr, $c:expr, $mb:expr, $mc:expr) => {{
+            ($a:expr, $pa:expr, $qa:expr, $b:expr, $c:expr, $mb:expr, $mc:expr) => {{
                 let (a, b, c, mb, mc): (u32, u32, u32, bool, bool) = ($a, $b, $c, $mb, $mc);
-                let (pa, qa) = (pos.get(a) - origin, moved[(a - start) as usize]);
+                let (pa, qa): (DVec3, DVec3) = ($pa, $qa);
                 let (pb, pc) = (pos.get(b) - origin, pos.get(c) - origin);
                 let (qb, qc) = (after(b, mb), after(c, mc));
                 let bc = qb.cross(qc);
@@ -183,7 +192,11 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
                     dir[(c - start) as usize] += qa.cross(qb);
                 }
                 if mb || mc {
-                    shared.push([a, b, c]);
+                    shared.push(Shared {
+                        corners: [a, b, c],
+                        mb,
+                        mc,
+                    });
                 }
             }};
         }
@@ -194,6 +207,7 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
             // first in its ascending list: the same faces in the same order as the general walk.
             let mut next = own.start as usize;
             for a in block.clone() {
+                let (pa, qa) = (pos.get(a) - origin, moved[(a - start) as usize]);
                 for &t in topo.faces_of(a) {
                     if t >= own.start {
                         break;
@@ -201,12 +215,12 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
                     let (b, c) = corners_after(triangles[t as usize], a);
                     let (mb, mc) = (member(b), member(c));
                     if !((mb && b < a) || (mc && c < a)) {
-                        face!(a, b, c, mb, mc);
+                        face!(a, pa, qa, b, c, mb, mc);
                     }
                 }
                 while next < own.end as usize && triangles[next][0] == a {
                     let [_, b, c] = triangles[next];
-                    face!(a, b, c, member(b), member(c));
+                    face!(a, pa, qa, b, c, member(b), member(c));
                     next += 1;
                 }
             }
@@ -216,11 +230,12 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
                 if !member(a) {
                     continue;
                 }
+                let (pa, qa) = (pos.get(a) - origin, moved[(a - start) as usize]);
                 for &t in topo.faces_of(a) {
                     let (b, c) = corners_after(triangles[t as usize], a);
                     let (mb, mc) = (member(b), member(c));
                     if !((mb && b < a) || (mc && c < a)) {
-                        face!(a, b, c, mb, mc);
+                        face!(a, pa, qa, b, c, mb, mc);
                     }
                 }
             }
@@ -235,8 +250,8 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
             }
         }
         let dir = &*dir;
-        let unit = |u: u32| {
-            if member(u) {
+        let unit = |u: u32, m: bool| {
+            if m {
                 dir[(u - start) as usize]
             } else {
                 DVec3::ZERO
@@ -244,10 +259,14 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
         };
         // Pass 2: the quadratic and cubic coefficients, from the faces with two or three members.
         let (mut c2, mut c3) = (0.0, 0.0);
-        for &[a, b, c] in shared.iter() {
-            let (mb, mc) = (member(b), member(c));
+        for &Shared {
+            corners: [a, b, c],
+            mb,
+            mc,
+        } in shared.iter()
+        {
             let (qa, qb, qc) = (moved[(a - start) as usize], after(b, mb), after(c, mc));
-            let (ea, eb, ec) = (dir[(a - start) as usize], unit(b), unit(c));
+            let (ea, eb, ec) = (dir[(a - start) as usize], unit(b, mb), unit(c, mc));
             let ebc = eb.cross(ec);
             c2 += ea.dot(eb.cross(qc)) + ea.dot(qb.cross(ec)) + qa.dot(ebc);
             c3 += ea.dot(ebc);
@@ -257,7 +276,7 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
         };
         step.clear();
         step.extend(block.clone().map(|u| match member(u) {
-            true => disp(u) + unit(u) * s,
+            true => disp(u) + unit(u, true) * s,
             false => DVec3::ZERO,
         }));
         if !scratch.step.iter().all(|d| d.is_finite()) {
