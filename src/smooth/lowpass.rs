@@ -33,8 +33,8 @@ use std::ops::Range;
 
 use glam::DVec3;
 
-use super::stencil::{self, Outcome};
 use super::method::PatchMesh;
+use super::stencil::{self, Outcome};
 use super::{Field, SweepStats};
 use crate::topology::{TopologyParts, corners_after};
 
@@ -106,7 +106,15 @@ pub fn sweep_blocks<P: Field + ?Sized, D: Field + ?Sized>(
             vertices: lo..hi,
             own,
         };
-        let outcome = apply_block(&topo, triangles, pos, filtered, block, deviation, &mut scratch);
+        let outcome = apply_block(
+            &topo,
+            triangles,
+            pos,
+            filtered,
+            block,
+            deviation,
+            &mut scratch,
+        );
         stencil::count(&mut stats, outcome);
         lo = hi;
     }
@@ -129,7 +137,10 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
     deviation: Option<stencil::Deviation>,
     scratch: &mut Scratch,
 ) -> Outcome {
-    let Block { vertices: block, own } = block;
+    let Block {
+        vertices: block,
+        own,
+    } = block;
     let (start, len) = (block.start, block.len());
     scratch.free.clear();
     scratch
@@ -361,5 +372,70 @@ mod tests {
         assert_eq!(offset(f64::NAN, 1.0, 0.0, 0.0), None);
         // No real root near zero: Newton does not settle.
         assert_eq!(offset(1.0, 1e-3, 1.0, 0.0), None);
+    }
+
+    /// A block that reads its faces as a run of the sorted triangles gives the bits of the
+    /// general walk from each corner: on a noisy open sphere (its border fixed, so some blocks
+    /// take the general walk either way), with and without a deviation bound.
+    #[test]
+    fn the_run_of_sorted_faces_gives_the_bits_of_the_general_walk() {
+        use crate::shapes::{add_normal_noise, icosphere};
+        use crate::topology::Topology;
+        let mut mesh = icosphere(5);
+        add_normal_noise(&mut mesh, 0.3, 3);
+        let pos: Vec<DVec3> = mesh.positions.to_vec();
+        // Open: drop the faces around vertex 0. Smallest corner first, sorted by it.
+        let mut tris: Vec<[u32; 3]> = mesh
+            .triangles
+            .iter()
+            .filter(|t| !t.contains(&0))
+            .map(|&[a, b, c]| match a.min(b).min(c) {
+                m if m == a => [a, b, c],
+                m if m == b => [b, c, a],
+                _ => [c, a, b],
+            })
+            .collect();
+        tris.sort_by_key(|t| t[0]);
+        let topo = Topology::build(pos.len(), &tris).unwrap();
+        assert!((0..topo.len() as u32).any(|v| topo.is_fixed(v)));
+        // A filtered field: every vertex a little way towards its neighbours' mean.
+        let filtered: Vec<DVec3> = (0..pos.len())
+            .map(|v| {
+                let n = topo.neighbors(v as u32);
+                let mean =
+                    n.iter().map(|&u| pos[u as usize]).sum::<DVec3>() / n.len().max(1) as f64;
+                pos[v] + 0.3 * (mean - pos[v])
+            })
+            .collect();
+        let bound = stencil::Deviation {
+            input: &pos,
+            limit: 0.002,
+        };
+        for deviation in [None, Some(bound)] {
+            let run = |sorted: bool| {
+                let mut p = pos.clone();
+                let mesh = PatchMesh {
+                    topo: &topo,
+                    tris: &tris,
+                    sorted,
+                };
+                // Two patches, their blocks not aligned to the patch's start.
+                let cut = 5000;
+                let mut st = sweep_blocks(mesh, &mut p[..], &filtered[..], 0..cut, deviation);
+                st.add(&sweep_blocks(
+                    mesh,
+                    &mut p[..],
+                    &filtered[..],
+                    cut..pos.len() as u32,
+                    deviation,
+                ));
+                (p, st.applied, st.deviation_limited)
+            };
+            let (fast, slow) = (run(true), run(false));
+            assert!(fast.1 + fast.2 > 0);
+            assert!(fast.0 != pos);
+            assert_eq!(fast.0, slow.0);
+            assert_eq!((fast.1, fast.2), (slow.1, slow.2));
+        }
     }
 }
