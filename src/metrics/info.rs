@@ -108,8 +108,9 @@ impl MeshInfo {
 
 /// [`info`] from the parts of a mesh (e.g. the reordered arrays of the patch engine; every count
 /// is independent of the vertex and triangle order). The triangles are measured as they are:
-/// oriented already when they come from a plan. The sums run in the arrays' order; the engine
-/// measures its plans over chunks in parallel instead (`engine::reduce::geometry`).
+/// oriented already when they come from a plan. The sums run over the vertices in order
+/// ([`vertex_sums`]); the engine measures its plans over chunks in parallel instead
+/// (`engine::reduce::geometry`).
 pub fn info_of(
     pos: &[DVec3],
     triangles: &[[u32; 3]],
