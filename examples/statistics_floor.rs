@@ -6,9 +6,10 @@
 //! Prints, for the mesh in the plan's order:
 //! - `components`: the connected-component count ([`vcsmooth::metrics::connectivity`]);
 //! - `geometry`: every figure that depends on the positions ([`Plan::geometry`]);
-//! - `edge pass`: its pass over the edges alone ([`vcsmooth::metrics::edge_sums`]);
-//! - `edge arithmetic`: the same sums, bit for bit, with every edge's two faces found beforehand
-//!   (untimed): each face normal once, each length, each dihedral angle;
+//! - `vertex pass`: its pass over the vertices alone ([`vcsmooth::metrics::vertex_sums`]);
+//! - `edge arithmetic`: the same edge sums (the angles with the library's arctangent) with every
+//!   edge's two faces found beforehand (untimed): each face normal once, each length, each
+//!   dihedral angle;
 //! - `arctangents and roots`: only the `atan2` and the two square roots of every edge, their
 //!   arguments computed beforehand: the floor of the pass while the values stay the same.
 use std::time::Instant;
@@ -17,7 +18,7 @@ use glam::DVec3;
 use vcsmooth::engine::plan::{Layout, Plan};
 use vcsmooth::engine::reduce;
 use vcsmooth::mesh::Storage;
-use vcsmooth::metrics::{self, EdgeSums};
+use vcsmooth::metrics::{self, EdgeSums, VertexSums};
 
 fn median(repeats: usize, mut f: impl FnMut() -> f64) -> f64 {
     let mut seconds: Vec<f64> = (0..repeats)
@@ -57,9 +58,10 @@ fn main() {
             reduce::map_fold(
                 pos,
                 |first, chunk| {
-                    metrics::edge_sums(pos, tris, topo, first as u32..(first + chunk.len()) as u32)
+                    let vertices = first as u32..(first + chunk.len()) as u32;
+                    metrics::vertex_sums(pos, tris, topo, vertices, DVec3::ZERO)
                 },
-                EdgeSums::default(),
+                VertexSums::default(),
                 |a, b| a + b,
             )
         };
@@ -101,11 +103,11 @@ fn main() {
         };
         // One chunk of the pass sums as the whole does only below 16,384 vertices; the check
         // compares the sequential sums, which the arithmetic reproduces.
-        let whole = metrics::edge_sums(pos, tris, topo, 0..topo.len() as u32);
+        let whole = metrics::vertex_sums(pos, tris, topo, 0..topo.len() as u32, DVec3::ZERO).edges;
         let same = arithmetic();
-        assert_eq!(
-            (whole.length, whole.angle),
-            (same.length, same.angle),
+        let angle = (whole.angle.0 - same.angle.0).abs() <= 1e-12 * same.angle.0;
+        assert!(
+            whole.length == same.length && whole.angle.1 == same.angle.1 && angle,
             "the arithmetic gives the pass's sums"
         );
         let roots: Vec<(f64, f64, f64)> = edges
@@ -140,7 +142,7 @@ fn main() {
         for (what, f) in [
             ("components", &components as &dyn Fn() -> f64),
             ("geometry", &|| plan.geometry().area),
-            ("edge pass", &|| pass().angle.0),
+            ("vertex pass", &|| pass().edges.angle.0),
             ("edge arithmetic", &|| arithmetic().angle.0),
             ("arctangents and roots", &floor),
         ] {

@@ -530,3 +530,192 @@ fn in_memory_runs_refuse_more_records_than_the_budget_holds() {
     );
     assert!(mesh.positions == before);
 }
+
+/// The figures of a [`metrics::MeshInfo`] by their plain definitions, sequentially in the input's
+/// order: what the engine's one chunked pass (its own summation order, a faster arctangent) must
+/// give within 1e-9 relative.
+struct PlainStats {
+    centroid: DVec3,
+    /// The point the volume is measured about.
+    origin: DVec3,
+    volume: f64,
+    area: f64,
+    bbox: (DVec3, DVec3),
+    edges: usize,
+    boundary_edges: usize,
+    non_manifold_edges: usize,
+    mean_edge_length: f64,
+    roughness_deg: f64,
+    components: usize,
+}
+
+impl PlainStats {
+    /// The figures of `mesh`, its volume about `origin` (its centroid when `None`).
+    fn of(mesh: &Mesh, origin: Option<DVec3>) -> PlainStats {
+        use std::collections::BTreeMap;
+        let pos = &mesh.positions;
+        let centroid = pos.iter().fold(DVec3::ZERO, |s, p| s + *p) / pos.len() as f64;
+        let o = origin.unwrap_or(centroid);
+        let (mut volume, mut area) = (0.0, 0.0);
+        let mut bbox = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+        for p in pos {
+            bbox = (bbox.0.min(*p), bbox.1.max(*p));
+        }
+        // Each undirected edge of a non-degenerate face, with the normals of its faces.
+        let mut faces: BTreeMap<(u32, u32), Vec<DVec3>> = BTreeMap::new();
+        for &[a, b, c] in mesh.triangles.iter() {
+            let [pa, pb, pc] = [a, b, c].map(|v| pos[v as usize]);
+            volume += (pa - o).dot((pb - o).cross(pc - o)) / 6.0;
+            let n = (pb - pa).cross(pc - pa);
+            area += n.length() / 2.0;
+            if a == b || b == c || a == c {
+                continue;
+            }
+            for (i, j) in [(a, b), (b, c), (c, a)] {
+                faces.entry((i.min(j), i.max(j))).or_default().push(n);
+            }
+        }
+        let (mut length, mut angle, mut angles) = (0.0, 0.0, 0);
+        for (&(i, j), normals) in &faces {
+            length += pos[i as usize].distance(pos[j as usize]);
+            let usable = |n: &DVec3| n.length_squared() > 0.0 && n.is_finite();
+            if let [n, m] = normals[..]
+                && usable(&n)
+                && usable(&m)
+            {
+                angle += n.cross(m).length().atan2(n.dot(m)).to_degrees();
+                angles += 1;
+            }
+        }
+        // Components: a search through the edges from every vertex of one.
+        let mut adjacent: Vec<Vec<u32>> = vec![Vec::new(); pos.len()];
+        for &(i, j) in faces.keys() {
+            adjacent[i as usize].push(j);
+            adjacent[j as usize].push(i);
+        }
+        let (mut seen, mut components) = (vec![false; pos.len()], 0);
+        for start in 0..pos.len() {
+            if seen[start] || adjacent[start].is_empty() {
+                continue;
+            }
+            components += 1;
+            let mut stack = vec![start as u32];
+            seen[start] = true;
+            while let Some(v) = stack.pop() {
+                for &u in &adjacent[v as usize] {
+                    if !std::mem::replace(&mut seen[u as usize], true) {
+                        stack.push(u);
+                    }
+                }
+            }
+        }
+        PlainStats {
+            centroid,
+            origin: o,
+            volume,
+            area,
+            bbox,
+            edges: faces.len(),
+            boundary_edges: faces.values().filter(|f| f.len() == 1).count(),
+            non_manifold_edges: faces.values().filter(|f| f.len() > 2).count(),
+            mean_edge_length: length / faces.len() as f64,
+            roughness_deg: angle / angles as f64,
+            components,
+        }
+    }
+
+    /// `info` gives these figures: the counts and the bounding box exactly, every sum within 1e-9
+    /// relative (the origin within 1e-9 of the mesh's size).
+    fn check(&self, info: &metrics::MeshInfo, what: &str) {
+        let close = |got: f64, want: f64, name: &str| {
+            assert!(
+                (got - want).abs() <= 1e-9 * want.abs(),
+                "{what}: {name} {got} against {want}"
+            );
+        };
+        let size = (self.bbox.1 - self.bbox.0).length();
+        let origin = DVec3::from(info.volume_origin);
+        assert!(
+            (origin - self.origin).length() <= 1e-9 * size,
+            "{what}: origin"
+        );
+        close(info.volume, self.volume, "volume");
+        close(info.area, self.area, "area");
+        close(
+            info.mean_edge_length,
+            self.mean_edge_length,
+            "mean edge length",
+        );
+        close(info.roughness_deg, self.roughness_deg, "roughness");
+        close(info.bbox_diagonal, size, "bounding box diagonal");
+        assert_eq!(
+            (DVec3::from(info.bbox_min), DVec3::from(info.bbox_max)),
+            self.bbox,
+            "{what}: bounding box"
+        );
+        assert_eq!(
+            (
+                info.edges,
+                info.boundary_edges,
+                info.non_manifold_edges,
+                info.components
+            ),
+            (
+                self.edges,
+                self.boundary_edges,
+                self.non_manifold_edges,
+                self.components
+            ),
+            "{what}: counts"
+        );
+    }
+}
+
+/// Every figure of a run's statistics, of its input and of its output as written, against the
+/// plain definitions ([`PlainStats`]) within 1e-9 relative: on the scans of tests/data, on two
+/// noisy spheres (two components, more than one reduction chunk) and on an open sphere with a
+/// hole, a non-manifold fin and a degenerate face.
+#[test]
+fn statistics_follow_their_plain_definitions() {
+    let mut meshes: Vec<(String, Mesh)> = scans()
+        .iter()
+        .map(|p| (p.display().to_string(), io::read_mesh(p).unwrap()))
+        .collect();
+    let mut two = noisy_sphere(5, 0.3, 3);
+    let n = two.positions.len() as u32;
+    let copy: Vec<DVec3> = two.positions.iter().map(|p| *p + DVec3::X * 3.0).collect();
+    let tris: Vec<[u32; 3]> = two.triangles.iter().map(|t| t.map(|v| v + n)).collect();
+    two.positions.extend(copy);
+    two.triangles.extend(tris);
+    meshes.push(("two spheres".into(), two));
+    let sphere = noisy_sphere(4, 0.3, 5);
+    let mut open = Mesh::new(sphere.positions.to_vec(), sphere.triangles[40..].to_vec());
+    let [a, b, _] = open.triangles[100];
+    open.positions.push(DVec3::new(2.0, 2.0, 2.0));
+    let fin = open.positions.len() as u32 - 1;
+    open.triangles.push([b, a, fin]);
+    open.triangles.push([a, a, b]);
+    meshes.push(("open sphere".into(), open));
+    let dir = tempfile::tempdir().unwrap();
+    let opts = Options {
+        iterations: 2,
+        weld: false,
+        ..Options::default()
+    };
+    let engine = EngineSettings {
+        with_stats: true,
+        ..threads(2)
+    };
+    for (name, mesh) in &meshes {
+        let (input, output) = (dir.path().join("in.ply"), dir.path().join("out.ply"));
+        io::write_mesh(&input, mesh).unwrap();
+        let report = engine::run_file(&input, &output, &opts, &engine, &mut Quiet).unwrap();
+        let read = io::read_mesh(&input).unwrap();
+        let plain = PlainStats::of(&read, None);
+        plain.check(report.input_stats.as_ref().unwrap(), name);
+        let written = io::read_mesh(&output).unwrap();
+        let plain_output = PlainStats::of(&written, Some(plain.centroid));
+        let output_stats = report.output_stats.as_ref().unwrap();
+        plain_output.check(output_stats, &format!("{name} output"));
+    }
+}

@@ -65,9 +65,8 @@ pub fn volume_area(pos: &[DVec3], tris: &[[u32; 3]], origin: DVec3) -> (f64, f64
     (v / 6.0, a / 2.0)
 }
 
-/// [`metrics::geometry`] over chunks: volume and area over chunks of triangles, about the
-/// centroid summed over chunks of vertices; the extent, and the edges by their smaller vertex
-/// (in ascending `(i, j)` order within a chunk), over chunks of vertices.
+/// [`metrics::geometry`] over chunks of vertices ([`metrics::vertex_sums`]): the centroid, then
+/// every other figure in one pass, about it.
 pub fn geometry(pos: &[DVec3], tris: &[[u32; 3]], topo: &Topology) -> metrics::Geometry {
     geometry_about(pos, tris, topo, centroid(pos))
 }
@@ -79,29 +78,16 @@ pub fn geometry_about(
     topo: &Topology,
     origin: DVec3,
 ) -> metrics::Geometry {
-    let (volume, area) = volume_area(pos, tris, origin);
-    let extent = map_fold(
-        pos,
-        |_, chunk| metrics::extent(chunk),
-        metrics::extent(&[]),
-        metrics::extent_union,
-    );
-    let edges = map_fold(
+    map_fold(
         pos,
         |first, chunk| {
             let vertices = first as u32..(first + chunk.len()) as u32;
-            metrics::edge_sums(pos, tris, topo, vertices)
+            metrics::vertex_sums(pos, tris, topo, vertices, origin)
         },
-        metrics::EdgeSums::default(),
+        metrics::VertexSums::default(),
         |a, b| a + b,
-    );
-    metrics::Geometry {
-        volume,
-        origin,
-        area,
-        extent,
-        edges,
-    }
+    )
+    .geometry(origin)
 }
 
 /// Signed volume about `origin` ([`metrics::volume_about`]).

@@ -107,6 +107,6 @@ pub mod surface;
 pub use compare::{Comparison, compare, compare_surfaces, displacement_lengths, same_connectivity};
 pub use deviation::{DeviationStats, signed_deviations};
 pub use info::{
-    EdgeSums, Geometry, MeshInfo, connectivity, edge_sums, extent, extent_union, geometry, info,
-    info_of, mean_edge_length, roughness,
+    EdgeSums, Geometry, MeshInfo, VertexSums, connectivity, extent, extent_union, geometry, info,
+    info_of, mean_edge_length, roughness, vertex_sums,
 };
