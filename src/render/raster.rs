@@ -9,7 +9,7 @@
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use glam::{DVec2, DVec3};
+use glam::{DVec2, DVec3, Vec4};
 
 use super::camera::Camera;
 use super::image::{Rgb, WHITE};
@@ -124,20 +124,131 @@ impl Projected {
     }
 }
 
-/// Draw triangles `first..first + triangles.len()` into every frame, one frame after another:
-/// the samples a run of neighbouring triangles touches in one frame stay in cache while it is
-/// drawn.
+/// Draw triangles `first..first + triangles.len()` into every frame. Frames go four at a time
+/// through [`Lanes`], which rules most (triangle, frame) pairs out at once; the others take the
+/// exact test.
 pub fn draw_triangles(frames: &[Frame], positions: &[DVec3], first: usize, triangles: &[[u32; 3]]) {
-    for frame in frames {
-        let cam = &frame.camera;
+    let Some(&[v, ..]) = triangles.first() else {
+        return;
+    };
+    // The triangles of a chunk lie close together: near their first corner, f32 is precise.
+    let origin = positions[v as usize];
+    for group in frames.chunks(LANES) {
+        let lanes = Lanes::new(group, origin);
         for (k, &[i, j, l]) in triangles.iter().enumerate() {
             let (a, b, c) = (
-                cam.project(positions[i as usize]),
-                cam.project(positions[j as usize]),
-                cam.project(positions[l as usize]),
+                positions[i as usize],
+                positions[j as usize],
+                positions[l as usize],
             );
-            draw_triangle(frame, (first + k) as u64, a, b, c);
+            let mut maybe = lanes.maybe(a, b, c);
+            while maybe != 0 {
+                let frame = &group[maybe.trailing_zeros() as usize];
+                maybe &= maybe - 1;
+                let cam = &frame.camera;
+                let index = (first + k) as u64;
+                draw_triangle(frame, index, cam.project(a), cam.project(b), cam.project(c));
+            }
         }
+    }
+}
+
+/// Frames a [`Lanes`] tests at once.
+const LANES: usize = 4;
+
+/// The column and row maps of up to four frames' cameras in the lanes of f32 vectors: which of
+/// the frames a triangle may hold a sample centre of in its box, for four frames in the time of
+/// one. Points are taken relative to `origin` (f64, then f32) so that f32 keeps its precision
+/// near it, and the test is made conservative by a margin of about 160 times f32's rounding of
+/// every term (and f64's of the exact projection): a frame it rules out, the exact test in f64
+/// would have too. Unused lanes rule everything out.
+struct Lanes {
+    origin: DVec3,
+    /// Lane `f` of `sx[k]` is component `k` of frame `f`'s column map; `ox` its offset at
+    /// `origin`. The same for rows.
+    sx: [Vec4; 3],
+    ox: Vec4,
+    sy: [Vec4; 3],
+    oy: Vec4,
+    /// The last column and row (−1 in unused lanes).
+    last_x: Vec4,
+    last_y: Vec4,
+    /// The margin: `fixed + per_unit × (the corners' largest coordinate from origin)`.
+    fixed: Vec4,
+    per_unit: Vec4,
+    used: u32,
+}
+
+impl Lanes {
+    fn new(frames: &[Frame], origin: DVec3) -> Lanes {
+        let lane = |f: &dyn Fn(&Frame) -> f64| {
+            let mut v = [0.0f32; LANES];
+            for (x, frame) in v.iter_mut().zip(frames) {
+                *x = f(frame) as f32;
+            }
+            Vec4::from_array(v)
+        };
+        let map = |frame: &Frame, axis: usize| frame.camera.screen()[axis];
+        let at = |frame: &Frame, axis: usize| {
+            let (s, o) = map(frame, axis);
+            origin.dot(s) + o
+        };
+        let l1 = |frame: &Frame, axis: usize| map(frame, axis).0.abs().element_sum();
+        let scale = |frame: &Frame| l1(frame, 0).max(l1(frame, 1));
+        const F32: f64 = 1e-5;
+        const F64: f64 = 1e-14;
+        let fixed = |frame: &Frame| {
+            let (o, ox, oy) = (origin.abs().max_element(), map(frame, 0).1, map(frame, 1).1);
+            F32 * at(frame, 0).abs().max(at(frame, 1).abs())
+                + F64 * (o * scale(frame) + ox.abs().max(oy.abs()))
+                + 1e-6
+        };
+        let mut last = [-1.0f32; LANES];
+        for (l, frame) in last.iter_mut().zip(frames) {
+            *l = frame.camera.width as f32 - 1.0;
+        }
+        let last_x = Vec4::from_array(last);
+        for (l, frame) in last.iter_mut().zip(frames) {
+            *l = frame.camera.height as f32 - 1.0;
+        }
+        Lanes {
+            origin,
+            sx: [0, 1, 2].map(|k| lane(&|f| map(f, 0).0[k])),
+            ox: lane(&|f| at(f, 0)),
+            sy: [0, 1, 2].map(|k| lane(&|f| map(f, 1).0[k])),
+            oy: lane(&|f| at(f, 1)),
+            last_x,
+            last_y: Vec4::from_array(last),
+            fixed: lane(&fixed),
+            per_unit: lane(&|f| F32 * scale(f)),
+            used: (1 << frames.len().min(LANES)) - 1,
+        }
+    }
+
+    /// The frames (bit `f` for lane `f`) in which the triangle `a`, `b`, `c` may hold a sample
+    /// centre in its box: all but those where it surely holds none. Corners that are not finite
+    /// in f32 leave the answer to the exact test.
+    #[inline]
+    fn maybe(&self, a: DVec3, b: DVec3, c: DVec3) -> u32 {
+        let q = [a, b, c].map(|p| (p - self.origin).as_vec3());
+        let far = q[0].abs().max(q[1].abs()).max(q[2].abs()).max_element();
+        let map = |s: &[Vec4; 3], o: Vec4| {
+            q.map(|p| {
+                Vec4::splat(p.x) * s[0] + Vec4::splat(p.y) * s[1] + Vec4::splat(p.z) * s[2] + o
+            })
+        };
+        let (xs, ys) = (map(&self.sx, self.ox), map(&self.sy, self.oy));
+        let margin = self.fixed + self.per_unit * far;
+        let half = Vec4::splat(0.5);
+        // No k with lo − ½ ≤ k ≤ hi − ½ inside the frame (as `centres` finds them), with room.
+        let none = |v: [Vec4; 3], last: Vec4| {
+            let (lo, hi) = (v[0].min(v[1]).min(v[2]), v[0].max(v[1]).max(v[2]));
+            let to = (hi - half + margin).min(last).floor();
+            to.cmplt((lo - half - margin).max(Vec4::ZERO))
+        };
+        let finite = (xs[0] + xs[1] + xs[2] + ys[0] + ys[1] + ys[2]).is_finite_mask();
+        let ruled_out = (none(xs, self.last_x) | none(ys, self.last_y)) & finite;
+        !ruled_out.bitmask() & self.used
     }
 }
 
@@ -392,32 +503,44 @@ mod tests {
 
     #[test]
     fn a_frame_holds_the_nearest_cover_of_every_sample() {
-        let (positions, triangles) = scattered(3000);
-        for view in View::STANDARD {
-            let bounds = Bounds::in_view(&positions, view);
-            let camera = Camera::framing(view, bounds, 48, 40);
-            let frame = Frame::new(camera);
-            draw_triangles(std::slice::from_ref(&frame), &positions, 0, &triangles);
-            // Every sample tested against every triangle, without boxes or shortcuts.
-            let projected: Vec<_> = triangles
+        let (near, triangles) = scattered(3000);
+        // Also far from the origin, where f32 alone would lose the samples.
+        let far: Vec<DVec3> = near
+            .iter()
+            .map(|&p| p + DVec3::new(3e5, -2e6, 1e4))
+            .collect();
+        for positions in [near, far] {
+            let cameras: Vec<Camera> = View::STANDARD
                 .iter()
-                .map(|t| {
-                    let [a, b, c] = t.map(|v| camera.project(positions[v as usize]));
-                    Projected::new(a, b, c)
-                })
+                .map(|&v| Camera::framing(v, Bounds::in_view(&positions, v), 48, 40))
                 .collect();
-            let mut covered = 0;
-            for y in 0..camera.height {
-                for x in 0..camera.width {
-                    let nearest = (projected.iter().enumerate())
-                        .filter_map(|(t, p)| p.as_ref()?.key(t as u64, x, y))
-                        .min();
-                    let key = frame.samples[y * camera.width + x].load(Ordering::Relaxed);
-                    assert_eq!(key, nearest.unwrap_or(EMPTY), "{view:?} ({x}, {y})");
-                    covered += usize::from(nearest.is_some());
+            // All views at once, in two chunks (two origins), as `parallel` draws them.
+            let frames: Vec<Frame> = cameras.iter().map(|&c| Frame::new(c)).collect();
+            let (one, two) = triangles.split_at(1000);
+            draw_triangles(&frames, &positions, 0, one);
+            draw_triangles(&frames, &positions, one.len(), two);
+            for (frame, camera) in frames.iter().zip(&cameras) {
+                // Every sample tested against every triangle, without boxes or shortcuts.
+                let projected: Vec<_> = triangles
+                    .iter()
+                    .map(|t| {
+                        let [a, b, c] = t.map(|v| camera.project(positions[v as usize]));
+                        Projected::new(a, b, c)
+                    })
+                    .collect();
+                let mut covered = 0;
+                for y in 0..camera.height {
+                    for x in 0..camera.width {
+                        let nearest = (projected.iter().enumerate())
+                            .filter_map(|(t, p)| p.as_ref()?.key(t as u64, x, y))
+                            .min();
+                        let key = frame.samples[y * camera.width + x].load(Ordering::Relaxed);
+                        assert_eq!(key, nearest.unwrap_or(EMPTY), "{camera:?} ({x}, {y})");
+                        covered += usize::from(nearest.is_some());
+                    }
                 }
+                assert!(covered > camera.width * camera.height / 8, "{covered}");
             }
-            assert!(covered > camera.width * camera.height / 8, "{covered}");
         }
     }
 
