@@ -169,6 +169,12 @@ impl Camera {
         }
     }
 
+    /// The maps of a point to its sample column and row, as [`Camera::project`] applies them:
+    /// `[(sx, ox), (sy, oy)]`, `x = p·sx + ox`, `y = p·sy + oy`.
+    pub fn screen(&self) -> [(DVec3, f64); 2] {
+        [(self.sx, self.offset.x), (self.sy, self.offset.y)]
+    }
+
     /// `p` in frame coordinates: sample column, row (continuous, sample centres at `k + ½`) and
     /// depth.
     #[inline]

@@ -92,13 +92,13 @@ pub fn render(
         .map(|c| raster::Frame::new(c.scaled(SAMPLES)))
         .collect();
     parallel::draw(&frames, positions, triangles, meter);
+    // Shaded frame by frame, all the paints at once; handed back paint by paint.
+    let mut shaded: Vec<std::vec::IntoIter<Image>> = frames
+        .iter()
+        .map(|f| parallel::shade(f, positions, triangles, paints, SAMPLES).into_iter())
+        .collect();
     Ok(paints
         .iter()
-        .map(|paint| {
-            frames
-                .iter()
-                .map(|f| parallel::shade(f, positions, triangles, paint, SAMPLES))
-                .collect()
-        })
+        .map(|_| shaded.iter_mut().filter_map(Iterator::next).collect())
         .collect())
 }

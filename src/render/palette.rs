@@ -32,7 +32,8 @@ const DIVERGING: [[f32; 3]; 5] = [
 ];
 
 impl Palette {
-    /// The colour at `t` in [0, 1] (clamped; NaN as 0).
+    /// The colour at `t` in [0, 1] (clamped; NaN as 0). Channels are rounded by a cast (they are
+    /// not negative): `round` is a call to libm on x86-64's baseline.
     pub fn at(self, t: f32) -> Rgb {
         let points = match self {
             Palette::Sequential => &SEQUENTIAL,
@@ -43,7 +44,7 @@ impl Palette {
         let k = (x as usize).min(points.len() - 2);
         let f = x - k as f32;
         let (a, b) = (points[k], points[k + 1]);
-        std::array::from_fn(|i| (a[i] + (b[i] - a[i]) * f).round() as u8)
+        std::array::from_fn(|i| (a[i] + (b[i] - a[i]) * f + 0.5) as u8)
     }
 }
 

@@ -38,25 +38,34 @@ pub fn draw(frames: &[Frame], positions: &[DVec3], triangles: &[[u32; 3]], meter
         });
 }
 
-/// The picture of `frame` under `paint`, at `factor × factor` samples a pixel.
+/// The pictures of `frame` under each of `paints`, at `factor × factor` samples a pixel, shaded
+/// together: each visible triangle is looked up once for all of them.
 pub fn shade(
     frame: &Frame,
     positions: &[DVec3],
     triangles: &[[u32; 3]],
-    paint: &Paint,
+    paints: &[Paint],
     factor: usize,
-) -> Image {
+) -> Vec<Image> {
     let (w, h) = (frame.camera.width / factor, frame.camera.height / factor);
-    let mut image = Image::filled(w, h, [0; 3]);
-    if w == 0 {
-        return image;
+    // Row by row, each paint's row beside the others'.
+    let mut rows = vec![[0; 3]; w * h * paints.len()];
+    if w > 0 && !paints.is_empty() {
+        rows.par_chunks_mut(w * paints.len())
+            .enumerate()
+            .for_each(|(py, out)| {
+                raster::shade_row(frame, positions, triangles, paints, factor, py, out)
+            });
     }
-    image
-        .pixels
-        .par_chunks_mut(w)
-        .enumerate()
-        .for_each(|(py, row)| {
-            raster::shade_row(frame, positions, triangles, paint, factor, py, row)
-        });
-    image
+    (0..paints.len())
+        .map(|k| Image {
+            width: w,
+            height: h,
+            pixels: rows
+                .chunks((w * paints.len()).max(1))
+                .flat_map(|row| &row[k * w..(k + 1) * w])
+                .copied()
+                .collect(),
+        })
+        .collect()
 }

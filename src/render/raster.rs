@@ -9,7 +9,7 @@
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use glam::{DVec2, DVec3};
+use glam::{DVec2, DVec3, Vec4};
 
 use super::camera::Camera;
 use super::image::{Rgb, WHITE};
@@ -55,58 +55,231 @@ fn edge(a: DVec2, b: DVec2, p: DVec2) -> f64 {
     (b - a).perp_dot(p - a)
 }
 
-/// Draw triangles `first..first + triangles.len()` into every frame.
+/// The samples `k` of an axis of `n` whose centres `k + ½` lie in [`lo`, `hi`], as `k0..=k1`;
+/// `None` when there are none (or a bound is NaN). Rounded by casts of values made non-negative
+/// first: x86-64's baseline has no rounding instruction, and `ceil`/`floor` are calls to libm
+/// that cost more than the rest of a small triangle.
+#[inline]
+fn centres(lo: f64, hi: f64, n: usize) -> Option<(usize, usize)> {
+    let last = n.checked_sub(1)? as f64;
+    let (from, to) = (lo - 0.5, hi - 0.5);
+    if !(to >= 0.0 && from <= last) {
+        return None;
+    }
+    let (from, to) = (from.max(0.0), to.min(last));
+    let floor = from as usize;
+    let k0 = floor + usize::from((floor as f64) < from);
+    let k1 = to as usize;
+    (k0 <= k1).then_some((k0, k1))
+}
+
+/// A triangle projected into a frame, ready to test sample centres against.
+struct Projected {
+    a: DVec3,
+    b: DVec3,
+    c: DVec3,
+    /// The sign of its area, its slack and 1 / area: see [`Projected::new`].
+    sign: f64,
+    slack: f64,
+    inv: f64,
+}
+
+impl Projected {
+    /// `corners` in frame coordinates; `None` for a triangle seen edge-on (or not finite),
+    /// which covers nothing.
+    #[inline]
+    fn new(a: DVec3, b: DVec3, c: DVec3) -> Option<Projected> {
+        let area = edge(a.truncate(), b.truncate(), c.truncate());
+        if area == 0.0 || !area.is_finite() {
+            return None;
+        }
+        // Either winding: the signs are turned so that inside is positive. A sample on a shared
+        // edge is taken by both triangles (the key decides), never dropped by rounding: hence
+        // the slack.
+        Some(Projected {
+            a,
+            b,
+            c,
+            sign: area.signum(),
+            slack: -1e-9 * area.abs(),
+            inv: 1.0 / area,
+        })
+    }
+
+    /// The depth key of triangle `index` at the centre of sample (`x`, `y`), if the triangle
+    /// covers it (its edges included).
+    #[inline]
+    fn key(&self, index: u64, x: usize, y: usize) -> Option<u64> {
+        let (a, b, c) = (self.a.truncate(), self.b.truncate(), self.c.truncate());
+        let p = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
+        let (e0, e1, e2) = (edge(b, c, p), edge(c, a, p), edge(a, b, p));
+        if e0 * self.sign < self.slack || e1 * self.sign < self.slack || e2 * self.sign < self.slack
+        {
+            return None;
+        }
+        let z = (e0 * self.a.z + e1 * self.b.z + e2 * self.c.z) * self.inv;
+        // Rounded by a cast: the clamped depth is not negative (NaN casts to 0).
+        let depth = (z.clamp(0.0, 1.0) * DEPTH_MAX + 0.5) as u64;
+        Some(depth << INDEX_BITS | index)
+    }
+}
+
+/// Draw triangles `first..first + triangles.len()` into every frame. Frames go four at a time
+/// through [`Lanes`], which rules most (triangle, frame) pairs out at once; the others take the
+/// exact test.
 pub fn draw_triangles(frames: &[Frame], positions: &[DVec3], first: usize, triangles: &[[u32; 3]]) {
-    for (k, t) in triangles.iter().enumerate() {
-        let corners = t.map(|v| positions[v as usize]);
-        for frame in frames {
-            draw_triangle(frame, (first + k) as u64, corners);
+    let Some(&[v, ..]) = triangles.first() else {
+        return;
+    };
+    // The triangles of a chunk lie close together: near their first corner, f32 is precise.
+    let origin = positions[v as usize];
+    for group in frames.chunks(LANES) {
+        let lanes = Lanes::new(group, origin);
+        for (k, &[i, j, l]) in triangles.iter().enumerate() {
+            let (a, b, c) = (
+                positions[i as usize],
+                positions[j as usize],
+                positions[l as usize],
+            );
+            let mut maybe = lanes.maybe(a, b, c);
+            while maybe != 0 {
+                let frame = &group[maybe.trailing_zeros() as usize];
+                maybe &= maybe - 1;
+                let cam = &frame.camera;
+                let index = (first + k) as u64;
+                draw_triangle(frame, index, cam.project(a), cam.project(b), cam.project(c));
+            }
         }
     }
 }
 
-/// Draw triangle `index` with `corners` into `frame`: every sample whose centre it covers (its
-/// edges included) takes it if it is nearer than what the sample holds. Triangles seen edge-on
-/// cover nothing.
-#[inline]
-fn draw_triangle(frame: &Frame, index: u64, corners: [DVec3; 3]) {
-    let cam = &frame.camera;
-    let [a, b, c] = corners.map(|p| cam.project(p));
-    let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
-    // Sample centres at k + ½ inside the triangle's box, clipped to the frame.
-    let x0 = (lo.x - 0.5).ceil().max(0.0);
-    let y0 = (lo.y - 0.5).ceil().max(0.0);
-    let x1 = (hi.x - 0.5).floor().min(cam.width as f64 - 1.0);
-    let y1 = (hi.y - 0.5).floor().min(cam.height as f64 - 1.0);
-    if !(x0 <= x1 && y0 <= y1) {
-        return;
-    }
-    let (a2, b2, c2) = (a.truncate(), b.truncate(), c.truncate());
-    let area = edge(a2, b2, c2);
-    if area == 0.0 || !area.is_finite() {
-        return;
-    }
-    // Either winding: the signs are turned so that inside is positive. A sample on a shared edge
-    // is taken by both triangles (the key decides), never dropped by rounding: hence the slack.
-    let sign = area.signum();
-    let slack = -1e-9 * area.abs();
-    let inv = 1.0 / area;
-    for y in y0 as usize..=y1 as usize {
-        let row = &frame.samples[y * cam.width..(y + 1) * cam.width];
-        for (x, sample) in row
-            .iter()
-            .enumerate()
-            .take(x1 as usize + 1)
-            .skip(x0 as usize)
-        {
-            let p = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
-            let (e0, e1, e2) = (edge(b2, c2, p), edge(c2, a2, p), edge(a2, b2, p));
-            if e0 * sign < slack || e1 * sign < slack || e2 * sign < slack {
-                continue;
+/// Frames a [`Lanes`] tests at once.
+const LANES: usize = 4;
+
+/// The column and row maps of up to four frames' cameras in the lanes of f32 vectors: which of
+/// the frames a triangle may hold a sample centre of in its box, for four frames in the time of
+/// one. Points are taken relative to `origin` (f64, then f32) so that f32 keeps its precision
+/// near it, and the test is made conservative by a margin of about 160 times f32's rounding of
+/// every term (and f64's of the exact projection): a frame it rules out, the exact test in f64
+/// would have too. Unused lanes rule everything out.
+struct Lanes {
+    origin: DVec3,
+    /// Lane `f` of `sx[k]` is component `k` of frame `f`'s column map; `ox` its offset at
+    /// `origin`. The same for rows.
+    sx: [Vec4; 3],
+    ox: Vec4,
+    sy: [Vec4; 3],
+    oy: Vec4,
+    /// The last column and row (−1 in unused lanes).
+    last_x: Vec4,
+    last_y: Vec4,
+    /// The margin: `fixed + per_unit × (the corners' largest coordinate from origin)`.
+    fixed: Vec4,
+    per_unit: Vec4,
+    used: u32,
+}
+
+impl Lanes {
+    fn new(frames: &[Frame], origin: DVec3) -> Lanes {
+        let lane = |f: &dyn Fn(&Frame) -> f64| {
+            let mut v = [0.0f32; LANES];
+            for (x, frame) in v.iter_mut().zip(frames) {
+                *x = f(frame) as f32;
             }
-            let z = (e0 * a.z + e1 * b.z + e2 * c.z) * inv;
-            let depth = (z.clamp(0.0, 1.0) * DEPTH_MAX).round() as u64;
-            sample.fetch_min(depth << INDEX_BITS | index, Ordering::Relaxed);
+            Vec4::from_array(v)
+        };
+        let map = |frame: &Frame, axis: usize| frame.camera.screen()[axis];
+        let at = |frame: &Frame, axis: usize| {
+            let (s, o) = map(frame, axis);
+            origin.dot(s) + o
+        };
+        let l1 = |frame: &Frame, axis: usize| map(frame, axis).0.abs().element_sum();
+        let scale = |frame: &Frame| l1(frame, 0).max(l1(frame, 1));
+        const F32: f64 = 1e-5;
+        const F64: f64 = 1e-14;
+        let fixed = |frame: &Frame| {
+            let (o, ox, oy) = (origin.abs().max_element(), map(frame, 0).1, map(frame, 1).1);
+            F32 * at(frame, 0).abs().max(at(frame, 1).abs())
+                + F64 * (o * scale(frame) + ox.abs().max(oy.abs()))
+                + 1e-6
+        };
+        let mut last = [-1.0f32; LANES];
+        for (l, frame) in last.iter_mut().zip(frames) {
+            *l = frame.camera.width as f32 - 1.0;
+        }
+        let last_x = Vec4::from_array(last);
+        for (l, frame) in last.iter_mut().zip(frames) {
+            *l = frame.camera.height as f32 - 1.0;
+        }
+        Lanes {
+            origin,
+            sx: [0, 1, 2].map(|k| lane(&|f| map(f, 0).0[k])),
+            ox: lane(&|f| at(f, 0)),
+            sy: [0, 1, 2].map(|k| lane(&|f| map(f, 1).0[k])),
+            oy: lane(&|f| at(f, 1)),
+            last_x,
+            last_y: Vec4::from_array(last),
+            fixed: lane(&fixed),
+            per_unit: lane(&|f| F32 * scale(f)),
+            used: (1 << frames.len().min(LANES)) - 1,
+        }
+    }
+
+    /// The frames (bit `f` for lane `f`) in which the triangle `a`, `b`, `c` may hold a sample
+    /// centre in its box: all but those where it surely holds none. Corners that are not finite
+    /// in f32 leave the answer to the exact test.
+    #[inline]
+    fn maybe(&self, a: DVec3, b: DVec3, c: DVec3) -> u32 {
+        let q = [a, b, c].map(|p| (p - self.origin).as_vec3());
+        let far = q[0].abs().max(q[1].abs()).max(q[2].abs()).max_element();
+        let map = |s: &[Vec4; 3], o: Vec4| {
+            q.map(|p| {
+                Vec4::splat(p.x) * s[0] + Vec4::splat(p.y) * s[1] + Vec4::splat(p.z) * s[2] + o
+            })
+        };
+        let (xs, ys) = (map(&self.sx, self.ox), map(&self.sy, self.oy));
+        let margin = self.fixed + self.per_unit * far;
+        let half = Vec4::splat(0.5);
+        // No k with lo − ½ ≤ k ≤ hi − ½ inside the frame (as `centres` finds them), with room.
+        let none = |v: [Vec4; 3], last: Vec4| {
+            let (lo, hi) = (v[0].min(v[1]).min(v[2]), v[0].max(v[1]).max(v[2]));
+            let to = (hi - half + margin).min(last).floor();
+            to.cmplt((lo - half - margin).max(Vec4::ZERO))
+        };
+        let finite = (xs[0] + xs[1] + xs[2] + ys[0] + ys[1] + ys[2]).is_finite_mask();
+        let ruled_out = (none(xs, self.last_x) | none(ys, self.last_y)) & finite;
+        !ruled_out.bitmask() & self.used
+    }
+}
+
+/// Draw triangle `index` with corners `a`, `b`, `c` (in frame coordinates) into `frame`: every
+/// sample whose centre it covers takes it if it is nearer than what the sample holds.
+#[inline]
+fn draw_triangle(frame: &Frame, index: u64, a: DVec3, b: DVec3, c: DVec3) {
+    let cam = &frame.camera;
+    let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
+    let Some((x0, x1)) = centres(lo.x, hi.x, cam.width) else {
+        return;
+    };
+    let Some((y0, y1)) = centres(lo.y, hi.y, cam.height) else {
+        return;
+    };
+    let Some(tri) = Projected::new(a, b, c) else {
+        return;
+    };
+    // Most triangles of a large mesh hold one sample centre in their box, or none.
+    if x0 == x1 && y0 == y1 {
+        if let Some(key) = tri.key(index, x0, y0) {
+            frame.samples[y0 * cam.width + x0].fetch_min(key, Ordering::Relaxed);
+        }
+        return;
+    }
+    for y in y0..=y1 {
+        let row = &frame.samples[y * cam.width + x0..=y * cam.width + x1];
+        for (x, sample) in (x0..=x1).zip(row) {
+            if let Some(key) = tri.key(index, x, y) {
+                sample.fetch_min(key, Ordering::Relaxed);
+            }
         }
     }
 }
@@ -128,48 +301,64 @@ const GREY_DARK: f64 = 45.0;
 /// Share of a value's colour that the headlight takes away at grazing angles.
 const VALUE_SHADOW: f64 = 0.45;
 
-/// The colour of sample (`x`, `y`) of `frame`: the background where no triangle is, else the
-/// visible triangle's colour under `paint`.
-pub fn shade_sample(
-    frame: &Frame,
-    positions: &[DVec3],
-    triangles: &[[u32; 3]],
-    paint: &Paint,
-    x: usize,
-    y: usize,
-) -> Rgb {
-    let Some(t) = frame.triangle(x, y) else {
-        return WHITE;
-    };
-    let ids = triangles[t];
-    let [a, b, c] = ids.map(|v| positions[v as usize]);
-    let normal = (b - a).cross(c - a);
-    let lit = match normal.length() {
-        l if l > 0.0 && l.is_finite() => (normal.dot(frame.camera.toward) / l).abs(),
-        _ => 0.0,
-    };
-    match paint {
-        Paint::Grey => {
-            let g = (GREY_DARK + (GREY_LIT - GREY_DARK) * lit).round() as u8;
-            [g, g, g]
+/// A visible triangle as the paints need it, found once for all the samples that show it.
+struct Seen {
+    index: usize,
+    ids: [u32; 3],
+    /// Its corners in frame coordinates (only when a paint interpolates values).
+    corners: Option<[DVec2; 3]>,
+    /// How squarely it faces the headlight: |cos| of the angle, 0 for a degenerate triangle.
+    lit: f64,
+}
+
+impl Seen {
+    fn new(
+        frame: &Frame,
+        positions: &[DVec3],
+        triangles: &[[u32; 3]],
+        index: usize,
+        corners: bool,
+    ) -> Seen {
+        let ids = triangles[index];
+        let [a, b, c] = [0, 1, 2].map(|k| positions[ids[k] as usize]);
+        let normal = (b - a).cross(c - a);
+        let lit = match normal.length() {
+            l if l > 0.0 && l.is_finite() => (normal.dot(frame.camera.toward) / l).abs(),
+            _ => 0.0,
+        };
+        let cam = &frame.camera;
+        Seen {
+            index,
+            ids,
+            corners: corners.then(|| [a, b, c].map(|p| cam.project(p).truncate())),
+            lit,
         }
-        Paint::Values { values, scale } => {
-            let w = barycentric(&frame.camera, [a, b, c], x, y);
-            let v = w[0] * values[ids[0] as usize] as f64
-                + w[1] * values[ids[1] as usize] as f64
-                + w[2] * values[ids[2] as usize] as f64;
-            let colour = scale.colour(v as f32);
-            let light = 1.0 - VALUE_SHADOW * (1.0 - lit);
-            colour.map(|ch| (ch as f64 * light).round() as u8)
+    }
+
+    /// Its colour under `paint` at `p` (frame coordinates). Channels are rounded by casts of
+    /// non-negative values: `round` is a call to libm on x86-64's baseline.
+    fn colour(&self, paint: &Paint, p: DVec2) -> Rgb {
+        match paint {
+            Paint::Grey => {
+                let g = (GREY_DARK + (GREY_LIT - GREY_DARK) * self.lit + 0.5) as u8;
+                [g, g, g]
+            }
+            Paint::Values { values, scale } => {
+                let w = self.corners.map_or([1.0 / 3.0; 3], |c| barycentric(c, p));
+                let v = (0..3)
+                    .map(|k| w[k] * values[self.ids[k] as usize] as f64)
+                    .sum::<f64>();
+                let colour = scale.colour(v as f32);
+                let light = 1.0 - VALUE_SHADOW * (1.0 - self.lit);
+                colour.map(|ch| (ch as f64 * light + 0.5) as u8)
+            }
         }
     }
 }
 
-/// The weights of `corners` at the centre of sample (`x`, `y`), clamped to the triangle (a
-/// sample on its edge may fall a rounding outside) and summing to 1.
-fn barycentric(cam: &Camera, corners: [DVec3; 3], x: usize, y: usize) -> [f64; 3] {
-    let [a, b, c] = corners.map(|p| cam.project(p).truncate());
-    let p = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
+/// The weights of `corners` at `p`, clamped to the triangle (a sample on its edge may fall a
+/// rounding outside) and summing to 1.
+fn barycentric([a, b, c]: [DVec2; 3], p: DVec2) -> [f64; 3] {
     let area = edge(a, b, c);
     if area == 0.0 || !area.is_finite() {
         return [1.0 / 3.0; 3];
@@ -182,29 +371,81 @@ fn barycentric(cam: &Camera, corners: [DVec3; 3], x: usize, y: usize) -> [f64; 3
     }
 }
 
-/// Pixel row `py` of a picture of `frame` at `factor × factor` samples a pixel: each pixel the
-/// mean of its samples' colours (the edges smoothed), into `out`.
+/// The visible triangles of a frame as the paints need them, the last one kept: a triangle is
+/// looked up once for a run of samples that show it.
+struct Lookup<'a> {
+    frame: &'a Frame,
+    positions: &'a [DVec3],
+    triangles: &'a [[u32; 3]],
+    corners: bool,
+    last: Option<Seen>,
+}
+
+impl Lookup<'_> {
+    fn seen(&mut self, t: usize) -> &Seen {
+        if self.last.as_ref().is_none_or(|s| s.index != t) {
+            let seen = Seen::new(self.frame, self.positions, self.triangles, t, self.corners);
+            self.last = Some(seen);
+        }
+        self.last.as_ref().expect("just set")
+    }
+}
+
+/// Pixel row `py` of the pictures of `frame` under each of `paints`, at `factor × factor`
+/// samples a pixel: each pixel the mean of its samples' colours (the edges smoothed), into `out`
+/// (the row of each paint in turn). A pixel whose samples all show one triangle is shaded once,
+/// at its centre: its values interpolate linearly, so the centre's is the samples' mean.
 pub fn shade_row(
     frame: &Frame,
     positions: &[DVec3],
     triangles: &[[u32; 3]],
-    paint: &Paint,
+    paints: &[Paint],
     factor: usize,
     py: usize,
     out: &mut [Rgb],
 ) {
+    let width = out.len() / paints.len().max(1);
+    let mut lookup = Lookup {
+        frame,
+        positions,
+        triangles,
+        corners: paints.iter().any(|p| matches!(p, Paint::Values { .. })),
+        last: None,
+    };
     let n = (factor * factor) as u32;
-    for (px, pixel) in out.iter_mut().enumerate() {
-        let mut sum = [0u32; 3];
-        for sy in py * factor..(py + 1) * factor {
-            for sx in px * factor..(px + 1) * factor {
-                let c = shade_sample(frame, positions, triangles, paint, sx, sy);
-                for i in 0..3 {
-                    sum[i] += c[i] as u32;
+    let mut sums = vec![[0u32; 3]; paints.len()];
+    let (sy0, sy1) = (py * factor, (py + 1) * factor);
+    for px in 0..width {
+        let (sx0, sx1) = (px * factor, (px + 1) * factor);
+        let first = frame.triangle(sx0, sy0);
+        let uniform = (sy0..sy1).all(|sy| (sx0..sx1).all(|sx| frame.triangle(sx, sy) == first));
+        if uniform {
+            let f = factor as f64;
+            let centre = DVec2::new((px as f64 + 0.5) * f, (py as f64 + 0.5) * f);
+            for (k, paint) in paints.iter().enumerate() {
+                out[k * width + px] = match first {
+                    Some(t) => lookup.seen(t).colour(paint, centre),
+                    None => WHITE,
+                };
+            }
+            continue;
+        }
+        sums.iter_mut().for_each(|s| *s = [0; 3]);
+        for sy in sy0..sy1 {
+            for sx in sx0..sx1 {
+                let p = DVec2::new(sx as f64 + 0.5, sy as f64 + 0.5);
+                let seen = frame.triangle(sx, sy).map(|t| lookup.seen(t));
+                for (sum, paint) in sums.iter_mut().zip(paints) {
+                    let c = seen.map_or(WHITE, |s| s.colour(paint, p));
+                    for i in 0..3 {
+                        sum[i] += c[i] as u32;
+                    }
                 }
             }
         }
-        *pixel = sum.map(|s| ((s + n / 2) / n) as u8);
+        for (k, sum) in sums.iter().enumerate() {
+            out[k * width + px] = sum.map(|s| ((s + n / 2) / n) as u8);
+        }
     }
 }
 
@@ -230,5 +471,95 @@ mod tests {
             assert!(tris[seen][0] == 3, "{tris:?}: {seen}");
             assert_eq!(frame.triangle(0, 0), None);
         }
+    }
+
+    /// Triangles from a fixed pseudo-random sequence: most far smaller than a sample (one centre
+    /// in their box or none: the fast path), some spanning many, both windings, a few degenerate.
+    fn scattered(count: usize) -> (Vec<DVec3>, Vec<[u32; 3]>) {
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut positions = Vec::new();
+        for k in 0..count {
+            let centre = DVec3::new(next(), next(), next());
+            let size = if k % 10 == 0 { 0.2 } else { 0.02 };
+            for _ in 0..3 {
+                let jitter = DVec3::new(next() - 0.5, next() - 0.5, next() - 0.5);
+                positions.push(centre + jitter * size);
+            }
+        }
+        // A degenerate triangle: all its corners at one point.
+        positions[3] = positions[4];
+        positions[5] = positions[4];
+        let triangles = (0..count as u32)
+            .map(|t| [3 * t, 3 * t + 1, 3 * t + 2])
+            .collect();
+        (positions, triangles)
+    }
+
+    #[test]
+    fn a_frame_holds_the_nearest_cover_of_every_sample() {
+        let (near, triangles) = scattered(3000);
+        // Also far from the origin, where f32 alone would lose the samples.
+        let far: Vec<DVec3> = near
+            .iter()
+            .map(|&p| p + DVec3::new(3e5, -2e6, 1e4))
+            .collect();
+        for positions in [near, far] {
+            let cameras: Vec<Camera> = View::STANDARD
+                .iter()
+                .map(|&v| Camera::framing(v, Bounds::in_view(&positions, v), 48, 40))
+                .collect();
+            // All views at once, in two chunks (two origins), as `parallel` draws them.
+            let frames: Vec<Frame> = cameras.iter().map(|&c| Frame::new(c)).collect();
+            let (one, two) = triangles.split_at(1000);
+            draw_triangles(&frames, &positions, 0, one);
+            draw_triangles(&frames, &positions, one.len(), two);
+            for (frame, camera) in frames.iter().zip(&cameras) {
+                // Every sample tested against every triangle, without boxes or shortcuts.
+                let projected: Vec<_> = triangles
+                    .iter()
+                    .map(|t| {
+                        let [a, b, c] = t.map(|v| camera.project(positions[v as usize]));
+                        Projected::new(a, b, c)
+                    })
+                    .collect();
+                let mut covered = 0;
+                for y in 0..camera.height {
+                    for x in 0..camera.width {
+                        let nearest = (projected.iter().enumerate())
+                            .filter_map(|(t, p)| p.as_ref()?.key(t as u64, x, y))
+                            .min();
+                        let key = frame.samples[y * camera.width + x].load(Ordering::Relaxed);
+                        assert_eq!(key, nearest.unwrap_or(EMPTY), "{camera:?} ({x}, {y})");
+                        covered += usize::from(nearest.is_some());
+                    }
+                }
+                assert!(covered > camera.width * camera.height / 8, "{covered}");
+            }
+        }
+    }
+
+    #[test]
+    fn the_centres_in_a_span_are_those_of_ceil_and_floor() {
+        let values = [
+            -3.0, -0.5, -0.2, 0.0, 0.3, 0.5, 0.50001, 1.5, 2.7, 9.5, 9.6, 12.0,
+        ];
+        for &lo in &values {
+            for &hi in &values {
+                let k0 = (lo - 0.5f64).ceil().max(0.0);
+                let k1 = (hi - 0.5f64).floor().min(9.0);
+                let expected = (k0 <= k1).then_some((k0 as usize, k1 as usize));
+                assert_eq!(centres(lo, hi, 10), expected, "{lo} {hi}");
+            }
+        }
+        assert_eq!(centres(f64::NAN, 3.0, 10), None);
+        assert_eq!(centres(0.0, f64::NAN, 10), None);
+        assert_eq!(centres(f64::NEG_INFINITY, f64::INFINITY, 10), Some((0, 9)));
+        assert_eq!(centres(0.0, 5.0, 0), None);
     }
 }
