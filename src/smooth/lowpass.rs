@@ -159,7 +159,8 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
             step,
             shared,
         } = &mut *scratch;
-        let free = &*free;
+        // Cut to the block's length: a member's test (`k < len`) proves its indices in bounds.
+        let free = &free[..len];
         let all_free = free.iter().all(|&f| f);
         let own = own.clone().filter(|_| all_free);
         // Step 1's displacement (computed here rather than stored: one pass over memory less).
@@ -170,7 +171,7 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
         };
         moved.clear();
         moved.extend(block.clone().map(|u| pos.get(u) - origin + disp(u)));
-        let moved = &*moved;
+        let moved = &moved[..len];
         // Where a corner is after step 1, about the origin.
         let after = |u: u32, m: bool| {
             if m {
@@ -184,6 +185,7 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
         // member's faces (ascending).
         dir.clear();
         dir.resize(len, DVec3::ZERO);
+        let dir = &mut dir[..len];
         shared.clear();
         let mut dv = 0.0;
         // A macro rather than a closure: the compiler would not inline the closure here.
