@@ -218,7 +218,8 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
             // smallest corner is in the block are `own` (sorted by first corner, which is the
             // smallest), a run per member, after its faces from below the block, which come
             // first in its ascending list: the same faces in the same order as the general walk.
-            let mut next = own.start as usize;
+            let run = &triangles[own.start as usize..own.end as usize];
+            let mut next = 0;
             for a in block.clone() {
                 let (pa, qa) = (pos.get(a) - origin, moved[(a - start) as usize]);
                 for &t in topo.faces_of(a) {
@@ -231,13 +232,14 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
                         face!(a, pa, qa, b, c, mb, mc);
                     }
                 }
-                while next < own.end as usize && triangles[next][0] == a {
-                    let [_, b, c] = triangles[next];
+                while let Some(&[first, b, c]) = run.get(next)
+                    && first == a
+                {
                     face!(a, pa, qa, b, c, member(b), member(c));
                     next += 1;
                 }
             }
-            debug_assert_eq!(next, own.end as usize, "the block's faces are a run");
+            debug_assert_eq!(next, run.len(), "the block's faces are a run");
         } else {
             for a in block.clone() {
                 if !member(a) {
