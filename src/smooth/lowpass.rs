@@ -218,6 +218,8 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
             // smallest corner is in the block are `own` (sorted by first corner, which is the
             // smallest), a run per member, after its faces from below the block, which come
             // first in its ascending list: the same faces in the same order as the general walk.
+            // A loop of its own: folded into the general walk (a bound and an empty run for the
+            // other blocks) the sweep ran 12 % more instructions.
             let run = &triangles[own.start as usize..own.end as usize];
             let mut next = 0;
             for a in block.clone() {
