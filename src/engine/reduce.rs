@@ -327,13 +327,7 @@ mod tests {
 
     #[test]
     fn the_median_counts_as_a_sort_would_select() {
-        let mut state = 7u64;
-        let mut next = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut next = crate::shapes::uniform(7);
         // More than one chunk, negative and positive values, ties, NaNs skipped.
         let mut values: Vec<f64> = (0..3 * CHUNK + 5).map(|_| next() * 4.0 - 3.0).collect();
         values.extend([0.25; 9]);

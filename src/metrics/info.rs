@@ -982,13 +982,7 @@ mod tests {
     /// from 1), and the library's own answers where it hands over.
     #[test]
     fn the_fast_arctangent_follows_the_library() {
-        let mut state = 11u64;
-        let mut next = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut next = crate::shapes::uniform(11);
         let mut angles: Vec<f64> = (0..200_000)
             .map(|_| next() * std::f64::consts::PI)
             .collect();

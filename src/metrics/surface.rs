@@ -275,13 +275,8 @@ mod tests {
     fn nearest_matches_brute_force() {
         let m = icosphere(3);
         let s = Surface::new(&m.positions, &m.triangles);
-        let mut seed = 7u64;
-        let mut next = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64 * 4.0 - 2.0
-        };
+        let mut uniform = crate::shapes::uniform(7);
+        let mut next = || uniform() * 4.0 - 2.0;
         for _ in 0..200 {
             let p = DVec3::new(next(), next(), next());
             let n = s.nearest(p).unwrap();

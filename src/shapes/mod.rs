@@ -255,6 +255,19 @@ pub(crate) fn permutation(n: usize, seed: u64) -> Vec<u32> {
     perm
 }
 
+/// Numbers in [0, 1) from a 64-bit linear congruential generator (Knuth's MMIX constants, the
+/// top 53 bits), deterministic per seed: for tests that want many values and no dependency.
+#[cfg(test)]
+pub(crate) fn uniform(seed: u64) -> impl FnMut() -> f64 {
+    let mut state = seed;
+    move || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
 /// Displace every vertex along its (area-weighted) normal by Gaussian noise of standard deviation
 /// `sigma` × the mean edge length; deterministic for a seed.
 ///
