@@ -6,7 +6,7 @@
 use std::path::Path;
 
 use glam::DVec3;
-use vcsmooth::engine::auto::{DEFAULT_CAP, DETAIL_RATIO, NOISE_GONE, REMOVED_ENOUGH, SETTLED};
+use vcsmooth::engine::auto::{DEFAULT_CAP, DETAIL_RATIO, HEAVY_TAILS, NOISE_GONE};
 use vcsmooth::engine::{
     AutoStopStats, EngineSettings, Layout, Plan, Quiet, Statistics, StopReason, thread_pool,
 };
@@ -65,8 +65,11 @@ fn a_clean_mesh_stops_at_once_for_every_method() {
     for mesh in [shapes::icosphere(4), read_scan("fertility-9k.ply")] {
         for method in Method::ALL {
             let (report, stats) = run(&mesh, method);
+            // hc's removal threshold is lower (`Settle::SLOW`): a clean scan's features, which
+            // the noise estimate cannot tell from impulsive noise, take it one step further.
+            let at_most = if method == Method::Hc { 3 } else { 2 };
             assert!(
-                report.iterations_run <= 2,
+                report.iterations_run <= at_most,
                 "{method}: {} iterations, {stats:?}",
                 report.iterations_run
             );
@@ -134,11 +137,11 @@ fn the_reported_figures_follow_the_rule() {
         let (report, s) = run(&noisy, method);
         let k = report.iterations_run;
         let stop_at = |j: usize| -> Option<StopReason> {
-            if method.unit().stop_rule(&auto(method)) == StopRule::Settle {
+            if let StopRule::Settle(settle) = method.unit().stop_rule(&auto(method)) {
                 let mean = report.records[j].mean_displacement;
-                if s.removed[j] > REMOVED_ENOUGH {
+                if s.removed[j] > settle.removed {
                     Some(StopReason::Detail)
-                } else if mean < SETTLED * s.noise_estimate {
+                } else if mean < settle.moved * s.noise_estimate {
                     Some(StopReason::Settled)
                 } else {
                     None
@@ -519,4 +522,73 @@ fn batch_and_slurm_script_take_auto() {
         "auto",
     ]));
     assert!(script.contains(" --iterations auto "), "{script}");
+}
+
+/// The mean angle (degrees) between each face's normal in `a` and in `b` (same faces).
+fn normal_error(a: &Mesh, b: &Mesh) -> f64 {
+    let normal = |m: &Mesh, t: &[u32; 3]| {
+        let p = |i: u32| m.positions[i as usize];
+        (p(t[1]) - p(t[0]))
+            .cross(p(t[2]) - p(t[0]))
+            .normalize_or_zero()
+    };
+    let sum: f64 = (a.triangles.iter())
+        .map(|t| normal(a, t).dot(normal(b, t)).clamp(-1.0, 1.0).acos())
+        .sum();
+    sum.to_degrees() / a.triangles.len() as f64
+}
+
+#[test]
+fn impulsive_noise_is_seen_and_the_stop_is_no_worse_than_ten_iterations() {
+    // Twelve with impulsive noise (tests/data/denoising/PROVENANCE.md): about half the vertices
+    // moved, hard. The median absolute deviation alone put σ̂ at 0.72× the noise, and the rule
+    // stopped after 1–2 iterations, 1.8× the normal error of 10 (docs/quality-research.md §15).
+    let pair = |kind: &str| {
+        vcsmooth::io::read_mesh(&scan(&format!("denoising/Twelve0.5Impulsive-{kind}.ply"))).unwrap()
+    };
+    let (noisy, clean) = (pair("noisy"), pair("clean"));
+    for method in [
+        Method::Taubin,
+        Method::VcsLowpass,
+        Method::Vcs,
+        Method::Hc,
+        Method::VcsGuided,
+    ] {
+        let (report, s) = run(&noisy, method);
+        assert!(
+            s.noise_estimate_rms > HEAVY_TAILS * s.noise_estimate_median,
+            "{method}: {s:?}"
+        );
+        assert_eq!(s.noise_estimate, s.noise_estimate_rms / HEAVY_TAILS);
+        let mut ten = noisy.clone();
+        let opts = Options {
+            method,
+            ..Options::default()
+        };
+        vcsmooth::smooth(&mut ten, &opts).unwrap();
+        let mut auto = noisy.clone();
+        vcsmooth::smooth(&mut auto, &self::auto(method)).unwrap();
+        let (e_auto, e_ten) = (normal_error(&auto, &clean), normal_error(&ten, &clean));
+        assert!(
+            e_auto <= 1.05 * e_ten,
+            "{method}: {} iterations {e_auto:.2}° against 10 iterations {e_ten:.2}°",
+            report.iterations_run
+        );
+    }
+}
+
+#[test]
+fn gaussian_noise_keeps_the_median_estimate() {
+    for sigma in [0.2, 0.5] {
+        let (_, s) = run(
+            &with_noise(read_scan("fertility-9k.ply"), sigma, 3),
+            Method::Taubin,
+        );
+        assert_eq!(
+            s.noise_estimate.to_bits(),
+            s.noise_estimate_median.to_bits()
+        );
+        let ratio = s.noise_estimate_rms / s.noise_estimate_median;
+        assert!((0.95..1.05).contains(&ratio), "σ {sigma}: {ratio}");
+    }
 }

@@ -503,6 +503,103 @@ fn vcs_lowpass_keeps_volume_is_deterministic_and_follows_the_prototype() {
     assert!((a - b).abs() <= 0.02 * b, "patched moved {a}, in order {b}");
 }
 
+/// A capsule along +x (radius `r`, hemispherical caps, `k` vertices a ring): `rings` rings, an
+/// apex at each end, the cylinder's rings one arc of the ring (`2π r / k`) apart; and the
+/// distance of a point to its surface.
+fn capsule(r: f64, k: usize, rings: usize) -> (Mesh, impl Fn(DVec3) -> f64) {
+    let step = std::f64::consts::TAU * r / k as f64;
+    let cap = ((std::f64::consts::FRAC_PI_2 * r / step).round() as usize).max(1);
+    let length = (rings + 1 - 2 * cap) as f64 * step;
+    // Each ring: its x and radius; caps at polar angles j·π/(2 cap).
+    let polar = |j: usize| j as f64 * std::f64::consts::FRAC_PI_2 / cap as f64;
+    let mut profile: Vec<(f64, f64)> = (1..=cap)
+        .map(|j| (-r * polar(j).cos(), r * polar(j).sin()))
+        .collect();
+    let cylinder = rings - (2 * cap - 1);
+    profile.extend((1..=cylinder).map(|i| (i as f64 * step, r)));
+    profile.extend(
+        (1..cap)
+            .rev()
+            .map(|j| (length + r * polar(j).cos(), r * polar(j).sin())),
+    );
+    assert_eq!(profile.len(), rings);
+    let mut p = vec![DVec3::new(-r, 0.0, 0.0)];
+    for (i, &(x, rho)) in profile.iter().enumerate() {
+        // Every other ring turned by half a step: near-equilateral triangles.
+        let turn = if i % 2 == 0 { 0.0 } else { 0.5 };
+        p.extend((0..k).map(|j| {
+            let a = (j as f64 + turn) * std::f64::consts::TAU / k as f64;
+            DVec3::new(x, rho * a.cos(), rho * a.sin())
+        }));
+    }
+    p.push(DVec3::new(length + r, 0.0, 0.0));
+    let (k32, last) = (k as u32, p.len() as u32 - 1);
+    let at = |ring: usize, j: usize| 1 + (ring * k + j % k) as u32;
+    let mut t: Vec<[u32; 3]> = (0..k).map(|j| [0, at(0, j + 1), at(0, j)]).collect();
+    for i in 0..rings - 1 {
+        // Ring i+1 is turned half a step ahead when i is even, behind when odd.
+        for j in 0..k {
+            let (a, b, c, d) = (at(i, j), at(i, j + 1), at(i + 1, j), at(i + 1, j + 1));
+            if i % 2 == 0 {
+                t.push([a, b, c]);
+                t.push([b, d, c]);
+            } else {
+                t.push([a, d, c]);
+                t.push([a, b, d]);
+            }
+        }
+    }
+    t.extend((0..k).map(|j| [last, at(rings - 1, j), at(rings - 1, j + 1)]));
+    debug_assert!(t.iter().flatten().all(|&v| v <= last) && k32 > 2);
+    let distance = move |q: DVec3| {
+        let x = q.x.clamp(0.0, length);
+        (q - DVec3::new(x, 0.0, 0.0)).length() - r
+    };
+    (Mesh::new(p, t), distance)
+}
+
+/// The thin-feature defect of #35: `vcs-lowpass` keeps each block's volume, so a block leaves
+/// its vertices the block's mean of their removed noise along the normals. When a patch was cut
+/// into runs of 4096 and a short rest, a rest of a few vertices at the far corner of the
+/// bounding box (the tip of a thin part) kept them near their noisy places: the largest distance
+/// to the clean surface, up to 2× Taubin's. A noisy finger of 8,198 vertices (two blocks and a
+/// rest of 6 before, whose largest distance was 1.24× Taubin's on seed 1): the default's largest
+/// distance to the clean capsule is within 10 % of Taubin's, and its rms no worse, on three
+/// noise samples.
+#[test]
+fn a_thin_finger_has_no_block_too_small_to_average_its_noise() {
+    let (clean, distance) = capsule(1.0, 12, 683);
+    assert_eq!(clean.positions.len(), 8198);
+    let edge = std::f64::consts::TAU / 12.0;
+    for seed in 1..=3 {
+        let mut noisy = clean.clone();
+        shapes::add_normal_noise(&mut noisy, 0.5, seed);
+        let smoothed = |method: Method| {
+            let mut m = noisy.clone();
+            let opts = Options {
+                method,
+                iterations: 10,
+                ..Options::default()
+            };
+            engine::smooth_with(&mut m, &opts, &threads(1), &mut Quiet).unwrap();
+            let d: Vec<f64> = m
+                .positions
+                .iter()
+                .map(|&q| distance(q).abs() / edge)
+                .collect();
+            let max = d.iter().copied().fold(0.0, f64::max);
+            let rms = (d.iter().map(|x| x * x).sum::<f64>() / d.len() as f64).sqrt();
+            (max, rms)
+        };
+        let (taubin, default) = (smoothed(Method::Taubin), smoothed(Method::VcsLowpass));
+        assert!(
+            default.0 <= 1.1 * taubin.0 && default.1 <= taubin.1,
+            "seed {seed}: largest distance and rms, vcs-lowpass {default:?}, taubin {taubin:?} \
+             (mean edges)"
+        );
+    }
+}
+
 /// An in-memory run refuses, before any work, an iteration count whose records the memory budget
 /// cannot hold, as a file run does; the mesh is left as it was.
 #[test]

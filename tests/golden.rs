@@ -70,7 +70,7 @@ fn runs(sphere: &Path, torus: &Path, big: &Path) -> Vec<Run> {
             args,
         });
     }
-    let more: [(&'static str, &Path, &'static str, &'static [&'static str]); 21] = [
+    let more: [(&'static str, &Path, &'static str, &'static [&'static str]); 24] = [
         (
             "sphere4-vcs-reject",
             sphere,
@@ -266,6 +266,24 @@ fn runs(sphere: &Path, torus: &Path, big: &Path) -> Vec<Run> {
                 "--patch-size",
                 "2000",
             ],
+        ),
+        (
+            "fertility-vcs-lowpass",
+            &scan("fertility-9k.ply"),
+            "ply",
+            &["--threads", "2"],
+        ),
+        (
+            "twelve-vcs-lowpass-auto",
+            &scan("denoising/Twelve0.5Impulsive-noisy.ply"),
+            "ply",
+            &["--iterations", "auto", "--threads", "2"],
+        ),
+        (
+            "twelve-vcs-guided-auto",
+            &scan("denoising/Twelve0.5Impulsive-noisy.ply"),
+            "ply",
+            &["--method", "vcs-guided", "--iterations", "auto"],
         ),
         (
             "bunny-vcs-lowpass-creases-deviation",

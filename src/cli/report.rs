@@ -51,14 +51,19 @@ pub fn defined(x: Option<f64>, format: impl Fn(f64) -> String) -> String {
 }
 
 /// The iterations a run of `opts` ran, for people: `10 iterations`, or with the automatic stop
-/// `14 iterations (auto: why it stopped; noise estimate σ̂, cap N)`.
+/// `14 iterations (auto: why it stopped; noise estimate σ̂[, heavy-tailed], cap N)`.
 pub fn iterations_run(opts: &Options, run: &Report) -> String {
     match &run.auto_stop {
         Some(a) if opts.auto_stop => format!(
-            "{} (auto: {}; noise estimate {}, cap {})",
+            "{} (auto: {}; noise estimate {}{}, cap {})",
             count(run.iterations_run, "iteration"),
             a.stopped_by.describe(),
             num(a.noise_estimate),
+            if a.noise_estimate > a.noise_estimate_median {
+                ", heavy-tailed"
+            } else {
+                ""
+            },
             a.cap
         ),
         _ => count(opts.iterations, "iteration"),

@@ -2,11 +2,18 @@
 //! what an iteration removes is no longer noise. Defined and measured in docs/quality-research.md
 //! §5; the per-vertex operators are [`crate::smooth::noise`]. All from the input alone:
 //!
-//! - **Noise level** `σ̂ = MAD(g) / MAD(g^ε)` over the movable vertices: `g` is the second
-//!   difference of the normal component of the umbrella Laplacian of the input (its smooth
-//!   curvature cancels, the noise does not), `g^ε` the same operators on a white-noise sample ε
-//!   (seed [`SEED`]) on the same connectivity, which calibrates the operators' gain. The median
-//!   absolute deviation ignores features (a minority of vertices).
+//! - **Noise level** `σ̂` over the movable vertices, from `g`, the second difference of the
+//!   normal component of the umbrella Laplacian of the input (its smooth curvature cancels, the
+//!   noise does not), and `g^ε`, the same operators on a white-noise sample ε (seed [`SEED`]) on
+//!   the same connectivity, which calibrates the operators' gain. Two measures of the spread of
+//!   each: the median absolute deviation (MAD), which ignores features (a minority of vertices),
+//!   and the root mean square of the deviations from the median that are within [`CLIP`] MADs,
+//!   which leaves out the features too but keeps the spikes of impulsive noise, which hits part
+//!   of the vertices hard and which the MAD does not see (on the impulsive pair of
+//!   docs/quality-research.md §15 the MAD puts σ̂ at 0.72× the true noise). `σ̂_m = MAD(g) /
+//!   MAD(g^ε)`, `σ̂_e = RMS(g) / RMS(g^ε)`; on Gaussian noise the two agree within 2 %, so
+//!   `σ̂ = max(σ̂_m, σ̂_e / `[`HEAVY_TAILS`]`)`: the median's estimate unless the noise is
+//!   heavy-tailed.
 //! - **Removed**, after iteration k: `O_k = mean ((P^k − P⁰) · n⁰)² / σ̂²`, the energy the
 //!   iterations took away along the input normals, in units of the noise.
 //! - **Expected** (`laplacian`, `taubin`, `vcs-lowpass`): `E_k = Σ (e^k − ε)² / Σ ε²`, where `e^k`
@@ -16,12 +23,15 @@
 //!   `k ≥ 2` and `R_k >` [`DETAIL_RATIO`] (more than 2/7 of what the iteration removed is not
 //!   explained by noise: it is removing shape), or when `E_k − E_{k−1} <` [`NOISE_GONE`] (a
 //!   further iteration would remove less than 1 % of the noise: what the filter can remove is
-//!   gone). The stencil methods (`lem`, `vcs`, `vcs-triangle`) have no scalar analogue (a scalar
-//!   stencil minimiser removes most white noise at once, then stalls); they stop when the
-//!   iteration's mean displacement falls below [`SETTLED`] × σ̂, or when `O_k >`
-//!   [`REMOVED_ENOUGH`]: the iterations together removed more than 4/3 of the noise energy along
-//!   the normals, so the rest was shape (on noisy scans they settle first, at `O_k` ≤ 1.34; on
-//!   a clean one this ends the run after an iteration or two).
+//!   gone). The other methods (the stencil methods `lem`, `vcs`, `vcs-triangle`; `hc`;
+//!   `vcs-guided`) have no scalar analogue (a scalar stencil minimiser removes most white noise
+//!   at once, then stalls); they stop when the iteration's mean displacement falls below a
+//!   share of σ̂, or when `O_k` exceeds a multiple of the noise energy along the normals, so
+//!   that the rest was shape: the method's [`Settle`] thresholds (for the stencil methods, on
+//!   noisy scans they settle first, at `O_k` ≤ 1.34; on a clean one this ends the run after an
+//!   iteration or two).
+//!
+//! [`Settle`]: crate::smooth::method::Settle
 //! - Always at [`Options::iterations`] at the latest (the cap), and before the first iteration
 //!   when σ̂ is 0 (nothing movable, or no measurable noise).
 //!
@@ -46,20 +56,21 @@ use crate::topology::Topology;
 
 /// Seed of the white-noise sample ε.
 pub const SEED: u64 = 1;
+/// Deviations from the median beyond this many MADs are features, left out of the RMS. 8 MADs is
+/// 5.4 standard deviations of Gaussian noise: no noise sample is left out.
+pub const CLIP: f64 = 8.0;
+/// The RMS estimate is taken (divided by this) when it exceeds the median's by more than this
+/// factor: on the 20 noisy meshes of docs/quality-research.md §15 with Gaussian noise the ratio is
+/// 0.988–1.018, so their σ̂ is the median's; on the impulsive pair it is 1.31.
+pub const HEAVY_TAILS: f64 = 1.05;
 /// Largest ratio of removed to expected energy that still counts as removing noise. 7/5 is the
 /// centre of the thresholds that stop every noisy scan of the research inside the iterations
 /// where the result beats the quality target (demosthenes σ 0.2 needs [1.19, 1.49), armadillo
 /// σ 0.2 [1.34, 1.45), the others anything above 1.25); 4/3, the round value first tried, sits on
 /// armadillo's edge, where the noise sample decides (docs/quality-research.md §5, §10).
 pub const DETAIL_RATIO: f64 = 7.0 / 5.0;
-/// The stencil methods stop when the iterations together removed more than this many times the
-/// noise energy along the normals: the rest was shape.
-pub const REMOVED_ENOUGH: f64 = 4.0 / 3.0;
 /// Smallest share of the noise energy an iteration of the filter must still remove.
 pub const NOISE_GONE: f64 = 0.01;
-/// The stencil methods stop when an iteration moves the vertices by less than this share of σ̂
-/// on average.
-pub const SETTLED: f64 = 0.05;
 /// The cap of `--iterations auto` (the command line's; the library's is
 /// [`Options::iterations`]). The rule stops `taubin` and `vcs-lowpass` after at most 14
 /// iterations on the scans measured (the noise-removed test depends only on λ, μ and the
@@ -80,8 +91,10 @@ pub struct AutoStop {
     movable: f64,
     noise_energy: f64,
     sigma: f64,
-    /// The step factors of the method's scalar analogue; empty for the stencil methods.
-    factors: Vec<f64>,
+    /// `σ̂_m` and `σ̂_e` (module doc).
+    estimates: (f64, f64),
+    /// The method's rule: the step factors of its scalar analogue, or its settle thresholds.
+    rule: StopRule,
     removed: Vec<f64>,
     expected: Vec<f64>,
     started: bool,
@@ -122,10 +135,7 @@ impl AutoStop {
         [base, field, spare]: [Buf<f64>; 3],
         opts: &Options,
     ) -> AutoStop {
-        let factors = match opts.method.unit().stop_rule(opts) {
-            StopRule::Filter(factors) => factors,
-            StopRule::Settle => Vec::new(),
-        };
+        let rule = opts.method.unit().stop_rule(opts);
         AutoStop {
             normals,
             base,
@@ -135,7 +145,8 @@ impl AutoStop {
             movable: 0.0,
             noise_energy: 0.0,
             sigma: 0.0,
-            factors,
+            estimates: (0.0, 0.0),
+            rule,
             removed: Vec::new(),
             expected: Vec::new(),
             started: false,
@@ -172,7 +183,7 @@ impl AutoStop {
             })
         });
         share.step_end_scalar(spare);
-        let input = mad_of_second_difference(topo, spare, &mut self.field, share);
+        let input = spread_of_second_difference(topo, spare, &mut self.field, share);
         white_noise(topo, &mut self.field, share);
         let (eps, spare) = (&self.field, &mut self.spare);
         on_pool(share, || {
@@ -181,12 +192,13 @@ impl AutoStop {
             })
         });
         share.step_end_scalar(spare);
-        let calibration = mad_of_second_difference(topo, spare, &mut self.field, share);
-        self.sigma = if calibration > 0.0 {
-            input / calibration
+        let calibration = spread_of_second_difference(topo, spare, &mut self.field, share);
+        self.estimates = if calibration.0 > 0.0 && calibration.1 > 0.0 {
+            (input.0 / calibration.0, input.1 / calibration.1)
         } else {
-            0.0
+            (0.0, 0.0)
         };
+        self.sigma = self.estimates.0.max(self.estimates.1 / HEAVY_TAILS);
         white_noise(topo, &mut self.field, share);
         let eps = &self.field[owned.clone()];
         let energy = on_pool(share, || reduce::fixed_sum(eps, |_, e| e * e));
@@ -248,10 +260,9 @@ impl AutoStop {
         share: &mut dyn Share,
     ) {
         for &o in removed {
-            let expected = if self.factors.is_empty() {
-                f64::NAN
-            } else {
-                self.expected_after_step(topo, share)
+            let expected = match self.rule {
+                StopRule::Settle(_) => f64::NAN,
+                StopRule::Filter(_) => self.expected_after_step(topo, share),
             };
             self.expected.push(expected);
             self.removed.push(o);
@@ -288,7 +299,7 @@ impl AutoStop {
             self.expected.last().copied().unwrap_or(0.0),
         );
         self.removed.push(removed);
-        let stop = if self.factors.is_empty() {
+        let stop = if let StopRule::Settle(settle) = self.rule {
             self.expected.push(f64::NAN);
             // The mean displacement in units of σ̂.
             let moved = prev.map_or(f64::NAN, |prev| {
@@ -298,9 +309,9 @@ impl AutoStop {
                 });
                 total(share, sum) / self.movable.max(1.0)
             });
-            if removed > REMOVED_ENOUGH {
+            if removed > settle.removed {
                 Some(StopReason::Detail)
-            } else if moved < SETTLED {
+            } else if moved < settle.moved {
                 Some(StopReason::Settled)
             } else {
                 None
@@ -329,7 +340,10 @@ impl AutoStop {
     /// One iteration of the scalar analogue on the field, and `E_k`.
     fn expected_after_step(&mut self, topo: &Topology, share: &mut dyn Share) -> f64 {
         let owned = share.owned();
-        for &factor in &self.factors {
+        let StopRule::Filter(factors) = &self.rule else {
+            return f64::NAN;
+        };
+        for &factor in factors {
             let (src, out) = (&self.field, &mut self.spare);
             on_pool(share, || {
                 reduce::for_chunks_mut(&mut out[owned.clone()], |at, out| {
@@ -359,6 +373,8 @@ impl AutoStop {
             cap: self.cap,
             stopped_by: self.stopped_by.unwrap_or(StopReason::Cap),
             noise_estimate: self.sigma,
+            noise_estimate_median: self.estimates.0,
+            noise_estimate_rms: self.estimates.1,
             removed: self.removed.clone(),
             expected: self.expected.clone(),
         }
@@ -381,15 +397,16 @@ fn total(share: &dyn Share, local: Fixed) -> f64 {
     Fixed::from_limbs(&share.sum_counts(local.limbs().to_vec())).value()
 }
 
-/// The median absolute deviation of the second difference of `x` over the movable vertices of
-/// all processes (`x` valid on this one's owned vertices and their neighbours); `out` is scratch
-/// space.
-fn mad_of_second_difference(
+/// The spread of the second difference of `x` over the movable vertices of all processes (`x`
+/// valid on this one's owned vertices and their neighbours): its median absolute deviation, and
+/// the root mean square of its deviations from the median within [`CLIP`] of those (module doc);
+/// `out` is scratch space.
+fn spread_of_second_difference(
     topo: &Topology,
     x: &[f64],
     out: &mut [f64],
     share: &mut dyn Share,
-) -> f64 {
+) -> (f64, f64) {
     let owned = share.owned();
     let out = &mut out[owned.clone()];
     on_pool(share, || {
@@ -405,5 +422,25 @@ fn mad_of_second_difference(
             o.iter_mut().for_each(|y| *y = (*y - median).abs())
         })
     });
-    reduce::median_over(out, share.pool(), |c| share.sum_counts(c))
+    let mad = reduce::median_over(out, share.pool(), |c| share.sum_counts(c));
+    if mad <= 0.0 || !mad.is_finite() {
+        return (mad, 0.0);
+    }
+    // In units of the MAD, so that the fixed-point sum's resolution does not depend on the
+    // model's units.
+    let within = |y: f64| y <= CLIP * mad;
+    let out: &[f64] = out;
+    let (sum, count) = on_pool(share, || {
+        let sum = reduce::fixed_sum(out, |_, &y| if within(y) { (y / mad).powi(2) } else { 0.0 });
+        let count = reduce::map_fold(
+            out,
+            |_, c| c.iter().filter(|&&y| within(y)).count() as u64,
+            0,
+            |a, b| a + b,
+        );
+        (sum, count)
+    });
+    let count = share.sum_counts(vec![count])[0].max(1);
+    let rms = mad * (total(share, sum) / count as f64).sqrt();
+    (mad, rms)
 }

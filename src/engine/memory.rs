@@ -115,7 +115,9 @@ pub fn in_core_bytes_of_file(size: u64) -> u64 {
 
 /// [`in_core_bytes_of_file`] of a run with `opts`: [`DEVIATION_BYTES_PER_TRIANGLE`] more when it
 /// keeps the input positions ([`crate::Options::keeps_input`]), [`AUTO_BYTES_PER_TRIANGLE`] more when it
-/// stops automatically, and the method's per-triangle fields ([`face_field_bytes`]).
+/// stops automatically, and the method's per-triangle fields ([`face_field_bytes`]), or the
+/// crease detection's ([`CREASE_FIELD_BYTES_PER_TRIANGLE`]) when those are more: the crease
+/// fields are dropped before the method's are allocated.
 pub fn in_core_bytes_of_file_with(size: u64, opts: &crate::Options) -> u64 {
     let mut per_triangle = HEAP_BYTES_PER_TRIANGLE;
     if opts.keeps_input() {
@@ -124,9 +126,19 @@ pub fn in_core_bytes_of_file_with(size: u64, opts: &crate::Options) -> u64 {
     if opts.auto_stop {
         per_triangle += AUTO_BYTES_PER_TRIANGLE;
     }
-    per_triangle += face_field_bytes(opts.method);
+    let creases = match opts.crease_angle {
+        Some(_) => CREASE_FIELD_BYTES_PER_TRIANGLE,
+        None => 0,
+    };
+    per_triangle += face_field_bytes(opts.method).max(creases);
     size.saturating_mul(per_triangle) / FILE_BYTES_PER_TRIANGLE
 }
+
+/// Bytes per triangle of the crease detection's face fields (`Plan::crease`: the guided
+/// filter's, [`crate::smooth::guided::FACE_VECTORS`] vectors and `FACE_SCALARS` scalars), alive
+/// while the plan is made.
+pub const CREASE_FIELD_BYTES_PER_TRIANGLE: u64 =
+    (crate::smooth::guided::FACE_VECTORS * 24 + crate::smooth::guided::FACE_SCALARS * 8) as u64;
 
 /// Bytes per triangle of `method`'s per-triangle fields ([`crate::smooth::method::Needs`]).
 pub fn face_field_bytes(method: crate::Method) -> u64 {

@@ -157,12 +157,12 @@ impl Statistics {
 pub enum StopReason {
     /// σ̂ is 0: no iteration ran.
     NoNoise,
-    /// `R_k >` `DETAIL_RATIO` (the stencil methods: `O_k >` `REMOVED_ENOUGH`): the last
+    /// `R_k >` `DETAIL_RATIO` (the other methods: `O_k >` their `Settle::removed`): the last
     /// iteration removed shape as well as noise.
     Detail,
     /// `E_k − E_{k−1} <` `NOISE_GONE`: the filter has removed what it can of the noise.
     NoiseRemoved,
-    /// The mean displacement fell below `SETTLED` × σ̂ (the stencil methods).
+    /// The mean displacement fell below `Settle::moved` × σ̂ (the methods without a filter).
     Settled,
     /// The cap (`Options::iterations`).
     Cap,
@@ -189,6 +189,11 @@ pub struct AutoStopStats {
     pub stopped_by: StopReason,
     /// σ̂, in model units (along the normals).
     pub noise_estimate: f64,
+    /// σ̂ from the median absolute deviation alone (`σ̂_m` of [`crate::engine::auto`]).
+    pub noise_estimate_median: f64,
+    /// σ̂ from the root mean square (`σ̂_e`): above [`crate::engine::auto::HEAVY_TAILS`] times
+    /// the median's, the noise is heavy-tailed (impulsive) and σ̂ follows this one.
+    pub noise_estimate_rms: f64,
     /// `O_k` of each iteration run.
     pub removed: Vec<f64>,
     /// `E_k` of each iteration run (`null` for the stencil methods, which have none).

@@ -11,9 +11,13 @@ use std::path::{Path, PathBuf};
 use serde::ser::SerializeMap;
 
 use super::plan::Plan;
+use super::reduce::PoolExec;
 use crate::error::{Error, Result};
 use crate::io::PlyLayout;
-use crate::mesh::Mesh;
+use crate::mesh::{Buf, Mesh, Storage};
+use crate::smooth::guided;
+use crate::smooth::method::FaceFields;
+use glam::DVec3;
 
 /// Which vertices never move, in the input's vertex order. Part of the result's definition (like
 /// the patch size): [`Pins::key`] says which pins a stored plan or a batch marker was made with.
@@ -322,16 +326,40 @@ impl Plan {
         });
     }
 
-    /// Fix the vertices on creases sharper than `angle` degrees (see [`Topology::crease`]),
-    /// measured on the plan's current positions (the input's, before smoothing); nothing when
-    /// `None`. Like pins, creases are part of the result's definition.
+    /// Fix the vertices on creases sharper than `angle` degrees (see [`Topology::crease`]) of
+    /// the plan's current positions (the input's, before smoothing); nothing when `None`. The
+    /// angle is measured on the input's face normals after [`guided::CREASE_ITERATIONS`]
+    /// iterations of the guided normal filter ([`guided::filter_normals`]) that never averages
+    /// two faces whose guidance normals differ by more than `angle`: noise makes no creases, and
+    /// the edges of a clean mesh stay as sharp as they are. The filter's fields are allocated in
+    /// `storage` (scratch out of core) and dropped on return. Every pass is a Jacobi pass, so
+    /// the creases do not depend on the thread count or the storage. Like pins, creases are part
+    /// of the result's definition.
     ///
     /// [`Topology::crease`]: crate::Topology::crease
-    pub fn crease(&mut self, angle: Option<f64>) {
-        if let Some(angle) = angle {
-            let r = &self.reordered;
-            self.topology.crease(&r.triangles, &r.positions, angle);
-        }
+    pub fn crease(&mut self, storage: &Storage, angle: Option<f64>) -> Result<()> {
+        let Some(angle) = angle else {
+            return Ok(());
+        };
+        let r = &self.reordered;
+        let faces = r.triangles.len();
+        let mut vectors: Buf<DVec3> = storage.zeroed(guided::FACE_VECTORS * faces)?;
+        let mut scalars: Buf<f64> = storage.zeroed(guided::FACE_SCALARS * faces)?;
+        let normals = {
+            let parts = self.topology.parts();
+            let mut exec = PoolExec::new(&self.topology);
+            let fields = FaceFields {
+                vectors: &mut vectors,
+                scalars: &mut scalars,
+            };
+            let (tris, pos) = (&r.triangles[..], &r.positions[..]);
+            let cut = angle.to_radians().cos();
+            let iterations = guided::CREASE_ITERATIONS;
+            guided::filter_normals(&mut exec, &parts, tris, pos, fields, iterations, cut)
+        };
+        self.topology
+            .crease(&r.triangles, &r.positions, normals, angle);
+        Ok(())
     }
 }
 

@@ -451,7 +451,8 @@ pub(crate) fn prepare(
         )
         .map_err(|e| e.in_file(input))?;
         plan.pin(&pins);
-        plan.crease(opts.crease_angle);
+        plan.crease(&storage, opts.crease_angle)
+            .map_err(|e| e.in_file(input))?;
         plan.stored = io::Stored::of(output, &mesh);
         Ok(plan)
     })?;
@@ -583,7 +584,7 @@ pub(crate) fn run_mesh(
             observer,
         )?;
         plan.pin(&pins);
-        plan.crease(opts.crease_angle);
+        plan.crease(&storage, opts.crease_angle)?;
         let mut smoothed = smooth_planned(
             &mut plan,
             &storage,

@@ -48,10 +48,10 @@ pub struct MeshInfo {
     #[serde(default)]
     pub pinned_vertices: usize,
     /// Crease edges of the run (`crease_angle` of [`crate::Options`]): edges whose faces' normals
-    /// differ by more than the angle on the input.
+    /// differ by more than the angle on the input and on its filtered normals.
     #[serde(default)]
     pub crease_edges: usize,
-    /// Vertices on crease edges; fixed, and included in `fixed_vertices`.
+    /// Vertices on two or more crease edges; fixed, and included in `fixed_vertices`.
     #[serde(default)]
     pub crease_vertices: usize,
     /// Connected components of the (non-degenerate) triangles, through shared vertices;

@@ -19,7 +19,7 @@
 use glam::DVec3;
 
 use super::laplacian::{StepStats, clamp_to_ball};
-use super::method::{Control, Needs, PassFields, Schedule, Smoother, StopRule};
+use super::method::{Control, Needs, PassFields, Schedule, Settle, Smoother, StopRule};
 use super::{Options, Topology, inv_deg, neighbor_sum};
 
 /// α, the weight of the input position in `b`: the value the paper's figures and trimesh's
@@ -119,7 +119,7 @@ impl Smoother for Hc {
         }
     }
     fn stop_rule(&self, _: &Options) -> StopRule {
-        StopRule::Settle
+        StopRule::Settle(Settle::SLOW)
     }
     fn accepts(&self, _: Control) -> bool {
         false

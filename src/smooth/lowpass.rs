@@ -8,8 +8,9 @@
 //!
 //! One iteration on positions `P`:
 //! 1. `D = T(P) − P`, `T` = Taubin's λ then μ umbrella step, Jacobi, fixed vertices kept.
-//! 2. The vertices of each patch are cut into blocks of [`BLOCK`] consecutive ids of the plan's
-//!    (Morton) order. Gauss–Seidel over the blocks, ascending: the block's movable vertices `M`
+//! 2. The vertices of each patch are cut evenly into blocks of [`BLOCK`] to `2 · BLOCK − 1`
+//!    consecutive ids of the plan's (Morton) order ([`blocks`]; a patch shorter than [`BLOCK`]
+//!    is one block). Gauss–Seidel over the blocks, ascending: the block's movable vertices `M`
 //!    move by `D` (step 1); then each `u ∈ M` moves by a common distance `s` along `e_u`, the
 //!    direction of the volume gradient of `u` (its faces' `p_b × p_c`, after step 1), with `s`
 //!    the root near zero of the faces' volume change, which is a cubic in `s` (step 2). The faces
@@ -38,8 +39,9 @@ use super::stencil::{self, Outcome};
 use super::{Field, SweepStats};
 use crate::topology::{TopologyParts, corners_after};
 
-/// Vertices per block: a block is this many consecutive vertices of a patch in the plan's
-/// (Morton) order, the last block of a patch shorter.
+/// Vertices per block, at least: a patch is cut evenly into blocks of consecutive vertices of
+/// the plan's (Morton) order, each of `BLOCK` to `2 · BLOCK − 1` vertices unless the patch is
+/// shorter ([`blocks`]).
 pub const BLOCK: u32 = 4096;
 
 /// Rounds of a block under a deviation bound: each round leaves out the members that would end
@@ -94,9 +96,8 @@ pub fn sweep_blocks<P: Field + ?Sized, D: Field + ?Sized>(
     let (topo, triangles) = (mesh.topo.parts(), mesh.tris);
     let mut stats = SweepStats::default();
     let mut scratch = Scratch::default();
-    let mut lo = owned.start;
-    while lo < owned.end {
-        let hi = lo.saturating_add(BLOCK).min(owned.end);
+    for vertices in blocks(owned) {
+        let (lo, hi) = (vertices.start, vertices.end);
         // The faces whose smallest corner is in the block, when the triangles are sorted by it.
         let own = mesh.sorted.then(|| {
             let from = |v: u32| triangles.partition_point(|t| t[0] < v) as u32;
@@ -116,9 +117,29 @@ pub fn sweep_blocks<P: Field + ?Sized, D: Field + ?Sized>(
             &mut scratch,
         );
         stencil::count(&mut stats, outcome);
-        lo = hi;
     }
     stats
+}
+
+/// The blocks of the vertex range `owned`, ascending: `⌊len / BLOCK⌋` blocks (one when the range
+/// is shorter), `owned` cut evenly, block `k` starting at `len · k / count`. So every block has
+/// [`BLOCK`] to `2 · BLOCK − 1` vertices unless the whole range is shorter, and a patch of a
+/// multiple of [`BLOCK`] (the default patch) is cut into blocks of exactly [`BLOCK`].
+///
+/// Not a full run of [`BLOCK`] and a short rest: a block keeps its faces' volume exactly, so
+/// what it leaves of its vertices' denoising along the normals is their mean over the block
+/// (noise that averages out over thousands of vertices and not over a few). A rest of a few
+/// vertices kept them near their noisy places; it sat at the end of the patch's Morton range,
+/// which for the mesh's last patch is the far corner of the bounding box: often the tip of a
+/// thin part, where it was the largest distance to the clean surface (docs/quality-research.md
+/// §16).
+pub fn blocks(owned: Range<u32>) -> impl Iterator<Item = Range<u32>> {
+    let len = u64::from(owned.end.saturating_sub(owned.start));
+    let count = (len / u64::from(BLOCK)).max(1);
+    let at = move |k: u64| owned.start + (len * k / count) as u32;
+    (0..count)
+        .map(move |k| at(k)..at(k + 1))
+        .filter(|b| !b.is_empty())
 }
 
 /// One block (see the module doc): its free members move to `filtered` (step 1: a vertex is

@@ -92,7 +92,34 @@ pub enum StopRule {
     Filter(Vec<f64>),
     /// No scalar analogue: stop when an iteration moves the vertices little, or when the
     /// iterations together removed more than the noise.
-    Settle,
+    Settle(Settle),
+}
+
+/// The thresholds of [`StopRule::Settle`], in units of the noise estimate σ̂.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Settle {
+    /// Stop when an iteration's mean displacement is below this many σ̂.
+    pub moved: f64,
+    /// Stop when the iterations together removed more than this many times the noise energy
+    /// along the normals: the rest was shape.
+    pub removed: f64,
+}
+
+impl Settle {
+    /// The stencil methods' (`lem`, `vcs`, `vcs-triangle`): a scalar stencil minimiser removes
+    /// most white noise at once, then stalls (docs/quality-research.md §5).
+    pub const STENCILS: Settle = Settle {
+        moved: 0.05,
+        removed: 4.0 / 3.0,
+    };
+    /// The methods that keep improving in ever smaller steps (`hc`, which converges towards the
+    /// input, and `vcs-guided`, whose normal filter keeps the edges a low-pass filter rounds):
+    /// they stop at a twentieth of a stencil method's step, or when 1.15 times the noise energy
+    /// is gone (docs/quality-research.md §15, chosen on the denoising pairs).
+    pub const SLOW: Settle = Settle {
+        moved: 0.015,
+        removed: 1.15,
+    };
 }
 
 /// The controls a method may or may not accept; [`Options::check`] refuses the others.

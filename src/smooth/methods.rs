@@ -9,7 +9,7 @@ use glam::DVec3;
 
 use super::boundary::{self, Loops};
 use super::method::{
-    Control, Exec, FaceFields, Footprint, Needs, PatchMesh, Schedule, Smoother, StopRule,
+    Control, Exec, FaceFields, Footprint, Needs, PatchMesh, Schedule, Settle, Smoother, StopRule,
 };
 use super::stencil::{self, StencilParams};
 use super::{Options, SharedField, SweepStats, Topology, guided, laplacian, lowpass, rings};
@@ -141,7 +141,7 @@ impl Smoother for StencilMethod {
         self.volume
     }
     fn stop_rule(&self, _: &Options) -> StopRule {
-        StopRule::Settle
+        StopRule::Settle(Settle::STENCILS)
     }
     /// The volume-keeping ones also run the coarse levels of the multiresolution mode.
     fn accepts(&self, control: Control) -> bool {
@@ -193,7 +193,7 @@ impl Smoother for VcsLowpass {
         "vcs-lowpass"
     }
     fn help(&self) -> &'static str {
-        "Taubin's λ|μ displacement, volume restored exactly on blocks of 4096 vertices"
+        "Taubin's λ|μ displacement, volume restored exactly on blocks of 4096+ vertices"
     }
     fn schedule(&self, _: &Options) -> Schedule {
         Schedule::Stencils(Footprint::Edge)
@@ -285,7 +285,7 @@ impl Smoother for VcsGuided {
         }
     }
     fn stop_rule(&self, _: &Options) -> StopRule {
-        StopRule::Settle
+        StopRule::Settle(Settle::SLOW)
     }
     fn accepts(&self, control: Control) -> bool {
         matches!(control, Control::SmoothBoundary)
@@ -311,41 +311,8 @@ impl Smoother for VcsGuided {
         let (topo, tris) = (mesh.topo, mesh.tris);
         let parts = topo.parts();
         let parts = &parts;
-        let n = tris.len();
-        let (normals, rest) = faces.vectors.split_at_mut(n);
-        let (means, guidance) = rest.split_at_mut(n);
-        let guidance = &mut guidance[..n];
-        let (areas, consistency) = faces.scalars.split_at_mut(n);
-        let consistency = &mut consistency[..n];
-        exec.face_pass_f64(areas, &|first, out| {
-            guided::areas_into(tris, pos, out, first)
-        });
-        let areas: &[f64] = areas;
-        // `means` takes the filtered normals once the guidance is made from it, and the two
-        // swap roles: the normals of each filter iteration are those of the one before.
-        let (mut normals, mut means) = (normals, means);
-        exec.face_pass(normals, &|first, out| {
-            guided::normals_into(tris, pos, out, first)
-        });
-        for _ in 0..guided::NORMAL_ITERATIONS {
-            let field: &[DVec3] = normals;
-            exec.face_pass_f64(consistency, &|first, out| {
-                guided::consistency_into(parts, tris, field, out, first)
-            });
-            exec.face_pass(means, &|first, out| {
-                guided::patch_means_into(parts, tris, field, areas, out, first)
-            });
-            let (h, m): (&[f64], &[DVec3]) = (consistency, means);
-            exec.face_pass(guidance, &|first, out| {
-                guided::guidance_into(parts, tris, h, m, field, out, first)
-            });
-            let g: &[DVec3] = guidance;
-            exec.face_pass(means, &|first, out| {
-                guided::filter_into(parts, tris, pos, field, areas, g, out, first)
-            });
-            std::mem::swap(&mut normals, &mut means);
-        }
-        let filtered: &[DVec3] = normals;
+        let iterations = guided::NORMAL_ITERATIONS;
+        let filtered = guided::filter_normals(exec, parts, tris, pos, faces, iterations, -2.0);
         exec.vertex_pass(spare, &|first, out| {
             guided::fit_into(parts, tris, filtered, pos, out, first)
         });

@@ -183,7 +183,7 @@ impl FromStr for Method {
 /// | `lambda` | 0.5 | `laplacian` (its step), `taubin` and `vcs-lowpass` (their first step) |
 /// | `mu` | the method's: −0.53 for `taubin`, −0.52 for `vcs-lowpass` | `taubin` and `vcs-lowpass` (their second step; negative, `|μ| > λ`) |
 /// | `reject_energy_increase` | false | `lem`, `vcs`, `vcs-triangle` |
-/// | `crease_angle` | none | every method: vertices on edges whose faces' normals differ by more than this many degrees (measured on the input) are fixed |
+/// | `crease_angle` | none | every method: vertices on two or more edges whose faces' normals differ by more than this many degrees (on the input, and on its filtered normals) are fixed |
 /// | `max_deviation` | none | every method: no vertex ends farther than this from its input position (see below) |
 /// | `weld`, `weld_tolerance` | true, 0 | every method: vertices at one position (or, with a tolerance, closer than it) are smoothed as one |
 ///
@@ -211,8 +211,10 @@ pub struct Options {
     /// Skip a stencil whose 2-step result has a higher stencil energy than before (§3.1).
     pub reject_energy_increase: bool,
     /// Crease angle in degrees, in (0, 180): an edge of two triangles whose normals differ by
-    /// more than this (on the input positions) is a crease, and its vertices are fixed, so
-    /// corners where creases meet are too. `None`: no creases.
+    /// more than this on the input positions and after a guided filter of the input's face
+    /// normals (so that noise makes no creases; see `Plan::crease`) is a crease, and the
+    /// vertices on two or more crease edges are fixed, corners where creases meet included.
+    /// `None`: no creases.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub crease_angle: Option<f64>,
     /// Largest distance, in model units (> 0, finite), a vertex may end from its input position.
