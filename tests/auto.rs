@@ -17,8 +17,8 @@ use vcsmooth::{Mesh, Method, Options, Report, Topology, shapes};
 
 use crate::oracles::lowpass;
 use crate::util::{
-    arg, cluster_settings, engine_settings, fails, generate_sphere, noisy_sphere, ok, read_json,
-    read_scan, run_ranks, scan, vcsmooth,
+    arg, cluster_settings, engine_settings, fails, generate_sphere, noisy_sphere, normal_error, ok,
+    read_json, read_scan, run_ranks, scan, vcsmooth,
 };
 
 fn auto(method: Method) -> Options {
@@ -522,20 +522,6 @@ fn batch_and_slurm_script_take_auto() {
         "auto",
     ]));
     assert!(script.contains(" --iterations auto "), "{script}");
-}
-
-/// The mean angle (degrees) between each face's normal in `a` and in `b` (same faces).
-fn normal_error(a: &Mesh, b: &Mesh) -> f64 {
-    let normal = |m: &Mesh, t: &[u32; 3]| {
-        let p = |i: u32| m.positions[i as usize];
-        (p(t[1]) - p(t[0]))
-            .cross(p(t[2]) - p(t[0]))
-            .normalize_or_zero()
-    };
-    let sum: f64 = (a.triangles.iter())
-        .map(|t| normal(a, t).dot(normal(b, t)).clamp(-1.0, 1.0).acos())
-        .sum();
-    sum.to_degrees() / a.triangles.len() as f64
 }
 
 #[test]

@@ -13,25 +13,6 @@ fn pair(kind: &str) -> PathBuf {
     root().join(format!("tests/data/denoising/Fandisk0.3-{kind}.ply"))
 }
 
-/// The mean angle (degrees) between each face's normal in `a` and in `b` (same faces).
-fn normal_error(a: &Mesh, b: &Mesh) -> f64 {
-    let normal = |m: &Mesh, t: &[u32; 3]| {
-        let p = |i: u32| m.positions[i as usize];
-        (p(t[1]) - p(t[0]))
-            .cross(p(t[2]) - p(t[0]))
-            .normalize_or_zero()
-    };
-    let sum: f64 = a
-        .triangles
-        .iter()
-        .map(|t| {
-            let cos = normal(a, t).dot(normal(b, t)).clamp(-1.0, 1.0);
-            cos.acos().to_degrees()
-        })
-        .sum();
-    sum / a.triangles.len() as f64
-}
-
 fn volume(m: &Mesh) -> f64 {
     let p = |i: u32| m.positions[i as usize];
     m.triangles

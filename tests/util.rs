@@ -311,3 +311,18 @@ pub fn planned_positions(
         out
     })
 }
+
+/// The mean angle (degrees) between each face's normal in `a` and in `b` (same faces), as the
+/// denoising literature measures a result against the clean mesh.
+pub fn normal_error(a: &Mesh, b: &Mesh) -> f64 {
+    let normal = |m: &Mesh, t: &[u32; 3]| {
+        let p = |i: u32| m.positions[i as usize];
+        (p(t[1]) - p(t[0]))
+            .cross(p(t[2]) - p(t[0]))
+            .normalize_or_zero()
+    };
+    let sum: f64 = (a.triangles.iter())
+        .map(|t| normal(a, t).dot(normal(b, t)).clamp(-1.0, 1.0).acos())
+        .sum();
+    sum.to_degrees() / a.triangles.len() as f64
+}
