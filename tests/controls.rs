@@ -13,8 +13,8 @@ use vcsmooth::mesh::Storage;
 use vcsmooth::{Mesh, Method, Options, io, metrics, shapes};
 
 use crate::util::{
-    cluster_settings, engine_settings, fails, noisy_sphere, ok, planned_positions, read_json,
-    run_ranks, vcsmooth,
+    cluster_settings, engine_settings, fails, noisy_sphere, normal_error, ok, planned_positions,
+    read_json, run_ranks, vcsmooth,
 };
 
 /// A cube of side `n` whose faces are `n × n` grids of unit squares, two outward triangles each.
@@ -176,19 +176,6 @@ fn creases_keep_a_noisy_cube_sharp_and_its_volume() {
     assert!(smoothed(&cube, &creased, 3).0.positions == sharp.positions);
 }
 
-/// The mean angle (degrees) between each face's normal on `a` and on `b` (same faces).
-fn normal_error(triangles: &[[u32; 3]], a: &[DVec3], b: &[DVec3]) -> f64 {
-    let normal = |p: &[DVec3], t: &[u32; 3]| {
-        let [x, y, z] = t.map(|v| p[v as usize]);
-        (y - x).cross(z - x).normalize_or_zero()
-    };
-    let sum: f64 = triangles
-        .iter()
-        .map(|t| normal(a, t).dot(normal(b, t)).clamp(-1.0, 1.0).acos())
-        .sum();
-    sum.to_degrees() / triangles.len() as f64
-}
-
 /// Issue #35 item 2: on a cube under noise of 0.3 of its edge length, most edges' faces differ
 /// by more than 30°, so creases measured on the noisy normals fixed most vertices and little
 /// was smoothed. Measured on the filtered normals they are the cube's edges,
@@ -242,7 +229,7 @@ fn creases_on_a_very_noisy_cube_are_its_edges() {
         stats.crease_vertices,
         creases.len()
     );
-    let error = |m: &Mesh| normal_error(&clean.triangles, &m.positions, &clean.positions);
+    let error = |m: &Mesh| normal_error(m, &clean);
     let (e_sharp, e_rounded, e_noisy) = (error(&sharp), error(&rounded), error(&cube));
     assert!(
         e_sharp < e_rounded && e_sharp < 0.5 * e_noisy,
