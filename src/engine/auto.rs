@@ -30,8 +30,6 @@
 //!   that the rest was shape: the method's [`Settle`] thresholds (for the stencil methods, on
 //!   noisy scans they settle first, at `O_k` ≤ 1.34; on a clean one this ends the run after an
 //!   iteration or two).
-//!
-//! [`Settle`]: crate::smooth::method::Settle
 //! - Always at [`Options::iterations`] at the latest (the cap), and before the first iteration
 //!   when σ̂ is 0 (nothing movable, or no measurable noise).
 //!
@@ -42,6 +40,8 @@
 //! stored). So the stop iteration is the same for any thread count, storage and number of ranks.
 //! Memory: four arrays of the plan's size in its storage (normals, their offsets,
 //! the scalar field and its second buffer), [`super::memory::AUTO_BYTES_PER_TRIANGLE`].
+//!
+//! [`Settle`]: crate::smooth::method::Settle
 
 use glam::DVec3;
 
@@ -260,10 +260,7 @@ impl AutoStop {
         share: &mut dyn Share,
     ) {
         for &o in removed {
-            let expected = match self.rule {
-                StopRule::Settle(_) => f64::NAN,
-                StopRule::Filter(_) => self.expected_after_step(topo, share),
-            };
+            let expected = self.expected_after_step(topo, share);
             self.expected.push(expected);
             self.removed.push(o);
         }
@@ -337,7 +334,8 @@ impl AutoStop {
         self.stopped_by
     }
 
-    /// One iteration of the scalar analogue on the field, and `E_k`.
+    /// One iteration of the scalar analogue on the field, and `E_k` (NaN for a method without
+    /// one).
     fn expected_after_step(&mut self, topo: &Topology, share: &mut dyn Share) -> f64 {
         let owned = share.owned();
         let StopRule::Filter(factors) = &self.rule else {

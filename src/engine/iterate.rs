@@ -807,10 +807,11 @@ enum Pass<'u> {
 }
 
 /// The loop's side of a method's passes: chunks of the owned vertices on the share's threads,
-/// each pass exchanged.
-struct ShareExec<'s> {
-    topo: &'s Topology,
-    share: &'s mut dyn Share,
+/// each pass exchanged. Over an [`Alone`], the passes of one process over the whole mesh (the
+/// crease detection's normal filter, `Plan::crease`).
+pub(super) struct ShareExec<'s> {
+    pub(super) topo: &'s Topology,
+    pub(super) share: &'s mut dyn Share,
 }
 
 impl Exec for ShareExec<'_> {

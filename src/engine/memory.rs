@@ -137,13 +137,20 @@ pub fn in_core_bytes_of_file_with(size: u64, opts: &crate::Options) -> u64 {
 /// Bytes per triangle of the crease detection's face fields (`Plan::crease`: the guided
 /// filter's, [`crate::smooth::guided::FACE_VECTORS`] vectors and `FACE_SCALARS` scalars), alive
 /// while the plan is made.
-pub const CREASE_FIELD_BYTES_PER_TRIANGLE: u64 =
-    (crate::smooth::guided::FACE_VECTORS * 24 + crate::smooth::guided::FACE_SCALARS * 8) as u64;
+pub const CREASE_FIELD_BYTES_PER_TRIANGLE: u64 = field_bytes(
+    crate::smooth::guided::FACE_VECTORS,
+    crate::smooth::guided::FACE_SCALARS,
+);
 
 /// Bytes per triangle of `method`'s per-triangle fields ([`crate::smooth::method::Needs`]).
 pub fn face_field_bytes(method: crate::Method) -> u64 {
     let needs = method.unit().needs();
-    (needs.face_vectors * 24 + needs.face_scalars * 8) as u64
+    field_bytes(needs.face_vectors, needs.face_scalars)
+}
+
+/// Bytes per triangle of `vectors` 3-vector fields and `scalars` scalar fields, in f64.
+const fn field_bytes(vectors: usize, scalars: usize) -> u64 {
+    (vectors * 24 + scalars * 8) as u64
 }
 
 /// [`in_core_bytes_of_file_with`], and [`FIELD_BYTES_PER_TRIANGLE`] more when the run measures

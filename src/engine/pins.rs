@@ -10,8 +10,8 @@ use std::path::{Path, PathBuf};
 
 use serde::ser::SerializeMap;
 
+use super::iterate::{Alone, ShareExec};
 use super::plan::Plan;
-use super::reduce::PoolExec;
 use crate::error::{Error, Result};
 use crate::io::PlyLayout;
 use crate::mesh::{Buf, Mesh, Storage};
@@ -347,7 +347,14 @@ impl Plan {
         let mut scalars: Buf<f64> = storage.zeroed(guided::FACE_SCALARS * faces)?;
         let normals = {
             let parts = self.topology.parts();
-            let mut exec = PoolExec::new(&self.topology);
+            let mut alone = Alone {
+                vertices: r.positions.len(),
+                triangles: faces,
+            };
+            let mut exec = ShareExec {
+                topo: &self.topology,
+                share: &mut alone,
+            };
             let fields = FaceFields {
                 vectors: &mut vectors,
                 scalars: &mut scalars,

@@ -11,7 +11,6 @@ use rayon::prelude::*;
 
 use crate::metrics;
 use crate::smooth::laplacian::StepStats;
-use crate::smooth::method::Exec;
 use crate::topology::Topology;
 
 /// Items per work unit.
@@ -23,37 +22,6 @@ pub fn for_chunks_mut<T: Send>(items: &mut [T], f: impl Fn(usize, &mut [T]) + Sy
         .par_chunks_mut(CHUNK)
         .enumerate()
         .for_each(|(c, chunk)| f(c * CHUNK, chunk));
-}
-
-/// [`Exec`] on the current pool over a whole mesh in one process: each pass through
-/// [`for_chunks_mut`], no exchange. For passes outside the iteration loop (the crease
-/// detection's normal filter).
-pub struct PoolExec<'t> {
-    topo: &'t Topology,
-}
-
-impl<'t> PoolExec<'t> {
-    pub fn new(topo: &'t Topology) -> Self {
-        PoolExec { topo }
-    }
-}
-
-impl Exec for PoolExec<'_> {
-    fn vertex_pass(&mut self, field: &mut [DVec3], f: &(dyn Fn(usize, &mut [DVec3]) + Sync)) {
-        for_chunks_mut(field, f)
-    }
-    fn vertex_pass_u8(&mut self, field: &mut [u8], f: &(dyn Fn(usize, &mut [u8]) + Sync)) {
-        for_chunks_mut(field, f)
-    }
-    fn face_pass(&mut self, field: &mut [DVec3], f: &(dyn Fn(usize, &mut [DVec3]) + Sync)) {
-        for_chunks_mut(field, f)
-    }
-    fn face_pass_f64(&mut self, field: &mut [f64], f: &(dyn Fn(usize, &mut [f64]) + Sync)) {
-        for_chunks_mut(field, f)
-    }
-    fn neighbor_sums(&mut self, pos: &[DVec3], sums: &mut [DVec3]) {
-        neighbor_sums(self.topo, pos, sums, 0..pos.len())
-    }
 }
 
 /// `map(first, chunk)` on each chunk of `items`, folded in chunk order from `init`.

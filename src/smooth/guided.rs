@@ -62,6 +62,8 @@ pub const GUIDANCE_LIMIT: f64 = 0.25;
 /// more change little. The cut keeps a clean mesh's edges as sharp as they are: without it,
 /// ten iterations blend the 63° edges of the clean Twelve below 60° and none is found at 60°.
 pub const CREASE_ITERATIONS: usize = 10;
+/// The `cut` of [`filter_into`] that cuts nothing (a cosine is never below it): `vcs-guided`'s.
+pub const NO_CUT: f64 = -2.0;
 /// `ε` of `R(P)`: keeps a flat patch's `R` at 0 instead of 0/0.
 const EPSILON_R: f64 = 1e-12;
 
@@ -218,7 +220,7 @@ pub fn guidance_into(
 
 /// Step 2's filter for the faces `first .. first + out.len()`: the new unit normals from
 /// `normals`, their areas and the guidance. A face whose guidance makes a cosine below
-/// `cut` with `t`'s gets no weight at all (−1 or less: none is cut).
+/// `cut` with `t`'s gets no weight at all ([`NO_CUT`]: none is cut).
 #[allow(clippy::too_many_arguments)]
 pub fn filter_into(
     topo: &TopologyParts,
@@ -405,7 +407,7 @@ mod tests {
         let areas = areas_of(&tris, &pos);
         patch_means_into(&parts, &tris, &n, &areas, &mut m, 0);
         guidance_into(&parts, &tris, &h, &m, &n, &mut g, 0);
-        filter_into(&parts, &tris, &pos, &n, &areas, &g, -2.0, &mut out, 0);
+        filter_into(&parts, &tris, &pos, &n, &areas, &g, NO_CUT, &mut out, 0);
         // Every face's guidance lies in its own plane, so a face of the other plane weighs at
         // most K_r(√2) = exp(−1/σ_r²) of a face of its own: the normal tilts less than that.
         let bound = (-1.0 / (SIGMA_RANGE * SIGMA_RANGE)).exp();
