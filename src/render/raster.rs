@@ -125,7 +125,7 @@ impl Projected {
 }
 
 /// Draw triangles `first..first + triangles.len()` into every frame. Frames go four at a time
-/// through [`Lanes`], which rules most (triangle, frame) pairs out at once; the others take the
+/// through `Lanes`, which rules most (triangle, frame) pairs out at once; the others take the
 /// exact test.
 pub fn draw_triangles(frames: &[Frame], positions: &[DVec3], first: usize, triangles: &[[u32; 3]]) {
     let Some(&[v, ..]) = triangles.first() else {

@@ -69,7 +69,7 @@ impl Topology {
         self.stats.fixed_vertices += newly;
     }
 
-    /// Fix the crease vertices: those on at least [`MIN_CREASE_EDGES`] crease edges, edges of two
+    /// Fix the crease vertices: those on at least `MIN_CREASE_EDGES` crease edges, edges of two
     /// triangles whose normals differ by more than `angle_deg` degrees (0° where the surface is
     /// flat, 90° on a cube's edge) both on `positions` and in `normals` (unit normals, one per
     /// triangle in this topology's triangle order, each in its triangle's own vertex order).
