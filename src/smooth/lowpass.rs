@@ -72,12 +72,14 @@ struct Shared {
 struct Scratch {
     /// Per member: whether it moves (movable, and not left out by the deviation bound).
     free: Vec<bool>,
+    /// Per member: where it is before step 1, about the block's origin.
+    here: Vec<V4>,
     /// Per member: its volume gradient after step 1, then that gradient's direction.
-    dir: Vec<DVec3>,
+    dir: Vec<V4>,
     /// Per member: where step 1 puts it, about the block's origin.
-    moved: Vec<DVec3>,
+    moved: Vec<V4>,
     /// Per member: its whole move (step 1 and the offset; zero for one that does not move).
-    step: Vec<DVec3>,
+    step: Vec<V4>,
     /// The faces with two or three members, corners in the order [`corners_after`] gives from
     /// the first: the only ones the cubic's higher terms need.
     shared: Vec<Shared>,
@@ -149,7 +151,44 @@ pub fn blocks(owned: Range<u32>) -> impl Iterator<Item = Range<u32>> {
 /// members that would end beyond it are held back (they do not move) and the rest is solved
 /// again: the outcome is then [`Outcome::DeviationLimited`], though the others moved. Writes
 /// nothing when the outcome is a skip.
+///
+/// With AVX2 the same code is compiled for it: a vector's three coordinates are lanes of one
+/// register, every operation lane by lane as the scalar code does it (the bits do not change).
 fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
+    topo: &TopologyParts,
+    triangles: &[[u32; 3]],
+    pos: &mut P,
+    filtered: &D,
+    block: Block,
+    deviation: Option<stencil::Deviation>,
+    scratch: &mut Scratch,
+) -> Outcome {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2 (just checked).
+        return unsafe {
+            apply_block_avx2(topo, triangles, pos, filtered, block, deviation, scratch)
+        };
+    }
+    apply_block_lanes(topo, triangles, pos, filtered, block, deviation, scratch)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn apply_block_avx2<P: Field + ?Sized, D: Field + ?Sized>(
+    topo: &TopologyParts,
+    triangles: &[[u32; 3]],
+    pos: &mut P,
+    filtered: &D,
+    block: Block,
+    deviation: Option<stencil::Deviation>,
+    scratch: &mut Scratch,
+) -> Outcome {
+    apply_block_lanes(topo, triangles, pos, filtered, block, deviation, scratch)
+}
+
+#[inline(always)]
+fn apply_block_lanes<P: Field + ?Sized, D: Field + ?Sized>(
     topo: &TopologyParts,
     triangles: &[[u32; 3]],
     pos: &mut P,
@@ -170,11 +209,12 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
     if !scratch.free.contains(&true) {
         return Outcome::SkippedFixed;
     }
-    let origin = pos.get(start);
+    let origin = V4::of(pos.get(start));
     let mut held_back = false;
     for _ in 0..DEVIATION_ROUNDS {
         let Scratch {
             free,
+            here,
             dir,
             moved,
             step,
@@ -184,28 +224,39 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
         let free = &free[..len];
         let all_free = free.iter().all(|&f| f);
         let own = own.clone().filter(|_| all_free);
+        let at = |u: u32| V4::of(pos.get(u));
         // Step 1's displacement (computed here rather than stored: one pass over memory less).
-        let disp = |u: u32| filtered.get(u) - pos.get(u);
+        let disp = |u: u32| V4::of(filtered.get(u)) - at(u);
         let member = |u: u32| {
             let k = u.wrapping_sub(start) as usize;
             k < len && (all_free || free[k])
         };
+        here.clear();
+        here.extend(block.clone().map(|u| at(u) - origin));
+        let here = &here[..len];
         moved.clear();
-        moved.extend(block.clone().map(|u| pos.get(u) - origin + disp(u)));
+        moved.extend(block.clone().zip(here).map(|(u, &h)| h + disp(u)));
         let moved = &moved[..len];
-        // Where a corner is after step 1, about the origin.
+        // Where a corner is before and after step 1, about the origin.
+        let before = |u: u32, m: bool| {
+            if m {
+                here[(u - start) as usize]
+            } else {
+                at(u) - origin
+            }
+        };
         let after = |u: u32, m: bool| {
             if m {
                 moved[(u - start) as usize]
             } else {
-                pos.get(u) - origin
+                at(u) - origin
             }
         };
         // Pass 1: the volume change of step 1 and each member's gradient, every face touching a
         // member once (at its smallest member corner), in the order of the members and of each
         // member's faces (ascending).
         dir.clear();
-        dir.resize(len, DVec3::ZERO);
+        dir.resize(len, V4::default());
         let dir = &mut dir[..len];
         shared.clear();
         let mut dv = 0.0;
@@ -213,8 +264,8 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
         macro_rules! face {
             ($a:expr, $pa:expr, $qa:expr, $b:expr, $c:expr, $mb:expr, $mc:expr) => {{
                 let (a, b, c, mb, mc): (u32, u32, u32, bool, bool) = ($a, $b, $c, $mb, $mc);
-                let (pa, qa): (DVec3, DVec3) = ($pa, $qa);
-                let (pb, pc) = (pos.get(b) - origin, pos.get(c) - origin);
+                let (pa, qa): (V4, V4) = ($pa, $qa);
+                let (pb, pc) = (before(b, mb), before(c, mc));
                 let (qb, qc) = (after(b, mb), after(c, mc));
                 let bc = qb.cross(qc);
                 dv += qa.dot(bc) - pa.dot(pb.cross(pc));
@@ -244,7 +295,7 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
             let run = &triangles[own.start as usize..own.end as usize];
             let mut next = 0;
             for a in block.clone() {
-                let (pa, qa) = (pos.get(a) - origin, moved[(a - start) as usize]);
+                let (pa, qa) = (here[(a - start) as usize], moved[(a - start) as usize]);
                 for &t in topo.faces_of(a) {
                     if t >= own.start {
                         break;
@@ -268,7 +319,7 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
                 if !member(a) {
                     continue;
                 }
-                let (pa, qa) = (pos.get(a) - origin, moved[(a - start) as usize]);
+                let (pa, qa) = (here[(a - start) as usize], moved[(a - start) as usize]);
                 for &t in topo.faces_of(a) {
                     let (b, c) = corners_after(triangles[t as usize], a);
                     let (mb, mc) = (member(b), member(c));
@@ -281,10 +332,10 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
         // The offset's linear coefficient is Σ |gradient|; the directions are made unit.
         let mut c1 = 0.0;
         for g in dir.iter_mut() {
-            let l = g.length();
+            let l = g.dot(*g).sqrt();
             if l > 0.0 {
                 c1 += l;
-                *g /= l;
+                *g = g.div(l);
             }
         }
         let dir = &*dir;
@@ -292,7 +343,7 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
             if m {
                 dir[(u - start) as usize]
             } else {
-                DVec3::ZERO
+                V4::default()
             }
         };
         // Pass 2: the quadratic and cubic coefficients, from the faces with two or three members.
@@ -314,17 +365,17 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
         };
         step.clear();
         step.extend(block.clone().map(|u| match member(u) {
-            true => disp(u) + unit(u, true) * s,
-            false => DVec3::ZERO,
+            true => disp(u) + unit(u, true).mul(s),
+            false => V4::default(),
         }));
-        if !scratch.step.iter().all(|d| d.is_finite()) {
+        if !scratch.step.iter().all(|d| d.vec().is_finite()) {
             return Outcome::SkippedDegenerate;
         }
         if let Some(bound) = deviation {
             let limit2 = bound.limit * bound.limit;
             let mut out = false;
             for (k, u) in block.clone().enumerate() {
-                let end = pos.get(u) + scratch.step[k];
+                let end = pos.get(u) + scratch.step[k].vec();
                 let beyond = (end - bound.input[u as usize]).length_squared();
                 if scratch.free[k] && beyond > limit2 {
                     scratch.free[k] = false;
@@ -341,7 +392,7 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
         }
         for (k, u) in block.clone().enumerate() {
             if scratch.free[k] {
-                pos.add(u, scratch.step[k]);
+                pos.add(u, scratch.step[k].vec());
             }
         }
         return if held_back {
@@ -351,6 +402,79 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
         };
     }
     Outcome::DeviationLimited
+}
+
+/// A vector as four lanes (the last zero), so that the compiler keeps it in one register: each
+/// operation is `DVec3`'s, lane by lane, its sums in `DVec3`'s order (the same bits).
+#[derive(Debug, Clone, Copy, Default)]
+#[repr(C, align(32))]
+struct V4([f64; 4]);
+
+impl V4 {
+    #[inline(always)]
+    fn of(p: DVec3) -> V4 {
+        V4([p.x, p.y, p.z, 0.0])
+    }
+
+    #[inline(always)]
+    fn vec(self) -> DVec3 {
+        DVec3::new(self.0[0], self.0[1], self.0[2])
+    }
+
+    #[inline(always)]
+    fn lanes(self, o: V4, f: impl Fn(f64, f64) -> f64) -> V4 {
+        let (a, b) = (self.0, o.0);
+        V4([f(a[0], b[0]), f(a[1], b[1]), f(a[2], b[2]), f(a[3], b[3])])
+    }
+
+    /// `self.yzx · o.zxy − o.yzx · self.zxy`: `DVec3::cross` lane by lane.
+    #[inline(always)]
+    fn cross(self, o: V4) -> V4 {
+        let [x, y, z, w] = self.0;
+        let [ox, oy, oz, ow] = o.0;
+        let l = V4([y, z, x, w]).lanes(V4([oz, ox, oy, ow]), |p, q| p * q);
+        let r = V4([oy, oz, ox, ow]).lanes(V4([z, x, y, w]), |p, q| p * q);
+        l - r
+    }
+
+    #[inline(always)]
+    fn dot(self, o: V4) -> f64 {
+        let p = self.lanes(o, |p, q| p * q).0;
+        p[0] + p[1] + p[2]
+    }
+
+    #[inline(always)]
+    fn mul(self, s: f64) -> V4 {
+        self.lanes(V4([s; 4]), |p, q| p * q)
+    }
+
+    #[inline(always)]
+    fn div(self, s: f64) -> V4 {
+        self.lanes(V4([s; 4]), |p, q| p / q)
+    }
+}
+
+impl std::ops::Add for V4 {
+    type Output = V4;
+    #[inline(always)]
+    fn add(self, o: V4) -> V4 {
+        self.lanes(o, |p, q| p + q)
+    }
+}
+
+impl std::ops::Sub for V4 {
+    type Output = V4;
+    #[inline(always)]
+    fn sub(self, o: V4) -> V4 {
+        self.lanes(o, |p, q| p - q)
+    }
+}
+
+impl std::ops::AddAssign for V4 {
+    #[inline(always)]
+    fn add_assign(&mut self, o: V4) {
+        *self = *self + o;
+    }
 }
 
 /// The root `s` near zero of `dv + c1 s + c2 s² + c3 s³` (the volume change after an offset
