@@ -224,11 +224,16 @@ fn apply_block_lanes<P: Field + ?Sized, D: Field + ?Sized>(
         let free = &free[..len];
         let all_free = free.iter().all(|&f| f);
         let own = own.clone().filter(|_| all_free);
-        let at = |u: u32| V4::of(pos.get(u));
+        // The closures below take copies (`move`): what they read by reference the compiler
+        // loaded again after every store of the passes, with each index's bounds check.
+        let read: &P = pos;
+        let at = move |u: u32| V4::of(read.get(u));
         // Step 1's displacement (computed here rather than stored: one pass over memory less).
-        let disp = |u: u32| V4::of(filtered.get(u)) - at(u);
-        let member = |u: u32| {
-            let k = u.wrapping_sub(start) as usize;
+        let disp = move |u: u32| V4::of(filtered.get(u)) - at(u);
+        // A member's index in the block's arrays (ids below the block wrap to beyond it).
+        let local = move |u: u32| u.wrapping_sub(start) as usize;
+        let member = move |u: u32| {
+            let k = local(u);
             k < len && (all_free || free[k])
         };
         here.clear();
@@ -238,16 +243,16 @@ fn apply_block_lanes<P: Field + ?Sized, D: Field + ?Sized>(
         moved.extend(block.clone().zip(here).map(|(u, &h)| h + disp(u)));
         let moved = &moved[..len];
         // Where a corner is before and after step 1, about the origin.
-        let before = |u: u32, m: bool| {
+        let before = move |u: u32, m: bool| {
             if m {
-                here[(u - start) as usize]
+                here[local(u)]
             } else {
                 at(u) - origin
             }
         };
-        let after = |u: u32, m: bool| {
+        let after = move |u: u32, m: bool| {
             if m {
-                moved[(u - start) as usize]
+                moved[local(u)]
             } else {
                 at(u) - origin
             }
@@ -269,12 +274,12 @@ fn apply_block_lanes<P: Field + ?Sized, D: Field + ?Sized>(
                 let (qb, qc) = (after(b, mb), after(c, mc));
                 let bc = qb.cross(qc);
                 dv += qa.dot(bc) - pa.dot(pb.cross(pc));
-                dir[(a - start) as usize] += bc;
+                dir[local(a)] += bc;
                 if mb {
-                    dir[(b - start) as usize] += qc.cross(qa);
+                    dir[local(b)] += qc.cross(qa);
                 }
                 if mc {
-                    dir[(c - start) as usize] += qa.cross(qb);
+                    dir[local(c)] += qa.cross(qb);
                 }
                 if mb || mc {
                     shared.push(Shared {
@@ -294,8 +299,10 @@ fn apply_block_lanes<P: Field + ?Sized, D: Field + ?Sized>(
             // other blocks) the sweep ran 12 % more instructions.
             let run = &triangles[own.start as usize..own.end as usize];
             let mut next = 0;
+            // Every member free: a test of the range alone, which proves the index in bounds.
+            let member = move |u: u32| local(u) < len;
             for a in block.clone() {
-                let (pa, qa) = (here[(a - start) as usize], moved[(a - start) as usize]);
+                let (pa, qa) = (here[local(a)], moved[local(a)]);
                 for &t in topo.faces_of(a) {
                     if t >= own.start {
                         break;
@@ -319,7 +326,7 @@ fn apply_block_lanes<P: Field + ?Sized, D: Field + ?Sized>(
                 if !member(a) {
                     continue;
                 }
-                let (pa, qa) = (here[(a - start) as usize], moved[(a - start) as usize]);
+                let (pa, qa) = (here[local(a)], moved[local(a)]);
                 for &t in topo.faces_of(a) {
                     let (b, c) = corners_after(triangles[t as usize], a);
                     let (mb, mc) = (member(b), member(c));
@@ -339,9 +346,9 @@ fn apply_block_lanes<P: Field + ?Sized, D: Field + ?Sized>(
             }
         }
         let dir = &*dir;
-        let unit = |u: u32, m: bool| {
+        let unit = move |u: u32, m: bool| {
             if m {
-                dir[(u - start) as usize]
+                dir[local(u)]
             } else {
                 V4::default()
             }
@@ -354,8 +361,8 @@ fn apply_block_lanes<P: Field + ?Sized, D: Field + ?Sized>(
             mc,
         } in shared.iter()
         {
-            let (qa, qb, qc) = (moved[(a - start) as usize], after(b, mb), after(c, mc));
-            let (ea, eb, ec) = (dir[(a - start) as usize], unit(b, mb), unit(c, mc));
+            let (qa, qb, qc) = (moved[local(a)], after(b, mb), after(c, mc));
+            let (ea, eb, ec) = (dir[local(a)], unit(b, mb), unit(c, mc));
             let ebc = eb.cross(ec);
             c2 += ea.dot(eb.cross(qc)) + ea.dot(qb.cross(ec)) + qa.dot(ebc);
             c3 += ea.dot(ebc);
