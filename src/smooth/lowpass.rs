@@ -60,7 +60,7 @@ struct Block {
 }
 
 /// A face with two or three members: its corners, and whether `b` and `c` are members (`a` is).
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, Default)]
 struct Shared {
     corners: [u32; 3],
     mb: bool,
@@ -81,7 +81,8 @@ struct Scratch {
     /// Per member: its whole move (step 1 and the offset; zero for one that does not move).
     step: Vec<V4>,
     /// The faces with two or three members, corners in the order [`corners_after`] gives from
-    /// the first: the only ones the cubic's higher terms need.
+    /// the first: the only ones the cubic's higher terms need. Slots for every face of every
+    /// member, filled from the front.
     shared: Vec<Shared>,
 }
 
@@ -263,7 +264,14 @@ fn apply_block_lanes<P: Field + ?Sized, D: Field + ?Sized>(
         dir.clear();
         dir.resize(len, V4::default());
         let dir = &mut dir[..len];
-        shared.clear();
+        // No more faces than the members' face lists hold: written by index into a slice, whose
+        // pointer stays in a register (a push loaded the vector's pointer, length and capacity).
+        let slots = topo.vf_offsets[block.end as usize] - topo.vf_offsets[start as usize];
+        if shared.len() < slots {
+            shared.resize(slots, Shared::default());
+        }
+        let shared = &mut shared[..slots];
+        let mut count = 0;
         let mut dv = 0.0;
         // A macro rather than a closure: the compiler would not inline the closure here.
         macro_rules! face {
@@ -282,11 +290,12 @@ fn apply_block_lanes<P: Field + ?Sized, D: Field + ?Sized>(
                     dir[local(c)] += qa.cross(qb);
                 }
                 if mb || mc {
-                    shared.push(Shared {
+                    shared[count] = Shared {
                         corners: [a, b, c],
                         mb,
                         mc,
-                    });
+                    };
+                    count += 1;
                 }
             }};
         }
@@ -359,7 +368,7 @@ fn apply_block_lanes<P: Field + ?Sized, D: Field + ?Sized>(
             corners: [a, b, c],
             mb,
             mc,
-        } in shared.iter()
+        } in &shared[..count]
         {
             let (qa, qb, qc) = (moved[local(a)], after(b, mb), after(c, mc));
             let (ea, eb, ec) = (dir[local(a)], unit(b, mb), unit(c, mc));
