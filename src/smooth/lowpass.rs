@@ -245,18 +245,10 @@ fn apply_block_lanes<P: Field + ?Sized, D: Field + ?Sized>(
         let moved = &moved[..len];
         // Where a corner is before and after step 1, about the origin.
         let before = move |u: u32, m: bool| {
-            if m {
-                here[local(u)]
-            } else {
-                at(u) - origin
-            }
+            if m { here[local(u)] } else { at(u) - origin }
         };
         let after = move |u: u32, m: bool| {
-            if m {
-                moved[local(u)]
-            } else {
-                at(u) - origin
-            }
+            if m { moved[local(u)] } else { at(u) - origin }
         };
         // Pass 1: the volume change of step 1 and each member's gradient, every face touching a
         // member once (at its smallest member corner), in the order of the members and of each
@@ -356,11 +348,7 @@ fn apply_block_lanes<P: Field + ?Sized, D: Field + ?Sized>(
         }
         let dir = &*dir;
         let unit = move |u: u32, m: bool| {
-            if m {
-                dir[local(u)]
-            } else {
-                V4::default()
-            }
+            if m { dir[local(u)] } else { V4::default() }
         };
         // Pass 2: the quadratic and cubic coefficients, from the faces with two or three members.
         let (mut c2, mut c3) = (0.0, 0.0);
