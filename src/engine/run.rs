@@ -171,7 +171,7 @@ pub struct PhaseTimings {
     pub metrics: f64,
     /// The deviation field and its statistics (in the write phase, before the write).
     pub deviation: f64,
-    /// The input's SHA-256: for a report's record, taken by the command line before the run (not
+    /// The input's SHA-256: for a report's record, taken by the command line beside the run (not
     /// in `total`); in a cluster run, the key of its checkpoint (in `total`).
     pub hash: f64,
     pub total: f64,

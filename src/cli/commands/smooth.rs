@@ -188,16 +188,16 @@ impl SmoothConfig {
 pub fn run(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) -> Result<()> {
     crate::cluster::with_world(|comm| {
         let Some(cluster) = cfg.cluster(comm.size()) else {
-            // Before the run: what it reads is what was hashed (and the read finds it cached).
-            let sha256 = match &cfg.report {
-                Some(_) => {
-                    progress.phase(format!("hashing {}", cfg.input.display()));
+            // On a thread of its own beside the run, which leaves a core idle in its sequential
+            // parts (the read, the write): the run reads the file at the same time, so what it
+            // reads is what was hashed as much as when the hash went first.
+            let input = cfg.input.clone();
+            let hashing = cfg.report.as_ref().map(|_| {
+                std::thread::spawn(move || {
                     let clock = std::time::Instant::now();
-                    let hash = crate::io::sha256_file(&cfg.input)?;
-                    Some((hash, clock.elapsed().as_secs_f64()))
-                }
-                None => None,
-            };
+                    crate::io::sha256_file(&input).map(|hash| (hash, clock.elapsed().as_secs_f64()))
+                })
+            });
             progress.phase(format!("smoothing {}", cfg.input.display()));
             progress.smoothing(&cfg.options);
             let labels = (
@@ -231,6 +231,11 @@ pub fn run(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) -> 
                     let (run, multires) = smooth(&mut *progress)?;
                     (run, multires, None)
                 }
+            };
+            let sha256 = match hashing.map(|h| h.join()) {
+                Some(Ok(hashed)) => Some(hashed?),
+                Some(Err(panic)) => std::panic::resume_unwind(panic),
+                None => None,
             };
             return report(cfg, &run, multires, sha256, sheet, progress, out);
         };
