@@ -193,8 +193,12 @@ pub fn run(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) -> 
                 Some(_) => {
                     progress.phase(format!("hashing {}", cfg.input.display()));
                     let clock = std::time::Instant::now();
+                    let disk = crate::engine::DiskBytes::now();
                     let hash = crate::io::sha256_file(&cfg.input)?;
-                    Some((hash, clock.elapsed().as_secs_f64()))
+                    let disk = disk
+                        .zip(crate::engine::DiskBytes::now())
+                        .map(|(before, after)| after.since(before));
+                    Some((hash, clock.elapsed().as_secs_f64(), disk))
                 }
                 None => None,
             };
@@ -298,12 +302,13 @@ fn in_one_process(multires: bool, d: &crate::engine::DeviationSettings, png: boo
     ))
 }
 
-/// The report, plot and table of a finished `smooth`.
+/// The report, plot and table of a finished `smooth`; `sha256`: the input's hash for the report,
+/// with the seconds and disk traffic of taking it.
 fn report(
     cfg: &SmoothConfig,
     run: &engine::Report,
     multires: Option<crate::multires::MultiresStats>,
-    sha256: Option<(String, f64)>,
+    sha256: Option<(String, f64, Option<crate::engine::DiskBytes>)>,
     sheet: Option<Sheet>,
     progress: &mut Progress,
     out: &mut dyn Write,
@@ -322,9 +327,12 @@ fn report(
             run,
             multires.clone(),
         );
-        if let Some((hash, seconds)) = sha256 {
+        if let Some((hash, seconds, disk)) = sha256 {
             report.input.sha256 = Some(hash);
             report.timings.hash = seconds;
+            if let (Some(traffic), Some(disk)) = (&mut report.disk, disk) {
+                traffic.hash = disk;
+            }
         } else if let Some(hash) = &run.input_sha256 {
             report.input.sha256 = Some(hash.clone());
         }
