@@ -45,7 +45,7 @@ impl DiskBytes {
     }
 
     /// What was moved from `earlier` to `self` (counters only grow; saturating all the same).
-    pub fn since(self, earlier: DiskBytes) -> DiskBytes {
+    fn since(self, earlier: DiskBytes) -> DiskBytes {
         DiskBytes {
             disk_read_bytes: self.disk_read_bytes.saturating_sub(earlier.disk_read_bytes),
             disk_written_bytes: self
@@ -108,16 +108,12 @@ pub struct DiskTraffic {
     /// The input's statistics (the output's are in `write`).
     pub metrics: DiskBytes,
     pub deviation: DiskBytes,
-    /// The input's SHA-256 for a report, as `timings.hash`: taken by the command line before the
-    /// run (not in `total`), which then reads the input from the page cache.
-    pub hash: DiskBytes,
     /// The whole run, from its start to the end of the write.
     pub total: DiskBytes,
 }
 
 /// The figure of `traffic` that a phase's bytes go to; `None` for the phases whose bytes are only
 /// in the total (hashing: the cluster engine's, which has no figures; drawing: between phases).
-/// The command line's hash is taken outside the run, by the command line.
 fn figure(traffic: &mut DiskTraffic, phase: Phase) -> Option<&mut DiskBytes> {
     match phase {
         Phase::Read => Some(&mut traffic.ingest),

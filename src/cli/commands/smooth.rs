@@ -193,12 +193,8 @@ pub fn run(cfg: &SmoothConfig, progress: &mut Progress, out: &mut dyn Write) -> 
                 Some(_) => {
                     progress.phase(format!("hashing {}", cfg.input.display()));
                     let clock = std::time::Instant::now();
-                    let disk = crate::engine::DiskBytes::now();
                     let hash = crate::io::sha256_file(&cfg.input)?;
-                    let disk = disk
-                        .zip(crate::engine::DiskBytes::now())
-                        .map(|(before, after)| after.since(before));
-                    Some((hash, clock.elapsed().as_secs_f64(), disk))
+                    Some((hash, clock.elapsed().as_secs_f64()))
                 }
                 None => None,
             };
@@ -302,13 +298,12 @@ fn in_one_process(multires: bool, d: &crate::engine::DeviationSettings, png: boo
     ))
 }
 
-/// The report, plot and table of a finished `smooth`; `sha256`: the input's hash for the report,
-/// with the seconds and disk traffic of taking it.
+/// The report, plot and table of a finished `smooth`.
 fn report(
     cfg: &SmoothConfig,
     run: &engine::Report,
     multires: Option<crate::multires::MultiresStats>,
-    sha256: Option<(String, f64, Option<crate::engine::DiskBytes>)>,
+    sha256: Option<(String, f64)>,
     sheet: Option<Sheet>,
     progress: &mut Progress,
     out: &mut dyn Write,
@@ -327,12 +322,9 @@ fn report(
             run,
             multires.clone(),
         );
-        if let Some((hash, seconds, disk)) = sha256 {
+        if let Some((hash, seconds)) = sha256 {
             report.input.sha256 = Some(hash);
             report.timings.hash = seconds;
-            if let (Some(traffic), Some(disk)) = (&mut report.disk, disk) {
-                traffic.hash = disk;
-            }
         } else if let Some(hash) = &run.input_sha256 {
             report.input.sha256 = Some(hash.clone());
         }
