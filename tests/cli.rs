@@ -815,6 +815,97 @@ fn vcs_lowpass_output_identical_across_threads_and_memory_budgets() {
     assert!(mapped == one, "scratch-mapped run differs from in-core");
 }
 
+/// Issue #33: the report's `disk` gives the bytes read and written in every phase and in all,
+/// from `/proc/self/io` (null where it cannot be read); an out-of-core run prints its sweep's
+/// per iteration.
+#[test]
+fn the_report_gives_the_disk_traffic_of_each_phase() {
+    const PHASES: [&str; 9] = [
+        "ingest",
+        "reorder",
+        "topology",
+        "partition",
+        "smoothing",
+        "restore",
+        "write",
+        "metrics",
+        "deviation",
+    ];
+    const FIGURES: [&str; 5] = [
+        "disk_read_bytes",
+        "disk_written_bytes",
+        "disk_write_cancelled_bytes",
+        "syscall_read_bytes",
+        "syscall_written_bytes",
+    ];
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in.ply");
+    // Level 8 (1.3M triangles) is the smallest sphere whose in-core estimate exceeds the 64M minimum.
+    generate_sphere(&input, 8, Some(0.3), None);
+    let scratch = dir.path().display().to_string();
+    let runs: [(&str, &[&str]); 2] = [
+        ("heap", &["--deviation-field"]),
+        (
+            "scratch",
+            &["--memory-budget", "64M", "--scratch", &scratch],
+        ),
+    ];
+    for (storage, extra) in runs {
+        let out = dir.path().join(format!("{storage}.ply"));
+        let report = dir.path().join(format!("{storage}.json"));
+        let mut args = vec![
+            "smooth".to_string(),
+            input.display().to_string(),
+            out.display().to_string(),
+            "--iterations".into(),
+            "2".into(),
+            "--report".into(),
+            report.display().to_string(),
+        ];
+        args.extend(extra.iter().map(|s| s.to_string()));
+        let text = ok(vcsmooth(&args));
+        let r = read_json(&report);
+        assert_eq!(r["memory"]["storage"], storage);
+        let disk = &r["disk"];
+        if std::fs::read_to_string("/proc/self/io").is_err() {
+            assert!(disk.is_null(), "{disk}");
+            continue;
+        }
+        // Non-negative integers, and the phases, one after another, within the total.
+        for figure in FIGURES {
+            let of = |phase: &str| {
+                disk[phase][figure]
+                    .as_u64()
+                    .unwrap_or_else(|| panic!("{storage}: disk.{phase}.{figure} in {disk}"))
+            };
+            let phases: u64 = PHASES.iter().map(|p| of(p)).sum();
+            assert!(
+                phases <= of("total"),
+                "{storage}: {figure} of the phases {phases} > total {}",
+                of("total")
+            );
+        }
+        // The output goes out through write(2), all of it whatever the file system; on a disk
+        // its pages are dirtied too, where tmpfs counts none (its tempdir may be one).
+        let size = std::fs::metadata(&out).unwrap().len();
+        let write = &disk["write"];
+        assert!(
+            write["syscall_written_bytes"].as_u64().unwrap() >= size,
+            "{storage}: {write}, output {size} B"
+        );
+        let dirtied = write["disk_written_bytes"].as_u64().unwrap();
+        assert!(
+            dirtied == 0 || dirtied >= size,
+            "{storage}: {write}, output {size} B"
+        );
+        assert_eq!(
+            text.contains("disk per iteration: "),
+            storage == "scratch",
+            "{text}"
+        );
+    }
+}
+
 /// Issue 3: the output file is bit-identical for 1, 2 and 8 threads, and between in-core and the
 /// smallest memory budget (scratch-mapped arrays), for a fixed patch size; scratch files vanish.
 #[test]

@@ -157,10 +157,10 @@ fn smooth<'py>(
 
 /// ``smooth`` with the run's report: returns ``(vertices, report)``, where ``report`` is the
 /// dictionary ``vcsmooth smooth --report FILE.json`` writes (``options``, ``engine``, ``input``
-/// and ``output`` statistics, ``plan``, ``timings``, ``summary`` and ``iterations``, one row per
-/// iteration: ``volume_pct``, ``area_pct``, ``max_displacement``, ``mean_displacement``,
-/// ``stencils``, ``seconds``). Figures that were not measured are ``None``. The mesh's "file"
-/// is ``"<memory>"``. Takes the keyword arguments of ``smooth``; ``stats`` defaults to
+/// and ``output`` statistics, ``plan``, ``timings``, ``disk``, ``summary`` and ``iterations``,
+/// one row per iteration: ``volume_pct``, ``area_pct``, ``max_displacement``,
+/// ``mean_displacement``, ``stencils``, ``seconds``). Figures that were not measured are
+/// ``None``. The mesh's "file" is ``"<memory>"``. Takes the keyword arguments of ``smooth``; ``stats`` defaults to
 /// ``"every"``, as on the command line.
 #[pyfunction]
 #[pyo3(signature = (vertices, faces, **options))]

@@ -139,7 +139,7 @@ smooth_report.__doc__ = f"""``smooth`` with the run's report: returns ``(result,
 
 ``result`` is what ``smooth`` returns (positions, or a mesh object of the kind given);
 ``report`` is the dictionary ``vcsmooth smooth --report FILE.json`` writes (``options``,
-``engine``, ``input`` and ``output`` statistics, ``plan``, ``timings``, ``summary`` and
+``engine``, ``input`` and ``output`` statistics, ``plan``, ``timings``, ``disk``, ``summary`` and
 ``iterations``, one row per iteration: ``volume_pct``, ``area_pct``, ``max_displacement``,
 ``mean_displacement``, ``stencils``, ``seconds``). Figures that were not measured are ``None``.
 The mesh's "file" is ``"<memory>"``; polygons count as their fans' triangles.

@@ -214,6 +214,7 @@ pub fn run_file(
             bytes_written: std::fs::metadata(output).map_or(0, |m| m.len()),
         },
         timings: t,
+        disk: None,
         cluster: Some(ClusterStats {
             ranks: comm.size(),
             resumed_after,

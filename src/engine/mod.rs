@@ -15,9 +15,11 @@
 //! - [`run`]: the run from file to file, its settings and its [`Report`].
 //! - [`pins`]: the caller's pinned vertices ([`Pins`]), fixed in the plan's topology.
 //! - [`memory`]: the memory budget, the memory model (bytes per triangle) and peak sampling.
+//! - [`disk`]: the disk traffic of a run's phases, from `/proc/self/io`.
 
 pub mod auto;
 pub mod deviation;
+pub mod disk;
 pub mod iterate;
 pub mod memory;
 pub mod observer;
@@ -31,6 +33,7 @@ use glam::DVec3;
 
 pub use auto::{AutoStopStats, StopReason};
 pub use deviation::DeviationSettings;
+pub use disk::{DiskBytes, DiskTraffic};
 pub use iterate::Reference;
 pub use observer::{IterationRecord, Meter, Moment, Observer, Phase, Quiet, Statistics, Unit};
 pub use pins::{PinSet, Pins};

@@ -6,6 +6,7 @@ use std::time::Instant;
 
 use super::auto::AutoStopStats;
 use super::deviation::{self, DeviationSettings};
+use super::disk::{DiskBytes, DiskMeter, DiskTraffic};
 use super::memory::{self, Budget, BudgetSource, PeakSampler};
 use super::observer::{
     IterationMeter, IterationRecord, Meter, Moment, Observer, Phase, Statistics, metered,
@@ -102,6 +103,9 @@ pub struct Report {
     pub plan: PlanStats,
     pub memory: MemoryStats,
     pub timings: PhaseTimings,
+    /// Bytes the process read and wrote, per phase (see [`super::disk`]); `None` where
+    /// `/proc/self/io` cannot be read, and for the cluster engine (several processes).
+    pub disk: Option<DiskTraffic>,
     /// Ranks, halo traffic and checkpoints of a cluster run ([`crate::cluster`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub cluster: Option<ClusterStats>,
@@ -221,6 +225,8 @@ pub(crate) fn run_file_with(
     observer: &mut dyn Observer,
     smooth: impl FnOnce(&mut Plan, &Storage, &mut dyn Observer) -> Result<Stopped> + Send,
 ) -> Result<Report> {
+    // The phases the observer is told of are the ones whose disk traffic is taken.
+    let observer = &mut DiskMeter::new(observer);
     let start = Start::new(opts, engine)?;
     let mut t = PhaseTimings::default();
     let Prepared {
@@ -297,6 +303,7 @@ pub(crate) fn run_file_with(
     let field = match engine.deviation.is_on() {
         true => {
             let clock = Instant::now();
+            let disk = DiskBytes::now();
             let stored = io::Stored::of(output, &mesh);
             let made = start.pool.install(|| -> Result<_> {
                 let field = deviation::field(
@@ -310,6 +317,7 @@ pub(crate) fn run_file_with(
                 Ok((field, stats))
             })?;
             t.deviation = clock.elapsed().as_secs_f64();
+            observer.add_deviation(disk);
             Some(made)
         }
         false => None,
@@ -363,7 +371,8 @@ pub(crate) fn run_file_with(
         bytes_read,
         bytes_written: std::fs::metadata(output).map(|m| m.len()).unwrap_or(0),
     };
-    let mut report = smoothed.report(&mesh, start.pool.current_num_threads(), memory, t);
+    let disk = observer.finish();
+    let mut report = smoothed.report(&mesh, start.pool.current_num_threads(), memory, t, disk);
     report.dropped = io::not_carried(&mesh.source, output);
     Ok(report)
 }
@@ -569,6 +578,7 @@ pub(crate) fn run_mesh(
     // As file runs do: an iteration count whose records the memory cannot hold is refused
     // before any work, not hours into the run.
     memory::check_records(opts.iterations, engine.budget_and_source()?.bytes)?;
+    let observer = &mut DiskMeter::new(observer);
     let start = Instant::now();
     let pool = super::thread_pool(engine.threads)?;
     let storage = Storage::heap();
@@ -615,7 +625,8 @@ pub(crate) fn run_mesh(
         storage: "heap",
         ..MemoryStats::default()
     };
-    Ok(smoothed.report(mesh, pool.current_num_threads(), memory, t))
+    let disk = observer.finish();
+    Ok(smoothed.report(mesh, pool.current_num_threads(), memory, t, disk))
 }
 
 /// What the smoothing phase of a run gives its report.
@@ -689,6 +700,7 @@ impl Smoothed {
         threads: usize,
         memory: MemoryStats,
         timings: PhaseTimings,
+        disk: Option<DiskTraffic>,
     ) -> Report {
         Report {
             input_format: mesh.source.format,
@@ -705,6 +717,7 @@ impl Smoothed {
             },
             memory,
             timings,
+            disk,
             cluster: None,
             deviation: self.deviation,
             input_sha256: None,

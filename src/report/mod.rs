@@ -171,6 +171,9 @@ pub struct SmoothReport {
     pub plan: crate::engine::PlanStats,
     pub memory: crate::engine::MemoryStats,
     pub timings: crate::engine::PhaseTimings,
+    /// Bytes read from and written to the disk per phase, from `/proc/self/io`
+    /// ([`crate::engine::disk`]); `null` where it cannot be read and for the cluster engine.
+    pub disk: Option<crate::engine::DiskTraffic>,
     /// Ranks, halo traffic and checkpoints, for runs of the cluster engine.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub cluster: Option<crate::engine::ClusterStats>,
@@ -225,6 +228,7 @@ impl SmoothReport {
             plan: run.plan.clone(),
             memory: run.memory.clone(),
             timings: run.timings,
+            disk: run.disk,
             cluster: run.cluster.clone(),
             summary: Summary::of_run(&run.records, multires.as_ref()),
             iterations_run: run.iterations_run,

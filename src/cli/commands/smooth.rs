@@ -419,9 +419,19 @@ fn report(
     )
     .map_err(stdout_error)?;
     if m.scratch_peak_bytes > 0 {
+        // What the sweep moves to and from the disk, to hold against the scratch (issue #33);
+        // not with --multires, whose smoothing phase runs the coarse levels too.
+        let sweep = match (&run.disk, run.iterations_run) {
+            (Some(d), n @ 1..) if multires.is_none() => format!(
+                "; disk per iteration: {} read, {} written",
+                crate::engine::memory::format_size(d.smoothing.disk_read_bytes / n as u64),
+                crate::engine::memory::format_size(d.smoothing.disk_written_bytes / n as u64)
+            ),
+            _ => String::new(),
+        };
         writeln!(
             out,
-            "scratch: at most {} on disk at once ({} in all)",
+            "scratch: at most {} on disk at once ({} in all){sweep}",
             crate::engine::memory::format_size(m.scratch_peak_bytes),
             crate::engine::memory::format_size(m.scratch_bytes)
         )
