@@ -58,7 +58,8 @@ fn edge(a: DVec2, b: DVec2, p: DVec2) -> f64 {
 /// The samples `k` of an axis of `n` whose centres `k + ½` lie in [`lo`, `hi`], as `k0..=k1`;
 /// `None` when there are none (or a bound is NaN). Rounded by casts of values made non-negative
 /// first: x86-64's baseline has no rounding instruction, and `ceil`/`floor` are calls to libm
-/// that cost more than the rest of a small triangle.
+/// that cost more than the rest of a small triangle. The casts go through `i64`, one instruction
+/// where a cast to an unsigned type is several; the values lie in `0..n`.
 #[inline]
 fn centres(lo: f64, hi: f64, n: usize) -> Option<(usize, usize)> {
     let last = n.checked_sub(1)? as f64;
@@ -67,9 +68,9 @@ fn centres(lo: f64, hi: f64, n: usize) -> Option<(usize, usize)> {
         return None;
     }
     let (from, to) = (from.max(0.0), to.min(last));
-    let floor = from as usize;
+    let floor = from as i64 as usize;
     let k0 = floor + usize::from((floor as f64) < from);
-    let k1 = to as usize;
+    let k1 = to as i64 as usize;
     (k0 <= k1).then_some((k0, k1))
 }
 
@@ -118,30 +119,49 @@ impl Projected {
             return None;
         }
         let z = (e0 * self.a.z + e1 * self.b.z + e2 * self.c.z) * self.inv;
-        // Rounded by a cast: the clamped depth is not negative (NaN casts to 0).
-        let depth = (z.clamp(0.0, 1.0) * DEPTH_MAX + 0.5) as u64;
+        // Rounded by a cast: the clamped depth is not negative (NaN casts to 0), and below 2⁶³.
+        let depth = (z.clamp(0.0, 1.0) * DEPTH_MAX + 0.5) as i64 as u64;
         Some(depth << INDEX_BITS | index)
     }
 }
 
 /// Draw triangles `first..first + triangles.len()` into every frame. Frames go four at a time
 /// through `Lanes`, which rules most (triangle, frame) pairs out at once; the others take the
-/// exact test.
+/// exact test. A vertex is shared by about six triangles, so the chunk's vertices are mapped into
+/// the lanes once each (a `Window` of ids), and a triangle's test reads its corners' maps.
 pub fn draw_triangles(frames: &[Frame], positions: &[DVec3], first: usize, triangles: &[[u32; 3]]) {
     let Some(&[v, ..]) = triangles.first() else {
         return;
     };
     // The triangles of a chunk lie close together: near their first corner, f32 is precise.
     let origin = positions[v as usize];
+    let window = Window::of(triangles);
+    let mut mapped = Vec::new();
     for group in frames.chunks(LANES) {
         let lanes = Lanes::new(group, origin);
+        let far = lanes.map_all(&positions[window.ids()], &mut mapped);
+        let margin = lanes.margin(far);
         for (k, &[i, j, l]) in triangles.iter().enumerate() {
-            let (a, b, c) = (
-                positions[i as usize],
-                positions[j as usize],
-                positions[l as usize],
-            );
-            let mut maybe = lanes.maybe(a, b, c);
+            let ids = [i, j, l];
+            let mut maybe = match ids.map(|v| window.get(&mapped, v)) {
+                [Some(a), Some(b), Some(c)] => lanes.maybe(&[a, b, c], margin),
+                _ => {
+                    let mut far = far;
+                    let corners = ids.map(|v| match window.get(&mapped, v) {
+                        Some(m) => *m,
+                        None => {
+                            let (m, f) = lanes.map(positions[v as usize]);
+                            far = far.max(f);
+                            m
+                        }
+                    });
+                    lanes.maybe(&corners.each_ref(), lanes.margin(far))
+                }
+            };
+            if maybe == 0 {
+                continue;
+            }
+            let [a, b, c] = ids.map(|v| positions[v as usize]);
             while maybe != 0 {
                 let frame = &group[maybe.trailing_zeros() as usize];
                 maybe &= maybe - 1;
@@ -151,6 +171,49 @@ pub fn draw_triangles(frames: &[Frame], positions: &[DVec3], first: usize, trian
             }
         }
     }
+}
+
+/// The ids of a chunk's vertices that are mapped once for all its triangles: those from its
+/// smallest first corner to its largest. In the plan's order (triangles sorted by their first
+/// corner, which is their smallest, and vertices in Morton order) about 98 % of the corners fall
+/// inside, and the others are mapped where they are met. A chunk whose first corners are spread
+/// wider than `SPAN` ids a triangle (a mesh in another order) maps every corner where it is met.
+struct Window {
+    first: u32,
+    len: u32,
+}
+
+/// Ids a window may span for each triangle of its chunk (a closed mesh has half as many
+/// vertices as triangles).
+const SPAN: u64 = 2;
+
+impl Window {
+    fn of(triangles: &[[u32; 3]]) -> Window {
+        let (lo, hi) = (triangles.iter())
+            .fold((u32::MAX, 0), |(lo, hi), t| (lo.min(t[0]), hi.max(t[0])));
+        let len = (hi as u64 + 1).saturating_sub(lo as u64);
+        Window {
+            first: lo,
+            len: if len <= SPAN * triangles.len() as u64 { len as u32 } else { 0 },
+        }
+    }
+
+    fn ids(&self) -> std::ops::Range<usize> {
+        self.first as usize..self.first as usize + self.len as usize
+    }
+
+    /// Vertex `v`'s map, if the window holds it.
+    #[inline]
+    fn get<'m>(&self, mapped: &'m [Mapped], v: u32) -> Option<&'m Mapped> {
+        mapped.get(v.wrapping_sub(self.first) as usize)
+    }
+}
+
+/// A point's column and row in each of a `Lanes`' frames.
+#[derive(Clone, Copy)]
+struct Mapped {
+    x: Vec4,
+    y: Vec4,
 }
 
 /// Frames a [`Lanes`] tests at once.
@@ -225,20 +288,47 @@ impl Lanes {
         }
     }
 
-    /// The frames (bit `f` for lane `f`) in which the triangle `a`, `b`, `c` may hold a sample
-    /// centre in its box: all but those where it surely holds none. Corners that are not finite
-    /// in f32 leave the answer to the exact test.
+    /// `p`'s column and row in each frame, and its largest coordinate from `origin` (which the
+    /// margin grows with).
     #[inline]
-    fn maybe(&self, a: DVec3, b: DVec3, c: DVec3) -> u32 {
-        let q = [a, b, c].map(|p| (p - self.origin).as_vec3());
-        let far = q[0].abs().max(q[1].abs()).max(q[2].abs()).max_element();
-        let map = |s: &[Vec4; 3], o: Vec4| {
-            q.map(|p| {
-                Vec4::splat(p.x) * s[0] + Vec4::splat(p.y) * s[1] + Vec4::splat(p.z) * s[2] + o
-            })
+    fn map(&self, p: DVec3) -> (Mapped, f32) {
+        let q = (p - self.origin).as_vec3();
+        let row = |s: &[Vec4; 3], o: Vec4| {
+            Vec4::splat(q.x) * s[0] + Vec4::splat(q.y) * s[1] + Vec4::splat(q.z) * s[2] + o
         };
-        let (xs, ys) = (map(&self.sx, self.ox), map(&self.sy, self.oy));
-        let margin = self.fixed + self.per_unit * far;
+        let mapped = Mapped {
+            x: row(&self.sx, self.ox),
+            y: row(&self.sy, self.oy),
+        };
+        (mapped, q.abs().max_element())
+    }
+
+    /// The maps of `points` into `out`, and their largest coordinate from `origin` (over those
+    /// that are not NaN: a corner that is not finite is left to the exact test anyway).
+    fn map_all(&self, points: &[DVec3], out: &mut Vec<Mapped>) -> f32 {
+        out.clear();
+        out.reserve(points.len());
+        let mut far = 0.0f32;
+        for &p in points {
+            let (m, f) = self.map(p);
+            out.push(m);
+            far = far.max(f);
+        }
+        far
+    }
+
+    /// The margin for points no farther than `far` from `origin`.
+    #[inline]
+    fn margin(&self, far: f32) -> Vec4 {
+        self.fixed + self.per_unit * far
+    }
+
+    /// The frames (bit `f` for lane `f`) in which the triangle of the mapped corners `a`, `b`,
+    /// `c` may hold a sample centre in its box: all but those where it surely holds none.
+    /// `margin` is that of the corners' distance from `origin`. Corners that are not finite in
+    /// f32 leave the answer to the exact test.
+    #[inline]
+    fn maybe(&self, [a, b, c]: &[&Mapped; 3], margin: Vec4) -> u32 {
         let half = Vec4::splat(0.5);
         // No k with lo − ½ ≤ k ≤ hi − ½ inside the frame (as `centres` finds them), with room.
         let none = |v: [Vec4; 3], last: Vec4| {
@@ -246,11 +336,14 @@ impl Lanes {
             let to = (hi - half + margin).min(last).floor();
             to.cmplt((lo - half - margin).max(Vec4::ZERO))
         };
-        let finite = (xs[0] + xs[1] + xs[2] + ys[0] + ys[1] + ys[2]).is_finite_mask();
+        let (xs, ys) = ([a.x, b.x, c.x], [a.y, b.y, c.y]);
+        let finite = (xs[0] + xs[1] + xs[2] + ys[0] + ys[1] + ys[2] + margin).is_finite_mask();
         let ruled_out = (none(xs, self.last_x) | none(ys, self.last_y)) & finite;
         !ruled_out.bitmask() & self.used
     }
 }
+
+
 
 /// Draw triangle `index` with corners `a`, `b`, `c` (in frame coordinates) into `frame`: every
 /// sample whose centre it covers takes it if it is nearer than what the sample holds.
@@ -503,13 +596,33 @@ mod tests {
 
     #[test]
     fn a_frame_holds_the_nearest_cover_of_every_sample() {
-        let (near, triangles) = scattered(3000);
+        let (near, listed) = scattered(3000);
         // Also far from the origin, where f32 alone would lose the samples.
         let far: Vec<DVec3> = near
             .iter()
             .map(|&p| p + DVec3::new(3e5, -2e6, 1e4))
             .collect();
-        for positions in [near, far] {
+        // The chunks' first corners span three ids a triangle: too wide for a `Window`. A strip
+        // of triangles over the same points has nearly every corner in its chunk's window; and
+        // with each triangle's second and third corners far from its first in the ids, the
+        // window holds those not.
+        let strip: Vec<[u32; 3]> = (0..listed.len() as u32).map(|t| [t, t + 1, t + 2]).collect();
+        let n = listed.len();
+        let mut apart = near.clone();
+        for (t, corners) in listed.iter().enumerate() {
+            for (k, &v) in corners.iter().enumerate() {
+                apart[k * n + t] = near[v as usize];
+            }
+        }
+        let spread: Vec<[u32; 3]> = (0..n as u32)
+            .map(|t| [t, n as u32 + t, 2 * n as u32 + t])
+            .collect();
+        for (positions, triangles) in [
+            (near.clone(), &listed),
+            (far, &listed),
+            (near, &strip),
+            (apart, &spread),
+        ] {
             let cameras: Vec<Camera> = View::STANDARD
                 .iter()
                 .map(|&v| Camera::framing(v, Bounds::in_view(&positions, v), 48, 40))
