@@ -9,10 +9,11 @@
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use glam::{DVec2, DVec3, Vec4};
+use glam::{DVec2, DVec3};
 
 use super::camera::Camera;
 use super::image::{Rgb, WHITE};
+use super::lanes::{Cells, LANES, Lanes};
 use super::palette::Scale;
 
 /// Bits of a key's depth and of its triangle index.
@@ -127,8 +128,9 @@ impl Projected {
 
 /// Draw triangles `first..first + triangles.len()` into every frame. Frames go four at a time
 /// through `Lanes`, which rules most (triangle, frame) pairs out at once; the others take the
-/// exact test. A vertex is shared by about six triangles, so the chunk's vertices are mapped into
-/// the lanes once each (a `Window` of ids), and a triangle's test reads its corners' maps.
+/// exact test. A vertex is shared by about six triangles, so the chunk's vertices are placed
+/// among the sample centres once each (a `Window` of ids), and a triangle's test compares its
+/// corners' `Cells` in integers.
 pub fn draw_triangles(frames: &[Frame], positions: &[DVec3], first: usize, triangles: &[[u32; 3]]) {
     let Some(&[v, ..]) = triangles.first() else {
         return;
@@ -136,26 +138,22 @@ pub fn draw_triangles(frames: &[Frame], positions: &[DVec3], first: usize, trian
     // The triangles of a chunk lie close together: near their first corner, f32 is precise.
     let origin = positions[v as usize];
     let window = Window::of(triangles);
-    let mut mapped = Vec::new();
+    let mut cells = Vec::new();
     for group in frames.chunks(LANES) {
         let lanes = Lanes::new(group, origin);
-        let far = lanes.map_all(&positions[window.ids()], &mut mapped);
-        let margin = lanes.margin(far);
+        cells.clear();
+        cells.extend(positions[window.ids()].iter().map(|&p| lanes.cells(p)));
         for (k, &[i, j, l]) in triangles.iter().enumerate() {
             let ids = [i, j, l];
-            let mut maybe = match ids.map(|v| window.get(&mapped, v)) {
-                [Some(a), Some(b), Some(c)] => lanes.maybe(&[a, b, c], margin),
-                _ => {
-                    let mut far = far;
-                    let corners = ids.map(|v| match window.get(&mapped, v) {
-                        Some(m) => *m,
-                        None => {
-                            let (m, f) = lanes.map(positions[v as usize]);
-                            far = far.max(f);
-                            m
-                        }
+            let mut maybe = match ids.map(|v| window.get(&cells, v)) {
+                [Some(a), Some(b), Some(c)] => lanes.maybe([a, b, c]),
+                met => {
+                    let [a, b, c] = [0, 1, 2].map(|n| {
+                        met[n]
+                            .copied()
+                            .unwrap_or_else(|| lanes.cells(positions[ids[n] as usize]))
                     });
-                    lanes.maybe(&corners.each_ref(), lanes.margin(far))
+                    lanes.maybe([&a, &b, &c])
                 }
             };
             if maybe == 0 {
@@ -173,11 +171,11 @@ pub fn draw_triangles(frames: &[Frame], positions: &[DVec3], first: usize, trian
     }
 }
 
-/// The ids of a chunk's vertices that are mapped once for all its triangles: those from its
+/// The ids of a chunk's vertices that are placed once for all its triangles: those from its
 /// smallest first corner to its largest. In the plan's order (triangles sorted by their first
 /// corner, which is their smallest, and vertices in Morton order) about 98 % of the corners fall
-/// inside, and the others are mapped where they are met. A chunk whose first corners are spread
-/// wider than `SPAN` ids a triangle (a mesh in another order) maps every corner where it is met.
+/// inside, and the others are placed where they are met. A chunk whose first corners are spread
+/// wider than `SPAN` ids a triangle (a mesh in another order) places every corner where it is met.
 struct Window {
     first: u32,
     len: u32,
@@ -189,12 +187,16 @@ const SPAN: u64 = 2;
 
 impl Window {
     fn of(triangles: &[[u32; 3]]) -> Window {
-        let (lo, hi) = (triangles.iter())
-            .fold((u32::MAX, 0), |(lo, hi), t| (lo.min(t[0]), hi.max(t[0])));
+        let (lo, hi) =
+            (triangles.iter()).fold((u32::MAX, 0), |(lo, hi), t| (lo.min(t[0]), hi.max(t[0])));
         let len = (hi as u64 + 1).saturating_sub(lo as u64);
         Window {
             first: lo,
-            len: if len <= SPAN * triangles.len() as u64 { len as u32 } else { 0 },
+            len: if len <= SPAN * triangles.len() as u64 {
+                len as u32
+            } else {
+                0
+            },
         }
     }
 
@@ -202,148 +204,12 @@ impl Window {
         self.first as usize..self.first as usize + self.len as usize
     }
 
-    /// Vertex `v`'s map, if the window holds it.
+    /// Vertex `v`'s cells, if the window holds it.
     #[inline]
-    fn get<'m>(&self, mapped: &'m [Mapped], v: u32) -> Option<&'m Mapped> {
-        mapped.get(v.wrapping_sub(self.first) as usize)
+    fn get<'m>(&self, cells: &'m [Cells], v: u32) -> Option<&'m Cells> {
+        cells.get(v.wrapping_sub(self.first) as usize)
     }
 }
-
-/// A point's column and row in each of a `Lanes`' frames.
-#[derive(Clone, Copy)]
-struct Mapped {
-    x: Vec4,
-    y: Vec4,
-}
-
-/// Frames a [`Lanes`] tests at once.
-const LANES: usize = 4;
-
-/// The column and row maps of up to four frames' cameras in the lanes of f32 vectors: which of
-/// the frames a triangle may hold a sample centre of in its box, for four frames in the time of
-/// one. Points are taken relative to `origin` (f64, then f32) so that f32 keeps its precision
-/// near it, and the test is made conservative by a margin of about 160 times f32's rounding of
-/// every term (and f64's of the exact projection): a frame it rules out, the exact test in f64
-/// would have too. Unused lanes rule everything out.
-struct Lanes {
-    origin: DVec3,
-    /// Lane `f` of `sx[k]` is component `k` of frame `f`'s column map; `ox` its offset at
-    /// `origin`. The same for rows.
-    sx: [Vec4; 3],
-    ox: Vec4,
-    sy: [Vec4; 3],
-    oy: Vec4,
-    /// The last column and row (−1 in unused lanes).
-    last_x: Vec4,
-    last_y: Vec4,
-    /// The margin: `fixed + per_unit × (the corners' largest coordinate from origin)`.
-    fixed: Vec4,
-    per_unit: Vec4,
-    used: u32,
-}
-
-impl Lanes {
-    fn new(frames: &[Frame], origin: DVec3) -> Lanes {
-        let lane = |f: &dyn Fn(&Frame) -> f64| {
-            let mut v = [0.0f32; LANES];
-            for (x, frame) in v.iter_mut().zip(frames) {
-                *x = f(frame) as f32;
-            }
-            Vec4::from_array(v)
-        };
-        let map = |frame: &Frame, axis: usize| frame.camera.screen()[axis];
-        let at = |frame: &Frame, axis: usize| {
-            let (s, o) = map(frame, axis);
-            origin.dot(s) + o
-        };
-        let l1 = |frame: &Frame, axis: usize| map(frame, axis).0.abs().element_sum();
-        let scale = |frame: &Frame| l1(frame, 0).max(l1(frame, 1));
-        const F32: f64 = 1e-5;
-        const F64: f64 = 1e-14;
-        let fixed = |frame: &Frame| {
-            let (o, ox, oy) = (origin.abs().max_element(), map(frame, 0).1, map(frame, 1).1);
-            F32 * at(frame, 0).abs().max(at(frame, 1).abs())
-                + F64 * (o * scale(frame) + ox.abs().max(oy.abs()))
-                + 1e-6
-        };
-        let mut last = [-1.0f32; LANES];
-        for (l, frame) in last.iter_mut().zip(frames) {
-            *l = frame.camera.width as f32 - 1.0;
-        }
-        let last_x = Vec4::from_array(last);
-        for (l, frame) in last.iter_mut().zip(frames) {
-            *l = frame.camera.height as f32 - 1.0;
-        }
-        Lanes {
-            origin,
-            sx: [0, 1, 2].map(|k| lane(&|f| map(f, 0).0[k])),
-            ox: lane(&|f| at(f, 0)),
-            sy: [0, 1, 2].map(|k| lane(&|f| map(f, 1).0[k])),
-            oy: lane(&|f| at(f, 1)),
-            last_x,
-            last_y: Vec4::from_array(last),
-            fixed: lane(&fixed),
-            per_unit: lane(&|f| F32 * scale(f)),
-            used: (1 << frames.len().min(LANES)) - 1,
-        }
-    }
-
-    /// `p`'s column and row in each frame, and its largest coordinate from `origin` (which the
-    /// margin grows with).
-    #[inline]
-    fn map(&self, p: DVec3) -> (Mapped, f32) {
-        let q = (p - self.origin).as_vec3();
-        let row = |s: &[Vec4; 3], o: Vec4| {
-            Vec4::splat(q.x) * s[0] + Vec4::splat(q.y) * s[1] + Vec4::splat(q.z) * s[2] + o
-        };
-        let mapped = Mapped {
-            x: row(&self.sx, self.ox),
-            y: row(&self.sy, self.oy),
-        };
-        (mapped, q.abs().max_element())
-    }
-
-    /// The maps of `points` into `out`, and their largest coordinate from `origin` (over those
-    /// that are not NaN: a corner that is not finite is left to the exact test anyway).
-    fn map_all(&self, points: &[DVec3], out: &mut Vec<Mapped>) -> f32 {
-        out.clear();
-        out.reserve(points.len());
-        let mut far = 0.0f32;
-        for &p in points {
-            let (m, f) = self.map(p);
-            out.push(m);
-            far = far.max(f);
-        }
-        far
-    }
-
-    /// The margin for points no farther than `far` from `origin`.
-    #[inline]
-    fn margin(&self, far: f32) -> Vec4 {
-        self.fixed + self.per_unit * far
-    }
-
-    /// The frames (bit `f` for lane `f`) in which the triangle of the mapped corners `a`, `b`,
-    /// `c` may hold a sample centre in its box: all but those where it surely holds none.
-    /// `margin` is that of the corners' distance from `origin`. Corners that are not finite in
-    /// f32 leave the answer to the exact test.
-    #[inline]
-    fn maybe(&self, [a, b, c]: &[&Mapped; 3], margin: Vec4) -> u32 {
-        let half = Vec4::splat(0.5);
-        // No k with lo − ½ ≤ k ≤ hi − ½ inside the frame (as `centres` finds them), with room.
-        let none = |v: [Vec4; 3], last: Vec4| {
-            let (lo, hi) = (v[0].min(v[1]).min(v[2]), v[0].max(v[1]).max(v[2]));
-            let to = (hi - half + margin).min(last).floor();
-            to.cmplt((lo - half - margin).max(Vec4::ZERO))
-        };
-        let (xs, ys) = ([a.x, b.x, c.x], [a.y, b.y, c.y]);
-        let finite = (xs[0] + xs[1] + xs[2] + ys[0] + ys[1] + ys[2] + margin).is_finite_mask();
-        let ruled_out = (none(xs, self.last_x) | none(ys, self.last_y)) & finite;
-        !ruled_out.bitmask() & self.used
-    }
-}
-
-
 
 /// Draw triangle `index` with corners `a`, `b`, `c` (in frame coordinates) into `frame`: every
 /// sample whose centre it covers takes it if it is nearer than what the sample holds.
@@ -606,7 +472,9 @@ mod tests {
         // of triangles over the same points has nearly every corner in its chunk's window; and
         // with each triangle's second and third corners far from its first in the ids, the
         // window holds those not.
-        let strip: Vec<[u32; 3]> = (0..listed.len() as u32).map(|t| [t, t + 1, t + 2]).collect();
+        let strip: Vec<[u32; 3]> = (0..listed.len() as u32)
+            .map(|t| [t, t + 1, t + 2])
+            .collect();
         let n = listed.len();
         let mut apart = near.clone();
         for (t, corners) in listed.iter().enumerate() {
