@@ -1,10 +1,11 @@
 //! The deviation field and its statistics ([`crate::metrics::deviation`]) computed over chunks
 //! on the current rayon pool, in heap or scratch storage: a run's output against its input, and
-//! `compare`'s two meshes. The normal sums go in triangle order and every other value is a
+//! `compare`'s two meshes. Each normal sum goes in triangle order and every other value is a
 //! function of its vertex, the sums over chunks fold in chunk order ([`reduce`]), the percentiles
 //! are counted exactly: the same bits for any thread count, storage and memory budget.
 
 use glam::DVec3;
+use rayon::prelude::*;
 
 use super::reduce;
 use crate::error::Result;
@@ -97,6 +98,28 @@ pub fn field(
     })
 }
 
+/// The area-weighted normal sum of every vertex, in `storage`: a range of the vertices for each
+/// thread, each summing its own in triangle order (the bits of one thread's sums, for any
+/// count). Each range reads every triangle, and takes the cross product of those it touches.
+fn normal_sums(
+    storage: &Storage,
+    positions: &[DVec3],
+    triangles: &[[u32; 3]],
+) -> Result<Buf<DVec3>> {
+    let mut normals: Buf<DVec3> = storage.working(positions.len())?;
+    let part = positions
+        .len()
+        .div_ceil(rayon::current_num_threads())
+        .max(1);
+    normals
+        .par_chunks_mut(part)
+        .enumerate()
+        .for_each(|(k, sums)| {
+            kernel::vertex_normal_sums_from(positions, triangles, k * part, sums)
+        });
+    Ok(normals)
+}
+
 /// The signed part of [`field`] alone, without the output's rounding, each value as `T`: what a
 /// picture colours.
 pub fn signed<T: crate::mesh::storage::Pod>(
@@ -119,9 +142,7 @@ fn signed_into<T: crate::mesh::storage::Pod>(
     to: impl Fn(f64) -> T + Sync,
 ) -> Result<Buf<T>> {
     let n = input.len();
-    let mut normals: Buf<DVec3> = storage.working(n)?;
-    // In triangle order, on one thread: the sum of each vertex has one order.
-    kernel::vertex_normal_sums(input, triangles, &mut normals);
+    let normals = normal_sums(storage, input, triangles)?;
     let mut signed: Buf<T> = storage.zeroed(n)?;
     reduce::for_chunks_mut(&mut signed, |first, out| {
         for (k, d) in out.iter_mut().enumerate() {
@@ -143,8 +164,7 @@ pub fn surface_field(
 ) -> Result<Field> {
     let storage = Storage::heap();
     let n = a.len();
-    let mut normals: Buf<DVec3> = storage.working(n)?;
-    kernel::vertex_normal_sums(a, a_triangles, &mut normals);
+    let normals = normal_sums(&storage, a, a_triangles)?;
     let surface = Surface::new(b, b_triangles);
     let mut signed: Buf<f64> = storage.zeroed(n)?;
     reduce::for_chunks_mut(&mut signed, |first, out| {

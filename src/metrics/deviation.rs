@@ -29,13 +29,31 @@ pub const HISTOGRAM_BINS: usize = 20;
 /// The area-weighted normal sum of every vertex, into `sums` (indexed like `positions`, zeroed
 /// first): `Σ (b − a) × (c − a)` over the triangles around it, in triangle order.
 pub fn vertex_normal_sums(positions: &[DVec3], triangles: &[[u32; 3]], sums: &mut [DVec3]) {
+    vertex_normal_sums_from(positions, triangles, 0, sums);
+}
+
+/// [`vertex_normal_sums`] of the vertices `first..first + sums.len()` alone, into `sums`: the
+/// same bits (each sum in triangle order), so that disjoint ranges can be summed apart.
+pub fn vertex_normal_sums_from(
+    positions: &[DVec3],
+    triangles: &[[u32; 3]],
+    first: usize,
+    sums: &mut [DVec3],
+) {
     sums.fill(DVec3::ZERO);
     for t in triangles {
+        // Below `first`, an index wraps past the range.
+        let local = t.map(|v| (v as usize).wrapping_sub(first));
+        if local.iter().all(|&l| l >= sums.len()) {
+            continue;
+        }
         let [a, b, c] = t.map(|v| positions[v as usize]);
         // |(b − a) × (c − a)| is twice the triangle's area: the sum is area-weighted.
         let n = (b - a).cross(c - a);
-        for &v in t {
-            sums[v as usize] += n;
+        for l in local {
+            if let Some(sum) = sums.get_mut(l) {
+                *sum += n;
+            }
         }
     }
 }
@@ -306,6 +324,29 @@ impl Sums {
 mod tests {
     use super::*;
     use crate::shapes::icosphere;
+
+    #[test]
+    fn normal_sums_by_ranges_have_the_bits_of_one_pass() {
+        let mut s = icosphere(3);
+        // Uneven, so that the sums' order shows in their last bits.
+        for (k, p) in s.positions.iter_mut().enumerate() {
+            *p *= 1.0 + 0.1 * ((k * 7919) % 13) as f64 / 13.0;
+        }
+        let mut whole = vec![DVec3::ZERO; s.positions.len()];
+        vertex_normal_sums(&s.positions, &s.triangles, &mut whole);
+        for part in [1, 7, 100, s.positions.len()] {
+            let mut parts = vec![DVec3::ONE; s.positions.len()];
+            for (k, sums) in parts.chunks_mut(part).enumerate() {
+                vertex_normal_sums_from(&s.positions, &s.triangles, k * part, sums);
+            }
+            let bits = |v: &[DVec3]| {
+                v.iter()
+                    .map(|p| p.to_array().map(f64::to_bits))
+                    .collect::<Vec<_>>()
+            };
+            assert_eq!(bits(&parts), bits(&whole), "{part}");
+        }
+    }
 
     #[test]
     fn a_sphere_grown_by_a_known_amount() {

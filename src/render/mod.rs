@@ -7,6 +7,8 @@
 //! - [`raster`]: the kernels: a triangle drawn into a frame of visibility samples (a z-buffer
 //!   keyed by depth and triangle index), a sample shaded by a headlight, grey or by a per-vertex
 //!   value through a colour map ([`Paint`]).
+//! - `lanes`: the first test of a triangle against four frames at once, each vertex placed among
+//!   the sample centres once, in SSE2's lanes on x86-64.
 //! - `parallel`: the threads: triangles in fixed chunks, pixel rows.
 //! - [`palette`]: colour maps over a range ([`Scale`]) and their round tick values.
 //! - [`font`]: a 5 × 7 bitmap font for labels; [`sheet`]: tiles, labels and scale bars in one
@@ -21,6 +23,7 @@
 pub mod camera;
 pub mod font;
 pub mod image;
+mod lanes;
 pub mod palette;
 mod parallel;
 pub mod raster;

@@ -9,10 +9,11 @@
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use glam::{DVec2, DVec3, Vec4};
+use glam::{DVec2, DVec3};
 
 use super::camera::Camera;
 use super::image::{Rgb, WHITE};
+use super::lanes::{Cells, LANES, Lanes};
 use super::palette::Scale;
 
 /// Bits of a key's depth and of its triangle index.
@@ -58,7 +59,8 @@ fn edge(a: DVec2, b: DVec2, p: DVec2) -> f64 {
 /// The samples `k` of an axis of `n` whose centres `k + ½` lie in [`lo`, `hi`], as `k0..=k1`;
 /// `None` when there are none (or a bound is NaN). Rounded by casts of values made non-negative
 /// first: x86-64's baseline has no rounding instruction, and `ceil`/`floor` are calls to libm
-/// that cost more than the rest of a small triangle.
+/// that cost more than the rest of a small triangle. The casts go through `i64`, one instruction
+/// where a cast to an unsigned type is several; the values lie in `0..n`.
 #[inline]
 fn centres(lo: f64, hi: f64, n: usize) -> Option<(usize, usize)> {
     let last = n.checked_sub(1)? as f64;
@@ -67,9 +69,9 @@ fn centres(lo: f64, hi: f64, n: usize) -> Option<(usize, usize)> {
         return None;
     }
     let (from, to) = (from.max(0.0), to.min(last));
-    let floor = from as usize;
+    let floor = from as i64 as usize;
     let k0 = floor + usize::from((floor as f64) < from);
-    let k1 = to as usize;
+    let k1 = to as i64 as usize;
     (k0 <= k1).then_some((k0, k1))
 }
 
@@ -118,30 +120,46 @@ impl Projected {
             return None;
         }
         let z = (e0 * self.a.z + e1 * self.b.z + e2 * self.c.z) * self.inv;
-        // Rounded by a cast: the clamped depth is not negative (NaN casts to 0).
-        let depth = (z.clamp(0.0, 1.0) * DEPTH_MAX + 0.5) as u64;
+        // Rounded by a cast: the clamped depth is not negative (NaN casts to 0), and below 2⁶³.
+        let depth = (z.clamp(0.0, 1.0) * DEPTH_MAX + 0.5) as i64 as u64;
         Some(depth << INDEX_BITS | index)
     }
 }
 
 /// Draw triangles `first..first + triangles.len()` into every frame. Frames go four at a time
 /// through `Lanes`, which rules most (triangle, frame) pairs out at once; the others take the
-/// exact test.
+/// exact test. A vertex is shared by about six triangles, so the chunk's vertices are placed
+/// among the sample centres once each (a `Window` of ids), and a triangle's test compares its
+/// corners' `Cells` in integers.
 pub fn draw_triangles(frames: &[Frame], positions: &[DVec3], first: usize, triangles: &[[u32; 3]]) {
     let Some(&[v, ..]) = triangles.first() else {
         return;
     };
     // The triangles of a chunk lie close together: near their first corner, f32 is precise.
     let origin = positions[v as usize];
+    let window = Window::of(triangles);
+    let mut cells = Vec::new();
     for group in frames.chunks(LANES) {
         let lanes = Lanes::new(group, origin);
+        cells.clear();
+        cells.extend(positions[window.ids()].iter().map(|&p| lanes.cells(p)));
         for (k, &[i, j, l]) in triangles.iter().enumerate() {
-            let (a, b, c) = (
-                positions[i as usize],
-                positions[j as usize],
-                positions[l as usize],
-            );
-            let mut maybe = lanes.maybe(a, b, c);
+            let ids = [i, j, l];
+            let mut maybe = match ids.map(|v| window.get(&cells, v)) {
+                [Some(a), Some(b), Some(c)] => lanes.maybe([a, b, c]),
+                met => {
+                    let [a, b, c] = [0, 1, 2].map(|n| {
+                        met[n]
+                            .copied()
+                            .unwrap_or_else(|| lanes.cells(positions[ids[n] as usize]))
+                    });
+                    lanes.maybe([&a, &b, &c])
+                }
+            };
+            if maybe == 0 {
+                continue;
+            }
+            let [a, b, c] = ids.map(|v| positions[v as usize]);
             while maybe != 0 {
                 let frame = &group[maybe.trailing_zeros() as usize];
                 maybe &= maybe - 1;
@@ -153,102 +171,43 @@ pub fn draw_triangles(frames: &[Frame], positions: &[DVec3], first: usize, trian
     }
 }
 
-/// Frames a [`Lanes`] tests at once.
-const LANES: usize = 4;
-
-/// The column and row maps of up to four frames' cameras in the lanes of f32 vectors: which of
-/// the frames a triangle may hold a sample centre of in its box, for four frames in the time of
-/// one. Points are taken relative to `origin` (f64, then f32) so that f32 keeps its precision
-/// near it, and the test is made conservative by a margin of about 160 times f32's rounding of
-/// every term (and f64's of the exact projection): a frame it rules out, the exact test in f64
-/// would have too. Unused lanes rule everything out.
-struct Lanes {
-    origin: DVec3,
-    /// Lane `f` of `sx[k]` is component `k` of frame `f`'s column map; `ox` its offset at
-    /// `origin`. The same for rows.
-    sx: [Vec4; 3],
-    ox: Vec4,
-    sy: [Vec4; 3],
-    oy: Vec4,
-    /// The last column and row (−1 in unused lanes).
-    last_x: Vec4,
-    last_y: Vec4,
-    /// The margin: `fixed + per_unit × (the corners' largest coordinate from origin)`.
-    fixed: Vec4,
-    per_unit: Vec4,
-    used: u32,
+/// The ids of a chunk's vertices that are placed once for all its triangles: those from its
+/// smallest first corner to its largest. In the plan's order (triangles sorted by their first
+/// corner, which is their smallest, and vertices in Morton order) about 98 % of the corners fall
+/// inside, and the others are placed where they are met. A chunk whose first corners are spread
+/// wider than `SPAN` ids a triangle (a mesh in another order) places every corner where it is met.
+struct Window {
+    first: u32,
+    len: u32,
 }
 
-impl Lanes {
-    fn new(frames: &[Frame], origin: DVec3) -> Lanes {
-        let lane = |f: &dyn Fn(&Frame) -> f64| {
-            let mut v = [0.0f32; LANES];
-            for (x, frame) in v.iter_mut().zip(frames) {
-                *x = f(frame) as f32;
-            }
-            Vec4::from_array(v)
-        };
-        let map = |frame: &Frame, axis: usize| frame.camera.screen()[axis];
-        let at = |frame: &Frame, axis: usize| {
-            let (s, o) = map(frame, axis);
-            origin.dot(s) + o
-        };
-        let l1 = |frame: &Frame, axis: usize| map(frame, axis).0.abs().element_sum();
-        let scale = |frame: &Frame| l1(frame, 0).max(l1(frame, 1));
-        const F32: f64 = 1e-5;
-        const F64: f64 = 1e-14;
-        let fixed = |frame: &Frame| {
-            let (o, ox, oy) = (origin.abs().max_element(), map(frame, 0).1, map(frame, 1).1);
-            F32 * at(frame, 0).abs().max(at(frame, 1).abs())
-                + F64 * (o * scale(frame) + ox.abs().max(oy.abs()))
-                + 1e-6
-        };
-        let mut last = [-1.0f32; LANES];
-        for (l, frame) in last.iter_mut().zip(frames) {
-            *l = frame.camera.width as f32 - 1.0;
-        }
-        let last_x = Vec4::from_array(last);
-        for (l, frame) in last.iter_mut().zip(frames) {
-            *l = frame.camera.height as f32 - 1.0;
-        }
-        Lanes {
-            origin,
-            sx: [0, 1, 2].map(|k| lane(&|f| map(f, 0).0[k])),
-            ox: lane(&|f| at(f, 0)),
-            sy: [0, 1, 2].map(|k| lane(&|f| map(f, 1).0[k])),
-            oy: lane(&|f| at(f, 1)),
-            last_x,
-            last_y: Vec4::from_array(last),
-            fixed: lane(&fixed),
-            per_unit: lane(&|f| F32 * scale(f)),
-            used: (1 << frames.len().min(LANES)) - 1,
+/// Ids a window may span for each triangle of its chunk (a closed mesh has half as many
+/// vertices as triangles).
+const SPAN: u64 = 2;
+
+impl Window {
+    fn of(triangles: &[[u32; 3]]) -> Window {
+        let (lo, hi) =
+            (triangles.iter()).fold((u32::MAX, 0), |(lo, hi), t| (lo.min(t[0]), hi.max(t[0])));
+        let len = (hi as u64 + 1).saturating_sub(lo as u64);
+        Window {
+            first: lo,
+            len: if len <= SPAN * triangles.len() as u64 {
+                len as u32
+            } else {
+                0
+            },
         }
     }
 
-    /// The frames (bit `f` for lane `f`) in which the triangle `a`, `b`, `c` may hold a sample
-    /// centre in its box: all but those where it surely holds none. Corners that are not finite
-    /// in f32 leave the answer to the exact test.
+    fn ids(&self) -> std::ops::Range<usize> {
+        self.first as usize..self.first as usize + self.len as usize
+    }
+
+    /// Vertex `v`'s cells, if the window holds it.
     #[inline]
-    fn maybe(&self, a: DVec3, b: DVec3, c: DVec3) -> u32 {
-        let q = [a, b, c].map(|p| (p - self.origin).as_vec3());
-        let far = q[0].abs().max(q[1].abs()).max(q[2].abs()).max_element();
-        let map = |s: &[Vec4; 3], o: Vec4| {
-            q.map(|p| {
-                Vec4::splat(p.x) * s[0] + Vec4::splat(p.y) * s[1] + Vec4::splat(p.z) * s[2] + o
-            })
-        };
-        let (xs, ys) = (map(&self.sx, self.ox), map(&self.sy, self.oy));
-        let margin = self.fixed + self.per_unit * far;
-        let half = Vec4::splat(0.5);
-        // No k with lo − ½ ≤ k ≤ hi − ½ inside the frame (as `centres` finds them), with room.
-        let none = |v: [Vec4; 3], last: Vec4| {
-            let (lo, hi) = (v[0].min(v[1]).min(v[2]), v[0].max(v[1]).max(v[2]));
-            let to = (hi - half + margin).min(last).floor();
-            to.cmplt((lo - half - margin).max(Vec4::ZERO))
-        };
-        let finite = (xs[0] + xs[1] + xs[2] + ys[0] + ys[1] + ys[2]).is_finite_mask();
-        let ruled_out = (none(xs, self.last_x) | none(ys, self.last_y)) & finite;
-        !ruled_out.bitmask() & self.used
+    fn get<'m>(&self, cells: &'m [Cells], v: u32) -> Option<&'m Cells> {
+        cells.get(v.wrapping_sub(self.first) as usize)
     }
 }
 
@@ -503,13 +462,35 @@ mod tests {
 
     #[test]
     fn a_frame_holds_the_nearest_cover_of_every_sample() {
-        let (near, triangles) = scattered(3000);
+        let (near, listed) = scattered(3000);
         // Also far from the origin, where f32 alone would lose the samples.
         let far: Vec<DVec3> = near
             .iter()
             .map(|&p| p + DVec3::new(3e5, -2e6, 1e4))
             .collect();
-        for positions in [near, far] {
+        // The chunks' first corners span three ids a triangle: too wide for a `Window`. A strip
+        // of triangles over the same points has nearly every corner in its chunk's window; and
+        // with each triangle's second and third corners far from its first in the ids, the
+        // window holds those not.
+        let strip: Vec<[u32; 3]> = (0..listed.len() as u32)
+            .map(|t| [t, t + 1, t + 2])
+            .collect();
+        let n = listed.len();
+        let mut apart = near.clone();
+        for (t, corners) in listed.iter().enumerate() {
+            for (k, &v) in corners.iter().enumerate() {
+                apart[k * n + t] = near[v as usize];
+            }
+        }
+        let spread: Vec<[u32; 3]> = (0..n as u32)
+            .map(|t| [t, n as u32 + t, 2 * n as u32 + t])
+            .collect();
+        for (positions, triangles) in [
+            (near.clone(), &listed),
+            (far, &listed),
+            (near, &strip),
+            (apart, &spread),
+        ] {
             let cameras: Vec<Camera> = View::STANDARD
                 .iter()
                 .map(|&v| Camera::framing(v, Bounds::in_view(&positions, v), 48, 40))
