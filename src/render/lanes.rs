@@ -7,7 +7,7 @@
 
 use glam::{DVec3, Vec3};
 
-use super::raster::Frame;
+use super::camera::Camera;
 
 /// Frames a [`Lanes`] tests at once.
 pub const LANES: usize = 4;
@@ -60,11 +60,11 @@ pub struct Lanes {
 }
 
 impl Lanes {
-    /// The lanes of `frames` (the first [`LANES`]), for points near `origin`.
-    pub fn new(frames: &[Frame], origin: DVec3) -> Lanes {
-        let frames = &frames[..frames.len().min(LANES)];
+    /// The lanes of the frames of `cameras` (the first [`LANES`]), for points near `origin`.
+    pub fn new(cameras: &[Camera], origin: DVec3) -> Lanes {
+        let frames = &cameras[..cameras.len().min(LANES)];
         // Lane `f` of `f(frame, axis)` for each axis, as `Cells` lay them out.
-        let lane = |f: &dyn Fn(&Frame, usize) -> f64| {
+        let lane = |f: &dyn Fn(&Camera, usize) -> f64| {
             let mut v = [0.0f32; AXES];
             for (k, frame) in frames.iter().enumerate() {
                 v[k] = f(frame, 0) as f32;
@@ -72,16 +72,16 @@ impl Lanes {
             }
             v
         };
-        let map = |frame: &Frame, axis: usize| frame.camera.screen()[axis];
-        let at = |frame: &Frame, axis: usize| {
+        let map = |camera: &Camera, axis: usize| camera.screen()[axis];
+        let at = |frame: &Camera, axis: usize| {
             let (s, o) = map(frame, axis);
             origin.dot(s) + o
         };
-        let l1 = |frame: &Frame, axis: usize| map(frame, axis).0.abs().element_sum();
-        let scale = |frame: &Frame| l1(frame, 0).max(l1(frame, 1));
+        let l1 = |frame: &Camera, axis: usize| map(frame, axis).0.abs().element_sum();
+        let scale = |frame: &Camera| l1(frame, 0).max(l1(frame, 1));
         const F32: f64 = 1e-5;
         const F64: f64 = 1e-14;
-        let fixed = |frame: &Frame| {
+        let fixed = |frame: &Camera| {
             let (o, ox, oy) = (origin.abs().max_element(), map(frame, 0).1, map(frame, 1).1);
             F32 * at(frame, 0).abs().max(at(frame, 1).abs())
                 + F64 * (o * scale(frame) + ox.abs().max(oy.abs()))
@@ -91,7 +91,7 @@ impl Lanes {
         let mut wide = 0;
         for (f, frame) in frames.iter().enumerate() {
             let side = |n: usize| (n as i64 - 1).clamp(-1, MAX_LAST);
-            let (w, h) = (frame.camera.width, frame.camera.height);
+            let (w, h) = (frame.width, frame.height);
             wide |= u32::from(w.max(h) as i64 - 1 > MAX_LAST) << f;
             last[f] = side(w) as i16;
             last[LANES + f] = side(h) as i16;
@@ -277,7 +277,7 @@ mod sse2 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::render::camera::{Bounds, Camera, View};
+    use crate::render::camera::{Bounds, View};
 
     /// Points near and far, some on sample centres and edges, some not finite in f32.
     fn points() -> Vec<DVec3> {
@@ -308,11 +308,11 @@ mod tests {
         let pts = points();
         let bounds = Bounds::in_view(&pts[..4], View::Front);
         for (size, frames) in [(48, 4), (300, 3), (9000, 2)] {
-            let frames: Vec<Frame> = View::STANDARD[..frames]
+            let cameras: Vec<Camera> = View::STANDARD[..frames]
                 .iter()
-                .map(|&v| Frame::new(Camera::framing(v, bounds, size, size)))
+                .map(|&v| Camera::framing(v, bounds, size, size))
                 .collect();
-            let lanes = Lanes::new(&frames, pts[7]);
+            let lanes = Lanes::new(&cameras, pts[7]);
             let cells: Vec<Cells> = pts.iter().map(|&p| lanes.cells(p)).collect();
             for (c, &p) in cells.iter().zip(&pts) {
                 assert_eq!(*c, lanes.cells_plain((p - lanes.origin).as_vec3()), "{p}");

@@ -140,7 +140,8 @@ pub fn draw_triangles(frames: &[Frame], positions: &[DVec3], first: usize, trian
     let window = Window::of(triangles);
     let mut cells = Vec::new();
     for group in frames.chunks(LANES) {
-        let lanes = Lanes::new(group, origin);
+        let cameras: Vec<Camera> = group.iter().map(|f| f.camera).collect();
+        let lanes = Lanes::new(&cameras, origin);
         cells.clear();
         cells.extend(positions[window.ids()].iter().map(|&p| lanes.cells(p)));
         for (k, &[i, j, l]) in triangles.iter().enumerate() {
