@@ -281,13 +281,7 @@ mod tests {
 
     /// Points near and far, some on sample centres and edges, some not finite in f32.
     fn points() -> Vec<DVec3> {
-        let mut state = 0x9e37_79b9_7f4a_7c15u64;
-        let mut next = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut next = crate::render::uniform(0x9e37_79b9_7f4a_7c15u64);
         let mut out: Vec<DVec3> = (0..20_000)
             .map(|k| {
                 let reach = [1.0, 0.01, 3.0, 1e3][k % 4];

@@ -105,3 +105,15 @@ pub fn render(
         .map(|_| shaded.iter_mut().filter_map(Iterator::next).collect())
         .collect())
 }
+
+/// A fixed pseudo-random sequence in [0, 1) (xorshift), for the renderer's tests.
+#[cfg(test)]
+fn uniform(seed: u64) -> impl FnMut() -> f64 {
+    let mut state = seed;
+    move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    }
+}

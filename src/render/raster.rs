@@ -436,13 +436,7 @@ mod tests {
     /// Triangles from a fixed pseudo-random sequence: most far smaller than a sample (one centre
     /// in their box or none: the fast path), some spanning many, both windings, a few degenerate.
     fn scattered(count: usize) -> (Vec<DVec3>, Vec<[u32; 3]>) {
-        let mut state = 0x2545_f491_4f6c_dd1du64;
-        let mut next = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut next = crate::render::uniform(0x2545_f491_4f6c_dd1du64);
         let mut positions = Vec::new();
         for k in 0..count {
             let centre = DVec3::new(next(), next(), next());
