@@ -28,9 +28,9 @@ pub struct Cells {
     down: [i16; AXES],
 }
 
-/// `Cells` of a point that is not finite. Far from `i16`'s ends, so that no difference the test
-/// takes overflows.
-const NEVER_UP: i16 = 1 << 14;
+/// `Cells` of a point that is not finite. Far enough from `i16`'s ends that no difference the test
+/// takes overflows: `NEVER_UP − NEVER_DOWN` is `i16::MAX`.
+const NEVER_UP: i16 = (1 << 14) - 1;
 const NEVER_DOWN: i16 = -(1 << 14);
 
 /// The largest last sample a frame's side may have for its `Cells`; a wider frame (a picture has
