@@ -49,8 +49,10 @@ pub struct Lanes {
     /// row map; `o` their offsets at `origin`, less ½ (sample centres lie at `k + ½`).
     s: [[f32; AXES]; 3],
     o: [f32; AXES],
-    /// The last column and row (−1 in unused lanes), laid out as `Cells`.
+    /// The last column and row (−1 in unused lanes), laid out as `Cells`; `top` one beyond
+    /// each, as f32: where `Cells` clamp.
     last: [i16; AXES],
+    top: [f32; AXES],
     /// The margin: `fixed + per_unit × (the point's largest coordinate from origin)`.
     fixed: [f32; AXES],
     per_unit: [f32; AXES],
@@ -101,6 +103,7 @@ impl Lanes {
             s: [0, 1, 2].map(|k| lane(&|f, axis| map(f, axis).0[k])),
             o: lane(&|f, axis| at(f, axis) - 0.5),
             last,
+            top: last.map(|l| l as f32 + 1.0),
             fixed: lane(&|f, _| fixed(f)),
             per_unit: lane(&|f, _| F32 * scale(f)),
             used: (1 << frames.len()) - 1,
@@ -147,8 +150,7 @@ impl Lanes {
             // Clamped first, so that a cast truncates values in −1 ..= last + 1: ⌊hi⌋ is then
             // the truncation less one where it rounded up, ⌈lo⌉ − 1 the truncation less one
             // where it did not round down.
-            let top = self.last[k] as f32 + 1.0;
-            let (hi, lo) = (hi.clamp(-1.0, top), lo.clamp(-1.0, top));
+            let (hi, lo) = (hi.clamp(-1.0, self.top[k]), lo.clamp(-1.0, self.top[k]));
             let (th, tl) = (hi as i32, lo as i32);
             up[k] = (th - i32::from(th as f32 > hi)) as i16;
             down[k] = (tl - i32::from(tl as f32 >= lo)) as i16;
@@ -214,15 +216,7 @@ mod sse2 {
             // Finite both: their difference less itself is 0 (NaN otherwise).
             let d = _mm_sub_ps(hi, lo);
             let finite = _mm_castps_si128(_mm_cmpeq_ps(_mm_sub_ps(d, d), _mm_setzero_ps()));
-            let top = _mm_add_ps(
-                _mm_set_ps(
-                    l.last[4 * h + 3] as f32,
-                    l.last[4 * h + 2] as f32,
-                    l.last[4 * h + 1] as f32,
-                    l.last[4 * h] as f32,
-                ),
-                _mm_set1_ps(1.0),
-            );
+            let top = half(&l.top, h);
             let clamp = |w| _mm_min_ps(_mm_max_ps(w, minus_one), top);
             let (hi, lo) = (clamp(hi), clamp(lo));
             let (th, tl) = (_mm_cvttps_epi32(hi), _mm_cvttps_epi32(lo));
