@@ -98,19 +98,22 @@ pub fn field(
     })
 }
 
+/// Ranges the normal sums are split into at most: each reads every triangle, so more ranges
+/// would read the triangles more times over than they save (out of core, from the disk).
+const NORMAL_RANGES: usize = 4;
+
 /// The area-weighted normal sum of every vertex, in `storage`: a range of the vertices for each
-/// thread, each summing its own in triangle order (the bits of one thread's sums, for any
-/// count). Each range reads every triangle, and takes the cross product of those it touches.
+/// thread (up to [`NORMAL_RANGES`]), each summing its own in triangle order (the bits of one
+/// thread's sums, for any count). Each range reads every triangle, and takes the cross product
+/// of those it touches.
 fn normal_sums(
     storage: &Storage,
     positions: &[DVec3],
     triangles: &[[u32; 3]],
 ) -> Result<Buf<DVec3>> {
     let mut normals: Buf<DVec3> = storage.working(positions.len())?;
-    let part = positions
-        .len()
-        .div_ceil(rayon::current_num_threads())
-        .max(1);
+    let ranges = rayon::current_num_threads().clamp(1, NORMAL_RANGES);
+    let part = positions.len().div_ceil(ranges).max(1);
     normals
         .par_chunks_mut(part)
         .enumerate()
