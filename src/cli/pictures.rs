@@ -11,9 +11,10 @@ use clap::Args as ClapArgs;
 use glam::DVec3;
 
 use crate::cli::output::png_output;
+use crate::engine::deviation::Kept;
 use crate::engine::{Meter, Moment, Observer, Phase, reduce};
 use crate::error::Result;
-use crate::mesh::{Buf, Storage};
+use crate::mesh::Storage;
 use crate::render::{self, Camera, Paint, Row, Scale, View};
 
 /// `--png FILE` and its tile size.
@@ -189,7 +190,7 @@ pub struct RunPictures<'a> {
     pub cfg: Option<PictureConfig>,
     pub labels: (String, String),
     sheet: Option<Sheet>,
-    before: Option<Buf<DVec3>>,
+    before: Option<Kept>,
 }
 
 impl<'a> RunPictures<'a> {
@@ -261,10 +262,7 @@ impl Observer for RunPictures<'_> {
                     let mut sheet = Sheet::new(cfg, &seen);
                     sheet.draw(label, positions, triangles, None, meter)?;
                     let clock = Instant::now();
-                    let mut before = storage.working::<DVec3>(positions.len())?;
-                    reduce::for_chunks_mut(&mut before, |first, chunk| {
-                        chunk.copy_from_slice(&positions[first..first + chunk.len()])
-                    });
+                    let before = Kept::of(storage, positions)?;
                     sheet.seconds += clock.elapsed().as_secs_f64();
                     Ok((sheet, before))
                 })?;

@@ -34,6 +34,7 @@ unsafe impl Pod for f32 {}
 unsafe impl Pod for f64 {}
 unsafe impl Pod for [u32; 2] {}
 unsafe impl Pod for [u32; 3] {}
+unsafe impl Pod for [f32; 3] {}
 unsafe impl Pod for [u64; 2] {}
 // SAFETY: glam's DVec3 is `#[repr(C)] { x: f64, y: f64, z: f64 }`: three f64s, no padding.
 unsafe impl Pod for DVec3 {}

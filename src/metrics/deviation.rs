@@ -32,28 +32,58 @@ pub fn vertex_normal_sums(positions: &[DVec3], triangles: &[[u32; 3]], sums: &mu
     vertex_normal_sums_from(positions, triangles, 0, sums);
 }
 
+/// Positions read one at a time: a slice, or a copy kept in another form
+/// ([`crate::engine::deviation::Kept`]).
+pub trait Points: Sync {
+    fn count(&self) -> usize;
+    fn at(&self, i: usize) -> DVec3;
+}
+
+impl Points for [DVec3] {
+    fn count(&self) -> usize {
+        self.len()
+    }
+
+    #[inline]
+    fn at(&self, i: usize) -> DVec3 {
+        self[i]
+    }
+}
+
 /// [`vertex_normal_sums`] of the vertices `first..first + sums.len()` alone, into `sums`: the
 /// same bits (each sum in triangle order), so that disjoint ranges can be summed apart.
-pub fn vertex_normal_sums_from(
-    positions: &[DVec3],
+pub fn vertex_normal_sums_from<P: Points + ?Sized>(
+    positions: &P,
     triangles: &[[u32; 3]],
     first: usize,
     sums: &mut [DVec3],
 ) {
     sums.fill(DVec3::ZERO);
-    for t in triangles {
-        // Below `first`, an index wraps past the range.
-        let local = t.map(|v| (v as usize).wrapping_sub(first));
-        if local.iter().all(|&l| l >= sums.len()) {
-            continue;
-        }
-        let [a, b, c] = t.map(|v| positions[v as usize]);
-        // |(b − a) × (c − a)| is twice the triangle's area: the sum is area-weighted.
-        let n = (b - a).cross(c - a);
-        for l in local {
-            if let Some(sum) = sums.get_mut(l) {
-                *sum += n;
-            }
+    for &t in triangles {
+        add_normal(positions, t, first, sums);
+    }
+}
+
+/// Adds triangle `t`'s normal to the sums of its corners among the vertices
+/// `first..first + sums.len()`: one step of [`vertex_normal_sums_from`].
+#[inline]
+pub fn add_normal<P: Points + ?Sized>(
+    positions: &P,
+    t: [u32; 3],
+    first: usize,
+    sums: &mut [DVec3],
+) {
+    // Below `first`, an index wraps past the range.
+    let local = t.map(|v| (v as usize).wrapping_sub(first));
+    if local.iter().all(|&l| l >= sums.len()) {
+        return;
+    }
+    let [a, b, c] = t.map(|v| positions.at(v as usize));
+    // |(b − a) × (c − a)| is twice the triangle's area: the sum is area-weighted.
+    let n = (b - a).cross(c - a);
+    for l in local {
+        if let Some(sum) = sums.get_mut(l) {
+            *sum += n;
         }
     }
 }
@@ -337,7 +367,7 @@ mod tests {
         for part in [1, 7, 100, s.positions.len()] {
             let mut parts = vec![DVec3::ONE; s.positions.len()];
             for (k, sums) in parts.chunks_mut(part).enumerate() {
-                vertex_normal_sums_from(&s.positions, &s.triangles, k * part, sums);
+                vertex_normal_sums_from(&s.positions[..], &s.triangles, k * part, sums);
             }
             let bits = |v: &[DVec3]| {
                 v.iter()

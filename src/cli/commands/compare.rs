@@ -230,7 +230,7 @@ fn draw(
             None => {
                 let moved = crate::engine::deviation::signed(
                     &Storage::heap(),
-                    &a.positions,
+                    &a.positions[..],
                     &b.positions,
                     &a.triangles,
                     |d| d as f32,
