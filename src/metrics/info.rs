@@ -412,7 +412,8 @@ impl VertexSums {
 ///
 /// Each face of `i` with a corner above `i` has its normal computed once there and handed to the
 /// edges `(i, j)` it holds, so a face is measured at most twice in all and an edge's faces need
-/// no search; at its smallest corner the same normal gives its area.
+/// no search; at its smallest corner the same normal gives its area, and its determinant as
+/// `(p_a − o) · n` (the same in exact arithmetic).
 pub fn vertex_sums(
     pos: &[DVec3],
     triangles: &[[u32; 3]],
@@ -420,6 +421,8 @@ pub fn vertex_sums(
     vertices: Range<u32>,
     origin: DVec3,
 ) -> VertexSums {
+    // Plain slices: the topology's own accessors ask at every call where an array lives.
+    let parts = topo.parts();
     let mut all = VertexSums::default();
     let mut wide: Vec<EdgeFaces> = Vec::new();
     let mut narrow = [EdgeFaces::default(); NARROW];
@@ -427,124 +430,150 @@ pub fn vertex_sums(
     for i in vertices {
         let p = pos[i as usize];
         all.extent = extent_union(all.extent, (p, p));
-        let above = topo.neighbors(i);
+        let above = parts.neighbors(i);
         let above = &above[above.partition_point(|&j| j <= i)..];
         if above.is_empty() {
             continue;
         }
+        let faces = parts.faces_of(i);
+        // The loop over the faces made once for each search, so that none asks which it is.
         let edges = if above.len() <= NARROW {
-            &mut narrow[..above.len()]
+            let edges = &mut narrow[..above.len()];
+            let slot = |v: u32| above.iter().position(|&j| j == v);
+            add_faces(pos, triangles, faces, i, origin, edges, slot, &mut all);
+            edges
         } else {
             wide.resize(above.len(), EdgeFaces::default());
+            let slot = |v: u32| above.binary_search(&v).ok();
+            add_faces(pos, triangles, faces, i, origin, &mut wide, slot, &mut all);
             &mut wide[..]
         };
-        // Only the counts and flags: a normal is read only where they say it was written.
-        edges.iter_mut().for_each(|e| (e.count, e.usable) = (0, 0));
-        for &t in topo.faces_of(i) {
-            let tri = triangles[t as usize];
-            // Every corner of a face of `i` is a neighbour of `i`; those above it own the edges.
-            let (b, c) = corners_after(tri, i);
-            let (b_above, c_above) = (b > i, c > i);
-            if !(b_above | c_above) {
-                continue;
-            }
-            let [pa, pb, pc] = tri.map(|v| pos[v as usize]);
-            let n = (pb - pa).cross(pc - pa);
-            if b_above & c_above {
-                // `i` is the face's smallest corner: the one place it is counted.
-                let [a, b, c] = [pa, pb, pc].map(|q| q - origin);
-                all.determinants += super::determinant(a, b, c);
-                all.doubled_area += n.length();
-            }
-            let usable = n.length_squared() > 0.0 && n.is_finite();
-            let slot = |v: u32| {
-                if above.len() <= NARROW {
-                    above.iter().position(|&j| j == v)
-                } else {
-                    above.binary_search(&v).ok()
-                }
-            };
-            for (v, is_above) in [(b, b_above), (c, c_above)] {
-                if is_above && let Some(k) = slot(v) {
-                    edges[k].add(n, usable);
-                }
-            }
-        }
         for (&j, e) in above.iter().zip(edges.iter()) {
             all.edges.length.0 += p.distance(pos[j as usize]);
             all.edges.length.1 += 1;
             if e.count == 2 && e.usable == 0b11 {
-                angles.push(angle_arguments(e.normals[0], e.normals[1]));
+                angles.push(e.normals, &mut all.edges);
             }
-        }
-        if angles.len >= ANGLE_BATCH {
-            angles.add_to(&mut all.edges);
         }
     }
     angles.add_to(&mut all.edges);
     all
 }
 
+/// The faces of `i` into `edges` (the edges `(i, j)` above `i`, at the slots `slot(j)` gives)
+/// and, where `i` is a face's smallest corner, its determinant and area into `all`.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn add_faces(
+    pos: &[DVec3],
+    triangles: &[[u32; 3]],
+    faces: &[u32],
+    i: u32,
+    origin: DVec3,
+    edges: &mut [EdgeFaces],
+    slot: impl Fn(u32) -> Option<usize>,
+    all: &mut VertexSums,
+) {
+    // Only the counts and flags: a normal is read only where they say it was written.
+    edges.iter_mut().for_each(|e| (e.count, e.usable) = (0, 0));
+    for &t in faces {
+        let tri = triangles[t as usize];
+        // Every corner of a face of `i` is a neighbour of `i`; those above it own the edges.
+        let (b, c) = corners_after(tri, i);
+        let (b_above, c_above) = (b > i, c > i);
+        if !(b_above | c_above) {
+            continue;
+        }
+        let [pa, pb, pc] = tri.map(|v| pos[v as usize]);
+        let n = (pb - pa).cross(pc - pa);
+        if b_above & c_above {
+            // `i` is the face's smallest corner: the one place it is counted.
+            all.determinants += (pa - origin).dot(n);
+            all.doubled_area += n.length();
+        }
+        let usable = usable(n);
+        for (v, is_above) in [(b, b_above), (c, c_above)] {
+            if is_above && let Some(k) = slot(v) {
+                edges[k].add(n, usable);
+            }
+        }
+    }
+}
+
+/// Whether a face normal gives an angle: non-zero and finite (`0 · x` is `±0` for a finite `x`
+/// and NaN otherwise, a test without branches).
+#[inline(always)]
+fn usable(n: DVec3) -> bool {
+    n.length_squared() > 0.0 && n.x * 0.0 + n.y * 0.0 + n.z * 0.0 == 0.0
+}
+
 /// Neighbours above a vertex that [`vertex_sums`] keeps in an array on the stack (more in a
 /// vector): surface meshes have degrees near 6.
 const NARROW: usize = 16;
 
-/// Dihedral angles waiting in [`vertex_sums`]: taken in batches, the arctangents (the pass's
-/// longest chains of dependent instructions) follow one another without the walk between them,
-/// so that the processor overlaps them; the sum is the same, in the same order.
+/// Dihedral angles waiting in [`vertex_sums`]: taken in batches, the arithmetic of the angles
+/// (the pass's longest chains of dependent instructions) runs in vector lanes without the walk
+/// between them; the sum is the same, in the same order.
 const ANGLE_BATCH: usize = 64;
 
-/// Dihedral angles waiting in [`vertex_sums`], as [`angle_arguments`]: at most [`ANGLE_BATCH`]
-/// plus a vertex's edges.
+/// The normal pairs of the dihedral angles waiting in [`vertex_sums`], coordinate by coordinate
+/// (`[a.x, a.y, a.z, b.x, b.y, b.z]`), so that the batch's arithmetic fills vector lanes.
 struct Angles {
-    args: [(f64, f64); ANGLE_BATCH + NARROW],
-    wide: Vec<(f64, f64)>,
+    normals: [[f64; ANGLE_BATCH]; 6],
     len: usize,
 }
 
 impl Default for Angles {
     fn default() -> Angles {
         Angles {
-            args: [(0.0, 0.0); ANGLE_BATCH + NARROW],
-            wide: Vec::new(),
+            normals: [[0.0; ANGLE_BATCH]; 6],
             len: 0,
         }
     }
 }
 
 impl Angles {
+    /// Queue the angle between `a` and `b`; a full batch is added to `sums` first.
     #[inline]
-    fn push(&mut self, args: (f64, f64)) {
-        match self.args.get_mut(self.len) {
-            Some(slot) => *slot = args,
-            // A vertex with more than NARROW edges above it, past a nearly full batch.
-            None => self.wide.push(args),
+    fn push(&mut self, [a, b]: [DVec3; 2], sums: &mut EdgeSums) {
+        if self.len == ANGLE_BATCH {
+            self.add_to(sums);
+        }
+        let k = self.len;
+        for (c, x) in [a.x, a.y, a.z, b.x, b.y, b.z].into_iter().enumerate() {
+            self.normals[c][k] = x;
         }
         self.len += 1;
     }
 
     /// Add the waiting angles, in order, to `sums`.
     fn add_to(&mut self, sums: &mut EdgeSums) {
-        let kept = self.len.min(self.args.len());
-        // The arithmetic first for the whole batch, without a branch, so that it runs two
-        // angles to an instruction; then the sum, with the library where it must take over.
-        let mut fast = [0.0; ANGLE_BATCH + NARROW];
-        for (f, &args) in fast.iter_mut().zip(&self.args[..kept]) {
-            *f = fast_arithmetic(args);
+        // The arithmetic first for the whole batch (the unused tail too: no branch, and a value
+        // that is never read), two angles to an instruction; then the sum, with the library
+        // where it must take over. The arguments are [`angle_arguments`]'s, bit for bit.
+        let [ax, ay, az, bx, by, bz] = &self.normals;
+        let mut args = [(0.0, 0.0); ANGLE_BATCH];
+        let mut fast = [0.0; ANGLE_BATCH];
+        for k in 0..ANGLE_BATCH {
+            let (cx, cy, cz) = (
+                ay[k] * bz[k] - by[k] * az[k],
+                az[k] * bx[k] - bz[k] * ax[k],
+                ax[k] * by[k] - bx[k] * ay[k],
+            );
+            let y = (cx * cx + cy * cy + cz * cz).sqrt();
+            let x = ax[k] * bx[k] + ay[k] * by[k] + az[k] * bz[k];
+            args[k] = (y, x);
+            fast[k] = fast_arithmetic((y, x));
         }
-        for (&f, &args) in fast.iter().zip(&self.args[..kept]) {
+        for (&f, &args) in fast.iter().zip(&args[..self.len]) {
             sums.angle.0 += if fast_covers(args) {
                 f
             } else {
                 degrees_of(args)
             };
         }
-        for &args in &self.wide {
-            sums.angle.0 += degrees_of_fast(args);
-        }
         sums.angle.1 += self.len;
         self.len = 0;
-        self.wide.clear();
     }
 }
 
@@ -583,30 +612,22 @@ fn degrees_of((y, x): (f64, f64)) -> f64 {
     y.atan2(x).to_degrees()
 }
 
+/// Whether [`fast_arithmetic`] gives the angle of `(y, x)`: `y ≥ +0`, neither argument NaN or
+/// infinite, not both zero (and `y + |x|` finite: the library takes the few pairs near the
+/// largest double too).
+#[inline]
+fn fast_covers((y, x): (f64, f64)) -> bool {
+    let s = y + x.abs();
+    !y.is_sign_negative() && s > 0.0 && s < f64::INFINITY
+}
+
 /// [`degrees_of`] within a few units in the last place (relative error below 1e-15, see the
 /// tests), for the roughness's millions of angles: the library's `atan2` was most of its pass.
 /// Cephes' arctangent (S. L. Moshier): the angle of `(y, x)` folded into `[0°, 45°]` and reduced
 /// to `−0.21 < u ≤ 0.66`, where a degree-4/5 rational function is exact to double precision; the
-/// reduction is exact but for one rounding of `u`. Zeros, infinities, NaN and negative `y` (never
-/// from [`angle_arguments`] with usable normals) go to the library.
-#[inline]
-fn degrees_of_fast(args: (f64, f64)) -> f64 {
-    match fast_covers(args) {
-        true => fast_arithmetic(args),
-        false => degrees_of(args),
-    }
-}
-
-/// Whether [`fast_arithmetic`] gives the angle of `(y, x)`: `y ≥ +0`, neither argument NaN or
-/// infinite, not both zero.
-#[inline]
-fn fast_covers((y, x): (f64, f64)) -> bool {
-    let (ax, hi) = (x.abs(), y.max(x.abs()));
-    y >= 0.0 && ax >= 0.0 && !y.is_sign_negative() && hi > 0.0 && hi < f64::INFINITY
-}
-
-/// [`degrees_of_fast`]'s arithmetic, without a branch (selects), for the arguments that
-/// [`fast_covers`]; anything for others.
+/// reduction is exact but for one rounding of `u`. Without a branch (selects), for the arguments
+/// that [`fast_covers`]; anything for others (zeros, infinities, NaN and negative `y`, never from
+/// [`angle_arguments`] with usable normals, go to the library).
 // The coefficients as Cephes publishes them (more digits than an f64 holds).
 #[allow(clippy::excessive_precision)]
 #[inline]
@@ -657,6 +678,15 @@ fn fast_arithmetic((y, x): (f64, f64)) -> f64 {
 mod tests {
     use super::*;
     use crate::shapes::{add_normal_noise, icosphere};
+
+    /// One angle as [`vertex_sums`] takes it: [`fast_arithmetic`] where it covers, else the
+    /// library.
+    fn degrees_of_fast(args: (f64, f64)) -> f64 {
+        match fast_covers(args) {
+            true => fast_arithmetic(args),
+            false => degrees_of(args),
+        }
+    }
 
     fn topo(m: &Mesh) -> Topology {
         Topology::build(m.positions.len(), &m.triangles).unwrap()
@@ -881,7 +911,8 @@ mod tests {
     /// [`vertex_sums`] against the plain definition: each vertex `i` in ascending order, its
     /// faces whose smallest corner it is (volume and area), each edge `(i, j)`, `i < j`, ascending;
     /// its faces looked for among all faces of `i`; an angle when there are exactly two, both with
-    /// a usable normal. Bit for bit (with the same arctangent: the library's is held to it apart),
+    /// a usable normal. Bit for bit (with the same arctangent, the library's held to it apart, and
+    /// the determinant as `(p_a − o) · n`; `tests/engine.rs` holds both to the plain formulas),
     /// on a mesh with every special case: a hub above the small-degree search, a non-manifold
     /// fin, a boundary, a zero-area face, a degenerate face, flipped faces.
     #[test]
@@ -922,8 +953,8 @@ mod tests {
                 for &f in t.faces_of(i) {
                     let tri = m.triangles[f as usize];
                     if tri.iter().all(|&v| v >= i) {
-                        let [a, b, c] = tri.map(|v| pos[v as usize] - origin);
-                        expected.determinants += a.dot(b.cross(c));
+                        let a = pos[tri[0] as usize] - origin;
+                        expected.determinants += a.dot(normal(tri));
                         expected.doubled_area += normal(tri).length();
                     }
                 }
