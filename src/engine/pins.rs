@@ -365,8 +365,7 @@ impl Plan {
             guided::filter_normals(&mut exec, &parts, tris, pos, fields, iterations, cut)
         };
         self.topology
-            .crease(&r.triangles, &r.positions, normals, angle);
-        Ok(())
+            .crease(storage, &r.triangles, &r.positions, normals, angle)
     }
 }
 
