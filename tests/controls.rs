@@ -209,8 +209,14 @@ fn creases_on_a_very_noisy_cube_are_its_edges() {
         })
         .collect();
     let mut topo = vcsmooth::Topology::build(cube.positions.len(), &cube.triangles).unwrap();
-    topo.crease(&Storage::heap(), &cube.triangles, &cube.positions, &raw, angle)
-        .unwrap();
+    topo.crease(
+        &Storage::heap(),
+        &cube.triangles,
+        &cube.positions,
+        &raw,
+        angle,
+    )
+    .unwrap();
     let n = cube.positions.len();
     assert!(
         topo.stats.crease_vertices > n * 2 / 3,
@@ -245,7 +251,8 @@ fn creases_on_a_very_noisy_cube_are_its_edges() {
         .filter(|&v| on_edge(v))
         .collect();
     assert!(
-        (35..=110).contains(&stats.crease_vertices) && creases.len() * 10 >= stats.crease_vertices * 9,
+        (35..=110).contains(&stats.crease_vertices)
+            && creases.len() * 10 >= stats.crease_vertices * 9,
         "filtered normals: {} crease vertices, {} of the 92 on the cube's edges",
         stats.crease_vertices,
         creases.len()

@@ -37,8 +37,8 @@ const CREASE_ALIGNMENT: f64 = 0.9;
 
 /// A line vertex's two crease edges go on nearly straight through it: the cosine of the angle
 /// between them is below minus this (the angle above 143°), on the input positions.
-/// Chosen on the machined denoising pairs with [`CREASE_ALIGNMENT`] (tools/denoise_table.py,
-/// docs/quality-research.md §17).
+/// Chosen with [`CREASE_ALIGNMENT`] on the machined denoising pairs (tools/denoise_table.py;
+/// CHANGELOG, results version 8).
 const LINE_STRAIGHTNESS: f64 = 0.8;
 
 impl Topology {
@@ -143,8 +143,8 @@ impl Topology {
                         CREASE
                     } else {
                         let p = positions[v as usize];
-                        let [a, b] = [place[0], place[1]]
-                            .map(|k| positions[nbrs[k as usize] as usize] - p);
+                        let [a, b] =
+                            [place[0], place[1]].map(|k| positions[nbrs[k as usize] as usize] - p);
                         // Two crease edges that turn at the vertex: on noisy input, a zigzag
                         // through the noise; the vertex is smoothed as any other.
                         let straight = a.dot(b) < -LINE_STRAIGHTNESS * a.length() * b.length();
@@ -255,6 +255,63 @@ impl Topology {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A strip of `w + 1` columns folded at 90° along row 2 (the x axis): rows 0–2 in the plane
+    /// z = 0, rows 2–4 in the plane y = 0; vertex `row · (w + 1) + x` at column x.
+    fn fold(w: u32) -> (Vec<[u32; 3]>, Vec<DVec3>) {
+        let mut pos = Vec::new();
+        for &(y, z) in &[(2.0, 0.0), (1.0, 0.0), (0.0, 0.0), (0.0, -1.0), (0.0, -2.0)] {
+            pos.extend((0..=w).map(|x| DVec3::new(x as f64, y, z)));
+        }
+        let mut tris = Vec::new();
+        for row in 0..4 {
+            for col in 0..w {
+                let a = row * (w + 1) + col;
+                tris.extend([[a, a + w + 1, a + 1], [a + 1, a + w + 1, a + w + 2]]);
+            }
+        }
+        (tris, pos)
+    }
+
+    #[test]
+    fn crease_line_vertices_move_along_their_line() {
+        use crate::smooth::laplacian::jacobi_step;
+        let (tris, mut pos) = fold(4);
+        let mut t = Topology::build(pos.len(), &tris).unwrap();
+        let normals: Vec<DVec3> = tris
+            .iter()
+            .map(|f| {
+                let [a, b, c] = f.map(|v| pos[v as usize]);
+                (b - a).cross(c - a).normalize()
+            })
+            .collect();
+        t.crease(&Storage::heap(), &tris, &pos, &normals, 40.0)
+            .unwrap();
+        // Row 2 is vertices 10–14; its ends are on the boundary, fixed and no line vertices.
+        assert_eq!(t.stats.crease_edges, 4);
+        assert_eq!(t.stats.crease_vertices, 3);
+        for v in 0..pos.len() as u32 {
+            let line = (11..=13).contains(&v).then(|| [v - 1, v + 1]);
+            assert_eq!(t.line_neighbors(v), line, "vertex {v}");
+            assert_eq!(t.is_crease(v), line.is_some(), "vertex {v}");
+            // Fixed for the methods that do not smooth creases.
+            assert!(line.is_none() || t.is_fixed(v), "vertex {v}");
+        }
+        // Moved off the crease, a line vertex goes back to its crease neighbours' midpoint, not
+        // towards its ring's (inside the fold); a free vertex goes to its ring's.
+        pos[12] += DVec3::new(0.25, 0.5, -0.5);
+        pos[7] += DVec3::new(0.0, 0.0, 0.5);
+        let mut out = vec![DVec3::ZERO; pos.len()];
+        jacobi_step(&t, &pos, &mut out, 0, 1.0);
+        assert_eq!(out[12], DVec3::new(2.0, 0.0, 0.0));
+        let ring = t
+            .neighbors(7)
+            .iter()
+            .map(|&u| pos[u as usize])
+            .sum::<DVec3>();
+        assert!(out[7].distance(ring / t.deg(7) as f64) < 1e-12);
+        assert_eq!(out[10], pos[10], "a boundary vertex stays");
+    }
 
     #[test]
     fn rim_vertices_are_loop_vertices_until_pinned() {
