@@ -155,21 +155,34 @@ fn creases_keep_a_noisy_cube_sharp_and_its_volume() {
     assert_eq!(stats.crease_edges, 12 * N as usize);
     assert_eq!(stats.crease_vertices, 12 * (N as usize - 1) + 8);
     assert_eq!(stats.fixed_vertices, stats.crease_vertices);
+    // The corners stay; the other edge vertices are smoothed along their edges: the noise had
+    // moved them off the edge lines, the run brings them back nearer.
+    let (mut off_before, mut off_after) = (0.0, 0.0);
     for v in 0..cube.positions.len() {
-        let p = grid.positions[v];
-        let on_edge = p
-            .to_array()
-            .iter()
-            .filter(|&&x| x == 0.0 || x == N as f64)
-            .count()
-            >= 2;
-        if on_edge {
-            assert_eq!(
-                sharp.positions[v], cube.positions[v],
-                "crease vertex {v} moved"
-            );
+        let p = grid.positions[v].to_array();
+        let at_side = |x: f64| x == 0.0 || x == N as f64;
+        match p.iter().filter(|&&x| at_side(x)).count() {
+            3 => assert_eq!(sharp.positions[v], cube.positions[v], "corner {v} moved"),
+            2 => {
+                // Distance to the cube's edge line: the two coordinates at a side.
+                let off = |q: DVec3| {
+                    let q = q.to_array();
+                    (0..3)
+                        .filter(|&k| at_side(p[k]))
+                        .map(|k| (q[k] - p[k]).powi(2))
+                        .sum::<f64>()
+                        .sqrt()
+                };
+                off_before += off(cube.positions[v]);
+                off_after += off(sharp.positions[v]);
+            }
+            _ => {}
         }
     }
+    assert!(
+        off_after < 0.8 * off_before,
+        "edge vertices off their edges: {off_before} before, {off_after} after"
+    );
     let v1 = volume(&sharp);
     assert!(((v1 - v0) / v0).abs() <= 1e-9, "volume {v0} -> {v1}");
     // Any thread count, and the default patch size's other cut, give the same bits.
@@ -196,7 +209,14 @@ fn creases_on_a_very_noisy_cube_are_its_edges() {
         })
         .collect();
     let mut topo = vcsmooth::Topology::build(cube.positions.len(), &cube.triangles).unwrap();
-    topo.crease(&cube.triangles, &cube.positions, &raw, angle);
+    topo.crease(
+        &Storage::heap(),
+        &cube.triangles,
+        &cube.positions,
+        &raw,
+        angle,
+    )
+    .unwrap();
     let n = cube.positions.len();
     assert!(
         topo.stats.crease_vertices > n * 2 / 3,
@@ -213,18 +233,26 @@ fn creases_on_a_very_noisy_cube_are_its_edges() {
     };
     let (rounded, _) = smoothed(&cube, &plain, 2);
     let (sharp, report) = smoothed(&cube, &creased, 1);
-    // The cube's edges have 12 (N - 1) + 8 = 92 vertices; measured: 81 crease vertices, 76 of
-    // them on the edges, normal error 10.9° with creases, 12.6° without, 26.0° noisy.
+    // The cube's edges have 12 (N - 1) + 8 = 92 vertices; measured: 43 crease vertices, all
+    // on the edges (a crease edge must run along its filtered crease, a line go on straight),
+    // normal error 10.8° with creases, 12.6° without, 26.0° noisy.
     let on_edge = |v: usize| {
         let p = clean.positions[v].to_array();
         p.iter().filter(|&&x| x == 0.0 || x == N as f64).count() >= 2
     };
     let stats = report.input_stats.as_ref().unwrap();
+    let storage = Storage::heap();
+    let layout = engine::Layout::Patches(64);
+    let mut plan = engine::Plan::new(&storage, &cube.positions, &cube.triangles, layout).unwrap();
+    plan.crease(&storage, Some(angle)).unwrap();
     let creases: Vec<usize> = (0..n)
-        .filter(|&v| on_edge(v) && sharp.positions[v] == cube.positions[v])
+        .filter(|&new| plan.topology.is_crease(new as u32))
+        .map(|new| plan.reordered.order[new] as usize)
+        .filter(|&v| on_edge(v))
         .collect();
     assert!(
-        (70..=110).contains(&stats.crease_vertices) && creases.len() >= 70,
+        (35..=110).contains(&stats.crease_vertices)
+            && creases.len() * 10 >= stats.crease_vertices * 9,
         "filtered normals: {} crease vertices, {} of the 92 on the cube's edges",
         stats.crease_vertices,
         creases.len()

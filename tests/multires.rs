@@ -491,9 +491,10 @@ fn the_deviation_bound_holds_and_the_volume_stays_exact() {
     );
 }
 
-/// Creases with `--multires`: their vertices keep their input bytes (the coarse transfer and
-/// the final correction leave fixed vertices alone), and the rest is smoothed. On a noisy
-/// machined part, whose creases are its edges (a noisy sphere has none).
+/// Creases with `--multires`: their corners keep their input bytes (the coarse transfer and
+/// the final correction leave fixed vertices alone), the vertices on crease lines move along
+/// them in level 0's steps, and the rest is smoothed. On a noisy machined part, whose creases
+/// are its edges (a noisy sphere has none).
 #[test]
 fn crease_vertices_keep_their_bytes() {
     let dir = tempfile::tempdir().unwrap();
@@ -524,9 +525,10 @@ fn crease_vertices_keep_their_bytes() {
         .zip(b.positions.iter())
         .filter(|(p, q)| p == q)
         .count();
+    // Measured: 247 crease vertices, 11 unmoved (the corners).
     assert!(creased > 10, "{creased}");
     assert!(
-        kept as u64 >= creased,
+        kept > 0 && (kept as u64) < creased / 4,
         "{kept} unmoved, {creased} crease vertices"
     );
     assert!(

@@ -7,7 +7,8 @@
 //!   and of the files it names, method options, patch size, pins). Written last: a directory without it holds no usable plan.
 //! - `order.u32` (reordered → input vertex), `triangles.u32` (reordered, smallest vertex first),
 //!   `vv_offsets.u64`, `vv.u32`, `vf_offsets.u64`, `vf.u32`, `fixed.u8` (the adjacency);
-//!   `welded.u32` (reordered → the vertex whose position it takes), only when some are welded.
+//!   `welded.u32` (reordered → the vertex whose position it takes), only when some are welded;
+//!   `lines.u8` (the crease line vertices' crease neighbours), only with creases.
 //! - `positions-0.f64`, `positions-1.f64`: two slots of `3 × f64` per reordered vertex. An
 //!   iteration's positions go to the slot that `state.json` does not name; only when every rank
 //!   has written and synced its part does rank 0 switch `state.json` (atomic rename) to it. A run
@@ -39,10 +40,11 @@ const STATE: &str = "state.json";
 const INPUT: &str = "input.f64";
 const LOOPS: &str = "loops.u32";
 const WELDED: &str = "welded.u32";
+const LINES: &str = "lines.u8";
 
 /// Every file a run writes in its work directory (and removes from it after a run without
 /// `--checkpoint`): no other file of the run may be one of them.
-pub const FILES: [&str; 14] = [
+pub const FILES: [&str; 15] = [
     PLAN,
     STATE,
     "order.u32",
@@ -57,6 +59,7 @@ pub const FILES: [&str; 14] = [
     INPUT,
     LOOPS,
     WELDED,
+    LINES,
 ];
 
 /// What a plan was made from; a plan is reused only when all of it matches.
@@ -99,6 +102,9 @@ impl PlanKey {
         // positions; keys without them are as they were.
         if let Some(a) = opts.crease_angle {
             options["crease_angle"] = a.into();
+            // Crease line vertices move along their creases (results version 8): a plan made
+            // before, whose topology fixes them, is made again.
+            options["crease_lines"] = true.into();
         }
         if let Some(d) = opts.max_deviation {
             options["max_deviation"] = d.into();
@@ -166,6 +172,9 @@ pub struct PlanDoc {
     /// Welded copies ([`crate::partition::Reordered::welded`]); `welded.u32` is stored when not 0.
     #[serde(default)]
     pub welded: usize,
+    /// Whether the crease line array is stored in `lines.u8` (with creases).
+    #[serde(default)]
+    pub crease_lines: bool,
     pub crossing_edge_stencils: u64,
     pub topology: TopologyStats,
     /// Input statistics, when the run that made the plan measured them.
@@ -279,6 +288,9 @@ impl WorkDir {
         self.write_array("vf_offsets.u64", parts.vf_offsets)?;
         self.write_array("vf.u32", parts.vf)?;
         self.write_array("fixed.u8", parts.fixed)?;
+        if !parts.lines.is_empty() {
+            self.write_array(LINES, parts.lines)?;
+        }
         for slot in [0, 1] {
             let name = format!("positions-{slot}.f64");
             self.write_array(&name, &made.reordered.positions)?;
@@ -317,6 +329,7 @@ impl WorkDir {
             ring_halo: made.schedule.ring_halo.clone(),
             boundary_edges: loops.len(),
             welded: made.reordered.welded,
+            crease_lines: !parts.lines.is_empty(),
             crossing_edge_stencils: stats.crossing_edge_stencils,
             topology: made.topology.stats,
             input_stats,
@@ -348,6 +361,10 @@ impl WorkDir {
             Buf::map_file(&m("vf_offsets.u64"), n + 1)?,
             Buf::map_file(&m("vf.u32"), 3 * (t - doc.topology.degenerate_triangles))?,
             Buf::map_file(&m("fixed.u8"), n)?,
+            match doc.crease_lines {
+                true => Buf::map_file(&m(LINES), 2 * n)?,
+                false => Buf::default(),
+            },
             doc.topology,
         )
         .map_err(|e| Error::invalid(&self.dir, e))?;

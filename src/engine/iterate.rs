@@ -536,10 +536,11 @@ impl Run<'_, '_> {
 
     /// The counts of a Jacobi iteration that updates every owned vertex `steps` times.
     fn vertex_counts(&self, steps: u64) -> SweepStats {
-        let owned = self.share.owned();
-        let fixed = self.mesh.topo.fixed_mask()[owned.clone()]
-            .iter()
-            .filter(|&&f| f != 0)
+        let (owned, topo) = (self.share.owned(), self.mesh.topo);
+        // Crease line vertices move (along their lines).
+        let fixed = owned
+            .clone()
+            .filter(|&v| topo.is_fixed(v as u32) && topo.line_neighbors(v as u32).is_none())
             .count() as u64;
         SweepStats {
             applied: (owned.len() as u64 - fixed) * steps,

@@ -4,7 +4,8 @@
 //! ([`Plan::pin`]), in its own vertex order: no method moves a pinned vertex, and a stencil that
 //! contains one is skipped like a stencil with a boundary vertex, so the volumes of the stencils
 //! that are applied stay exact. Crease vertices ([`Plan::crease`], the options' `crease_angle`)
-//! are fixed the same way.
+//! are fixed the same way, but for those on crease lines, which the methods that smooth creases
+//! move along their lines ([`crate::Topology::line_neighbors`]).
 
 use std::path::{Path, PathBuf};
 
@@ -326,7 +327,7 @@ impl Plan {
         });
     }
 
-    /// Fix the vertices on creases sharper than `angle` degrees (see [`Topology::crease`]) of
+    /// Mark the vertices on creases sharper than `angle` degrees (see [`Topology::crease`]) of
     /// the plan's current positions (the input's, before smoothing); nothing when `None`. The
     /// angle is measured on the input's face normals after [`guided::CREASE_ITERATIONS`]
     /// iterations of the guided normal filter ([`guided::filter_normals`]) that never averages
@@ -365,8 +366,7 @@ impl Plan {
             guided::filter_normals(&mut exec, &parts, tris, pos, fields, iterations, cut)
         };
         self.topology
-            .crease(&r.triangles, &r.positions, normals, angle);
-        Ok(())
+            .crease(storage, &r.triangles, &r.positions, normals, angle)
     }
 }
 

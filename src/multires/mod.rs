@@ -15,7 +15,8 @@
 //! 4. A global volume correction (every movable vertex translated along its volume gradient by a
 //!    common factor, the global form of vcs's step 2) makes the output's volume the input's.
 //!
-//! Pins and creases fix vertices of level 0, which neither the transfer nor the correction moves.
+//! Pins and crease corners fix vertices of level 0, which neither the transfer nor the
+//! correction moves; crease line vertices move along their lines in level 0's steps only.
 //! With the automatic stop level 0 stops when its noise is gone; with a deviation bound level 0
 //! stays within it of the input through the transfer, the fine method and the correction
 //! ([`transfer::restore_volume_within`]).

@@ -329,7 +329,7 @@ pub fn fit_into(
         let v = (first + k) as u32;
         let p = from[v as usize];
         let faces = topo.faces_of(v);
-        if topo.is_fixed(v) || faces.is_empty() {
+        if !topo.is_free_or_on_line(v) || faces.is_empty() {
             *o = p;
             continue;
         }

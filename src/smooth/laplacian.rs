@@ -16,7 +16,9 @@ pub fn umbrella(topo: &Topology, pos: &[DVec3], v: u32) -> DVec3 {
 
 /// One Jacobi step `p' = p + λ L(p)` for the vertices `first .. first + dst.len()`, reading only `src`.
 ///
-/// Fixed vertices are copied unchanged. Each output depends only on `src`, so any split of the vertex
+/// Fixed vertices are copied unchanged, but for crease line vertices
+/// ([`Topology::line_neighbors`]), whose umbrella is that of their line: the mean of their two
+/// crease neighbours. Each output depends only on `src`, so any split of the vertex
 /// range over threads gives bit-identical results. Returns the number of vertices moved.
 pub fn jacobi_step(
     topo: &Topology,
@@ -145,22 +147,30 @@ fn step<const MEASURE: u8, const CLAMP: bool>(
     let mut st = StepStats::default();
     for k in 0..n {
         let p = own[k];
-        let new = if fixed[k] != 0 {
-            p
-        } else {
-            st.moved += 1;
+        let stepped = if fixed[k] == 0 {
             let nbrs = &vv[offsets[k]..offsets[k + 1]];
             let mut sum = DVec3::ZERO;
             for &u in nbrs {
                 // SAFETY: `u < topo.len() <= src.len()` (asserted above).
                 sum += unsafe { *src.get_unchecked(u as usize) };
             }
-            let new = p + lambda * (sum * inv_deg(nbrs.len()) - p);
-            if CLAMP {
-                clamp_to_ball(new, input[first + k], limit)
-            } else {
-                new
+            Some(p + lambda * (sum * inv_deg(nbrs.len()) - p))
+        } else {
+            // A crease line vertex steps along its line: the umbrella of its two crease
+            // neighbours (a lookup only fixed vertices make).
+            topo.line_neighbors((first + k) as u32)
+                .map(|[a, b]| p + lambda * ((src[a as usize] + src[b as usize]) * 0.5 - p))
+        };
+        let new = match stepped {
+            Some(new) => {
+                st.moved += 1;
+                if CLAMP {
+                    clamp_to_ball(new, input[first + k], limit)
+                } else {
+                    new
+                }
             }
+            None => p,
         };
         if MEASURE != NO_MEASURE {
             let before = if MEASURE == FROM_SRC { p } else { dst[k] };

@@ -7,7 +7,9 @@
 //! is test code (`tests/oracles/lowpass.rs`).
 //!
 //! One iteration on positions `P`:
-//! 1. `D = T(P) − P`, `T` = Taubin's λ then μ umbrella step, Jacobi, fixed vertices kept.
+//! 1. `D = T(P) − P`, `T` = Taubin's λ then μ umbrella step, Jacobi, fixed vertices kept; a
+//!    crease line vertex takes the steps of its line (`laplacian::jacobi_step`), so that it
+//!    moves along its crease, and is movable below.
 //! 2. The vertices of each patch are cut evenly into blocks of [`BLOCK`] to `2 · BLOCK − 1`
 //!    consecutive ids of the plan's (Morton) order ([`blocks`]; a patch shorter than [`BLOCK`]
 //!    is one block). Gauss–Seidel over the blocks, ascending: the block's movable vertices `M`
@@ -206,7 +208,7 @@ fn apply_block_lanes<P: Field + ?Sized, D: Field + ?Sized>(
     scratch.free.clear();
     scratch
         .free
-        .extend(block.clone().map(|u| !topo.is_fixed(u)));
+        .extend(block.clone().map(|u| topo.is_free_or_on_line(u)));
     if !scratch.free.contains(&true) {
         return Outcome::SkippedFixed;
     }

@@ -183,7 +183,7 @@ impl FromStr for Method {
 /// | `lambda` | 0.5 | `laplacian` (its step), `taubin` and `vcs-lowpass` (their first step) |
 /// | `mu` | the method's: −0.53 for `taubin`, −0.52 for `vcs-lowpass` | `taubin` and `vcs-lowpass` (their second step; negative, `|μ| > λ`) |
 /// | `reject_energy_increase` | false | `lem`, `vcs`, `vcs-triangle` |
-/// | `crease_angle` | none | every method: vertices on two or more edges whose faces' normals differ by more than this many degrees (on the input, and on its filtered normals) are fixed |
+/// | `crease_angle` | none | every method: edges whose faces' normals differ by more than this many degrees (on the input, and on its filtered normals) are creases; corners are fixed, crease line vertices smoothed along their lines (see the field) |
 /// | `max_deviation` | none | every method: no vertex ends farther than this from its input position (see below) |
 /// | `weld`, `weld_tolerance` | true, 0 | every method: vertices at one position (or, with a tolerance, closer than it) are smoothed as one |
 ///
@@ -212,9 +212,12 @@ pub struct Options {
     pub reject_energy_increase: bool,
     /// Crease angle in degrees, in (0, 180): an edge of two triangles whose normals differ by
     /// more than this on the input positions and after a guided filter of the input's face
-    /// normals (so that noise makes no creases; see `Plan::crease`) is a crease, and the
-    /// vertices on two or more crease edges are fixed, corners where creases meet included.
-    /// `None`: no creases.
+    /// normals (so that noise makes no creases; see `Plan::crease`) is a crease. Corners (three
+    /// or more crease edges) are fixed; a vertex on a crease line (two crease edges going on
+    /// nearly straight, see [`Topology::line_neighbors`]) is smoothed along its line by
+    /// `laplacian`, `taubin` and `vcs-lowpass` (the umbrella of its two crease neighbours),
+    /// moved as any vertex by `vcs-guided` (whose fit to the filtered normals keeps edges),
+    /// and fixed by `hc`, `lem`, `vcs` and `vcs-triangle`. `None`: no creases.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub crease_angle: Option<f64>,
     /// Largest distance, in model units (> 0, finite), a vertex may end from its input position.

@@ -180,14 +180,14 @@ impl Ring {
 pub fn ring_of(topo: &TopologyParts, v: u32, ring: &mut Ring, sorted: bool) {
     const { assert!(RING_RADIUS == 2, "ring_of walks exactly two rings") };
     ring.clear(v);
-    if topo.is_fixed(v) {
+    if !topo.is_free_or_on_line(v) {
         return;
     }
     ring.reserve(1);
     ring.insert(v);
     let mut fixed_near = false;
     for &u in topo.neighbors(v) {
-        if topo.is_fixed(u) {
+        if !topo.is_free_or_on_line(u) {
             fixed_near = true;
             continue;
         }
@@ -199,7 +199,7 @@ pub fn ring_of(topo: &TopologyParts, v: u32, ring: &mut Ring, sorted: bool) {
             if w == v {
                 continue;
             }
-            if topo.is_fixed(w) {
+            if !topo.is_free_or_on_line(w) {
                 fixed_near = true;
             } else {
                 ring.insert(w);
@@ -300,7 +300,7 @@ pub fn apply_ring<P: Field + ?Sized, D: Field + ?Sized>(
         let near = a == v || around.get(next) == Some(&a);
         let free = |u: u32| {
             if near {
-                ring.all_movable || !topo.is_fixed(u)
+                ring.all_movable || topo.is_free_or_on_line(u)
             } else {
                 ring.contains(u)
             }

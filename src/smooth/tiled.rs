@@ -179,11 +179,21 @@ fn build_tile(topo: &Topology, own: Range<usize>, depth: usize, ids: &mut RingId
     // The row of `v`, its neighbours outside the tile joining the next ring. `None`: the tile
     // does not fit 16-bit ids, or the row cannot be expressed (see below).
     let mut row = |v: usize, gather: &mut Vec<u32>| -> Option<u8> {
-        if fixed[v] != 0 {
-            // Copied unchanged: its neighbours are not needed.
-            return Some(0);
-        }
-        let nb = nbrs_of(v);
+        let line;
+        let nb = if fixed[v] == 0 {
+            nbrs_of(v)
+        } else {
+            match topo.line_neighbors(v as u32) {
+                // A crease line vertex: a row of its two crease neighbours, whose mean is
+                // `jacobi_step`'s (a sum from zero, times 1/2).
+                Some(pair) => {
+                    line = pair;
+                    &line[..]
+                }
+                // Copied unchanged: its neighbours are not needed.
+                None => return Some(0),
+            }
+        };
         if nb.is_empty() || nb.len() >= INTERIOR as usize {
             // No neighbour: `jacobi_step` would move it (towards the origin), which an empty row
             // cannot say; 255 or more: the length does not fit the kind byte. Both are left to

@@ -231,6 +231,7 @@ impl Topology {
             vf_offsets,
             vf,
             fixed,
+            lines: Buf::default(),
             stats,
         })
     }

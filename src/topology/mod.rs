@@ -48,6 +48,10 @@ pub struct Topology {
     vf_offsets: Buf<usize>,
     vf: Buf<u32>,
     fixed: Buf<u8>,
+    /// Two bytes per vertex when creases were detected (empty otherwise): for a crease line
+    /// vertex ([`Topology::line_neighbors`]), the places of its two crease neighbours in its
+    /// neighbour list.
+    lines: Buf<u8>,
     /// Counts found while building, for `info` and reports.
     pub stats: TopologyStats,
 }
@@ -61,8 +65,11 @@ pub struct TopologyParts<'a> {
     /// Vertex → face CSR offsets (`len + 1`) and triangle indices.
     pub vf_offsets: &'a [usize],
     pub vf: &'a [u32],
-    /// One byte per vertex, 1 = fixed.
+    /// One byte per vertex, non-zero = fixed (see [`Topology::fixed_mask`]).
     pub fixed: &'a [u8],
+    /// Empty, or two bytes per vertex: the crease line vertices' crease neighbours, as places in
+    /// their neighbour lists ([`Topology::line_neighbors`]).
+    pub lines: &'a [u8],
 }
 
 /// The accessors of [`Topology`] on the plain slices: a kernel takes the parts once per sweep,
@@ -91,6 +98,32 @@ impl<'a> TopologyParts<'a> {
     pub fn is_fixed(&self, v: u32) -> bool {
         self.fixed[v as usize] != 0
     }
+
+    /// Whether a method that smooths creases moves `v`: it is free, or a crease line vertex.
+    #[inline(always)]
+    pub fn is_free_or_on_line(&self, v: u32) -> bool {
+        !self.is_fixed(v) || self.line_neighbors(v).is_some()
+    }
+
+    /// [`Topology::line_neighbors`].
+    #[inline(always)]
+    pub fn line_neighbors(&self, v: u32) -> Option<[u32; 2]> {
+        line_neighbors(self.fixed, self.lines, self.neighbors(v), v)
+    }
+}
+
+/// The crease neighbours of `v` if its mask entry marks a crease line vertex, from its places in
+/// `neighbors` (`v`'s list); `None` also for places out of range (a damaged stored plan).
+#[inline(always)]
+fn line_neighbors(fixed: &[u8], lines: &[u8], neighbors: &[u32], v: u32) -> Option<[u32; 2]> {
+    if fixed[v as usize] & masks::LINE == 0 {
+        return None;
+    }
+    let at = lines.get(2 * v as usize..2 * v as usize + 2)?;
+    Some([
+        *neighbors.get(at[0] as usize)?,
+        *neighbors.get(at[1] as usize)?,
+    ])
 }
 
 /// Most neighbours a vertex may have and still move. A stencil with a free vertex of degree d
@@ -115,6 +148,7 @@ impl Topology {
             vf_offsets: &self.vf_offsets,
             vf: &self.vf,
             fixed: &self.fixed,
+            lines: &self.lines,
         }
     }
 
@@ -128,9 +162,13 @@ impl Topology {
         vf_offsets: Buf<usize>,
         vf: Buf<u32>,
         fixed: Buf<u8>,
+        lines: Buf<u8>,
         stats: TopologyStats,
     ) -> std::result::Result<Topology, String> {
         let n = fixed.len();
+        if !(lines.is_empty() || lines.len() == 2 * n) {
+            return Err("crease line array has the wrong size".into());
+        }
         let shape_ok = |offsets: &[usize], data: usize| {
             offsets.len() == n + 1 && offsets.first() == Some(&0) && offsets.last() == Some(&data)
         };
@@ -146,6 +184,7 @@ impl Topology {
             vf_offsets,
             vf,
             fixed,
+            lines,
             stats,
         })
     }
@@ -214,9 +253,18 @@ impl Topology {
     }
 
     /// The fixed-vertex mask, one entry per vertex (non-zero = fixed; bit 2 also marks a crease
-    /// vertex, bit 3 a loop vertex).
+    /// vertex, bit 3 a loop vertex, bit 4 a crease line vertex).
     pub fn fixed_mask(&self) -> &[u8] {
         &self.fixed
+    }
+
+    /// The two crease neighbours of `v` when it is a crease line vertex (on exactly two crease
+    /// edges, see [`Topology::crease`]), ascending: the methods that smooth creases move it as a
+    /// point of that line; every other method keeps it fixed, as it keeps a corner. `None` for
+    /// any other vertex.
+    #[inline]
+    pub fn line_neighbors(&self, v: u32) -> Option<[u32; 2]> {
+        line_neighbors(&self.fixed, &self.lines, self.neighbors(v), v)
     }
 
     /// Every undirected edge once, as `(i, j)` with `i < j`, in ascending `(i, j)` order: the edge
@@ -256,6 +304,9 @@ impl Topology {
         if let Some(a) = self.fixed.advisor() {
             a.will_need(lo..hi);
         }
+        if let Some(a) = self.lines.advisor() {
+            a.will_need(2 * lo..2 * hi);
+        }
         if let Some(a) = self.vv.advisor() {
             a.will_need(self.vv_offsets[lo]..self.vv_offsets[hi]);
         }
@@ -269,5 +320,6 @@ impl Topology {
         (self.vv_offsets.len() + self.vf_offsets.len()) * std::mem::size_of::<usize>()
             + (self.vv.len() + self.vf.len()) * 4
             + self.fixed.len()
+            + self.lines.len()
     }
 }
