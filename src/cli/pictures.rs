@@ -92,27 +92,6 @@ impl Sheet {
         meter: &Meter,
     ) -> Result<()> {
         let clock = Instant::now();
-        let frames = self.frames(triangles.len())?;
-        frames.draw_all(positions, triangles, meter);
-        self.seconds += clock.elapsed().as_secs_f64();
-        self.shade(label, &frames, positions, triangles, distances)
-    }
-
-    /// Empty frames for a mesh of `triangles` triangles, to draw into and [`Sheet::shade`].
-    pub fn frames(&self, triangles: usize) -> Result<render::Frames> {
-        render::Frames::new(&self.cameras, triangles)
-    }
-
-    /// The rows of `frames`, every triangle drawn, as [`Sheet::draw`] makes them.
-    pub fn shade(
-        &mut self,
-        label: String,
-        frames: &render::Frames,
-        positions: &[DVec3],
-        triangles: &[[u32; 3]],
-        distances: Option<(&[f32], String)>,
-    ) -> Result<()> {
-        let clock = Instant::now();
         let mut paints = vec![Paint::Grey];
         let mut scale = None;
         if let Some((values, what)) = &distances {
@@ -123,7 +102,7 @@ impl Sheet {
             paints.push(Paint::Values { values, scale: s });
             scale = Some((s, what.clone()));
         }
-        let mut drawn = frames.shade(positions, triangles, &paints)?;
+        let mut drawn = render::render(&self.cameras, positions, triangles, &paints, meter)?;
         let coloured = (drawn.len() > 1).then(|| drawn.pop()).flatten();
         let grey = drawn.pop().unwrap_or_default();
         self.rows.push(Row {
@@ -305,23 +284,17 @@ impl Observer for RunPictures<'_> {
                 let label = self.labels.1.clone();
                 let sheet = self.phase(triangles.len(), |meter| {
                     let clock = Instant::now();
-                    // Drawn in the deviation's pass over the triangles.
-                    let frames = sheet.frames(triangles.len())?;
-                    let moved = crate::engine::deviation::signed_with(
+                    let moved = crate::engine::deviation::signed(
                         storage,
                         &before,
                         positions,
                         triangles,
                         |d| d as f32,
-                        |first, run| {
-                            frames.draw(positions, first, run);
-                            meter.add(run.len() as u64);
-                        },
                     )?;
                     drop(before);
                     sheet.seconds += clock.elapsed().as_secs_f64();
                     let distances = Some((&moved[..], DEVIATION.to_string()));
-                    sheet.shade(label, &frames, positions, triangles, distances)?;
+                    sheet.draw(label, positions, triangles, distances, meter)?;
                     Ok(sheet)
                 })?;
                 self.sheet = Some(sheet);

@@ -85,7 +85,7 @@ pub fn field(
         None => output[i],
     };
     let n = input.len();
-    let signed = signed_into(storage, input, triangles, at, |d| d, |_, _| {})?;
+    let signed = signed_into(storage, input, triangles, at, |d| d)?;
     let mut distance: Buf<f64> = storage.zeroed(n)?;
     reduce::for_chunks_mut(&mut distance, |first, out| {
         for (k, d) in out.iter_mut().enumerate() {
@@ -196,32 +196,17 @@ pub fn signed<T: crate::mesh::storage::Pod, P: Points + ?Sized>(
     triangles: &[[u32; 3]],
     to: impl Fn(f64) -> T + Sync,
 ) -> Result<Buf<T>> {
-    signed_into(storage, input, triangles, |i| output[i], to, |_, _| {})
-}
-
-/// [`signed`], and `also(first, run)` on runs of the triangles (`first` the index of the run's
-/// first), each triangle in one run: in the pass that reads them when there is one (a picture
-/// draws them there, reading them and the output's positions once for both).
-pub fn signed_with<T: crate::mesh::storage::Pod, P: Points + ?Sized>(
-    storage: &Storage,
-    input: &P,
-    output: &[DVec3],
-    triangles: &[[u32; 3]],
-    to: impl Fn(f64) -> T + Sync,
-    also: impl Fn(usize, &[[u32; 3]]) + Sync,
-) -> Result<Buf<T>> {
-    signed_into(storage, input, triangles, |i| output[i], to, also)
+    signed_into(storage, input, triangles, |i| output[i], to)
 }
 
 /// Each vertex's signed deviation from `input` to `at(i)` along `input`'s vertex normal over
-/// `triangles`, as `to` makes it, in `storage`; `also` as [`signed_with`] says.
+/// `triangles`, as `to` makes it, in `storage`.
 fn signed_into<T: crate::mesh::storage::Pod, P: Points + ?Sized>(
     storage: &Storage,
     input: &P,
     triangles: &[[u32; 3]],
     at: impl Fn(usize) -> DVec3 + Sync,
     to: impl Fn(f64) -> T + Sync,
-    also: impl Fn(usize, &[[u32; 3]]) + Sync,
 ) -> Result<Buf<T>> {
     let n = input.count();
     let mut signed: Buf<T> = storage.zeroed(n)?;
@@ -229,13 +214,9 @@ fn signed_into<T: crate::mesh::storage::Pod, P: Points + ?Sized>(
     if !storage.is_mapped()
         && let Some(reaching) = Reaching::of(triangles, n, SUM_CHUNK_SHIFT)
     {
-        signed_by_chunks(&mut signed, input, triangles, &reaching, &at, &to, &also);
+        signed_by_chunks(&mut signed, input, triangles, &reaching, &at, &to);
         return Ok(signed);
     }
-    triangles
-        .par_chunks(reduce::CHUNK)
-        .enumerate()
-        .for_each(|(c, run)| also(c * reduce::CHUNK, run));
     let normals = normal_sums(storage, input, triangles)?;
     reduce::for_chunks_mut(&mut signed, |first, out| {
         for (k, d) in out.iter_mut().enumerate() {
@@ -310,7 +291,6 @@ impl Reaching {
 
 /// [`signed_into`]'s values into `signed`, chunk by chunk of `reaching`'s vertices, each
 /// chunk's normal sums in a buffer of its own (no array of every vertex's sums): the same bits.
-/// `also` takes each chunk's own run of the triangles before its sums.
 fn signed_by_chunks<T: Send, P: Points + ?Sized>(
     signed: &mut [T],
     input: &P,
@@ -318,7 +298,6 @@ fn signed_by_chunks<T: Send, P: Points + ?Sized>(
     reaching: &Reaching,
     at: &(impl Fn(usize) -> DVec3 + Sync),
     to: &(impl Fn(f64) -> T + Sync),
-    also: &(impl Fn(usize, &[[u32; 3]]) + Sync),
 ) {
     let begin = |v: usize| triangles.partition_point(|t| (t[0] as usize) < v);
     signed
@@ -329,7 +308,6 @@ fn signed_by_chunks<T: Send, P: Points + ?Sized>(
             sums.clear();
             sums.resize(out.len(), DVec3::ZERO);
             let own = begin(first)..begin(first + out.len());
-            also(own.start, &triangles[own.clone()]);
             let reach = reaching.into[c].iter().map(|&t| t as usize);
             for t in reach.chain(own) {
                 kernel::add_normal(input, triangles[t], first, sums);
@@ -470,7 +448,6 @@ mod tests {
                 &reaching,
                 &|i| output[i],
                 &|d| d,
-                &|_, _| {},
             );
             assert_eq!(bits(&got), bits(&expected), "chunks of 2^{shift}");
         }
@@ -507,37 +484,6 @@ mod tests {
         let expected = kernel::signed_deviations(&input, &output, &triangles);
         let got = signed(&Storage::heap(), &input[..], &output, &triangles, |d| d).unwrap();
         assert_eq!(bits(&got), bits(&expected));
-    }
-
-    #[test]
-    fn every_triangle_is_in_one_run_of_signed_with() {
-        let (input, output, triangles) = in_plan_order();
-        let mut shuffled = triangles.clone();
-        shuffled.reverse();
-        for tris in [&triangles, &shuffled] {
-            let seen: Vec<std::sync::atomic::AtomicU32> =
-                tris.iter().map(|_| Default::default()).collect();
-            let got = signed_with(
-                &Storage::heap(),
-                &input[..],
-                &output,
-                tris,
-                |d| d,
-                |first, run| {
-                    for (k, t) in run.iter().enumerate() {
-                        assert_eq!(*t, tris[first + k]);
-                        seen[first + k].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                    }
-                },
-            )
-            .unwrap();
-            assert!(
-                seen.iter()
-                    .all(|s| s.load(std::sync::atomic::Ordering::Relaxed) == 1)
-            );
-            let expected = kernel::signed_deviations(&input, &output, tris);
-            assert_eq!(bits(&got), bits(&expected));
-        }
     }
 
     #[test]

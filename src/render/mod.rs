@@ -38,7 +38,7 @@ pub use raster::Paint;
 pub use sheet::{Row, compose};
 
 use crate::error::{Error, Result};
-use crate::meter::{Meter, STEP};
+use crate::meter::Meter;
 
 /// Samples per pixel along each axis.
 pub const SAMPLES: usize = 3;
@@ -59,74 +59,51 @@ pub fn cameras(views: &[View], seen: &[Bounds], size: usize) -> Vec<Camera> {
         .collect()
 }
 
-/// The frames of a picture through each of some cameras, while its triangles are drawn: in any
-/// chunks and order, from any thread (each sample keeps the nearest triangle over it), then
-/// shaded.
-pub struct Frames(Vec<raster::Frame>);
-
-impl Frames {
-    /// Empty frames for a mesh of `triangles` triangles.
-    pub fn new(cameras: &[Camera], triangles: usize) -> Result<Frames> {
-        if triangles as u64 > raster::MAX_TRIANGLES {
-            return Err(Error::resource(format!(
-                "{triangles} triangles are more than a picture can tell apart ({})",
-                raster::MAX_TRIANGLES
-            )));
-        }
-        Ok(Frames(
-            cameras
-                .iter()
-                .map(|c| raster::Frame::new(c.scaled(SAMPLES)))
-                .collect(),
-        ))
+/// Pictures of the mesh of `positions` and `triangles` through each of `cameras`, once under each
+/// of `paints`: `result[paint][camera]`. The triangles are drawn once (on the current rayon pool,
+/// `meter` counting them) for all the cameras and paints.
+pub fn render(
+    cameras: &[Camera],
+    positions: &[DVec3],
+    triangles: &[[u32; 3]],
+    paints: &[Paint],
+    meter: &Meter,
+) -> Result<Vec<Vec<Image>>> {
+    if triangles.len() as u64 > raster::MAX_TRIANGLES {
+        return Err(Error::resource(format!(
+            "{} triangles are more than a picture can tell apart ({})",
+            triangles.len(),
+            raster::MAX_TRIANGLES
+        )));
     }
-
-    /// Draws every triangle into every frame, in chunks on the current rayon pool, `meter`
-    /// counting them.
-    pub fn draw_all(&self, positions: &[DVec3], triangles: &[[u32; 3]], meter: &Meter) {
-        parallel::draw(&self.0, positions, triangles, meter);
-    }
-
-    /// Draws `triangles`, the mesh's from index `first` on, into every frame, on this thread.
-    pub fn draw(&self, positions: &[DVec3], first: usize, triangles: &[[u32; 3]]) {
-        for (k, chunk) in triangles.chunks(STEP).enumerate() {
-            raster::draw_triangles(&self.0, positions, first + k * STEP, chunk);
+    for paint in paints {
+        if let Paint::Values { values, .. } = paint
+            && values.len() != positions.len()
+        {
+            return Err(Error::parameter(
+                "values",
+                format!(
+                    "{} values for {} vertices: a picture colours every vertex",
+                    values.len(),
+                    positions.len()
+                ),
+            ));
         }
     }
-
-    /// The pictures of the frames once every triangle is drawn, under each of `paints`:
-    /// `result[paint][camera]`.
-    pub fn shade(
-        &self,
-        positions: &[DVec3],
-        triangles: &[[u32; 3]],
-        paints: &[Paint],
-    ) -> Result<Vec<Vec<Image>>> {
-        for paint in paints {
-            if let Paint::Values { values, .. } = paint
-                && values.len() != positions.len()
-            {
-                return Err(Error::parameter(
-                    "values",
-                    format!(
-                        "{} values for {} vertices: a picture colours every vertex",
-                        values.len(),
-                        positions.len()
-                    ),
-                ));
-            }
-        }
-        // Shaded frame by frame, all the paints at once; handed back paint by paint.
-        let mut shaded: Vec<std::vec::IntoIter<Image>> = self
-            .0
-            .iter()
-            .map(|f| parallel::shade(f, positions, triangles, paints, SAMPLES).into_iter())
-            .collect();
-        Ok(paints
-            .iter()
-            .map(|_| shaded.iter_mut().filter_map(Iterator::next).collect())
-            .collect())
-    }
+    let frames: Vec<raster::Frame> = cameras
+        .iter()
+        .map(|c| raster::Frame::new(c.scaled(SAMPLES)))
+        .collect();
+    parallel::draw(&frames, positions, triangles, meter);
+    // Shaded frame by frame, all the paints at once; handed back paint by paint.
+    let mut shaded: Vec<std::vec::IntoIter<Image>> = frames
+        .iter()
+        .map(|f| parallel::shade(f, positions, triangles, paints, SAMPLES).into_iter())
+        .collect();
+    Ok(paints
+        .iter()
+        .map(|_| shaded.iter_mut().filter_map(Iterator::next).collect())
+        .collect())
 }
 
 /// A fixed pseudo-random sequence in [0, 1) (xorshift), for the renderer's tests.
