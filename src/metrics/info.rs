@@ -39,8 +39,8 @@ pub struct MeshInfo {
     /// Vertices with more neighbours than [`crate::topology::MAX_FREE_DEGREE`]; they are fixed.
     #[serde(default)]
     pub high_degree_vertices: usize,
-    /// Vertices that no method moves (boundary, non-manifold, degenerate, unreferenced, hubs,
-    /// orientation seams).
+    /// Vertices that no method moves freely (boundary, non-manifold, degenerate, unreferenced,
+    /// hubs, orientation seams, pins, crease vertices: see `crease_vertices`).
     #[serde(default)]
     pub fixed_vertices: usize,
     /// Vertices pinned by the run (`pins` of [`crate::EngineSettings`]); included in
@@ -51,7 +51,9 @@ pub struct MeshInfo {
     /// differ by more than the angle on the input and on its filtered normals.
     #[serde(default)]
     pub crease_edges: usize,
-    /// Vertices on two or more crease edges; fixed, and included in `fixed_vertices`.
+    /// Vertices on two or more crease edges, included in `fixed_vertices`: a corner (three or
+    /// more) never moves; a vertex on a crease line moves only along it with `laplacian`, `taubin`
+    /// and `vcs-lowpass`, as any vertex with `vcs-guided`, and not at all with the others.
     #[serde(default)]
     pub crease_vertices: usize,
     /// Connected components of the (non-degenerate) triangles, through shared vertices;
