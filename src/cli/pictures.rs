@@ -258,19 +258,12 @@ impl Observer for RunPictures<'_> {
                 };
                 let label = self.labels.0.clone();
                 let (sheet, before) = self.phase(triangles.len(), |meter| {
-                    let clock = Instant::now();
-                    // The views' bounds in the copy's pass over the positions.
-                    let (before, seen) = Kept::of(
-                        storage,
-                        positions,
-                        |chunk| View::STANDARD.map(|v| render::Bounds::in_view(chunk, v)),
-                        [render::Bounds::EMPTY; View::STANDARD.len()],
-                        |a, b| std::array::from_fn(|k| a[k].union(b[k])),
-                    )?;
-                    let seconds = clock.elapsed().as_secs_f64();
+                    let seen = render::view_bounds(positions, &View::STANDARD);
                     let mut sheet = Sheet::new(cfg, &seen);
-                    sheet.seconds += seconds;
                     sheet.draw(label, positions, triangles, None, meter)?;
+                    let clock = Instant::now();
+                    let before = Kept::of(storage, positions)?;
+                    sheet.seconds += clock.elapsed().as_secs_f64();
                     Ok((sheet, before))
                 })?;
                 self.sheet = Some(sheet);

@@ -134,17 +134,10 @@ pub enum Kept {
 }
 
 impl Kept {
-    /// A copy of `positions` in `storage`, and `measure` of its chunks folded in chunk order
-    /// from `init` (as a picture's view bounds), taken in the same pass over the positions.
-    pub fn of<R: Send>(
-        storage: &Storage,
-        positions: &[DVec3],
-        measure: impl Fn(&[DVec3]) -> R + Sync,
-        init: R,
-        fold: impl Fn(R, R) -> R,
-    ) -> Result<(Kept, R)> {
+    /// A copy of `positions` in `storage`.
+    pub fn of(storage: &Storage, positions: &[DVec3]) -> Result<Kept> {
         let mut single = storage.working::<[f32; 3]>(positions.len())?;
-        let (exact, measured) = reduce::map_fold_mut(
+        let exact = reduce::map_fold_mut(
             &mut single,
             |first, chunk| {
                 let mut exact = true;
@@ -153,20 +146,20 @@ impl Kept {
                     *s = p.as_vec3().to_array();
                     exact &= s.map(f64::from) == p.to_array();
                 }
-                (exact, measure(&positions[first..first + chunk.len()]))
+                exact
             },
-            (true, init),
-            |(a, x), (b, y)| (a && b, fold(x, y)),
+            true,
+            |a, b| a && b,
         );
         if exact {
-            return Ok((Kept::Single(single), measured));
+            return Ok(Kept::Single(single));
         }
         drop(single);
         let mut double = storage.working::<DVec3>(positions.len())?;
         reduce::for_chunks_mut(&mut double, |first, chunk| {
             chunk.copy_from_slice(&positions[first..first + chunk.len()])
         });
-        Ok((Kept::Double(double), measured))
+        Ok(Kept::Double(double))
     }
 }
 
@@ -491,10 +484,9 @@ mod tests {
         let (input, output, triangles) = in_plan_order();
         let singles: Vec<DVec3> = input.iter().map(|p| p.as_vec3().as_dvec3()).collect();
         let storage = Storage::heap();
-        let (kept, count) = Kept::of(&storage, &singles, |c| c.len(), 0, |a, b| a + b).unwrap();
-        assert_eq!(count, singles.len());
+        let kept = Kept::of(&storage, &singles).unwrap();
         assert!(matches!(kept, Kept::Single(_)));
-        let (kept_double, _) = Kept::of(&storage, &input, |_| (), (), |_, _| ()).unwrap();
+        let kept_double = Kept::of(&storage, &input).unwrap();
         assert!(matches!(kept_double, Kept::Double(_)));
         for (points, from) in [(&kept, &singles), (&kept_double, &input)] {
             assert_eq!(points.count(), from.len());
@@ -512,8 +504,7 @@ mod tests {
         for odd in [1.0 + f64::EPSILON, f64::NAN, 1e-310] {
             let mut p = singles.clone();
             p[3].y = odd;
-            let (kept, count) = Kept::of(&storage, &p, |c| c.len(), 0, |a, b| a + b).unwrap();
-            assert_eq!(count, p.len());
+            let kept = Kept::of(&storage, &p).unwrap();
             assert!(matches!(kept, Kept::Double(_)), "{odd}");
             assert_eq!(kept.at(3).y.to_bits(), odd.to_bits());
         }
