@@ -536,11 +536,11 @@ impl Run<'_, '_> {
 
     /// The counts of a Jacobi iteration that updates every owned vertex `steps` times.
     fn vertex_counts(&self, steps: u64) -> SweepStats {
-        let (owned, topo) = (self.share.owned(), self.mesh.topo);
+        let (owned, topo) = (self.share.owned(), self.mesh.topo.parts());
         // Crease line vertices move (along their lines).
         let fixed = owned
             .clone()
-            .filter(|&v| topo.is_fixed(v as u32) && topo.line_neighbors(v as u32).is_none())
+            .filter(|&v| !topo.is_free_or_on_line(v as u32))
             .count() as u64;
         SweepStats {
             applied: (owned.len() as u64 - fixed) * steps,
