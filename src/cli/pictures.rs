@@ -277,13 +277,7 @@ impl Observer for RunPictures<'_> {
                 let label = self.labels.1.clone();
                 let sheet = self.phase(triangles.len(), |meter| {
                     let clock = Instant::now();
-                    let moved = crate::engine::deviation::signed(
-                        storage,
-                        &before,
-                        positions,
-                        triangles,
-                        |d| d as f32,
-                    )?;
+                    let moved = before.signed(storage, positions, triangles, |d| d as f32)?;
                     drop(before);
                     sheet.seconds += clock.elapsed().as_secs_f64();
                     let distances = Some((&moved[..], DEVIATION.to_string()));

@@ -163,19 +163,19 @@ impl Kept {
     }
 }
 
-impl Points for Kept {
-    fn count(&self) -> usize {
+impl Kept {
+    /// [`signed`] from these positions: each form read as its plain slice, so that the sums'
+    /// loop does not choose between them at every read.
+    pub fn signed<T: crate::mesh::storage::Pod>(
+        &self,
+        storage: &Storage,
+        output: &[DVec3],
+        triangles: &[[u32; 3]],
+        to: impl Fn(f64) -> T + Sync,
+    ) -> Result<Buf<T>> {
         match self {
-            Kept::Single(p) => p.len(),
-            Kept::Double(p) => p.len(),
-        }
-    }
-
-    #[inline]
-    fn at(&self, i: usize) -> DVec3 {
-        match self {
-            Kept::Single(p) => DVec3::from_array(p[i].map(f64::from)),
-            Kept::Double(p) => p[i],
+            Kept::Single(p) => signed(storage, &p[..], output, triangles, to),
+            Kept::Double(p) => signed(storage, &p[..], output, triangles, to),
         }
     }
 }
@@ -488,16 +488,25 @@ mod tests {
         assert!(matches!(kept, Kept::Single(_)));
         let kept_double = Kept::of(&storage, &input).unwrap();
         assert!(matches!(kept_double, Kept::Double(_)));
-        for (points, from) in [(&kept, &singles), (&kept_double, &input)] {
-            assert_eq!(points.count(), from.len());
-            for (i, p) in from.iter().enumerate() {
+        // The values a kept copy holds, read through its form's `Points`.
+        let values = |kept: &Kept| -> Vec<DVec3> {
+            let read = |p: &dyn Fn(usize) -> DVec3, n| (0..n).map(p).collect();
+            match kept {
+                Kept::Single(p) => read(&|i| p[..].at(i), p.len()),
+                Kept::Double(p) => read(&|i| p[..].at(i), p.len()),
+            }
+        };
+        for (kept, from) in [(&kept, &singles), (&kept_double, &input)] {
+            let held = values(kept);
+            assert_eq!(held.len(), from.len());
+            for (h, p) in held.iter().zip(from) {
                 assert_eq!(
-                    points.at(i).to_array().map(f64::to_bits),
+                    h.to_array().map(f64::to_bits),
                     p.to_array().map(f64::to_bits)
                 );
             }
             let expected = kernel::signed_deviations(from, &output, &triangles);
-            let got = signed(&storage, points, &output, &triangles, |d| d).unwrap();
+            let got = kept.signed(&storage, &output, &triangles, |d| d).unwrap();
             assert_eq!(bits(&got), bits(&expected));
         }
         // A coordinate beyond a single's precision, a NaN: kept as they are.
@@ -506,7 +515,7 @@ mod tests {
             p[3].y = odd;
             let kept = Kept::of(&storage, &p).unwrap();
             assert!(matches!(kept, Kept::Double(_)), "{odd}");
-            assert_eq!(kept.at(3).y.to_bits(), odd.to_bits());
+            assert_eq!(values(&kept)[3].y.to_bits(), odd.to_bits());
         }
     }
 }

@@ -50,6 +50,17 @@ impl Points for [DVec3] {
     }
 }
 
+impl Points for [[f32; 3]] {
+    fn count(&self) -> usize {
+        self.len()
+    }
+
+    #[inline]
+    fn at(&self, i: usize) -> DVec3 {
+        DVec3::from_array(self[i].map(f64::from))
+    }
+}
+
 /// [`vertex_normal_sums`] of the vertices `first..first + sums.len()` alone, into `sums`: the
 /// same bits (each sum in triangle order), so that disjoint ranges can be summed apart.
 pub fn vertex_normal_sums_from<P: Points + ?Sized>(

@@ -263,7 +263,6 @@ const VALUE_SHADOW: f64 = 0.45;
 
 /// A visible triangle as the paints need it, found once for all the samples that show it.
 struct Seen {
-    index: usize,
     ids: [u32; 3],
     /// Its corners in frame coordinates (only when a paint interpolates values).
     corners: Option<[DVec2; 3]>,
@@ -272,14 +271,7 @@ struct Seen {
 }
 
 impl Seen {
-    fn new(
-        frame: &Frame,
-        positions: &[DVec3],
-        triangles: &[[u32; 3]],
-        index: usize,
-        corners: bool,
-    ) -> Seen {
-        let ids = triangles[index];
+    fn new(frame: &Frame, positions: &[DVec3], ids: [u32; 3], corners: bool) -> Seen {
         let [a, b, c] = [0, 1, 2].map(|k| positions[ids[k] as usize]);
         let normal = (b - a).cross(c - a);
         let lit = match normal.length() {
@@ -288,7 +280,6 @@ impl Seen {
         };
         let cam = &frame.camera;
         Seen {
-            index,
             ids,
             corners: corners.then(|| [a, b, c].map(|p| cam.project(p).truncate())),
             lit,
@@ -331,23 +322,85 @@ fn barycentric([a, b, c]: [DVec2; 3], p: DVec2) -> [f64; 3] {
     }
 }
 
-/// The visible triangles of a frame as the paints need them, the last one kept: a triangle is
-/// looked up once for a run of samples that show it.
-struct Lookup<'a> {
-    frame: &'a Frame,
-    positions: &'a [DVec3],
-    triangles: &'a [[u32; 3]],
-    corners: bool,
-    last: Option<Seen>,
+/// Pixels a [`Looked`] takes at once: their samples' triangles (at most `SEGMENT × factor²`)
+/// stay in the first levels of the cache between the look-up and the shading.
+const SEGMENT: usize = 64;
+
+/// The visible triangles of a segment of a pixel row, looked up for all its samples at once. On a
+/// large mesh nearly every sample shows a triangle of its own, far in memory from the last one:
+/// one triangle at a time, each look-up waits for its triangle's corners and then their
+/// positions. Each step here is a loop of reads that do not wait for one another, which the
+/// processor overlaps.
+#[derive(Default)]
+struct Looked {
+    /// The triangle each sample shows (`NONE` for none), row by row of the segment's samples.
+    triangle: Vec<usize>,
+    /// Each sample's place in `seen` (the triangles it shows, each once for a run of samples).
+    slot: Vec<u32>,
+    /// The triangles to look up, and their corners' ids.
+    wanted: Vec<usize>,
+    ids: Vec<[u32; 3]>,
+    seen: Vec<Seen>,
 }
 
-impl Lookup<'_> {
-    fn seen(&mut self, t: usize) -> &Seen {
-        if self.last.as_ref().is_none_or(|s| s.index != t) {
-            let seen = Seen::new(self.frame, self.positions, self.triangles, t, self.corners);
-            self.last = Some(seen);
+const NONE: usize = usize::MAX;
+
+impl Looked {
+    /// Look up the samples of pixels `px` of row `py` (`factor × factor` samples a pixel).
+    #[allow(clippy::too_many_arguments)]
+    fn segment(
+        &mut self,
+        frame: &Frame,
+        positions: &[DVec3],
+        triangles: &[[u32; 3]],
+        corners: bool,
+        factor: usize,
+        py: usize,
+        px: std::ops::Range<usize>,
+    ) {
+        let (sx, sy) = (
+            px.start * factor..px.end * factor,
+            py * factor..(py + 1) * factor,
+        );
+        let across = sx.len();
+        self.triangle.clear();
+        self.slot.clear();
+        self.wanted.clear();
+        for y in sy {
+            for x in sx.clone() {
+                let t = frame.triangle(x, y).unwrap_or(NONE);
+                let s = self.triangle.len();
+                // The sample before it and the one above show the same triangle most often.
+                let known = [s.checked_sub(1), s.checked_sub(across)]
+                    .into_iter()
+                    .flatten()
+                    .find(|&k| self.triangle[k] == t);
+                let slot = match known {
+                    Some(k) => self.slot[k],
+                    None if t == NONE => u32::MAX,
+                    None => {
+                        self.wanted.push(t);
+                        (self.wanted.len() - 1) as u32
+                    }
+                };
+                self.triangle.push(t);
+                self.slot.push(slot);
+            }
         }
-        self.last.as_ref().expect("just set")
+        self.ids.clear();
+        self.ids.extend(self.wanted.iter().map(|&t| triangles[t]));
+        self.seen.clear();
+        self.seen.extend(
+            self.ids
+                .iter()
+                .map(|&ids| Seen::new(frame, positions, ids, corners)),
+        );
+    }
+
+    /// The triangle shown by sample `k` of the segment, and how it is seen.
+    #[inline]
+    fn at(&self, k: usize) -> Option<&Seen> {
+        self.seen.get(self.slot[k] as usize)
     }
 }
 
@@ -365,36 +418,34 @@ pub fn shade_row(
     out: &mut [Rgb],
 ) {
     let width = out.len() / paints.len().max(1);
-    let mut lookup = Lookup {
-        frame,
-        positions,
-        triangles,
-        corners: paints.iter().any(|p| matches!(p, Paint::Values { .. })),
-        last: None,
-    };
+    let corners = paints.iter().any(|p| matches!(p, Paint::Values { .. }));
+    let mut looked = Looked::default();
     let n = (factor * factor) as u32;
     let mut sums = vec![[0u32; 3]; paints.len()];
-    let (sy0, sy1) = (py * factor, (py + 1) * factor);
-    for px in 0..width {
-        let (sx0, sx1) = (px * factor, (px + 1) * factor);
-        let first = frame.triangle(sx0, sy0);
-        let uniform = (sy0..sy1).all(|sy| (sx0..sx1).all(|sx| frame.triangle(sx, sy) == first));
-        if uniform {
-            let f = factor as f64;
-            let centre = DVec2::new((px as f64 + 0.5) * f, (py as f64 + 0.5) * f);
-            for (k, paint) in paints.iter().enumerate() {
-                out[k * width + px] = match first {
-                    Some(t) => lookup.seen(t).colour(paint, centre),
-                    None => WHITE,
-                };
+    for from in (0..width).step_by(SEGMENT) {
+        let to = (from + SEGMENT).min(width);
+        looked.segment(frame, positions, triangles, corners, factor, py, from..to);
+        let across = (to - from) * factor;
+        for px in from..to {
+            // The segment's samples of pixel `px`, row by row.
+            let first = (px - from) * factor;
+            let samples = (0..factor).flat_map(|dy| (0..factor).map(move |dx| (dx, dy)));
+            let index = |(dx, dy): (usize, usize)| dy * across + first + dx;
+            let t = looked.triangle[first];
+            if samples.clone().all(|s| looked.triangle[index(s)] == t) {
+                let f = factor as f64;
+                let centre = DVec2::new((px as f64 + 0.5) * f, (py as f64 + 0.5) * f);
+                for (k, paint) in paints.iter().enumerate() {
+                    out[k * width + px] =
+                        looked.at(first).map_or(WHITE, |s| s.colour(paint, centre));
+                }
+                continue;
             }
-            continue;
-        }
-        sums.iter_mut().for_each(|s| *s = [0; 3]);
-        for sy in sy0..sy1 {
-            for sx in sx0..sx1 {
+            sums.iter_mut().for_each(|s| *s = [0; 3]);
+            for (dx, dy) in samples {
+                let (sx, sy) = (px * factor + dx, py * factor + dy);
                 let p = DVec2::new(sx as f64 + 0.5, sy as f64 + 0.5);
-                let seen = frame.triangle(sx, sy).map(|t| lookup.seen(t));
+                let seen = looked.at(index((dx, dy)));
                 for (sum, paint) in sums.iter_mut().zip(paints) {
                     let c = seen.map_or(WHITE, |s| s.colour(paint, p));
                     for i in 0..3 {
@@ -402,9 +453,9 @@ pub fn shade_row(
                     }
                 }
             }
-        }
-        for (k, sum) in sums.iter().enumerate() {
-            out[k * width + px] = sum.map(|s| ((s + n / 2) / n) as u8);
+            for (k, sum) in sums.iter().enumerate() {
+                out[k * width + px] = sum.map(|s| ((s + n / 2) / n) as u8);
+            }
         }
     }
 }
@@ -518,6 +569,74 @@ mod tests {
                 assert!(covered > camera.width * camera.height / 8, "{covered}");
             }
         }
+    }
+
+    #[test]
+    fn a_pixel_is_its_triangles_colour_or_the_mean_of_its_samples() {
+        let (positions, triangles) = scattered(3000);
+        let values: Vec<f32> = (0..positions.len())
+            .map(|i| (i % 17) as f32 - 8.0)
+            .collect();
+        let scale = Scale::for_range(-8.0, 8.0);
+        let paints = [
+            Paint::Grey,
+            Paint::Values {
+                values: &values,
+                scale,
+            },
+        ];
+        // Wider than two segments, so that segments end inside a row.
+        let factor = 3;
+        let (w, h) = (2 * SEGMENT + 37, 30);
+        let bounds = Bounds::in_view(&positions, View::Iso);
+        let camera = Camera::framing(View::Iso, bounds, w * factor, h * factor);
+        let frame = Frame::new(camera);
+        draw_triangles(std::slice::from_ref(&frame), &positions, 0, &triangles);
+        let seen = |x, y| {
+            let t: Option<usize> = frame.triangle(x, y);
+            t.map(|t| Seen::new(&frame, &positions, triangles[t], true))
+        };
+        let (mut uniform, mut mixed) = (0, 0);
+        for py in 0..h {
+            let mut out = vec![[0u8; 3]; w * paints.len()];
+            shade_row(
+                &frame, &positions, &triangles, &paints, factor, py, &mut out,
+            );
+            for px in 0..w {
+                // One sample at a time, as the definition reads.
+                let samples: Vec<(usize, usize)> = (0..factor * factor)
+                    .map(|k| (px * factor + k % factor, py * factor + k / factor))
+                    .collect();
+                let shown: Vec<Option<usize>> =
+                    samples.iter().map(|&(x, y)| frame.triangle(x, y)).collect();
+                for (k, paint) in paints.iter().enumerate() {
+                    let expected = if shown.iter().all(|&t| t == shown[0]) {
+                        let f = factor as f64;
+                        let centre = DVec2::new((px as f64 + 0.5) * f, (py as f64 + 0.5) * f);
+                        let (sx, sy) = samples[0];
+                        seen(sx, sy).map_or(WHITE, |s| s.colour(paint, centre))
+                    } else {
+                        let mut sum = [0u32; 3];
+                        for &(x, y) in &samples {
+                            let p = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
+                            let c = seen(x, y).map_or(WHITE, |s| s.colour(paint, p));
+                            (0..3).for_each(|i| sum[i] += c[i] as u32);
+                        }
+                        let n = samples.len() as u32;
+                        sum.map(|s| ((s + n / 2) / n) as u8)
+                    };
+                    assert_eq!(out[k * w + px], expected, "paint {k} pixel ({px}, {py})");
+                }
+                match shown.iter().all(|&t| t == shown[0]) {
+                    true => uniform += 1,
+                    false => mixed += 1,
+                }
+            }
+        }
+        assert!(
+            uniform > w * h / 20 && mixed > w * h / 20,
+            "{uniform} {mixed}"
+        );
     }
 
     #[test]
