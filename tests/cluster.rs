@@ -104,6 +104,95 @@ fn any_number_of_ranks_gives_the_single_process_output_bit_for_bit() {
     }
 }
 
+/// `vcs-guided` on ranks: its normal filter reads, pass after pass, the triangles around each
+/// triangle, so near a rank's border it reads triangles another rank owns; their fields travel
+/// after every pass. 2 and 3 ranks write the bytes of one process, with creases and with the
+/// automatic stop too, and a checkpointed run resumes on another rank count.
+#[test]
+fn vcs_guided_on_ranks_gives_the_single_process_output_bit_for_bit() {
+    let tmp = tempfile::tempdir().unwrap();
+    let sphere = sphere_file(tmp.path(), 4);
+    let fandisk = scan("denoising/Fandisk0.3-noisy.ply");
+    let guided = Options {
+        method: Method::VcsGuided,
+        iterations: 3,
+        ..Options::default()
+    };
+    let creases = Options {
+        crease_angle: Some(40.0),
+        ..guided
+    };
+    let auto = Options {
+        iterations: 40,
+        auto_stop: true,
+        ..guided
+    };
+    for (what, input, opts, patch) in [
+        ("plain", &sphere, guided, 300),
+        ("creases", &fandisk, creases, 1024),
+        ("auto", &sphere, auto, 300),
+    ] {
+        let reference = tmp.path().join(format!("{what}-plain.ply"));
+        let settings = engine_settings(patch, 2);
+        let plain = engine::run_file(input, &reference, &opts, &settings, &mut Quiet).unwrap();
+        let expected = std::fs::read(&reference).unwrap();
+        for ranks in [2, 3] {
+            let out = tmp.path().join(format!("{what}-{ranks}.ply"));
+            let work = tmp.path().join(format!("{what}-{ranks}.work"));
+            let settings = engine_settings(patch, 1);
+            let cluster = cluster_settings(&work, false, 1);
+            let run = run_ranks(ranks, input, &out, &opts, &settings, &cluster)
+                .remove(0)
+                .unwrap();
+            assert!(
+                run.plan.patches >= 2 * ranks,
+                "{what}: {}",
+                run.plan.patches
+            );
+            assert!(run.cluster.unwrap().halo_values_per_iteration > 0);
+            assert_eq!(run.iterations_run, plain.iterations_run, "{what}");
+            assert!(
+                std::fs::read(&out).unwrap() == expected,
+                "vcs-guided, {what}, on {ranks} ranks differs from one process"
+            );
+        }
+    }
+
+    // One iteration on 2 ranks, resumed to three on 3.
+    let work = tmp.path().join("ck");
+    let out = tmp.path().join("resumed.ply");
+    let once = Options {
+        iterations: 1,
+        ..guided
+    };
+    let settings = engine_settings(300, 1);
+    run_ranks(
+        2,
+        &sphere,
+        &out,
+        &once,
+        &settings,
+        &cluster_settings(&work, true, 1),
+    )
+    .remove(0)
+    .unwrap();
+    let resumed = run_ranks(
+        3,
+        &sphere,
+        &out,
+        &guided,
+        &settings,
+        &cluster_settings(&work, true, 1),
+    )
+    .remove(0)
+    .unwrap();
+    assert_eq!(resumed.cluster.unwrap().resumed_after, 1);
+    assert!(
+        std::fs::read(&out).unwrap() == std::fs::read(tmp.path().join("plain-plain.ply")).unwrap(),
+        "vcs-guided resumed on 3 ranks differs from one process"
+    );
+}
+
 #[test]
 fn a_run_resumes_from_its_checkpoint_with_another_rank_count() {
     let tmp = tempfile::tempdir().unwrap();

@@ -76,6 +76,7 @@ fn mpi_ranks_1_2_3_are_bit_identical_to_one_process() {
         (&sphere, three("taubin")),
         (&sphere, three("vcs-triangle")),
         (&sphere, three("hc")),
+        (&sphere, three("vcs-guided")),
         (&bunny, auto),
     ] {
         let method = args.join(" ");

@@ -23,6 +23,14 @@
 //! the owned vertices within three rings of another rank; the vertices two regions share are
 //! exactly `X_r ∩ X_s`.
 //!
+//! A method's per-triangle fields (`vcs-guided`'s normal filter) go the same way: a rank computes
+//! the entries of its owned triangles (those whose first corner it owns) in every pass, and then
+//! receives those of its triangle halo ([`face_halo`]: the triangles at the corners of its own
+//! triangles and at its owned vertices, all that such a pass and the vertex passes after it read)
+//! from their owners. Each pass reads only the previous passes' fields, so a filter that reaches
+//! many rings out over its iterations needs a halo of one triangle ring, exchanged after every
+//! pass, and each entry is computed once, by its owner, from the values one process reads.
+//!
 //! Checkpoints: after every `--checkpoint-every` iterations (and the last), each rank writes its
 //! owned positions into the work directory and rank 0 records the iteration ([`store`]). A run
 //! started again with the same input, options, patch size and pins resumes after the last recorded
@@ -82,15 +90,6 @@ pub fn run_file(
     if cluster.checkpoint_every == 0 {
         return Err(Error::parameter("checkpoint_every", "must be at least 1"));
     }
-    if comm.size() > 1 && !opts.method.runs_on_ranks() {
-        return Err(Error::parameter(
-            "method",
-            format!(
-                "{} runs in one process (its per-triangle fields are not shared between ranks); run it without MPI ranks",
-                opts.method
-            ),
-        ));
-    }
     let start = agree(
         comm,
         run::Start::new(opts, engine),
@@ -125,7 +124,8 @@ pub fn run_file(
     });
     let (plan, state) = agree(comm, opened, "another rank could not open the plan")?;
     let clock = Instant::now();
-    let part = Part::new(comm, &plan)?;
+    let needs = opts.method.unit().needs();
+    let part = Part::new(comm, &plan, needs.face_vectors + needs.face_scalars > 0)?;
     t.partition += clock.elapsed().as_secs_f64();
 
     // 3. Smooth from the checkpoint on.
@@ -405,10 +405,14 @@ struct Part {
     shared: Vec<u32>,
     /// Per other rank: positions in `shared` of the vertices both regions hold.
     links: Vec<(usize, Vec<u32>)>,
+    /// Per other rank: the owned triangles whose per-triangle fields it reads, ascending (see
+    /// [`face_halo`]); empty when the method has no such fields.
+    face_links: Vec<(usize, Vec<u32>)>,
 }
 
 impl Part {
-    fn new(comm: &dyn Comm, plan: &StoredPlan) -> Result<Part> {
+    /// `faces`: the method has per-triangle fields, whose halos are exchanged too.
+    fn new(comm: &dyn Comm, plan: &StoredPlan, faces: bool) -> Result<Part> {
         let doc = &plan.doc;
         let (r, size) = (comm.rank(), comm.size());
         let count = doc.patches.len();
@@ -462,6 +466,10 @@ impl Part {
                 (s, at)
             })
             .collect();
+        let face_links = match faces {
+            true => face_links(comm, &face_halo(plan, &owned, &triangles), &triangles),
+            false => Vec::new(),
+        };
         Ok(Part {
             patches,
             owned,
@@ -469,6 +477,7 @@ impl Part {
             rings,
             shared,
             links,
+            face_links,
         })
     }
 }
@@ -544,6 +553,58 @@ fn rings_around(
         front = next;
     }
     Ok((rings, inner))
+}
+
+/// The triangles outside the owned ones (`triangles`, those whose first corner is in `owned`)
+/// whose per-triangle fields a rank reads: those at a corner of an owned triangle (a triangle's
+/// entries read the triangles at its corners, [`crate::smooth::method::Exec::face_pass`]) or
+/// at an owned vertex (a vertex reads the triangles around it). Ascending. Their corners are in
+/// the owned vertices and ring 1, whose adjacency [`rings_around`] checked.
+fn face_halo(plan: &StoredPlan, owned: &Range<u32>, triangles: &Range<u32>) -> Vec<u32> {
+    let topo = &plan.topology;
+    let outside = |f: &&u32| !triangles.contains(*f);
+    let mut halo: Vec<u32> = Vec::new();
+    for v in owned.clone() {
+        halo.extend(topo.faces_of(v).iter().filter(outside));
+    }
+    for t in triangles.clone() {
+        for &c in plan.triangles[t as usize]
+            .iter()
+            .filter(|c| !owned.contains(*c))
+        {
+            halo.extend(topo.faces_of(c).iter().filter(outside));
+        }
+    }
+    halo.sort_unstable();
+    halo.dedup();
+    halo
+}
+
+/// Every rank learns every other's triangle halo; per other rank, the owned triangles
+/// (`triangles`) in its halo.
+fn face_links(comm: &dyn Comm, halo: &[u32], triangles: &Range<u32>) -> Vec<(usize, Vec<u32>)> {
+    let r = comm.rank();
+    let wanted = comm.exchange(
+        (0..comm.size())
+            .map(|s| match s == r {
+                true => Vec::new(),
+                false => halo.iter().map(|&f| f as u64).collect(),
+            })
+            .collect(),
+    );
+    wanted
+        .iter()
+        .enumerate()
+        .filter(|&(s, _)| s != r)
+        .filter_map(|(s, theirs)| {
+            let mine: Vec<u32> = theirs
+                .iter()
+                .map(|&f| f as u32)
+                .filter(|f| triangles.contains(f))
+                .collect();
+            (!mine.is_empty()).then_some((s, mine))
+        })
+        .collect()
 }
 
 /// Sorted intersection of two ascending lists.
@@ -765,6 +826,14 @@ impl Share for RankRun<'_> {
         send_owned(self.comm, self.part, field, &mut self.traffic);
     }
 
+    fn face_end(&mut self, field: &mut [DVec3]) {
+        send_faces(self.comm, self.part, field, &mut self.traffic);
+    }
+
+    fn face_end_scalar(&mut self, field: &mut [f64]) {
+        send_faces(self.comm, self.part, field, &mut self.traffic);
+    }
+
     fn gather(&mut self, pos: &mut [DVec3], vertices: &[u32]) {
         let owned = self.owned();
         let mut mine = Vec::new();
@@ -852,7 +921,8 @@ fn send_changes(
         .zip(before)
         .map(|(&v, b)| !same(pos[v as usize], b[0]) || !same(sums[v as usize], b[1]))
         .collect();
-    let got = exchange_values(comm, part, traffic, 7, |k, msg| {
+    let got = exchange_values(comm, &part.links, traffic, 7, |k, msg| {
+        let k = k as usize;
         if changed[k] {
             let v = part.shared[k] as usize;
             msg.push(v as u64);
@@ -910,8 +980,8 @@ impl Words for f64 {
 
 /// After a Jacobi step: send each linked rank the owned vertices it holds (vertex, value).
 fn send_owned<T: Words>(comm: &dyn Comm, part: &Part, field: &mut [T], traffic: &mut Traffic) {
-    let got = exchange_values(comm, part, traffic, 1 + T::WORDS, |k, msg| {
-        let v = part.shared[k];
+    let got = exchange_values(comm, &part.links, traffic, 1 + T::WORDS, |k, msg| {
+        let v = part.shared[k as usize];
         if part.owned.contains(&v) {
             msg.push(v as u64);
             field[v as usize].put(msg);
@@ -924,20 +994,34 @@ fn send_owned<T: Words>(comm: &dyn Comm, part: &Part, field: &mut [T], traffic: 
     }
 }
 
-/// Build one message per linked rank with `fill(index in shared, message)`, exchange, and return
-/// the messages received (entries of `words` u64 each, checked).
+/// After a pass over the owned triangles: send each linked rank the owned triangles in its halo
+/// (triangle, value), and apply what the others sent.
+fn send_faces<T: Words>(comm: &dyn Comm, part: &Part, field: &mut [T], traffic: &mut Traffic) {
+    let got = exchange_values(comm, &part.face_links, traffic, 1 + T::WORDS, |f, msg| {
+        msg.push(f as u64);
+        field[f as usize].put(msg);
+    });
+    for msg in got {
+        for e in msg.chunks_exact(1 + T::WORDS) {
+            field[e[0] as usize] = T::get(&e[1..]);
+        }
+    }
+}
+
+/// Build one message per linked rank of `links` with `fill(entry of its list, message)`,
+/// exchange, and return the messages received (entries of `words` u64 each, checked).
 fn exchange_values(
     comm: &dyn Comm,
-    part: &Part,
+    links: &[(usize, Vec<u32>)],
     traffic: &mut Traffic,
     words: usize,
-    mut fill: impl FnMut(usize, &mut Vec<u64>),
+    mut fill: impl FnMut(u32, &mut Vec<u64>),
 ) -> Vec<Vec<u64>> {
     let mut send = vec![Vec::new(); comm.size()];
-    for (s, at) in &part.links {
+    for (s, at) in links {
         let msg = &mut send[*s];
         for &k in at {
-            fill(k as usize, msg);
+            fill(k, msg);
         }
         traffic.values += (msg.len() / words) as u64;
         traffic.bytes += 8 * msg.len() as u64;

@@ -833,14 +833,22 @@ impl Exec for ShareExec<'_> {
         });
     }
 
-    /// Every triangle, in every process: the fields are not exchanged (see
-    /// [`Smoother::prepare`]'s callers: a method with per-triangle fields runs in one process).
     fn face_pass(&mut self, field: &mut [DVec3], f: &(dyn Fn(usize, &mut [DVec3]) + Sync)) {
-        on_pool(&*self.share, || reduce::for_chunks_mut(field, f));
+        let owned = self.share.triangles();
+        let first = owned.start;
+        on_pool(&*self.share, || {
+            reduce::for_chunks_mut(&mut field[owned], |at, out| f(first + at, out))
+        });
+        self.share.face_end(field);
     }
 
     fn face_pass_f64(&mut self, field: &mut [f64], f: &(dyn Fn(usize, &mut [f64]) + Sync)) {
-        on_pool(&*self.share, || reduce::for_chunks_mut(field, f));
+        let owned = self.share.triangles();
+        let first = owned.start;
+        on_pool(&*self.share, || {
+            reduce::for_chunks_mut(&mut field[owned], |at, out| f(first + at, out))
+        });
+        self.share.face_end_scalar(field);
     }
 
     fn neighbor_sums(&mut self, pos: &[DVec3], sums: &mut [DVec3]) {

@@ -14,7 +14,8 @@ use crate::error::Result;
 pub trait Share {
     /// The vertices this process updates.
     fn owned(&self) -> Range<usize>;
-    /// The triangles whose volume and area this process sums.
+    /// The triangles this process owns: it sums their volume and area and computes their
+    /// entries of a method's per-triangle fields.
     fn triangles(&self) -> Range<usize>;
     /// Whether this process applies the stencils of patch `p`.
     fn runs_patch(&self, p: usize) -> bool;
@@ -28,6 +29,10 @@ pub trait Share {
     fn step_end(&mut self, field: &mut [DVec3]);
     /// The same for a scalar field (the automatic stop's).
     fn step_end_scalar(&mut self, field: &mut [f64]);
+    /// After a pass wrote the owned entries of a per-triangle `field`: exchange them.
+    fn face_end(&mut self, field: &mut [DVec3]);
+    /// The same for a per-triangle scalar field.
+    fn face_end_scalar(&mut self, field: &mut [f64]);
     /// Bring `vertices`' entries of `pos` up to date from the processes that own them, wherever
     /// they are (the boundary loops, which every process walks whole).
     fn gather(&mut self, pos: &mut [DVec3], vertices: &[u32]);
@@ -84,6 +89,8 @@ impl Share for Alone {
     fn colour_end(&mut self, _: &mut [DVec3], _: &mut [DVec3]) {}
     fn step_end(&mut self, _: &mut [DVec3]) {}
     fn step_end_scalar(&mut self, _: &mut [f64]) {}
+    fn face_end(&mut self, _: &mut [DVec3]) {}
+    fn face_end_scalar(&mut self, _: &mut [f64]) {}
     fn gather(&mut self, _: &mut [DVec3], _: &[u32]) {}
     fn sum(&self, local: &[f64]) -> Vec<f64> {
         local.to_vec()

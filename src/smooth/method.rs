@@ -173,9 +173,11 @@ pub trait Exec {
     fn vertex_pass(&mut self, field: &mut [DVec3], f: &(dyn Fn(usize, &mut [DVec3]) + Sync));
     /// The same for a byte field only this process reads (no exchange).
     fn vertex_pass_u8(&mut self, field: &mut [u8], f: &(dyn Fn(usize, &mut [u8]) + Sync));
-    /// `f(first, out)` over every entry of a per-triangle `field` (out holds triangles
-    /// `first ..`), in fixed chunks that may run in parallel; each entry must depend only on what
-    /// `f` reads.
+    /// `f(first, out)` over the owned entries of a per-triangle `field` (`out` holds triangles
+    /// `first ..`), in fixed chunks that may run in parallel; then the entries other processes
+    /// hold are brought up to date. Every entry must depend only on what `f` reads, and `f` may
+    /// read only the entries of the triangles at the entry's corners and positions within two
+    /// rings of them: a rank of the cluster engine holds no others (`crate::cluster`).
     fn face_pass(&mut self, field: &mut [DVec3], f: &(dyn Fn(usize, &mut [DVec3]) + Sync));
     /// The same for a per-triangle scalar field.
     fn face_pass_f64(&mut self, field: &mut [f64], f: &(dyn Fn(usize, &mut [f64]) + Sync));

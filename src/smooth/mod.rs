@@ -118,13 +118,6 @@ impl Method {
         self.unit().keeps_volume()
     }
 
-    /// Whether the method runs on MPI ranks: its fields are the vertices', exchanged at the
-    /// partition's borders. Per-triangle fields (`vcs-guided`'s) reach many rings out and are not.
-    pub fn runs_on_ranks(self) -> bool {
-        let needs = self.unit().needs();
-        needs.face_vectors + needs.face_scalars == 0
-    }
-
     /// The methods that accept `control`, in documentation order.
     pub fn accepting(control: Control) -> impl Iterator<Item = Method> {
         Method::ALL
