@@ -19,6 +19,14 @@
 //! - **Expected** (`laplacian`, `taubin`, `vcs-lowpass`): `E_k = Σ (e^k − ε)² / Σ ε²`, where `e^k`
 //!   is ε after k iterations of the method's scalar analogue (one λ step; a λ|μ pair): what the
 //!   filter would remove from pure noise.
+//! - **Along the edges** (`laplacian`, which shrinks: [`StopRule::ShrinkingFilter`]): both
+//!   energies are taken on the differences of the displacement across the edges instead,
+//!   `O_k = Σ_v Σ_{u∈N(v)} (d_u − d_v)² / (σ̂² Σ_v Σ_{u∈N(v)} (ε_u − ε_v)²)` with
+//!   `d = (P^k − P⁰) · n⁰`, and `E_k` the same of `e^k − ε`. Every iteration of `laplacian` also
+//!   moves a curved surface inwards by about λ times its curvature, nearly the same over a
+//!   vertex's neighbours: along the normals that shrink grows with the square of the
+//!   iterations and stopped the run after 2–4 of them on the denoising pairs, while it hardly
+//!   tilts a normal (docs/quality-research.md §17).
 //! - **Rule** with `R_k = (O_k − O_{k−1}) / (E_k − E_{k−1})`: stop after iteration k when
 //!   `k ≥ 2` and `R_k >` [`DETAIL_RATIO`] (more than 2/7 of what the iteration removed is not
 //!   explained by noise: it is removing shape), or when `E_k − E_{k−1} <` [`NOISE_GONE`] (a
@@ -90,6 +98,9 @@ pub struct AutoStop {
     origin: DVec3,
     movable: f64,
     noise_energy: f64,
+    /// The noise sample's energy along the edges ([`edge_energy`]), for a
+    /// [`StopRule::ShrinkingFilter`] (0 for the others).
+    edge_noise: f64,
     sigma: f64,
     /// `σ̂_m` and `σ̂_e` (module doc).
     estimates: (f64, f64),
@@ -144,6 +155,7 @@ impl AutoStop {
             origin: DVec3::ZERO,
             movable: 0.0,
             noise_energy: 0.0,
+            edge_noise: 0.0,
             sigma: 0.0,
             estimates: (0.0, 0.0),
             rule,
@@ -203,6 +215,10 @@ impl AutoStop {
         let eps = &self.field[owned.clone()];
         let energy = on_pool(share, || reduce::fixed_sum(eps, |_, e| e * e));
         self.noise_energy = total(share, energy);
+        if let StopRule::ShrinkingFilter(_) = self.rule {
+            let eps: &[f64] = &self.field;
+            self.edge_noise = edge_energy(topo, share, |v| eps[v]);
+        }
         let base = &mut self.base;
         on_pool(share, || {
             reduce::for_chunks_mut(&mut base[owned.clone()], |at, out| {
@@ -282,25 +298,19 @@ impl AutoStop {
     ) -> Option<StopReason> {
         let k = self.removed.len() + 1;
         let owned = share.owned();
-        let (normals, base, origin, sigma) = (&*self.normals, &*self.base, self.origin, self.sigma);
-        let now = &pos[owned.clone()];
-        let sum = on_pool(share, || {
-            reduce::fixed_sum(now, |i, p| {
-                let v = owned.start + i;
-                (((*p - origin).dot(normals[v]) - base[v]) / sigma).powi(2)
-            })
-        });
-        let removed = total(share, sum) / self.movable.max(1.0);
         let before = (
             self.removed.last().copied().unwrap_or(0.0),
             self.expected.last().copied().unwrap_or(0.0),
         );
+        let expected = self.expected_after_step(topo, share);
+        let removed = self.removed_by(topo, pos, share);
+        self.expected.push(expected);
         self.removed.push(removed);
         let stop = if let StopRule::Settle(settle) = self.rule {
-            self.expected.push(f64::NAN);
             // The mean displacement in units of σ̂.
             let moved = prev.map_or(f64::NAN, |prev| {
-                let prev = &prev[owned.clone()];
+                let (now, prev) = (&pos[owned.clone()], &prev[owned.clone()]);
+                let sigma = self.sigma;
                 let sum = on_pool(share, || {
                     reduce::fixed_sum(now, |i, p| p.distance(prev[i]) / sigma)
                 });
@@ -314,8 +324,6 @@ impl AutoStop {
                 None
             }
         } else {
-            let expected = self.expected_after_step(topo, share);
-            self.expected.push(expected);
             let gain = expected - before.1;
             let ratio = if gain > 0.0 {
                 (removed - before.0) / gain
@@ -334,11 +342,38 @@ impl AutoStop {
         self.stopped_by
     }
 
+    /// `O_k` of the positions `pos` after iteration k: the energy removed along the input
+    /// normals, in units of the noise; for a [`StopRule::ShrinkingFilter`] that of its
+    /// differences along the edges, relative to the noise sample's (this uses the spare field).
+    fn removed_by(&mut self, topo: &Topology, pos: &[DVec3], share: &mut dyn Share) -> f64 {
+        let owned = share.owned();
+        let (normals, base, origin, sigma) = (&*self.normals, &*self.base, self.origin, self.sigma);
+        let along = |v: usize| ((pos[v] - origin).dot(normals[v]) - base[v]) / sigma;
+        if let StopRule::ShrinkingFilter(_) = self.rule {
+            let d = &mut self.spare;
+            on_pool(share, || {
+                reduce::for_chunks_mut(&mut d[owned.clone()], |at, out| {
+                    for (k, o) in out.iter_mut().enumerate() {
+                        *o = along(owned.start + at + k);
+                    }
+                })
+            });
+            share.step_end_scalar(d);
+            let d: &[f64] = d;
+            return edge_energy(topo, share, |v| d[v]) / self.edge_noise;
+        }
+        let now = &pos[owned.clone()];
+        let sum = on_pool(share, || {
+            reduce::fixed_sum(now, |i, _| along(owned.start + i).powi(2))
+        });
+        total(share, sum) / self.movable.max(1.0)
+    }
+
     /// One iteration of the scalar analogue on the field, and `E_k` (NaN for a method without
-    /// one).
+    /// one); for a [`StopRule::ShrinkingFilter`] measured along the edges, as its `O_k`.
     fn expected_after_step(&mut self, topo: &Topology, share: &mut dyn Share) -> f64 {
         let owned = share.owned();
-        let StopRule::Filter(factors) = &self.rule else {
+        let (StopRule::Filter(factors) | StopRule::ShrinkingFilter(factors)) = &self.rule else {
             return f64::NAN;
         };
         for &factor in factors {
@@ -350,6 +385,14 @@ impl AutoStop {
             });
             share.step_end_scalar(out);
             std::mem::swap(&mut self.field, &mut self.spare);
+        }
+        if let StopRule::ShrinkingFilter(_) = self.rule {
+            let field: &[f64] = &self.field;
+            let eps = |v: usize| match topo.is_fixed(v as u32) {
+                true => 0.0,
+                false => noise::gaussian(SEED, v as u64),
+            };
+            return edge_energy(topo, share, |v| field[v] - eps(v)) / self.edge_noise;
         }
         let field = &self.field[owned.clone()];
         let sum = on_pool(share, || {
@@ -388,6 +431,24 @@ fn white_noise(topo: &Topology, field: &mut [f64], share: &mut dyn Share) {
         })
     });
     share.step_end_scalar(field);
+}
+
+/// `Σ_v Σ_{u ∈ N(v)} (x_u − x_v)²` over the vertices of all processes (each edge from both of
+/// its ends), `x` known on each one's owned vertices and their neighbours.
+fn edge_energy(topo: &Topology, share: &mut dyn Share, x: impl Fn(usize) -> f64 + Sync) -> f64 {
+    let owned = share.owned();
+    let fixed = &topo.fixed_mask()[owned.clone()];
+    let sum = on_pool(share, || {
+        reduce::fixed_sum(fixed, |i, _| {
+            let v = owned.start + i;
+            let xv = x(v);
+            topo.neighbors(v as u32)
+                .iter()
+                .map(|&u| (x(u as usize) - xv).powi(2))
+                .sum()
+        })
+    });
+    total(share, sum)
 }
 
 /// A [`Fixed`] sum over all processes, as an f64.

@@ -194,9 +194,11 @@ pub struct AutoStopStats {
     /// σ̂ from the root mean square (`σ̂_e`): above [`crate::engine::auto::HEAVY_TAILS`] times
     /// the median's, the noise is heavy-tailed (impulsive) and σ̂ follows this one.
     pub noise_estimate_rms: f64,
-    /// `O_k` of each iteration run.
+    /// `O_k` of each iteration run (for `laplacian` measured along the edges, see
+    /// [`crate::engine::auto`]).
     pub removed: Vec<f64>,
-    /// `E_k` of each iteration run (`null` for the stencil methods, which have none).
+    /// `E_k` of each iteration run (`null` for the stencil methods, which have none; for
+    /// `laplacian` along the edges, as its `O_k`).
     pub expected: Vec<f64>,
 }
 

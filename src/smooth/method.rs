@@ -90,6 +90,13 @@ pub enum StopRule {
     /// A low-pass filter with a scalar analogue: these umbrella step factors per iteration, run
     /// on white noise, tell what the filter would remove from pure noise.
     Filter(Vec<f64>),
+    /// The same for a low-pass filter that shrinks (`laplacian`): its gain falls from the
+    /// lowest frequencies on, so every iteration also moves a curved surface inwards by about
+    /// λ times its curvature, a displacement the scalar analogue does not make and which grows
+    /// with every iteration. Both energies are measured on the displacement's differences along
+    /// the edges, which tilt the normals, so that a shrink nearly uniform over a vertex's
+    /// neighbours hardly counts as shape removed (docs/quality-research.md §17).
+    ShrinkingFilter(Vec<f64>),
     /// No scalar analogue: stop when an iteration moves the vertices little, or when the
     /// iterations together removed more than the noise.
     Settle(Settle),

@@ -31,7 +31,7 @@ impl Smoother for Laplacian {
         false
     }
     fn stop_rule(&self, opts: &Options) -> StopRule {
-        StopRule::Filter(vec![opts.lambda])
+        StopRule::ShrinkingFilter(vec![opts.lambda])
     }
     fn accepts(&self, control: Control) -> bool {
         matches!(control, Control::Lambda | Control::MultiresFine)
