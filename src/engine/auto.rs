@@ -388,10 +388,7 @@ impl AutoStop {
         }
         if let StopRule::ShrinkingFilter(_) = self.rule {
             let field: &[f64] = &self.field;
-            let eps = |v: usize| match topo.is_fixed(v as u32) {
-                true => 0.0,
-                false => noise::gaussian(SEED, v as u64),
-            };
+            let eps = |v| noise::epsilon(topo, SEED, v);
             return edge_energy(topo, share, |v| field[v] - eps(v)) / self.edge_noise;
         }
         let field = &self.field[owned.clone()];

@@ -161,9 +161,7 @@ impl Kept {
         });
         Ok(Kept::Double(double))
     }
-}
 
-impl Kept {
     /// [`signed`] from these positions: each form read as its plain slice, so that the sums'
     /// loop does not choose between them at every read.
     pub fn signed<T: crate::mesh::storage::Pod>(
@@ -490,10 +488,9 @@ mod tests {
         assert!(matches!(kept_double, Kept::Double(_)));
         // The values a kept copy holds, read through its form's `Points`.
         let values = |kept: &Kept| -> Vec<DVec3> {
-            let read = |p: &dyn Fn(usize) -> DVec3, n| (0..n).map(p).collect();
             match kept {
-                Kept::Single(p) => read(&|i| p[..].at(i), p.len()),
-                Kept::Double(p) => read(&|i| p[..].at(i), p.len()),
+                Kept::Single(p) => (0..p.len()).map(|i| p[..].at(i)).collect(),
+                Kept::Double(p) => (0..p.len()).map(|i| p[..].at(i)).collect(),
             }
         };
         for (kept, from) in [(&kept, &singles), (&kept_double, &input)] {

@@ -815,39 +815,37 @@ pub(super) struct ShareExec<'s> {
     pub(super) share: &'s mut dyn Share,
 }
 
+/// `f(first, out)` over the entries `owned` of `field` (`out` holds entries `first ..`), in fixed
+/// chunks on the process's pool: a vertex or triangle pass before its exchange.
+fn owned_pass<T: Send>(
+    share: &dyn Share,
+    owned: std::ops::Range<usize>,
+    field: &mut [T],
+    f: &(dyn Fn(usize, &mut [T]) + Sync),
+) {
+    let first = owned.start;
+    on_pool(share, || {
+        reduce::for_chunks_mut(&mut field[owned], |at, out| f(first + at, out))
+    });
+}
+
 impl Exec for ShareExec<'_> {
     fn vertex_pass(&mut self, field: &mut [DVec3], f: &(dyn Fn(usize, &mut [DVec3]) + Sync)) {
-        let owned = self.share.owned();
-        let first = owned.start;
-        on_pool(&*self.share, || {
-            reduce::for_chunks_mut(&mut field[owned], |at, out| f(first + at, out))
-        });
+        owned_pass(&*self.share, self.share.owned(), field, f);
         self.share.step_end(field);
     }
 
     fn vertex_pass_u8(&mut self, field: &mut [u8], f: &(dyn Fn(usize, &mut [u8]) + Sync)) {
-        let owned = self.share.owned();
-        let first = owned.start;
-        on_pool(&*self.share, || {
-            reduce::for_chunks_mut(&mut field[owned], |at, out| f(first + at, out))
-        });
+        owned_pass(&*self.share, self.share.owned(), field, f);
     }
 
     fn face_pass(&mut self, field: &mut [DVec3], f: &(dyn Fn(usize, &mut [DVec3]) + Sync)) {
-        let owned = self.share.triangles();
-        let first = owned.start;
-        on_pool(&*self.share, || {
-            reduce::for_chunks_mut(&mut field[owned], |at, out| f(first + at, out))
-        });
+        owned_pass(&*self.share, self.share.triangles(), field, f);
         self.share.face_end(field);
     }
 
     fn face_pass_f64(&mut self, field: &mut [f64], f: &(dyn Fn(usize, &mut [f64]) + Sync)) {
-        let owned = self.share.triangles();
-        let first = owned.start;
-        on_pool(&*self.share, || {
-            reduce::for_chunks_mut(&mut field[owned], |at, out| f(first + at, out))
-        });
+        owned_pass(&*self.share, self.share.triangles(), field, f);
         self.share.face_end_scalar(field);
     }
 

@@ -609,8 +609,9 @@ mod tests {
                     .collect();
                 let shown: Vec<Option<usize>> =
                     samples.iter().map(|&(x, y)| frame.triangle(x, y)).collect();
+                let one = shown.iter().all(|&t| t == shown[0]);
                 for (k, paint) in paints.iter().enumerate() {
-                    let expected = if shown.iter().all(|&t| t == shown[0]) {
+                    let expected = if one {
                         let f = factor as f64;
                         let centre = DVec2::new((px as f64 + 0.5) * f, (py as f64 + 0.5) * f);
                         let (sx, sy) = samples[0];
@@ -627,7 +628,7 @@ mod tests {
                     };
                     assert_eq!(out[k * w + px], expected, "paint {k} pixel ({px}, {py})");
                 }
-                match shown.iter().all(|&t| t == shown[0]) {
+                match one {
                     true => uniform += 1,
                     false => mixed += 1,
                 }

@@ -97,12 +97,16 @@ pub fn scalar_step_into(topo: &Topology, x: &[f64], out: &mut [f64], first: usiz
 /// through Box–Muller), so the sample is recomputed rather than stored.
 pub fn white_noise_into(topo: &Topology, seed: u64, out: &mut [f64], first: usize) {
     for (k, o) in out.iter_mut().enumerate() {
-        let v = first + k;
-        *o = if topo.is_fixed(v as u32) {
-            0.0
-        } else {
-            gaussian(seed, v as u64)
-        };
+        *o = epsilon(topo, seed, first + k);
+    }
+}
+
+/// `ε_v` of [`white_noise_into`] for any vertex `v`.
+#[inline]
+pub fn epsilon(topo: &Topology, seed: u64, v: usize) -> f64 {
+    match topo.is_fixed(v as u32) {
+        true => 0.0,
+        false => gaussian(seed, v as u64),
     }
 }
 
