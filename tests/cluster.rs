@@ -45,12 +45,14 @@ fn any_number_of_ranks_gives_the_single_process_output_bit_for_bit() {
             &opts,
             &EngineSettings {
                 with_stats: true,
-                ..engine_settings(2048, 2)
+                ..engine_settings(300, 2)
             },
             &mut Quiet,
         )
         .unwrap();
         let expected = std::fs::read(&reference).unwrap();
+        // Patches of 300 vertices: more than one step of the streaming order.
+        assert_eq!(plain.plan.steps, 2);
         for ranks in [1, 2, 3, 5] {
             let out = tmp.path().join(format!("{method}-{ranks}.ply"));
             let work = tmp.path().join(format!("{method}-{ranks}.work"));
@@ -61,7 +63,7 @@ fn any_number_of_ranks_gives_the_single_process_output_bit_for_bit() {
                 &opts,
                 &EngineSettings {
                     with_stats: true,
-                    ..engine_settings(2048, 1)
+                    ..engine_settings(300, 1)
                 },
                 &cluster_settings(&work, false, 1),
             )

@@ -139,7 +139,6 @@ pub fn run_file(
         work: &work,
         state,
         checkpoint_every: cluster.checkpoint_every,
-        halo: part.rings[..2].concat(),
         before: Vec::new(),
         traffic: Traffic::default(),
     };
@@ -642,8 +641,6 @@ struct RankRun<'a> {
     work: &'a WorkDir,
     state: StateDoc,
     checkpoint_every: usize,
-    /// Rings 1 and 2: the vertices outside the owned range whose neighbour sums the stencils read.
-    halo: Vec<u32>,
     /// The shared vertices' positions and sums before the current colour (see [`snapshot`]).
     before: Vec<[DVec3; 2]>,
     traffic: Traffic,
@@ -799,9 +796,6 @@ impl Share for RankRun<'_> {
         self.part.patches.contains(&p)
     }
 
-    fn halo_sums(&self) -> &[u32] {
-        &self.halo
-    }
 
     fn colour_start(&mut self, pos: &[DVec3], sums: &[DVec3]) {
         self.before = snapshot(self.part, pos, sums);

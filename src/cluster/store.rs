@@ -93,6 +93,9 @@ impl PlanKey {
     ) -> Result<PlanKey> {
         let meta = fs::metadata(input).map_err(|e| Error::io(input, e))?;
         let mut options = serde_json::json!({
+            // A plan or checkpoint of another results version is another run's (its order of
+            // work and arithmetic may differ).
+            "results_version": crate::RESULTS_VERSION,
             "method": opts.method,
             "lambda": opts.lambda,
             "mu": opts.mu(),

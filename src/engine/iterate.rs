@@ -36,7 +36,7 @@ pub use super::share::{Alone, Share};
 use crate::error::{Error, Result};
 use crate::metrics;
 use crate::partition::Patch;
-use crate::schedule::Prefetch;
+use crate::schedule::{LANES, Prefetch};
 use crate::smooth::boundary::{self, Loops};
 use crate::smooth::laplacian::{self, Previous, StepStats};
 use crate::smooth::method::{Exec, FaceFields, Footprint, PassFields, PatchMesh, Schedule};
@@ -371,7 +371,6 @@ impl Run<'_, '_> {
     /// The loop's side of a method's passes ([`Exec`]), on the share's threads.
     fn exec(&mut self) -> ShareExec<'_> {
         ShareExec {
-            topo: self.mesh.topo,
             share: &mut *self.share,
         }
     }
@@ -391,10 +390,11 @@ impl Run<'_, '_> {
         let mut sweep = SweepStats::default();
         for (c, colour) in colours.iter().enumerate() {
             if let Some(prefetch) = mesh.prefetch {
-                // Read ahead the next colour (at the end, the first: the next iteration's).
-                let next = &colours[(c + 1) % colours.len()];
-                for &p in next {
-                    prefetch.hint(mesh.patches[p as usize].vertices.clone());
+                // Read ahead the patches of the colours after this one, about a step of them (at
+                // the end, the first ones again: the next iteration's).
+                let ahead = colours.iter().cycle().skip(c + 1).flatten();
+                for &p in ahead.take(LANES) {
+                    prefetch.hint(&mesh.patches[p as usize]);
                 }
             }
             let mine: Vec<Patch> = colour
@@ -811,7 +811,6 @@ enum Pass<'u> {
 /// each pass exchanged. Over an [`Alone`], the passes of one process over the whole mesh (the
 /// crease detection's normal filter, `Plan::crease`).
 pub(super) struct ShareExec<'s> {
-    pub(super) topo: &'s Topology,
     pub(super) share: &'s mut dyn Share,
 }
 
@@ -847,17 +846,6 @@ impl Exec for ShareExec<'_> {
     fn face_pass_f64(&mut self, field: &mut [f64], f: &(dyn Fn(usize, &mut [f64]) + Sync)) {
         owned_pass(&*self.share, self.share.triangles(), field, f);
         self.share.face_end_scalar(field);
-    }
-
-    fn neighbor_sums(&mut self, pos: &[DVec3], sums: &mut [DVec3]) {
-        let (topo, owned) = (self.topo, self.share.owned());
-        on_pool(&*self.share, || {
-            reduce::neighbor_sums(topo, pos, sums, owned)
-        });
-        for &v in self.share.halo_sums() {
-            let v = v as usize;
-            crate::smooth::neighbor_sums_into(topo, pos, &mut sums[v..v + 1], v);
-        }
     }
 }
 

@@ -199,14 +199,14 @@ impl Plan {
         .into_iter()
         .flatten()
         .collect();
+        let tri_advisor = reordered.triangles.advisor();
         let tris: &[[u32; 3]] = &reordered.triangles;
         let pos: &mut [DVec3] = &mut reordered.positions;
-        let queue = 2 * rayon::current_num_threads();
         let mut alone = iterate::Alone {
             vertices: n,
             triangles: tris.len(),
         };
-        schedule::with_prefetch(topo, advisors, queue, |prefetch| {
+        schedule::with_prefetch(topo, advisors, tri_advisor, |prefetch| {
             let mesh = iterate::Sweep {
                 topo,
                 tris,

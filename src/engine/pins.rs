@@ -353,7 +353,6 @@ impl Plan {
                 triangles: faces,
             };
             let mut exec = ShareExec {
-                topo: &self.topology,
                 share: &mut alone,
             };
             let fields = FaceFields {

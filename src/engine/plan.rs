@@ -74,7 +74,10 @@ pub struct PrepTimings {
 pub struct PlanStats {
     pub patch_size: usize,
     pub patches: usize,
+    /// Colours per iteration: those of every step of the streaming order, added up.
     pub colours: usize,
+    /// Steps of the streaming order ([`crate::schedule::steps`]): the length of a lane.
+    pub steps: usize,
     /// Vertices outside a patch's own range that its stencils read: smallest, mean, largest.
     pub halo_min: u32,
     pub halo_mean: f64,
@@ -378,6 +381,7 @@ impl PlanStats {
             patch_size,
             patches: halo.len(),
             colours,
+            steps: crate::schedule::steps(halo.len()),
             halo_min: halo.iter().copied().min().unwrap_or(0),
             // `+ 0.0`: an empty sum is −0.
             halo_mean: (halo.iter().map(|&h| h as f64).sum::<f64>() + 0.0)

@@ -4,7 +4,6 @@
 //! parallel sum of the engine (its statistics included), the multiresolution mode and the cluster
 //! engine goes through here.
 
-use std::ops::Range;
 
 use glam::DVec3;
 use rayon::prelude::*;
@@ -137,14 +136,6 @@ pub fn displacement(a: &[DVec3], b: &[DVec3]) -> StepStats {
         max_displacement: max,
         sum_displacement: sum,
     }
-}
-
-/// Neighbour sums `S(v) = Σ_{u∈N(v)} p_u` of the vertices `range`, into `sums[range]`.
-pub fn neighbor_sums(topo: &Topology, pos: &[DVec3], sums: &mut [DVec3], range: Range<usize>) {
-    let first = range.start;
-    for_chunks_mut(&mut sums[range], |at, out| {
-        crate::smooth::neighbor_sums_into(topo, pos, out, first + at)
-    });
 }
 
 /// The median of the values that are not NaN: the element of rank `count / 2` in ascending

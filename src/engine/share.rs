@@ -19,8 +19,6 @@ pub trait Share {
     fn triangles(&self) -> Range<usize>;
     /// Whether this process applies the stencils of patch `p`.
     fn runs_patch(&self, p: usize) -> bool;
-    /// Vertices outside [`Share::owned`] whose neighbour sums its stencils read.
-    fn halo_sums(&self) -> &[u32];
     /// Before the patches of a colour run.
     fn colour_start(&mut self, pos: &[DVec3], sums: &[DVec3]);
     /// After the patches of a colour ran: exchange what changed.
@@ -81,9 +79,6 @@ impl Share for Alone {
     }
     fn runs_patch(&self, _: usize) -> bool {
         true
-    }
-    fn halo_sums(&self) -> &[u32] {
-        &[]
     }
     fn colour_start(&mut self, _: &[DVec3], _: &[DVec3]) {}
     fn colour_end(&mut self, _: &mut [DVec3], _: &mut [DVec3]) {}

@@ -1,28 +1,40 @@
-//! Which patches may run at the same time.
+//! Which patches may run at the same time, and in what order.
 //!
 //! A stencil with free vertices F reads positions and neighbour sums of F ∪ N(F) (and, for the
 //! Laplacians, their neighbours' positions through the sums), and writes positions of F and sums of
 //! N(F). Two stencils whose free vertices are 3 or more rings apart therefore touch disjoint data.
 //! A patch's free vertices lie within one ring of its owned range, so two patches whose owned
-//! ranges are more than 4 rings apart never conflict; closer ones are joined in the conflict graph,
-//! which is coloured with DSatur (petgraph). Colours run one after another, in ascending colour
-//! number; the patches of one colour run in parallel, and because they touch disjoint data, the
-//! result equals running them one by one in ascending patch order, whatever the thread count.
+//! ranges are more than 4 rings apart never conflict; closer ones are joined in the conflict graph.
+//! A patch takes the neighbour sums it reads afresh from the positions when it starts
+//! ([`crate::smooth::rebuild_patch_sums`]: its vertices and two rings around them, reading
+//! positions three rings out), which the same 4 rings keep apart from any other patch of its
+//! colour (3 + 1 < 5).
+//!
+//! **The order of work streams through the mesh.** The patches, in Morton order, are cut into
+//! [`LANES`] lanes of `n = ⌈patches / LANES⌉` consecutive patches; step `s` (0 ≤ s < n) takes the
+//! `s`-th patch of every lane: patches `s, s + n, s + 2n, …`. The steps run one after another;
+//! inside a step its patches are coloured on their own conflict graph with DSatur (petgraph), the
+//! colours run one after another in ascending colour number, and the patches of one colour run in
+//! parallel. Because they touch disjoint data, the result equals running them one by one in the
+//! order (step, colour, patch), whatever the thread count. Each step moves every lane on by one
+//! patch, so an iteration passes over the scratch of each lane once, in Morton order, with the
+//! step's pages (and its neighbours', which the next step reads) the only ones in use: that is what
+//! keeps a mesh past the page cache from reading its scratch again for every colour. A mesh of at
+//! most [`LANES`] patches is one step, coloured whole. The cluster's ranks own contiguous blocks of
+//! patches, so every rank has patches in every step.
 //!
 //! The boundary stencils of `boundary: smooth` ([`crate::smooth::boundary`]) write what an edge
 //! stencil writes and read positions one ring further (two steps along their loop, within 2 rings
 //! of their free vertices, so within 3 of the patch): against another patch's position writes (1
 //! ring out) that is the same 4 rings, so they share the edge colouring.
 //!
-//! `vcs-guided` has wider stencils and gets its own colouring ([`Schedule::ring_colours`]): the
-//! stencil of an owned vertex v writes the positions of its 2-ring `F_v` and reads the corners of
-//! the faces touching `F_v`, i.e. the 3-ring of v (its step-1 shares are computed before the sweep
-//! and only read; it keeps no neighbour sums). A patch therefore writes within 2 rings of its
-//! owned range and reads within 3 (halo 3), and two patches can only meet when their owned ranges
-//! are at most 2 + 3 = 5 rings apart: the same rule with 5 conflict rings instead of 4. The edge
-//! and triangle methods keep their 4-ring colouring untouched (a wider one would be correct for
-//! them too, but would change their order of work and so their results); both colourings come
-//! from one breadth-first walk of 5 rings per patch.
+//! `vcs-guided` has wider stencils and gets its own colouring ([`Schedule::ring_colours`], in the
+//! same steps): the stencil of an owned vertex v writes the positions of its 2-ring `F_v` and reads
+//! the corners of the faces touching `F_v`, i.e. the 3-ring of v (its step-1 shares are computed
+//! before the sweep and only read; it keeps no neighbour sums). A patch therefore writes within 2
+//! rings of its owned range and reads within 3 (halo 3), and two patches can only meet when their
+//! owned ranges are at most 2 + 3 = 5 rings apart: the same rule with 5 conflict rings instead of
+//! 4. Both colourings come from one breadth-first walk of 5 rings per patch.
 
 use std::collections::HashSet;
 
@@ -40,13 +52,18 @@ const HALO_RINGS: usize = 2;
 /// The same two for the 2-ring stencils of `vcs-guided` (see the module doc).
 const RING_CONFLICT_RINGS: usize = 5;
 const RING_HALO_RINGS: usize = 3;
+/// Lanes of the streaming order (see the module doc): the patches of one step. Part of the
+/// results: another count is another order of work.
+pub const LANES: usize = 128;
 
 /// The colouring of the patches.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct Schedule {
-    /// Patch indices of each colour, ascending; colours in execution order (edge and triangle
-    /// stencils).
+    /// Patch indices of each colour, ascending; the colours of every step, steps and colours in
+    /// execution order (edge and triangle stencils).
     pub colours: Vec<Vec<u32>>,
+    /// Steps of the streaming order ([`steps`]).
+    pub steps: usize,
     /// Per patch: vertices outside its owned range that its stencils read.
     pub halo: Vec<u32>,
     /// The colouring for the 2-ring stencils of `vcs-guided`, in the same form.
@@ -60,6 +77,7 @@ impl Schedule {
     pub fn single() -> Schedule {
         Schedule {
             colours: vec![vec![0]],
+            steps: 1,
             halo: vec![0],
             ring_colours: vec![vec![0]],
             ring_halo: vec![0],
@@ -115,34 +133,54 @@ pub fn schedule_metered(topo: &Topology, patches: &[Patch], meter: &Meter) -> Sc
             near
         })
         .collect();
-    let (colours, halo) = colour(near.iter().map(|n| &n[0]));
+    let steps = steps(patches.len());
+    let (colours, halo) = colour(near.iter().map(|n| &n[0]), steps);
     meter.add(patches.len() as u64);
-    let (ring_colours, ring_halo) = colour(near.iter().map(|n| &n[1]));
+    let (ring_colours, ring_halo) = colour(near.iter().map(|n| &n[1]), steps);
     meter.add(patches.len() as u64);
     Schedule {
         colours,
+        steps,
         halo,
         ring_colours,
         ring_halo,
     }
 }
 
-/// DSatur colouring of the conflict graph given by each patch's near patches, and the halos.
-fn colour<'a>(near: impl ExactSizeIterator<Item = &'a Near> + Clone) -> (Vec<Vec<u32>>, Vec<u32>) {
-    let mut graph = UnGraph::<(), ()>::with_capacity(near.len(), 0);
-    let nodes: Vec<_> = (0..near.len()).map(|_| graph.add_node(())).collect();
-    for (a, n) in near.clone().enumerate() {
-        for &b in &n.others {
-            graph.add_edge(nodes[a], nodes[b as usize], ());
+/// Steps of the streaming order of `patches` patches: the length of a lane (see the module doc).
+pub fn steps(patches: usize) -> usize {
+    patches.div_ceil(LANES).max(1)
+}
+
+/// The colours of the patches given by each one's near patches, step by step (`steps` of them:
+/// patch `p` is in step `p % steps`), each step's conflict graph coloured with DSatur; and the
+/// halos.
+fn colour<'a>(
+    near: impl ExactSizeIterator<Item = &'a Near> + Clone,
+    steps: usize,
+) -> (Vec<Vec<u32>>, Vec<u32>) {
+    let near: Vec<&Near> = near.collect();
+    let mut colours = Vec::new();
+    for step in 0..steps {
+        let members: Vec<u32> = (step..near.len()).step_by(steps).map(|p| p as u32).collect();
+        let mut graph = UnGraph::<(), ()>::with_capacity(members.len(), 0);
+        let nodes: Vec<_> = members.iter().map(|_| graph.add_node(())).collect();
+        let node_of = |p: u32| nodes[(p as usize - step) / steps];
+        for &a in &members {
+            for &b in &near[a as usize].others {
+                if b as usize % steps == step {
+                    graph.add_edge(node_of(a), node_of(b), ());
+                }
+            }
         }
+        let (colouring, count) = petgraph::algo::dsatur_coloring(&graph);
+        let mut mine = vec![Vec::new(); count];
+        for (&p, node) in members.iter().zip(&nodes) {
+            mine[colouring[node]].push(p);
+        }
+        colours.extend(mine.into_iter().filter(|c| !c.is_empty()));
     }
-    let (colouring, count) = petgraph::algo::dsatur_coloring(&graph);
-    let mut colours = vec![Vec::new(); count];
-    for (p, node) in nodes.iter().enumerate() {
-        colours[colouring[node]].push(p as u32);
-    }
-    colours.retain(|c| !c.is_empty());
-    (colours, near.map(|n| n.halo).collect())
+    (colours, near.iter().map(|n| n.halo).collect())
 }
 
 /// The vertices outside `p`'s owned range, ring by ring (ring 1 first), up to `depth` rings.
@@ -173,12 +211,13 @@ fn rings_outside(topo: &Topology, p: &Patch, depth: usize) -> Vec<Vec<u32>> {
 }
 
 /// The bounded read-ahead pipeline of out-of-core runs: while the patches of one colour are
-/// smoothed, a prefetch thread receives the next colour's patches over a bounded channel and asks
-/// the kernel to read their pages ahead (positions, neighbour sums, adjacency). It only gives
-/// advice, so it never changes a result; when the queue is full, hints are dropped rather than
-/// stalling the sweep. On the heap there is nothing to prefetch and no thread is started.
+/// smoothed, a prefetch thread receives the patches of the colours after it (about one step of
+/// the streaming order) over a bounded channel and asks the kernel to read their pages ahead
+/// (positions, neighbour sums, adjacency, triangles). It only gives advice, so it never changes a
+/// result; when the queue is full, hints are dropped rather than stalling the sweep. On the heap
+/// there is nothing to prefetch and no thread is started.
 pub struct Prefetch {
-    tx: Option<crossbeam_channel::Sender<std::ops::Range<u32>>>,
+    tx: Option<crossbeam_channel::Sender<Patch>>,
 }
 
 impl Prefetch {
@@ -187,32 +226,41 @@ impl Prefetch {
         Prefetch { tx: None }
     }
 
-    /// Hint that `vertices` will be needed soon.
-    pub fn hint(&self, vertices: std::ops::Range<u32>) {
+    /// Hint that `patch`'s vertices and triangles will be needed soon.
+    pub fn hint(&self, patch: &Patch) {
         if let Some(tx) = &self.tx {
-            let _ = tx.try_send(vertices);
+            let _ = tx.try_send(patch.clone());
         }
     }
 }
 
-/// Run `f` with a prefetch pipeline for the given advisors (positions and sums of a mapped run)
-/// and `topo`'s adjacency; without advisors, `f` gets [`Prefetch::none`].
+/// Hints the queue of [`with_prefetch`] holds: two steps' patches.
+pub const PREFETCH_QUEUE: usize = 2 * LANES;
+
+/// Run `f` with a prefetch pipeline for the given per-vertex advisors (positions and sums of a
+/// mapped run), the per-triangle `triangles` advisor and `topo`'s adjacency; without advisors,
+/// `f` gets [`Prefetch::none`].
 pub fn with_prefetch<R>(
     topo: &Topology,
     advisors: Vec<crate::mesh::storage::Advisor>,
-    queue: usize,
+    triangles: Option<crate::mesh::storage::Advisor>,
     f: impl FnOnce(&Prefetch) -> R,
 ) -> R {
     if advisors.is_empty() {
         return f(&Prefetch::none());
     }
-    let (tx, rx) = crossbeam_channel::bounded::<std::ops::Range<u32>>(queue.max(1));
+    let (tx, rx) = crossbeam_channel::bounded::<Patch>(PREFETCH_QUEUE);
     std::thread::scope(|scope| {
         scope.spawn(move || {
-            for range in rx {
-                topo.will_need(range.clone());
+            for patch in rx {
+                let v = &patch.vertices;
+                topo.will_need(v.clone());
                 for a in &advisors {
-                    a.will_need(range.start as usize..range.end as usize);
+                    a.will_need(v.start as usize..v.end as usize);
+                }
+                if let Some(a) = &triangles {
+                    let t = &patch.triangles;
+                    a.will_need(t.start as usize..t.end as usize);
                 }
             }
         });
@@ -286,4 +334,35 @@ mod tests {
         assert!(s.ring_colours.len() > s.colours.len());
         assert_eq!(s.ring_colours.iter().map(Vec::len).sum::<usize>(), ps.len());
     }
+
+    /// More patches than lanes: three steps, step `s` the patches `p ≡ s (mod 3)`, every colour
+    /// of a step before the next step's. Patches of 4 vertices on a ladder are 2|p − q| − 1 rings
+    /// apart, so within a step (3 apart, 5 rings) the edge stencils do not conflict and each step
+    /// is one colour, where the 2-ring stencils (conflict within 5 rings) need two.
+    #[test]
+    fn a_mesh_of_more_patches_than_lanes_runs_lane_by_lane() {
+        let patches = 3 * LANES;
+        let n = 4 * patches as u32 / 2;
+        let tris = ladder(n);
+        let topo = Topology::build(2 * n as usize, &tris).unwrap();
+        let ps = partition::patches(2 * n as usize, &tris, 4);
+        assert_eq!(ps.len(), patches);
+        let s = schedule(&topo, &ps);
+        assert_eq!(s.steps, 3);
+        let lane_step = |p: u32| p as usize % 3;
+        let expect: Vec<Vec<u32>> = (0..3)
+            .map(|step| (0..patches as u32).filter(|&p| lane_step(p) == step).collect())
+            .collect();
+        assert_eq!(s.colours, expect);
+        assert_eq!(s.ring_colours.len(), 6);
+        for (k, colour) in s.ring_colours.iter().enumerate() {
+            assert!(colour.iter().all(|&p| lane_step(p) == k / 2), "{k}");
+            assert!(colour.windows(2).all(|w| w[1] - w[0] >= 6), "{k}");
+        }
+        assert_eq!(s.ring_colours.iter().map(Vec::len).sum::<usize>(), patches);
+        // One patch more than a step holds is two steps.
+        assert_eq!(steps(LANES), 1);
+        assert_eq!(steps(LANES + 1), 2);
+    }
+
 }

@@ -188,9 +188,6 @@ pub trait Exec {
     fn face_pass(&mut self, field: &mut [DVec3], f: &(dyn Fn(usize, &mut [DVec3]) + Sync));
     /// The same for a per-triangle scalar field.
     fn face_pass_f64(&mut self, field: &mut [f64], f: &(dyn Fn(usize, &mut [f64]) + Sync));
-    /// The neighbour sums of `pos` ([`super::neighbor_sums`]) into `sums`, for the owned vertices
-    /// and those around them whose sums the owned stencils read.
-    fn neighbor_sums(&mut self, pos: &[DVec3], sums: &mut [DVec3]);
 }
 
 /// A smoothing method: everything the engine needs of it (see the module doc). Implemented once
@@ -221,22 +218,21 @@ pub trait Smoother: Sync {
     fn start(&self, _topo: &Topology, _exec: &mut dyn Exec, _counts: &mut [u8]) {}
 
     /// [`Schedule::Stencils`]: before every sweep, what its stencils read beside the positions
-    /// into `sums` (by default the neighbour sums); `spare` is a buffer the method may use (it
-    /// is overwritten after), `counts` its byte field, `faces` its per-triangle fields.
+    /// into `sums` (nothing by default: the neighbour sums of the stencil methods are rebuilt by
+    /// each patch, [`super::rebuild_patch_sums`]); `spare` is a buffer the method may use (it is
+    /// overwritten after), `counts` its byte field, `faces` its per-triangle fields.
     #[allow(clippy::too_many_arguments)]
     fn prepare(
         &self,
         _mesh: PatchMesh,
-        opts: &Options,
-        exec: &mut dyn Exec,
-        pos: &[DVec3],
-        sums: &mut [DVec3],
+        _opts: &Options,
+        _exec: &mut dyn Exec,
+        _pos: &[DVec3],
+        _sums: &mut [DVec3],
         _spare: &mut [DVec3],
         _counts: &[u8],
         _faces: FaceFields,
     ) {
-        let _ = opts;
-        exec.neighbor_sums(pos, sums);
     }
 
     /// [`Schedule::Stencils`]: the stencils of one patch (the vertices `vertices` and triangles

@@ -22,6 +22,7 @@
 
 use std::fmt;
 use std::marker::PhantomData;
+use std::ops::Range;
 use std::str::FromStr;
 
 use glam::DVec3;
@@ -471,6 +472,8 @@ pub trait Field {
     fn get(&self, v: u32) -> DVec3;
     /// Add `d` to the value at vertex `v`.
     fn add(&mut self, v: u32, d: DVec3);
+    /// Set the value at vertex `v`.
+    fn set(&mut self, v: u32, value: DVec3);
 }
 
 impl Field for [DVec3] {
@@ -481,6 +484,10 @@ impl Field for [DVec3] {
     #[inline]
     fn add(&mut self, v: u32, d: DVec3) {
         self[v as usize] += d;
+    }
+    #[inline]
+    fn set(&mut self, v: u32, value: DVec3) {
+        self[v as usize] = value;
     }
 }
 
@@ -534,6 +541,12 @@ impl Field for SharedField<'_> {
             p.write(p.read() + d);
         }
     }
+    #[inline]
+    fn set(&mut self, v: u32, value: DVec3) {
+        debug_assert!((v as usize) < self.len, "vertex {v} out of range");
+        // SAFETY: as for `add`.
+        unsafe { self.ptr.add(v as usize).write(value) }
+    }
 }
 
 /// `1/d` for the degrees of nearly every vertex, so that the kernels load it instead of dividing
@@ -570,6 +583,43 @@ pub fn neighbor_sums(topo: &Topology, pos: &[DVec3]) -> Vec<DVec3> {
 pub fn neighbor_sums_into(topo: &Topology, pos: &[DVec3], out: &mut [DVec3], first: usize) {
     for (k, s) in out.iter_mut().enumerate() {
         *s = neighbor_sum(topo, pos, (first + k) as u32);
+    }
+}
+
+/// The neighbour sums that the stencils of the patch owning `vertices` read, taken afresh from
+/// `pos` when the patch starts: those of its vertices and of the two rings around them (a
+/// stencil's free vertices lie within one ring of the patch, their neighbours within two). What
+/// the stencils then write into `sums` keeps them up to date within the patch; no sum is read by
+/// another patch before it rebuilds its own, so the sums need not outlive a patch (the schedule's
+/// colouring keeps this apart from the other patches of a colour: [`crate::schedule`]).
+pub fn rebuild_patch_sums<P: Field + ?Sized, S: Field + ?Sized>(
+    topo: &Topology,
+    pos: &P,
+    sums: &mut S,
+    vertices: Range<u32>,
+) {
+    let sum = |v: u32| {
+        topo.neighbors(v)
+            .iter()
+            .fold(DVec3::ZERO, |s, &u| s + pos.get(u))
+    };
+    let inside = |v: u32| vertices.contains(&v);
+    let mut ring: Vec<u32> = Vec::new();
+    for v in vertices.clone() {
+        sums.set(v, sum(v));
+        ring.extend(topo.neighbors(v).iter().filter(|&&u| !inside(u)));
+    }
+    ring.sort_unstable();
+    ring.dedup();
+    let mut second: Vec<u32> = ring
+        .iter()
+        .flat_map(|&v| topo.neighbors(v).iter().copied())
+        .filter(|&u| !inside(u) && ring.binary_search(&u).is_err())
+        .collect();
+    second.sort_unstable();
+    second.dedup();
+    for v in ring.into_iter().chain(second) {
+        sums.set(v, sum(v));
     }
 }
 

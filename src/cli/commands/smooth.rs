@@ -407,10 +407,12 @@ fn report(
     let (t, p, m) = (&run.timings, &run.plan, &run.memory);
     writeln!(
         out,
-        "patches: {} of {} vertices in {} colours on {} threads, {} crossing edge stencils; memory: {} ({}), peak anonymous {}",
+        "patches: {} of {} vertices, {} colours in {} {} on {} threads, {} crossing edge stencils; memory: {} ({}), peak anonymous {}",
         p.patches,
         p.patch_size,
         p.colours,
+        p.steps,
+        if p.steps == 1 { "step" } else { "steps" },
         p.threads,
         p.crossing_edge_stencils,
         m.storage,
