@@ -3,15 +3,15 @@
 //! The unit of distribution is the patch of the out-of-core engine ([`crate::engine::Plan`]):
 //! rank 0 prepares the plan once (Morton reorder, adjacency, patches, colours) into a work
 //! directory on a shared file system ([`store`]); every rank maps it and owns a contiguous block of
-//! patches, i.e. a contiguous range `A` of reordered vertices. A rank keeps positions and
-//! neighbour sums for its *region*: `A` and three rings around it (a stencil of an owned patch
-//! reads up to two rings out; the sums of ring 2 need the positions of ring 3). Its arrays are
+//! patches, i.e. a contiguous range `A` of reordered vertices. A rank keeps positions for its
+//! *region*: `A` and three rings around it (a stencil of an owned patch reads up to two rings
+//! out; the neighbour sums a patch rebuilds for ring 2 need the positions of ring 3). Its arrays are
 //! indexed by global vertex id but only the region's pages are ever touched
 //! ([`Buf::sparse`]), so a rank's memory follows its region, not the mesh.
 //!
 //! Every rank runs the engine's one iteration loop ([`crate::engine::iterate`]), plugged in as its
 //! [`Share`]: per iteration, colour after colour, each rank applies the stencils of its patches of that
-//! colour (in parallel on its threads), then sends every value it changed that another rank's
+//! colour (in parallel on its threads), then sends every position it changed that another rank's
 //! region holds to that rank ([`Comm::exchange`]). Patches of one colour touch disjoint data and
 //! every region copy is brought up to date before the next colour, so each stencil sees exactly
 //! the values it sees in the single-process engine: **the output is bit-identical to
@@ -641,8 +641,8 @@ struct RankRun<'a> {
     work: &'a WorkDir,
     state: StateDoc,
     checkpoint_every: usize,
-    /// The shared vertices' positions and sums before the current colour (see [`snapshot`]).
-    before: Vec<[DVec3; 2]>,
+    /// The shared vertices' positions before the current colour (see [`snapshot`]).
+    before: Vec<DVec3>,
     traffic: Traffic,
 }
 
@@ -797,19 +797,12 @@ impl Share for RankRun<'_> {
     }
 
 
-    fn colour_start(&mut self, pos: &[DVec3], sums: &[DVec3]) {
-        self.before = snapshot(self.part, pos, sums);
+    fn colour_start(&mut self, pos: &[DVec3]) {
+        self.before = snapshot(self.part, pos);
     }
 
-    fn colour_end(&mut self, pos: &mut [DVec3], sums: &mut [DVec3]) {
-        send_changes(
-            self.comm,
-            self.part,
-            &self.before,
-            pos,
-            sums,
-            &mut self.traffic,
-        );
+    fn colour_end(&mut self, pos: &mut [DVec3]) {
+        send_changes(self.comm, self.part, &self.before, pos, &mut self.traffic);
     }
 
     fn step_end(&mut self, field: &mut [DVec3]) {
@@ -889,22 +882,20 @@ impl Share for RankRun<'_> {
     }
 }
 
-/// Positions and sums of the shared vertices, to find what a colour phase changed.
-fn snapshot(part: &Part, pos: &[DVec3], sums: &[DVec3]) -> Vec<[DVec3; 2]> {
-    part.shared
-        .iter()
-        .map(|&v| [pos[v as usize], sums[v as usize]])
-        .collect()
+/// Positions of the shared vertices, to find what a colour phase changed.
+fn snapshot(part: &Part, pos: &[DVec3]) -> Vec<DVec3> {
+    part.shared.iter().map(|&v| pos[v as usize]).collect()
 }
 
-/// After a colour phase: send each linked rank the shared vertices whose position or sum changed
-/// (vertex, position, sum), and apply what the others changed.
+/// After a colour phase: send each linked rank the shared vertices whose position changed
+/// (vertex, position), and apply what the others changed. Positions are all a colour's stencils
+/// leave for others to read: neighbour sums are rebuilt by each patch, and the shares a method
+/// prepares before its sweep are exchanged when they are made.
 fn send_changes(
     comm: &dyn Comm,
     part: &Part,
-    before: &[[DVec3; 2]],
+    before: &[DVec3],
     pos: &mut [DVec3],
-    sums: &mut [DVec3],
     traffic: &mut Traffic,
 ) {
     let same =
@@ -913,30 +904,19 @@ fn send_changes(
         .shared
         .iter()
         .zip(before)
-        .map(|(&v, b)| !same(pos[v as usize], b[0]) || !same(sums[v as usize], b[1]))
+        .map(|(&v, &b)| !same(pos[v as usize], b))
         .collect();
-    let got = exchange_values(comm, &part.links, traffic, 7, |k, msg| {
+    let got = exchange_values(comm, &part.links, traffic, 4, |k, msg| {
         let k = k as usize;
         if changed[k] {
             let v = part.shared[k] as usize;
             msg.push(v as u64);
             msg.extend(pos[v].to_array().map(f64::to_bits));
-            msg.extend(sums[v].to_array().map(f64::to_bits));
         }
     });
     for msg in got {
-        for e in msg.chunks_exact(7) {
-            let v = e[0] as usize;
-            pos[v] = DVec3::new(
-                f64::from_bits(e[1]),
-                f64::from_bits(e[2]),
-                f64::from_bits(e[3]),
-            );
-            sums[v] = DVec3::new(
-                f64::from_bits(e[4]),
-                f64::from_bits(e[5]),
-                f64::from_bits(e[6]),
-            );
+        for e in msg.chunks_exact(4) {
+            pos[e[0] as usize] = DVec3::get(&e[1..]);
         }
     }
 }

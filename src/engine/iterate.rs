@@ -4,12 +4,14 @@
 //! [`Schedule`] the method's unit ([`Smoother`]) declares.
 //!
 //! Order contract (part of the result's definition, so runs are reproducible):
-//! - [`Schedule::Stencils`]: Gauss–Seidel, colour after colour of the plan's colouring for the
-//!   method's footprint; within a colour the patches run in parallel (they touch disjoint data),
+//! - [`Schedule::Stencils`]: Gauss–Seidel, step after step of the streaming order and colour
+//!   after colour within a step ([`crate::schedule`]) of the plan's colouring for the method's
+//!   footprint; within a colour the patches run in parallel (they touch disjoint data),
 //!   each applying the stencils it owns in the unit's fixed order ([`Smoother::sweep_patch`];
 //!   edge stencils `(i, j)`, `i < j`, ascending by `(i, j)`; triangle stencils in the plan's
 //!   triangle order; ring stencils by ascending vertex). Before each sweep, the unit's
-//!   [`Smoother::prepare`] (neighbour sums, or a method's own Jacobi passes).
+//!   [`Smoother::prepare`] (a method's shares: its own Jacobi passes; the stencil methods'
+//!   neighbour sums are rebuilt by each patch).
 //! - `boundary: smooth`: the loops' normals are measured before the sweep; a unit applies its
 //!   boundary stencils inside its patch sweep, or (when [`Smoother::boundary_pass`] says so) in
 //!   a pass of their own over the edge colouring after its stencils, each patch's ascending;
@@ -111,8 +113,8 @@ impl Sweep<'_> {
 pub struct Buffers<'b> {
     /// The positions: smoothed in place.
     pub pos: &'b mut [DVec3],
-    /// What the stencils read beside the positions ([`Smoother::prepare`]: neighbour sums), or
-    /// the second buffer of the Jacobi steps.
+    /// What the stencils read beside the positions ([`Smoother::prepare`], [`Needs::shares`](crate::smooth::method::Needs)),
+    /// or the second buffer of the Jacobi steps; empty for a method that needs neither.
     pub scratch: &'b mut [DVec3],
     /// The stencil methods' copy before a measured sweep (and the spare buffer of their
     /// preparation), or the auxiliary field of a [`Schedule::TwoPass`] method; may be empty for
@@ -403,7 +405,7 @@ impl Run<'_, '_> {
                 .filter(|&p| self.share.runs_patch(p))
                 .map(|p| mesh.patches[p].clone())
                 .collect();
-            self.share.colour_start(pos, sums);
+            self.share.colour_start(pos);
             // SAFETY: the views are used only by the patches of this colour, which touch
             // disjoint positions and sums (the colouring invariant of `schedule` for the
             // method's footprint; a ring stencil only reads `sums`); `pos` and `sums` are not
@@ -413,7 +415,7 @@ impl Run<'_, '_> {
                 sweep_patches(mesh, pv, sv, &mine, pass, params, loops)
             });
             sweep.add(&done);
-            self.share.colour_end(pos, sums);
+            self.share.colour_end(pos);
             if self.share.leads() {
                 self.observer.iteration_part(c + 1, colours.len());
             }

@@ -20,9 +20,9 @@ pub trait Share {
     /// Whether this process applies the stencils of patch `p`.
     fn runs_patch(&self, p: usize) -> bool;
     /// Before the patches of a colour run.
-    fn colour_start(&mut self, pos: &[DVec3], sums: &[DVec3]);
-    /// After the patches of a colour ran: exchange what changed.
-    fn colour_end(&mut self, pos: &mut [DVec3], sums: &mut [DVec3]);
+    fn colour_start(&mut self, pos: &[DVec3]);
+    /// After the patches of a colour ran: exchange the positions they changed.
+    fn colour_end(&mut self, pos: &mut [DVec3]);
     /// After a Jacobi step wrote the owned entries of `field`: exchange them.
     fn step_end(&mut self, field: &mut [DVec3]);
     /// The same for a scalar field (the automatic stop's).
@@ -80,8 +80,8 @@ impl Share for Alone {
     fn runs_patch(&self, _: usize) -> bool {
         true
     }
-    fn colour_start(&mut self, _: &[DVec3], _: &[DVec3]) {}
-    fn colour_end(&mut self, _: &mut [DVec3], _: &mut [DVec3]) {}
+    fn colour_start(&mut self, _: &[DVec3]) {}
+    fn colour_end(&mut self, _: &mut [DVec3]) {}
     fn step_end(&mut self, _: &mut [DVec3]) {}
     fn step_end_scalar(&mut self, _: &mut [f64]) {}
     fn face_end(&mut self, _: &mut [DVec3]) {}
