@@ -974,12 +974,10 @@ fn smooth_output_identical_across_threads_and_memory_budgets() {
         "peak {peak}, all {all}"
     );
     // The input's triangles are read again for the write, not held while smoothing: at the peak
-    // (a closed mesh, n ≈ m / 2), the write, the plan's f64 positions (24 B per vertex), its
+    // (a closed mesh, n ≈ m / 2) the f64 positions, sums and copy (72 B per vertex), the plan's
     // triangles and both adjacency lists (36 B per triangle), their offsets (16 B per vertex),
-    // the permutation and the mask (5 B per vertex), and the input read again (24 B per vertex,
-    // 12 per triangle): 82.5 B per triangle, where holding the input's triangles too made 94.5.
-    // While smoothing, the copy a measured sweep takes (24 B per vertex) stands where the input
-    // will be; the neighbour sums are the patches' own.
+    // the permutation and the mask (5 B per vertex): 82.5 B per triangle, where holding the
+    // input's triangles too made 94.5.
     assert!(peak <= 83 * m, "peak {peak} = {} B per triangle", peak / m);
     assert!(mapped == one, "scratch-mapped run differs from in-core");
     assert_eq!(

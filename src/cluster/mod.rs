@@ -3,10 +3,10 @@
 //! The unit of distribution is the patch of the out-of-core engine ([`crate::engine::Plan`]):
 //! rank 0 prepares the plan once (Morton reorder, adjacency, patches, colours) into a work
 //! directory on a shared file system ([`store`]); every rank maps it and owns a contiguous block of
-//! patches, i.e. a contiguous range `A` of reordered vertices. A rank keeps positions for its
-//! *region*: `A` and three rings around it (a stencil of an owned patch reads up to two rings
-//! out; the neighbour sums a patch rebuilds for ring 2 need the positions of ring 3). Its arrays are
-//! indexed by global vertex id but only the region's pages are ever touched
+//! patches, i.e. a contiguous range `A` of reordered vertices. A rank keeps positions and
+//! neighbour sums for its *region*: `A` and three rings around it (a stencil of an owned patch
+//! reads up to two rings out; the sums a patch rebuilds for ring 2 need the positions of ring 3).
+//! Its arrays are indexed by global vertex id but only the region's pages are ever touched
 //! ([`Buf::sparse`]), so a rank's memory follows its region, not the mesh.
 //!
 //! Every rank runs the engine's one iteration loop ([`crate::engine::iterate`]), plugged in as its

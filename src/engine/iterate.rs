@@ -113,8 +113,9 @@ impl Sweep<'_> {
 pub struct Buffers<'b> {
     /// The positions: smoothed in place.
     pub pos: &'b mut [DVec3],
-    /// What the stencils read beside the positions ([`Smoother::prepare`], [`Needs::shares`](crate::smooth::method::Needs)),
-    /// or the second buffer of the Jacobi steps; empty for a method that needs neither.
+    /// What the stencils read beside the positions: a method's shares ([`Smoother::prepare`]),
+    /// the neighbour sums each patch of a stencil method rebuilds, or the second buffer of the
+    /// Jacobi steps.
     pub scratch: &'b mut [DVec3],
     /// The stencil methods' copy before a measured sweep (and the spare buffer of their
     /// preparation), or the auxiliary field of a [`Schedule::TwoPass`] method; may be empty for

@@ -176,7 +176,7 @@ impl Plan {
         );
         let sized = |wanted: bool| if wanted { n } else { 0 };
         let mut prev: Buf<DVec3> = storage.zeroed(sized(!schedule_of.is_jacobi() || needs.aux))?;
-        let mut scratch: Buf<DVec3> = storage.zeroed(sized(schedule_of.is_jacobi() || needs.shares))?;
+        let mut scratch: Buf<DVec3> = storage.zeroed(n)?;
         let mut counts: Buf<u8> = storage.zeroed(sized(needs.counts))?;
         let faces = reordered.triangles.len();
         let mut face_vectors: Buf<DVec3> = storage.zeroed(needs.face_vectors * faces)?;

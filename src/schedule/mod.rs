@@ -6,7 +6,7 @@
 //! A patch's free vertices lie within one ring of its owned range, so two patches whose owned
 //! ranges are more than 4 rings apart never conflict; closer ones are joined in the conflict graph.
 //! A patch takes the neighbour sums it reads afresh from the positions when it starts
-//! ([`crate::smooth::PatchSums`]: its vertices and two rings around them, reading
+//! ([`crate::smooth::rebuild_patch_sums`]: its vertices and two rings around them, reading
 //! positions three rings out), which the same 4 rings keep apart from any other patch of its
 //! colour (3 + 1 < 5).
 //!

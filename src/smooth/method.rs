@@ -69,9 +69,6 @@ pub struct Needs {
     pub input: bool,
     /// An auxiliary vector field ([`Schedule::TwoPass`]).
     pub aux: bool,
-    /// A vector field per vertex that [`Smoother::prepare`] fills before each sweep and the
-    /// stencils read ([`Schedule::Stencils`]; a Jacobi method's second buffer is there anyway).
-    pub shares: bool,
     /// A byte per vertex, filled once per run by [`Smoother::start`].
     pub counts: bool,
     /// Vector fields per triangle ([`FaceFields::vectors`], this many times the triangle count).
@@ -222,7 +219,7 @@ pub trait Smoother: Sync {
 
     /// [`Schedule::Stencils`]: before every sweep, what its stencils read beside the positions
     /// into `sums` (nothing by default: the neighbour sums of the stencil methods are rebuilt by
-    /// each patch, [`super::PatchSums`]); `spare` is a buffer the method may use (it is
+    /// each patch, [`super::rebuild_patch_sums`]); `spare` is a buffer the method may use (it is
     /// overwritten after), `counts` its byte field, `faces` its per-triangle fields.
     #[allow(clippy::too_many_arguments)]
     fn prepare(

@@ -12,10 +12,7 @@ use super::method::{
     Control, Exec, FaceFields, Footprint, Needs, PatchMesh, Schedule, Settle, Smoother, StopRule,
 };
 use super::stencil::{self, StencilParams};
-use super::{
-    Field, Options, PatchSums, SharedField, SweepStats, Topology, guided, laplacian, lowpass,
-    rings,
-};
+use super::{Options, SharedField, SweepStats, Topology, guided, laplacian, lowpass, rings};
 
 /// Umbrella Laplacian, forward Euler `p += λ L(p)`, Jacobi (Liu et al. 2002, eq. 3–6). Shrinks.
 pub struct Laplacian;
@@ -70,11 +67,11 @@ impl Smoother for Taubin {
 
 /// The edge stencils' sweep of a patch: its edges `(i, j)`, `i` in `vertices`, ascending; with
 /// `loops`, an edge that is a boundary stencil gets the boundary kernel in its place.
-fn sweep_edge_stencils<P: Field + ?Sized, S: Field + ?Sized>(
+fn sweep_edge_stencils(
     mesh: PatchMesh,
     vertices: Range<u32>,
-    pos: &mut P,
-    sums: &mut S,
+    pos: &mut SharedField,
+    sums: &mut SharedField,
     params: StencilParams,
     loops: Option<&Loops>,
 ) -> SweepStats {
@@ -157,38 +154,20 @@ impl Smoother for StencilMethod {
     fn stencil_volume(&self) -> bool {
         self.volume
     }
-    /// The patch's neighbour sums rebuilt ([`PatchSums`]), then [`StencilMethod::sweep_with`].
+    /// Edge stencils: [`sweep_edge_stencils`]. Triangle stencils: the patch's triangles in the
+    /// plan's order, then (with `loops`) its boundary edges, ascending.
     fn sweep_patch(
         &self,
         mesh: PatchMesh,
         vertices: Range<u32>,
         triangles: Range<u32>,
         pos: &mut SharedField,
-        _: &mut SharedField,
-        params: StencilParams,
-        loops: Option<&Loops>,
-    ) -> SweepStats {
-        let mut sums = PatchSums::rebuild(mesh.topo, &*pos, vertices.clone());
-        self.sweep_with(mesh, vertices, triangles, pos, &mut sums, params, loops)
-    }
-}
-
-impl StencilMethod {
-    /// The stencils of the patch of `vertices` and `triangles` with the neighbour sums `sums`.
-    /// Edge stencils: [`sweep_edge_stencils`]. Triangle stencils: the patch's triangles in the
-    /// plan's order, then (with `loops`) its boundary edges, ascending.
-    #[allow(clippy::too_many_arguments)]
-    fn sweep_with<P: Field + ?Sized, S: Field + ?Sized>(
-        &self,
-        mesh: PatchMesh,
-        vertices: Range<u32>,
-        triangles: Range<u32>,
-        pos: &mut P,
-        sums: &mut S,
+        sums: &mut SharedField,
         params: StencilParams,
         loops: Option<&Loops>,
     ) -> SweepStats {
         let (topo, tris) = (mesh.topo, mesh.tris);
+        super::rebuild_patch_sums(topo, &*pos, &mut *sums, vertices.clone());
         match self.free {
             Free::Edge => sweep_edge_stencils(mesh, vertices, pos, sums, params, loops),
             Free::Triangle => {
@@ -222,12 +201,6 @@ impl Smoother for VcsLowpass {
     }
     fn keeps_volume(&self) -> bool {
         true
-    }
-    fn needs(&self) -> Needs {
-        Needs {
-            shares: true,
-            ..Needs::default()
-        }
     }
     fn stop_rule(&self, opts: &Options) -> StopRule {
         StopRule::Filter(vec![opts.lambda, opts.mu()])
@@ -307,7 +280,6 @@ impl Smoother for VcsGuided {
     fn needs(&self) -> Needs {
         Needs {
             counts: true,
-            shares: true,
             face_vectors: guided::FACE_VECTORS,
             face_scalars: guided::FACE_SCALARS,
             ..Needs::default()
@@ -387,12 +359,11 @@ mod tests {
     use crate::shapes::{add_normal_noise, icosphere};
     use crate::smooth::neighbor_sums;
 
-    /// Each patch of a stencil method rebuilds every neighbour sum its stencils read
-    /// ([`PatchSums`], which has none beyond two rings of the patch and panics if asked): a sweep
-    /// of the patches one by one gives the bits of one that takes all the mesh's sums afresh from
-    /// the positions when each patch starts. On a noisy open sphere (its border loop smoothed
-    /// too, whose interior stencils read sums as well), small patches, so that most stencils
-    /// reach outside their patch.
+    /// Each patch of a stencil method rebuilds every neighbour sum its stencils read: started
+    /// from sums that are NaN everywhere, a sweep of the patches one by one gives the bits of one
+    /// started from the exact sums. A sum read but not rebuilt would spread its NaN. On a noisy
+    /// open sphere (its border loop smoothed too, whose interior stencils read sums as well),
+    /// small patches, so that most stencils reach outside their patch.
     #[test]
     fn a_patch_reads_only_the_sums_it_rebuilds() {
         let mut mesh = icosphere(4);
@@ -425,41 +396,34 @@ mod tests {
         };
         for unit in [&LEM, &VCS, &VCS_TRIANGLE] {
             for smooth_loops in [None, Some(&loops)] {
-                let params = StencilParams {
-                    volume: unit.volume,
-                    ..params
+                let run = |start: Vec<DVec3>| {
+                    let (mut p, mut s) = (pos.clone(), start);
+                    // SAFETY: one thread, nothing else uses the arrays while the views live.
+                    let (mut pv, mut sv) =
+                        unsafe { (SharedField::new(&mut p), SharedField::new(&mut s)) };
+                    let params = StencilParams {
+                        volume: unit.volume,
+                        ..params
+                    };
+                    let mut st = SweepStats::default();
+                    for patch in &patches {
+                        st.add(&unit.sweep_patch(
+                            mesh,
+                            patch.vertices.clone(),
+                            patch.triangles.clone(),
+                            &mut pv,
+                            &mut sv,
+                            params,
+                            smooth_loops,
+                        ));
+                    }
+                    (p, st.applied)
                 };
-                let (mut p, mut st) = (pos.clone(), SweepStats::default());
-                // SAFETY: one thread, nothing else uses the array while the view lives.
-                let mut pv = unsafe { SharedField::new(&mut p) };
-                let mut unused = [];
-                let mut no_sums = unsafe { SharedField::new(&mut unused) };
-                for patch in &patches {
-                    st.add(&unit.sweep_patch(
-                        mesh,
-                        patch.vertices.clone(),
-                        patch.triangles.clone(),
-                        &mut pv,
-                        &mut no_sums,
-                        params,
-                        smooth_loops,
-                    ));
-                }
-                let mut q = pos.clone();
-                for patch in &patches {
-                    let mut sums = neighbor_sums(&topo, &q);
-                    unit.sweep_with(
-                        mesh,
-                        patch.vertices.clone(),
-                        patch.triangles.clone(),
-                        &mut q[..],
-                        &mut sums[..],
-                        params,
-                        smooth_loops,
-                    );
-                }
-                assert!(st.applied > 0 && p != pos, "{}", unit.name);
-                assert_eq!(p, q, "{}", unit.name);
+                let (exact, applied) = run(neighbor_sums(&topo, &pos));
+                let (from_nan, _) = run(vec![DVec3::NAN; pos.len()]);
+                assert!(applied > 0 && exact != pos, "{}", unit.name);
+                assert!(from_nan.iter().all(|p| p.is_finite()), "{}", unit.name);
+                assert_eq!(exact, from_nan, "{}", unit.name);
             }
         }
     }

@@ -472,6 +472,8 @@ pub trait Field {
     fn get(&self, v: u32) -> DVec3;
     /// Add `d` to the value at vertex `v`.
     fn add(&mut self, v: u32, d: DVec3);
+    /// Set the value at vertex `v`.
+    fn set(&mut self, v: u32, value: DVec3);
 }
 
 impl Field for [DVec3] {
@@ -482,6 +484,10 @@ impl Field for [DVec3] {
     #[inline]
     fn add(&mut self, v: u32, d: DVec3) {
         self[v as usize] += d;
+    }
+    #[inline]
+    fn set(&mut self, v: u32, value: DVec3) {
+        self[v as usize] = value;
     }
 }
 
@@ -535,6 +541,12 @@ impl Field for SharedField<'_> {
             p.write(p.read() + d);
         }
     }
+    #[inline]
+    fn set(&mut self, v: u32, value: DVec3) {
+        debug_assert!((v as usize) < self.len, "vertex {v} out of range");
+        // SAFETY: as for `add`.
+        unsafe { self.ptr.add(v as usize).write(value) }
+    }
 }
 
 /// `1/d` for the degrees of nearly every vertex, so that the kernels load it instead of dividing
@@ -574,91 +586,40 @@ pub fn neighbor_sums_into(topo: &Topology, pos: &[DVec3], out: &mut [DVec3], fir
     }
 }
 
-/// The neighbour sums that the stencils of one patch read, taken afresh from the positions when
-/// the patch starts: those of its vertices and of the two rings around them (a stencil's free
-/// vertices lie within one ring of the patch, their neighbours within two). The stencils keep
-/// them up to date as they move vertices; they live only while the patch runs, so no array of
-/// the mesh's size holds them (the schedule's colouring keeps a patch's reads of positions, three
-/// rings out, apart from the other patches of its colour: [`crate::schedule`]).
-pub struct PatchSums {
-    first: u32,
-    /// The sums of the patch's vertices, from `first` on.
-    inner: Vec<DVec3>,
-    /// The two rings around them, ascending, and their sums.
-    ring: Vec<u32>,
-    outer: Vec<DVec3>,
-}
-
-impl PatchSums {
-    /// The sums of the patch of `vertices` from `pos`.
-    pub fn rebuild<P: Field + ?Sized>(topo: &Topology, pos: &P, vertices: Range<u32>) -> PatchSums {
-        let sum = |v: u32| {
-            topo.neighbors(v)
-                .iter()
-                .fold(DVec3::ZERO, |s, &u| s + pos.get(u))
-        };
-        let inside = |v: u32| vertices.contains(&v);
-        let mut ring: Vec<u32> = Vec::new();
-        let inner = vertices
-            .clone()
-            .map(|v| {
-                ring.extend(topo.neighbors(v).iter().filter(|&&u| !inside(u)));
-                sum(v)
-            })
-            .collect();
-        ring.sort_unstable();
-        ring.dedup();
-        let mut second: Vec<u32> = ring
+/// The neighbour sums that the stencils of the patch owning `vertices` read, taken afresh from
+/// `pos` when the patch starts: those of its vertices and of the two rings around them (a
+/// stencil's free vertices lie within one ring of the patch, their neighbours within two). What
+/// the stencils then write into `sums` keeps them up to date within the patch; no sum is read by
+/// another patch before it rebuilds its own, so the sums need not outlive a patch (the schedule's
+/// colouring keeps this apart from the other patches of a colour: [`crate::schedule`]).
+pub fn rebuild_patch_sums<P: Field + ?Sized, S: Field + ?Sized>(
+    topo: &Topology,
+    pos: &P,
+    sums: &mut S,
+    vertices: Range<u32>,
+) {
+    let sum = |v: u32| {
+        topo.neighbors(v)
             .iter()
-            .flat_map(|&v| topo.neighbors(v).iter().copied())
-            .filter(|&u| !inside(u) && ring.binary_search(&u).is_err())
-            .collect();
-        ring.append(&mut second);
-        ring.sort_unstable();
-        ring.dedup();
-        let outer = ring.iter().map(|&v| sum(v)).collect();
-        PatchSums {
-            first: vertices.start,
-            inner,
-            ring,
-            outer,
-        }
+            .fold(DVec3::ZERO, |s, &u| s + pos.get(u))
+    };
+    let inside = |v: u32| vertices.contains(&v);
+    let mut ring: Vec<u32> = Vec::new();
+    for v in vertices.clone() {
+        sums.set(v, sum(v));
+        ring.extend(topo.neighbors(v).iter().filter(|&&u| !inside(u)));
     }
-
-    /// Where `v`'s sum is. A vertex more than two rings from the patch has none: a stencil of the
-    /// patch never reads it.
-    #[inline]
-    fn slot(&mut self, v: u32) -> &mut DVec3 {
-        let i = v.wrapping_sub(self.first) as usize;
-        if i < self.inner.len() {
-            &mut self.inner[i]
-        } else {
-            let k = self
-                .ring
-                .binary_search(&v)
-                .unwrap_or_else(|_| panic!("vertex {v} is beyond the patch's two rings"));
-            &mut self.outer[k]
-        }
-    }
-}
-
-impl Field for PatchSums {
-    #[inline]
-    fn get(&self, v: u32) -> DVec3 {
-        let i = v.wrapping_sub(self.first) as usize;
-        if i < self.inner.len() {
-            self.inner[i]
-        } else {
-            let k = self
-                .ring
-                .binary_search(&v)
-                .unwrap_or_else(|_| panic!("vertex {v} is beyond the patch's two rings"));
-            self.outer[k]
-        }
-    }
-    #[inline]
-    fn add(&mut self, v: u32, d: DVec3) {
-        *self.slot(v) += d;
+    ring.sort_unstable();
+    ring.dedup();
+    let mut second: Vec<u32> = ring
+        .iter()
+        .flat_map(|&v| topo.neighbors(v).iter().copied())
+        .filter(|&u| !inside(u) && ring.binary_search(&u).is_err())
+        .collect();
+    second.sort_unstable();
+    second.dedup();
+    for v in ring.into_iter().chain(second) {
+        sums.set(v, sum(v));
     }
 }
 
