@@ -176,7 +176,11 @@ impl Plan {
         );
         let sized = |wanted: bool| if wanted { n } else { 0 };
         let mut prev: Buf<DVec3> = storage.zeroed(sized(!schedule_of.is_jacobi() || needs.aux))?;
-        let mut scratch: Buf<DVec3> = storage.zeroed(n)?;
+        // Out of core a stencil method's neighbour sums are each patch's own (`PatchSums`): an
+        // array of the mesh's size would be 12 B per triangle more to pass through the page cache.
+        let keep_sums = *in_memory;
+        let mut scratch: Buf<DVec3> =
+            storage.zeroed(sized(schedule_of.is_jacobi() || needs.shares || keep_sums))?;
         let mut counts: Buf<u8> = storage.zeroed(sized(needs.counts))?;
         let faces = reordered.triangles.len();
         let mut face_vectors: Buf<DVec3> = storage.zeroed(needs.face_vectors * faces)?;

@@ -69,6 +69,11 @@ pub struct Needs {
     pub input: bool,
     /// An auxiliary vector field ([`Schedule::TwoPass`]).
     pub aux: bool,
+    /// A vector field per vertex that [`Smoother::prepare`] fills before each sweep and the
+    /// stencils read ([`Schedule::Stencils`]; a Jacobi method's second buffer is there anyway).
+    /// Without it, a stencil method gets the array only in core, for its neighbour sums (out of
+    /// core each patch holds its own: [`super::PatchSums`]).
+    pub shares: bool,
     /// A byte per vertex, filled once per run by [`Smoother::start`].
     pub counts: bool,
     /// Vector fields per triangle ([`FaceFields::vectors`], this many times the triangle count).

@@ -12,7 +12,10 @@ use super::method::{
     Control, Exec, FaceFields, Footprint, Needs, PatchMesh, Schedule, Settle, Smoother, StopRule,
 };
 use super::stencil::{self, StencilParams};
-use super::{Options, SharedField, SweepStats, Topology, guided, laplacian, lowpass, rings};
+use super::{
+    Field, Options, PatchSums, SharedField, SweepStats, Topology, guided, laplacian, lowpass,
+    rings,
+};
 
 /// Umbrella Laplacian, forward Euler `p += λ L(p)`, Jacobi (Liu et al. 2002, eq. 3–6). Shrinks.
 pub struct Laplacian;
@@ -67,11 +70,11 @@ impl Smoother for Taubin {
 
 /// The edge stencils' sweep of a patch: its edges `(i, j)`, `i` in `vertices`, ascending; with
 /// `loops`, an edge that is a boundary stencil gets the boundary kernel in its place.
-fn sweep_edge_stencils(
+fn sweep_edge_stencils<P: Field + ?Sized, S: Field + ?Sized>(
     mesh: PatchMesh,
     vertices: Range<u32>,
-    pos: &mut SharedField,
-    sums: &mut SharedField,
+    pos: &mut P,
+    sums: &mut S,
     params: StencilParams,
     loops: Option<&Loops>,
 ) -> SweepStats {
@@ -154,8 +157,9 @@ impl Smoother for StencilMethod {
     fn stencil_volume(&self) -> bool {
         self.volume
     }
-    /// Edge stencils: [`sweep_edge_stencils`]. Triangle stencils: the patch's triangles in the
-    /// plan's order, then (with `loops`) its boundary edges, ascending.
+    /// The patch's neighbour sums rebuilt ([`super::rebuild_patch_sums`]) in `sums`, or in the
+    /// patch alone ([`PatchSums`]) when the run keeps no such array (out of core), then
+    /// [`StencilMethod::sweep_with`]: the same bits either way.
     fn sweep_patch(
         &self,
         mesh: PatchMesh,
@@ -166,8 +170,31 @@ impl Smoother for StencilMethod {
         params: StencilParams,
         loops: Option<&Loops>,
     ) -> SweepStats {
+        if sums.is_empty() {
+            let mut own = PatchSums::rebuild(mesh.topo, &*pos, vertices.clone());
+            return self.sweep_with(mesh, vertices, triangles, pos, &mut own, params, loops);
+        }
+        super::rebuild_patch_sums(mesh.topo, &*pos, &mut *sums, vertices.clone());
+        self.sweep_with(mesh, vertices, triangles, pos, sums, params, loops)
+    }
+}
+
+impl StencilMethod {
+    /// The stencils of the patch of `vertices` and `triangles` with the neighbour sums `sums`.
+    /// Edge stencils: [`sweep_edge_stencils`]. Triangle stencils: the patch's triangles in the
+    /// plan's order, then (with `loops`) its boundary edges, ascending.
+    #[allow(clippy::too_many_arguments)]
+    fn sweep_with<P: Field + ?Sized, S: Field + ?Sized>(
+        &self,
+        mesh: PatchMesh,
+        vertices: Range<u32>,
+        triangles: Range<u32>,
+        pos: &mut P,
+        sums: &mut S,
+        params: StencilParams,
+        loops: Option<&Loops>,
+    ) -> SweepStats {
         let (topo, tris) = (mesh.topo, mesh.tris);
-        super::rebuild_patch_sums(topo, &*pos, &mut *sums, vertices.clone());
         match self.free {
             Free::Edge => sweep_edge_stencils(mesh, vertices, pos, sums, params, loops),
             Free::Triangle => {
@@ -201,6 +228,12 @@ impl Smoother for VcsLowpass {
     }
     fn keeps_volume(&self) -> bool {
         true
+    }
+    fn needs(&self) -> Needs {
+        Needs {
+            shares: true,
+            ..Needs::default()
+        }
     }
     fn stop_rule(&self, opts: &Options) -> StopRule {
         StopRule::Filter(vec![opts.lambda, opts.mu()])
@@ -280,6 +313,7 @@ impl Smoother for VcsGuided {
     fn needs(&self) -> Needs {
         Needs {
             counts: true,
+            shares: true,
             face_vectors: guided::FACE_VECTORS,
             face_scalars: guided::FACE_SCALARS,
             ..Needs::default()
@@ -361,7 +395,8 @@ mod tests {
 
     /// Each patch of a stencil method rebuilds every neighbour sum its stencils read: started
     /// from sums that are NaN everywhere, a sweep of the patches one by one gives the bits of one
-    /// started from the exact sums. A sum read but not rebuilt would spread its NaN. On a noisy
+    /// started from the exact sums, and so does one whose sums each patch holds alone. A sum
+    /// read but not rebuilt would spread its NaN. On a noisy
     /// open sphere (its border loop smoothed too, whose interior stencils read sums as well),
     /// small patches, so that most stencils reach outside their patch.
     #[test]
@@ -424,6 +459,10 @@ mod tests {
                 assert!(applied > 0 && exact != pos, "{}", unit.name);
                 assert!(from_nan.iter().all(|p| p.is_finite()), "{}", unit.name);
                 assert_eq!(exact, from_nan, "{}", unit.name);
+                // No array of the mesh's size (out of core): the sums held by each patch
+                // ([`PatchSums`], which panics on a vertex beyond its two rings), the same bits.
+                let (own, _) = run(Vec::new());
+                assert_eq!(exact, own, "{}", unit.name);
             }
         }
     }

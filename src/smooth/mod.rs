@@ -508,6 +508,11 @@ unsafe impl Send for SharedField<'_> {}
 unsafe impl Sync for SharedField<'_> {}
 
 impl<'a> SharedField<'a> {
+    /// Whether the view holds no element (a field the run does not keep).
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
     /// Share `data` between threads.
     ///
     /// # Safety
@@ -598,17 +603,19 @@ pub fn rebuild_patch_sums<P: Field + ?Sized, S: Field + ?Sized>(
     sums: &mut S,
     vertices: Range<u32>,
 ) {
-    let sum = |v: u32| {
-        topo.neighbors(v)
-            .iter()
-            .fold(DVec3::ZERO, |s, &u| s + pos.get(u))
-    };
-    let inside = |v: u32| vertices.contains(&v);
-    let mut ring: Vec<u32> = Vec::new();
-    for v in vertices.clone() {
-        sums.set(v, sum(v));
-        ring.extend(topo.neighbors(v).iter().filter(|&&u| !inside(u)));
+    for v in vertices.clone().chain(two_rings(topo, &vertices)) {
+        sums.set(v, neighbor_sum_of(topo, pos, v));
     }
+}
+
+/// The vertices outside `vertices` within two rings of them, ascending.
+fn two_rings(topo: &Topology, vertices: &Range<u32>) -> Vec<u32> {
+    let inside = |v: u32| vertices.contains(&v);
+    let mut ring: Vec<u32> = vertices
+        .clone()
+        .flat_map(|v| topo.neighbors(v).iter().copied())
+        .filter(|&u| !inside(u))
+        .collect();
     ring.sort_unstable();
     ring.dedup();
     let mut second: Vec<u32> = ring
@@ -616,10 +623,89 @@ pub fn rebuild_patch_sums<P: Field + ?Sized, S: Field + ?Sized>(
         .flat_map(|&v| topo.neighbors(v).iter().copied())
         .filter(|&u| !inside(u) && ring.binary_search(&u).is_err())
         .collect();
-    second.sort_unstable();
-    second.dedup();
-    for v in ring.into_iter().chain(second) {
-        sums.set(v, sum(v));
+    ring.append(&mut second);
+    ring.sort_unstable();
+    ring.dedup();
+    ring
+}
+
+/// [`neighbor_sum`] of a [`Field`].
+#[inline]
+fn neighbor_sum_of<P: Field + ?Sized>(topo: &Topology, pos: &P, v: u32) -> DVec3 {
+    topo.neighbors(v)
+        .iter()
+        .fold(DVec3::ZERO, |s, &u| s + pos.get(u))
+}
+
+
+/// The sums of [`rebuild_patch_sums`] held by the patch itself while it runs: its vertices' in one
+/// array, its two rings' beside a sorted list of them. The same bits as the sums of the mesh's
+/// size rebuilt per patch, without that array: what a run out of core uses, where that array
+/// would be 12 B per triangle more of scratch to pass through the page cache. In core the array
+/// is cheaper to read (no test of which part holds a vertex).
+pub struct PatchSums {
+    first: u32,
+    /// The sums of the patch's vertices, from `first` on.
+    inner: Vec<DVec3>,
+    /// The two rings around them, ascending, and their sums.
+    ring: Vec<u32>,
+    outer: Vec<DVec3>,
+}
+
+impl PatchSums {
+    /// The sums of the patch of `vertices` from `pos`.
+    pub fn rebuild<P: Field + ?Sized>(topo: &Topology, pos: &P, vertices: Range<u32>) -> PatchSums {
+        let ring = two_rings(topo, &vertices);
+        PatchSums {
+            first: vertices.start,
+            inner: vertices.map(|v| neighbor_sum_of(topo, pos, v)).collect(),
+            outer: ring.iter().map(|&v| neighbor_sum_of(topo, pos, v)).collect(),
+            ring,
+        }
+    }
+
+    /// The slot of `v`, one of the two rings (kept out of the kernels' inlined code: most reads
+    /// are the patch's own vertices). A vertex more than two rings from the patch has none: a
+    /// stencil of the patch never reads it.
+    #[cold]
+    #[inline(never)]
+    fn ring_slot(&self, v: u32) -> usize {
+        self.ring
+            .binary_search(&v)
+            .unwrap_or_else(|_| panic!("vertex {v} is beyond the patch's two rings"))
+    }
+}
+
+impl Field for PatchSums {
+    #[inline]
+    fn get(&self, v: u32) -> DVec3 {
+        let i = v.wrapping_sub(self.first) as usize;
+        match self.inner.get(i) {
+            Some(&s) => s,
+            None => self.outer[self.ring_slot(v)],
+        }
+    }
+    #[inline]
+    fn add(&mut self, v: u32, d: DVec3) {
+        let i = v.wrapping_sub(self.first) as usize;
+        match self.inner.get_mut(i) {
+            Some(s) => *s += d,
+            None => {
+                let k = self.ring_slot(v);
+                self.outer[k] += d;
+            }
+        }
+    }
+    #[inline]
+    fn set(&mut self, v: u32, value: DVec3) {
+        let i = v.wrapping_sub(self.first) as usize;
+        match self.inner.get_mut(i) {
+            Some(s) => *s = value,
+            None => {
+                let k = self.ring_slot(v);
+                self.outer[k] = value;
+            }
+        }
     }
 }
 
