@@ -255,6 +255,27 @@ pub(crate) fn permutation(n: usize, seed: u64) -> Vec<u32> {
     perm
 }
 
+/// A noisy icosphere of `level` (noise 0.3, `seed`) opened by dropping the faces around vertex 0,
+/// its triangles turned to put their smallest corner first and sorted by it (the plan's layout):
+/// its positions and triangles, for kernel tests with a border.
+#[cfg(test)]
+pub(crate) fn open_sorted_sphere(level: u32, seed: u64) -> (Vec<DVec3>, Vec<[u32; 3]>) {
+    let mut mesh = icosphere(level);
+    add_normal_noise(&mut mesh, 0.3, seed);
+    let mut tris: Vec<[u32; 3]> = mesh
+        .triangles
+        .iter()
+        .filter(|t| !t.contains(&0))
+        .map(|&[a, b, c]| match a.min(b).min(c) {
+            m if m == a => [a, b, c],
+            m if m == b => [b, c, a],
+            _ => [c, a, b],
+        })
+        .collect();
+    tris.sort_by_key(|t| t[0]);
+    (mesh.positions.to_vec(), tris)
+}
+
 /// Numbers in [0, 1) from a 64-bit linear congruential generator (Knuth's MMIX constants, the
 /// top 53 bits), deterministic per seed: for tests that want many values and no dependency.
 #[cfg(test)]

@@ -536,23 +536,8 @@ mod tests {
     /// take the general walk either way), with and without a deviation bound.
     #[test]
     fn the_run_of_sorted_faces_gives_the_bits_of_the_general_walk() {
-        use crate::shapes::{add_normal_noise, icosphere};
         use crate::topology::Topology;
-        let mut mesh = icosphere(5);
-        add_normal_noise(&mut mesh, 0.3, 3);
-        let pos: Vec<DVec3> = mesh.positions.to_vec();
-        // Open: drop the faces around vertex 0. Smallest corner first, sorted by it.
-        let mut tris: Vec<[u32; 3]> = mesh
-            .triangles
-            .iter()
-            .filter(|t| !t.contains(&0))
-            .map(|&[a, b, c]| match a.min(b).min(c) {
-                m if m == a => [a, b, c],
-                m if m == b => [b, c, a],
-                _ => [c, a, b],
-            })
-            .collect();
-        tris.sort_by_key(|t| t[0]);
+        let (pos, tris) = crate::shapes::open_sorted_sphere(5, 3);
         let topo = Topology::build(pos.len(), &tris).unwrap();
         assert!((0..topo.len() as u32).any(|v| topo.is_fixed(v)));
         // A filtered field: every vertex a little way towards its neighbours' mean.

@@ -390,31 +390,17 @@ impl Smoother for VcsGuided {
 mod tests {
     use super::*;
     use crate::partition;
-    use crate::shapes::{add_normal_noise, icosphere};
     use crate::smooth::neighbor_sums;
 
     /// Each patch of a stencil method rebuilds every neighbour sum its stencils read: started
     /// from sums that are NaN everywhere, a sweep of the patches one by one gives the bits of one
     /// started from the exact sums, and so does one whose sums each patch holds alone. A sum
-    /// read but not rebuilt would spread its NaN. On a noisy
-    /// open sphere (its border loop smoothed too, whose interior stencils read sums as well),
-    /// small patches, so that most stencils reach outside their patch.
+    /// read but not rebuilt would spread its NaN. On a noisy open sphere (its border loop
+    /// smoothed too, whose interior stencils read sums as well), small patches, so that most
+    /// stencils reach outside their patch.
     #[test]
     fn a_patch_reads_only_the_sums_it_rebuilds() {
-        let mut mesh = icosphere(4);
-        add_normal_noise(&mut mesh, 0.3, 5);
-        let pos: Vec<DVec3> = mesh.positions.to_vec();
-        let mut tris: Vec<[u32; 3]> = mesh
-            .triangles
-            .iter()
-            .filter(|t| !t.contains(&0))
-            .map(|&[a, b, c]| match a.min(b).min(c) {
-                m if m == a => [a, b, c],
-                m if m == b => [b, c, a],
-                _ => [c, a, b],
-            })
-            .collect();
-        tris.sort_by_key(|t| t[0]);
+        let (pos, tris) = crate::shapes::open_sorted_sphere(4, 5);
         let topo = Topology::build(pos.len(), &tris).unwrap();
         let patches = partition::patches(pos.len(), &tris, 97);
         let mut loops = Loops::find(&topo, &tris);
