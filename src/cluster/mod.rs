@@ -796,7 +796,6 @@ impl Share for RankRun<'_> {
         self.part.patches.contains(&p)
     }
 
-
     fn colour_start(&mut self, pos: &[DVec3]) {
         self.before = snapshot(self.part, pos);
     }

@@ -352,9 +352,7 @@ impl Plan {
                 vertices: r.positions.len(),
                 triangles: faces,
             };
-            let mut exec = ShareExec {
-                share: &mut alone,
-            };
+            let mut exec = ShareExec { share: &mut alone };
             let fields = FaceFields {
                 vectors: &mut vectors,
                 scalars: &mut scalars,

@@ -4,7 +4,6 @@
 //! parallel sum of the engine (its statistics included), the multiresolution mode and the cluster
 //! engine goes through here.
 
-
 use glam::DVec3;
 use rayon::prelude::*;
 

@@ -162,7 +162,10 @@ fn colour<'a>(
     let near: Vec<&Near> = near.collect();
     let mut colours = Vec::new();
     for step in 0..steps {
-        let members: Vec<u32> = (step..near.len()).step_by(steps).map(|p| p as u32).collect();
+        let members: Vec<u32> = (step..near.len())
+            .step_by(steps)
+            .map(|p| p as u32)
+            .collect();
         let mut graph = UnGraph::<(), ()>::with_capacity(members.len(), 0);
         let nodes: Vec<_> = members.iter().map(|_| graph.add_node(())).collect();
         let node_of = |p: u32| nodes[(p as usize - step) / steps];
@@ -351,7 +354,11 @@ mod tests {
         assert_eq!(s.steps, 3);
         let lane_step = |p: u32| p as usize % 3;
         let expect: Vec<Vec<u32>> = (0..3)
-            .map(|step| (0..patches as u32).filter(|&p| lane_step(p) == step).collect())
+            .map(|step| {
+                (0..patches as u32)
+                    .filter(|&p| lane_step(p) == step)
+                    .collect()
+            })
             .collect();
         assert_eq!(s.colours, expect);
         assert_eq!(s.ring_colours.len(), 6);
@@ -364,5 +371,4 @@ mod tests {
         assert_eq!(steps(LANES), 1);
         assert_eq!(steps(LANES + 1), 2);
     }
-
 }

@@ -13,8 +13,7 @@ use super::method::{
 };
 use super::stencil::{self, StencilParams};
 use super::{
-    Field, Options, PatchSums, SharedField, SweepStats, Topology, guided, laplacian, lowpass,
-    rings,
+    Field, Options, PatchSums, SharedField, SweepStats, Topology, guided, laplacian, lowpass, rings,
 };
 
 /// Umbrella Laplacian, forward Euler `p += λ L(p)`, Jacobi (Liu et al. 2002, eq. 3–6). Shrinks.

@@ -637,7 +637,6 @@ fn neighbor_sum_of<P: Field + ?Sized>(topo: &Topology, pos: &P, v: u32) -> DVec3
         .fold(DVec3::ZERO, |s, &u| s + pos.get(u))
 }
 
-
 /// The sums of [`rebuild_patch_sums`] held by the patch itself while it runs: its vertices' in one
 /// array, its two rings' beside a sorted list of them. The same bits as the sums of the mesh's
 /// size rebuilt per patch, without that array: what a run out of core uses, where that array
@@ -659,7 +658,10 @@ impl PatchSums {
         PatchSums {
             first: vertices.start,
             inner: vertices.map(|v| neighbor_sum_of(topo, pos, v)).collect(),
-            outer: ring.iter().map(|&v| neighbor_sum_of(topo, pos, v)).collect(),
+            outer: ring
+                .iter()
+                .map(|&v| neighbor_sum_of(topo, pos, v))
+                .collect(),
             ring,
         }
     }
