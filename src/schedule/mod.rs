@@ -62,8 +62,6 @@ pub struct Schedule {
     /// Patch indices of each colour, ascending; the colours of every step, steps and colours in
     /// execution order (edge and triangle stencils).
     pub colours: Vec<Vec<u32>>,
-    /// Steps of the streaming order ([`steps`]).
-    pub steps: usize,
     /// Per patch: vertices outside its owned range that its stencils read.
     pub halo: Vec<u32>,
     /// The colouring for the 2-ring stencils of `vcs-guided`, in the same form.
@@ -77,7 +75,6 @@ impl Schedule {
     pub fn single() -> Schedule {
         Schedule {
             colours: vec![vec![0]],
-            steps: 1,
             halo: vec![0],
             ring_colours: vec![vec![0]],
             ring_halo: vec![0],
@@ -140,7 +137,6 @@ pub fn schedule_metered(topo: &Topology, patches: &[Patch], meter: &Meter) -> Sc
     meter.add(patches.len() as u64);
     Schedule {
         colours,
-        steps,
         halo,
         ring_colours,
         ring_halo,
@@ -155,10 +151,7 @@ pub fn steps(patches: usize) -> usize {
 /// The colours of the patches given by each one's near patches, step by step (`steps` of them:
 /// patch `p` is in step `p % steps`), each step's conflict graph coloured with DSatur; and the
 /// halos.
-fn colour<'a>(
-    near: impl ExactSizeIterator<Item = &'a Near> + Clone,
-    steps: usize,
-) -> (Vec<Vec<u32>>, Vec<u32>) {
+fn colour<'a>(near: impl Iterator<Item = &'a Near>, steps: usize) -> (Vec<Vec<u32>>, Vec<u32>) {
     let near: Vec<&Near> = near.collect();
     let mut colours = Vec::new();
     for step in 0..steps {
@@ -351,7 +344,7 @@ mod tests {
         let ps = partition::patches(2 * n as usize, &tris, 4);
         assert_eq!(ps.len(), patches);
         let s = schedule(&topo, &ps);
-        assert_eq!(s.steps, 3);
+        assert_eq!(steps(ps.len()), 3);
         let lane_step = |p: u32| p as usize % 3;
         let expect: Vec<Vec<u32>> = (0..3)
             .map(|step| {

@@ -604,7 +604,7 @@ pub fn rebuild_patch_sums<P: Field + ?Sized, S: Field + ?Sized>(
     vertices: Range<u32>,
 ) {
     for v in vertices.clone().chain(two_rings(topo, &vertices)) {
-        sums.set(v, neighbor_sum_of(topo, pos, v));
+        sums.set(v, neighbor_sum(topo, pos, v));
     }
 }
 
@@ -629,14 +629,6 @@ fn two_rings(topo: &Topology, vertices: &Range<u32>) -> Vec<u32> {
     ring
 }
 
-/// [`neighbor_sum`] of a [`Field`].
-#[inline]
-fn neighbor_sum_of<P: Field + ?Sized>(topo: &Topology, pos: &P, v: u32) -> DVec3 {
-    topo.neighbors(v)
-        .iter()
-        .fold(DVec3::ZERO, |s, &u| s + pos.get(u))
-}
-
 /// The sums of [`rebuild_patch_sums`] held by the patch itself while it runs: its vertices' in one
 /// array, its two rings' beside a sorted list of them. The same bits as the sums of the mesh's
 /// size rebuilt per patch, without that array: what a run out of core uses, where that array
@@ -657,12 +649,21 @@ impl PatchSums {
         let ring = two_rings(topo, &vertices);
         PatchSums {
             first: vertices.start,
-            inner: vertices.map(|v| neighbor_sum_of(topo, pos, v)).collect(),
-            outer: ring
-                .iter()
-                .map(|&v| neighbor_sum_of(topo, pos, v))
-                .collect(),
+            inner: vertices.map(|v| neighbor_sum(topo, pos, v)).collect(),
+            outer: ring.iter().map(|&v| neighbor_sum(topo, pos, v)).collect(),
             ring,
+        }
+    }
+
+    /// Where `v`'s sum is held.
+    #[inline]
+    fn slot_mut(&mut self, v: u32) -> &mut DVec3 {
+        let i = v.wrapping_sub(self.first) as usize;
+        if i < self.inner.len() {
+            &mut self.inner[i]
+        } else {
+            let k = self.ring_slot(v);
+            &mut self.outer[k]
         }
     }
 
@@ -689,34 +690,20 @@ impl Field for PatchSums {
     }
     #[inline]
     fn add(&mut self, v: u32, d: DVec3) {
-        let i = v.wrapping_sub(self.first) as usize;
-        match self.inner.get_mut(i) {
-            Some(s) => *s += d,
-            None => {
-                let k = self.ring_slot(v);
-                self.outer[k] += d;
-            }
-        }
+        *self.slot_mut(v) += d;
     }
     #[inline]
     fn set(&mut self, v: u32, value: DVec3) {
-        let i = v.wrapping_sub(self.first) as usize;
-        match self.inner.get_mut(i) {
-            Some(s) => *s = value,
-            None => {
-                let k = self.ring_slot(v);
-                self.outer[k] = value;
-            }
-        }
+        *self.slot_mut(v) = value;
     }
 }
 
 /// `Σ_{u∈N(v)} field_u`, summed in the neighbour order (every kernel's order, so their bits agree).
 #[inline]
-pub(crate) fn neighbor_sum(topo: &Topology, field: &[DVec3], v: u32) -> DVec3 {
+pub(crate) fn neighbor_sum<P: Field + ?Sized>(topo: &Topology, field: &P, v: u32) -> DVec3 {
     topo.neighbors(v)
         .iter()
-        .fold(DVec3::ZERO, |s, &u| s + field[u as usize])
+        .fold(DVec3::ZERO, |s, &u| s + field.get(u))
 }
 
 #[cfg(test)]
