@@ -5,7 +5,9 @@ use std::path::{Path, PathBuf};
 
 use serde_json::Value;
 
-use crate::util::{command, fails, generate_sphere, json, listing, ok, read_json, scan, vcsmooth};
+use crate::util::{
+    arg, command, fails, generate_sphere, json, listing, ok, read_json, scan, vcsmooth,
+};
 
 const METHODS: [&str; 5] = ["vcs", "vcs-triangle", "lem", "laplacian", "taubin"];
 
@@ -331,6 +333,35 @@ fn smooth_defaults_and_other_formats() {
         assert!(out.is_file(), "no .{ext} output");
         // Default: vcs-lowpass, 10 iterations.
         assert!(text.contains("vcs-lowpass, 10 iterations"), "{text}");
+    }
+}
+
+#[test]
+fn the_default_method_says_when_to_choose_another() {
+    let (dir, sphere) = noisy_sphere_file();
+    let out = dir.path().join("out.ply");
+    let run = |extra: &[&str]| {
+        let mut args = vec!["smooth".to_string(), arg(&sphere), arg(&out)];
+        args.extend(extra.iter().map(|s| s.to_string()));
+        ok(vcsmooth(&args))
+    };
+    let hint = "--method vcs-guided";
+    let text = run(&[]);
+    let last = text.lines().last().unwrap();
+    assert!(
+        last.starts_with("method: vcs-lowpass (the default)") && last.contains(hint),
+        "{text}"
+    );
+    // Named (even the default), with creases, or with nothing done: no hint.
+    for extra in [
+        &["--method", "vcs-lowpass"][..],
+        &["--method", "taubin"],
+        &["--crease-angle", "40"],
+        &["--iterations", "0"],
+        &["--multires"],
+    ] {
+        let text = run(extra);
+        assert!(!text.contains(hint), "{extra:?}: {text}");
     }
 }
 

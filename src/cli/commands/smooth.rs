@@ -88,6 +88,8 @@ pub struct SmoothConfig {
     pub checkpoint_every: usize,
     /// The command line as given, recorded in the report.
     pub argv: Vec<String>,
+    /// Whether `--method` was given: without it the summary says when to choose another.
+    pub method_given: bool,
 }
 
 impl SmoothConfig {
@@ -99,6 +101,7 @@ impl SmoothConfig {
             false => crate::Method::default(),
         };
         let options = a.smoothing.options(default)?;
+        let method_given = a.smoothing.method.is_some();
         let multires = a.multires.resolve(&options)?;
         if multires.is_some() && a.cluster.checkpoint.is_some() {
             return Err(flags::parameter(
@@ -158,6 +161,7 @@ impl SmoothConfig {
             checkpoint: a.cluster.checkpoint,
             checkpoint_every: a.cluster.checkpoint_every as usize,
             argv,
+            method_given,
         })
     }
 
@@ -470,10 +474,29 @@ fn report(
     if let Some(d) = drawn {
         print_drawn(out, &d)?;
     }
+    if let Some(hint) = method_hint(cfg, run.iterations_run) {
+        writeln!(out, "{hint}").map_err(stdout_error)?;
+    }
     match &run.deviation {
         Some(d) => tolerance_verdict(&cfg.output, d),
         None => Ok(()),
     }
+}
+
+/// When the method was left to its default, which other one to choose for which input: no
+/// cheap measure tells a machined part from an organic scan (docs/quality-research.md §18), so
+/// the user is told once per run, and naming any method hides the line.
+fn method_hint(cfg: &SmoothConfig, iterations_run: usize) -> Option<String> {
+    let o = &cfg.options;
+    let plain = !cfg.method_given && cfg.multires.is_none() && o.crease_angle.is_none();
+    (plain && iterations_run > 0 && o.method == crate::Method::default()).then(|| {
+        format!(
+            "method: {} (the default) is for organic and smooth scans; a part with sharp edges \
+             (machined, CAD) keeps them with --method vcs-guided (slower), or keeps its clearest \
+             ones with --crease-angle 40; --method {} hides this line",
+            o.method, o.method
+        )
+    })
 }
 
 /// Print the per-iteration table of a run.
