@@ -73,6 +73,9 @@ impl Method {
         Method::Hc,
     ];
 
+    /// The method for a part with sharp edges (machined, CAD), which a run left to the default
+    /// names in its summary.
+    pub const SHARP_EDGES: Method = Method::VcsGuided;
     /// The coarse levels' method of the multiresolution mode when none is named.
     pub const MULTIRES_COARSE: Method = Method::Vcs;
     /// The input level's method of the multiresolution mode when none is named: the cheapest

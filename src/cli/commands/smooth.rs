@@ -492,9 +492,11 @@ fn method_hint(cfg: &SmoothConfig, iterations_run: usize) -> Option<String> {
     (plain && iterations_run > 0 && o.method == crate::Method::default()).then(|| {
         format!(
             "method: {} (the default) is for organic and smooth scans; a part with sharp edges \
-             (machined, CAD) keeps them with --method vcs-guided (slower), or keeps its clearest \
-             ones with --crease-angle 40; --method {} hides this line",
-            o.method, o.method
+             (machined, CAD) keeps them with --method {} (slower), or keeps its clearest ones \
+             with --crease-angle 40; --method {} hides this line",
+            o.method,
+            crate::Method::SHARP_EDGES,
+            o.method
         )
     })
 }
