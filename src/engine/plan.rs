@@ -141,6 +141,12 @@ pub fn mesh_info(mesh: &crate::Mesh, weld: Weld) -> Result<crate::metrics::MeshI
     Ok(info)
 }
 
+/// The mesh in a plan's order, and the seconds it took ([`Plan::reorder`]).
+pub struct Ordered {
+    pub reordered: Reordered,
+    pub seconds: f64,
+}
+
 impl Plan {
     /// Order, build the topology, cut and colour the patches as `layout` says, placing the large
     /// arrays as `storage` says. Runs on the current rayon pool (the result does not depend on it).
@@ -170,9 +176,23 @@ impl Plan {
         weld: Weld,
         observer: &mut dyn Observer,
     ) -> Result<Plan> {
+        let ordered = Plan::reorder(storage, positions, triangles, layout, weld, observer)?;
+        Plan::of_reordered(storage, ordered, layout, observer)
+    }
+
+    /// The first phase of [`Plan::new_observed`]: the mesh in the plan's order, a copy that the
+    /// rest of the plan is built from alone (so the caller may give the input's arrays back).
+    pub fn reorder(
+        storage: &Storage,
+        positions: &[DVec3],
+        triangles: &[[u32; 3]],
+        layout: Layout,
+        weld: Weld,
+        observer: &mut dyn Observer,
+    ) -> Result<Ordered> {
         let (n, t) = (positions.len() as u64, triangles.len() as u64);
         let clock = Instant::now();
-        let mut reordered = match layout {
+        let reordered = match layout {
             Layout::Patches(0) => {
                 return Err(Error::parameter("patch_size", "must be at least 1"));
             }
@@ -189,7 +209,26 @@ impl Plan {
             }
             Layout::Whole => Reordered::in_input_order(storage, positions, triangles, weld)?,
         };
-        let reorder = clock.elapsed().as_secs_f64();
+        Ok(Ordered {
+            reordered,
+            seconds: clock.elapsed().as_secs_f64(),
+        })
+    }
+
+    /// The rest of [`Plan::new_observed`] after [`Plan::reorder`]: the topology, the patches and
+    /// their schedule.
+    pub fn of_reordered(
+        storage: &Storage,
+        ordered: Ordered,
+        layout: Layout,
+        observer: &mut dyn Observer,
+    ) -> Result<Plan> {
+        let Ordered {
+            mut reordered,
+            seconds: reorder,
+        } = ordered;
+        let (vertices, triangles) = (reordered.positions.len(), reordered.triangles.len());
+        let (n, t) = (vertices as u64, triangles as u64);
         let clock = Instant::now();
         let topology = metered(
             observer,
@@ -197,7 +236,7 @@ impl Plan {
             Topology::BUILD_PASSES.items(n, t) + t,
             |m| -> Result<Topology> {
                 let mut topology =
-                    Topology::build_metered(storage, positions.len(), &reordered.triangles, m)?;
+                    Topology::build_metered(storage, vertices, &reordered.triangles, m)?;
                 // The plan's copy of the faces is what the stencils' volumes read; the output
                 // keeps the input's faces.
                 topology.orient(&mut reordered.triangles, &reordered.positions);
@@ -209,7 +248,7 @@ impl Plan {
         let clock = Instant::now();
         let (patches, schedule) = match layout {
             Layout::Patches(size) => {
-                let patches = partition::patches(positions.len(), &reordered.triangles, size);
+                let patches = partition::patches(vertices, &reordered.triangles, size);
                 let total = schedule::SCHEDULE_PASSES * patches.len() as u64;
                 let schedule = metered(observer, Phase::Schedule, total, |m| {
                     Ok(schedule::schedule_metered(&topology, &patches, m))
@@ -218,8 +257,8 @@ impl Plan {
             }
             Layout::Whole => (
                 vec![Patch {
-                    vertices: 0..positions.len() as u32,
-                    triangles: 0..triangles.len() as u32,
+                    vertices: 0..vertices as u32,
+                    triangles: 0..triangles as u32,
                 }],
                 Schedule::single(),
             ),
