@@ -218,8 +218,10 @@ impl Topology {
                 });
         }
         if misfits == 0 {
-            // The skipped pass 2, for the meter.
+            // The skipped pass 2, for the meter. The neighbours' offsets are then the faces'
+            // (`Topology::vv_offsets`).
             meter.add(n_vertices as u64);
+            vv_offsets = Buf::default();
         } else {
             // Pass 1's array goes before pass 2's is made, so the two are never held at once.
             drop(std::mem::take(&mut vv));
@@ -419,6 +421,9 @@ mod tests {
         assert!((0..6).all(|v| t.deg(v) == 4 && t.faces_of(v).len() == 4));
         assert_eq!(t.edges().count(), 12);
         assert!(t.edges().all(|[i, j]| i < j));
+        // As many neighbours as faces everywhere: one offsets array serves both lists.
+        assert!(t.vv_offsets.is_empty());
+        assert_eq!(t.heap_bytes(), 7 * 8 + 2 * 24 * 4 + 6);
     }
 
     #[test]
@@ -429,6 +434,9 @@ mod tests {
         assert!(!t.is_fixed(0));
         assert!((1..=5).all(|v| t.is_fixed(v)));
         assert_eq!(t.stats.boundary_edges, 5);
+        // The rim has a neighbour more than faces: the offsets differ, both are kept.
+        assert_eq!(t.parts().vv_offsets, [0, 5, 8, 11, 14, 17, 20]);
+        assert_eq!(t.parts().vf_offsets, [0, 5, 7, 9, 11, 13, 15]);
     }
 
     #[test]

@@ -43,6 +43,8 @@ use crate::mesh::Buf;
 /// CSR adjacency and fixed-vertex mask of a triangle mesh.
 #[derive(Debug, Clone, Default)]
 pub struct Topology {
+    /// Empty when it would equal `vf_offsets` (every vertex has as many neighbours as faces: a
+    /// closed manifold), which then serve both lists: 8 bytes per vertex less.
     vv_offsets: Buf<usize>,
     vv: Buf<u32>,
     vf_offsets: Buf<usize>,
@@ -143,7 +145,7 @@ impl Topology {
     /// The arrays: for storing a plan on disk, and for kernels (see [`TopologyParts`]).
     pub fn parts(&self) -> TopologyParts<'_> {
         TopologyParts {
-            vv_offsets: &self.vv_offsets,
+            vv_offsets: self.vv_offsets(),
             vv: &self.vv,
             vf_offsets: &self.vf_offsets,
             vf: &self.vf,
@@ -197,7 +199,7 @@ impl Topology {
         let ok = |offsets: &[usize], len: usize| {
             v < n && offsets[v] <= offsets[v + 1] && offsets[v + 1] <= len
         };
-        ok(&self.vv_offsets, self.vv.len())
+        ok(self.vv_offsets(), self.vv.len())
             && ok(&self.vf_offsets, self.vf.len())
             && self.neighbors(v as u32).iter().all(|&u| (u as usize) < n)
             && self
@@ -222,21 +224,32 @@ impl Topology {
     #[inline]
     pub fn neighbors(&self, v: u32) -> &[u32] {
         let v = v as usize;
-        &self.vv[self.vv_offsets[v]..self.vv_offsets[v + 1]]
+        let offsets = self.vv_offsets();
+        &self.vv[offsets[v]..offsets[v + 1]]
+    }
+
+    /// The vertex → vertex offsets, `vf_offsets` when they are the same.
+    #[inline]
+    fn vv_offsets(&self) -> &[usize] {
+        match self.vv_offsets.is_empty() {
+            true => &self.vf_offsets,
+            false => &self.vv_offsets,
+        }
     }
 
     /// The vertex→vertex CSR arrays: the neighbours of `v` are `vv[offsets[v]..offsets[v + 1]]`.
     /// Every id in `vv` is below [`Topology::len`].
     #[inline]
     pub fn csr(&self) -> (&[usize], &[u32]) {
-        (&self.vv_offsets, &self.vv)
+        (self.vv_offsets(), &self.vv)
     }
 
     /// Number of neighbours of `v`.
     #[inline]
     pub fn deg(&self, v: u32) -> usize {
         let v = v as usize;
-        self.vv_offsets[v + 1] - self.vv_offsets[v]
+        let offsets = self.vv_offsets();
+        offsets[v + 1] - offsets[v]
     }
 
     /// Triangles using `v` (indices into the triangle array the topology was built from), ascending.
@@ -308,7 +321,7 @@ impl Topology {
             a.will_need(2 * lo..2 * hi);
         }
         if let Some(a) = self.vv.advisor() {
-            a.will_need(self.vv_offsets[lo]..self.vv_offsets[hi]);
+            a.will_need(self.vv_offsets()[lo]..self.vv_offsets()[hi]);
         }
         if let Some(a) = self.vf.advisor() {
             a.will_need(self.vf_offsets[lo]..self.vf_offsets[hi]);
