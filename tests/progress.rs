@@ -200,7 +200,11 @@ fn a_file_run_reports_each_phase_to_its_end() {
         want.extend([Phase::Smooth, Phase::Restore]);
         if name == "scratch" {
             // Out of core the input's triangles are read again for the write, once the plan
-            // has put the positions back in the input's order and is given back.
+            // has put the positions back in the input's order, measured the output (when
+            // asked) and been given back.
+            if settings.with_stats {
+                want.push(Phase::Statistics);
+            }
             want.push(Phase::Read);
         }
         want.push(Phase::Write);

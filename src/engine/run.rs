@@ -283,7 +283,11 @@ pub(crate) fn run_file_with(
         let measured = match engine.with_stats {
             true => {
                 let clock = Instant::now();
-                let stats = output_stats(&mut plan, output, &mesh, &smoothed);
+                let stats = metered(observer, Phase::Statistics, 1, |m| {
+                    let stats = output_stats(&mut plan, output, &mesh, &smoothed);
+                    m.add(1);
+                    Ok(stats)
+                })?;
                 t.metrics += clock.elapsed().as_secs_f64();
                 Some(stats)
             }
