@@ -239,22 +239,17 @@ pub(crate) fn run_file_with(
     } = prepare(input, output, opts, engine, &start, &mut t, observer)?;
 
     let smoothed = start.pool.install(|| -> Result<_> {
-        // The plan holds its own (reordered) copy: the input-order positions are not needed until
-        // the write, so their memory is given back while smoothing (the peak of an in-core run).
-        // Out of core (the triangles in a scratch file) the input's triangles go too, and the
-        // file, held open, is read again for the write: 12 B per triangle less scratch at the
-        // run's peak, for one more read of the input.
-        let again = kept;
+        // The plan holds its own (reordered) copy: in core the input-order positions are not
+        // needed until the write, so their memory is given back while smoothing (the peak of an
+        // in-core run). Out of core (`kept`) `prepare` gave the input's arrays back already, and
+        // the file, held open, is read again for the write.
         // The deviation field needs the input positions at the write: kept in core, read again
         // out of core.
-        let mut input_positions = match engine.deviation.is_on() && again.is_none() {
+        let mut input_positions = match engine.deviation.is_on() {
             true => std::mem::take(&mut mesh.positions),
             false => Buf::default(),
         };
         mesh.positions = Buf::default();
-        if again.is_some() {
-            mesh.triangles = Buf::default();
-        }
         let smoothed = smooth_planned(
             &mut plan,
             &storage,
@@ -272,7 +267,7 @@ pub(crate) fn run_file_with(
             plan.positions_in_input_order_metered(&mut positions, m);
             Ok(positions)
         })?;
-        let Some(kept) = again else {
+        let Some(kept) = kept else {
             // The plan is kept past the write only to measure the output as written, beside it.
             return Ok((smoothed, input_positions, Some(plan), None));
         };

@@ -488,8 +488,9 @@ fn report(
 /// the user is told once per run, and naming any method hides the line.
 fn method_hint(cfg: &SmoothConfig, iterations_run: usize) -> Option<String> {
     let o = &cfg.options;
+    // Without `--method` or `--multires` the method is the default.
     let plain = !cfg.method_given && cfg.multires.is_none() && o.crease_angle.is_none();
-    (plain && iterations_run > 0 && o.method == crate::Method::default()).then(|| {
+    (plain && iterations_run > 0).then(|| {
         format!(
             "method: {} (the default) is for organic and smooth scans; a part with sharp edges \
              (machined, CAD) keeps them with --method {} (slower), or keeps its clearest ones \
