@@ -73,7 +73,7 @@ pub use engine::{EngineSettings, Report, smooth, smooth_with};
 /// why). Within one results version an output is the same for any thread count, memory budget
 /// and rank count. Reports (`results_version`) and batch markers carry it, and a rerun of a batch
 /// redoes what an earlier results version made.
-pub const RESULTS_VERSION: u32 = 10;
+pub const RESULTS_VERSION: u32 = 11;
 pub use error::{Error, Result};
 pub use mesh::Mesh;
 

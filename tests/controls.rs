@@ -213,6 +213,7 @@ fn creases_on_a_very_noisy_cube_are_its_edges() {
         &Storage::heap(),
         &cube.triangles,
         &cube.positions,
+        &cube.positions,
         &raw,
         angle,
     )

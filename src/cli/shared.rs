@@ -117,7 +117,7 @@ pub struct MethodParams {
         " [default: off]"
     ))]
     pub reject_energy_increase: bool,
-    /// Creases: edges whose two faces' normals differ by more than DEG degrees, in (0, 180), on the input and after filtering its face normals (so noise makes no creases); a vertex on a crease line (two crease edges, nearly straight) is smoothed along it by laplacian, taubin and vcs-lowpass, fitted by vcs-guided, and fixed by the other methods; corners (three or more) stay where they are [default: none].
+    /// Creases: edges whose two faces' normals differ by more than DEG degrees, in (0, 180), on a denoised copy of the input (its face normals filtered, the positions fitted to them: noise makes no creases), along lines that are as sharp on the input; a vertex on a crease line (two crease edges, nearly straight) is smoothed along it by laplacian, taubin and vcs-lowpass, fitted by vcs-guided, and fixed by the other methods; corners (three or more) stay where they are [default: none].
     #[arg(long, value_name = "DEG", value_parser = crease_angle, allow_hyphen_values = true)]
     pub crease_angle: Option<f64>,
     /// No vertex ends farther than D (model units, > 0) from its input position.

@@ -17,7 +17,7 @@ use crate::error::{Error, Result};
 use crate::io::PlyLayout;
 use crate::mesh::{Buf, Mesh, Storage};
 use crate::smooth::guided;
-use crate::smooth::method::FaceFields;
+use crate::smooth::method::{Exec, FaceFields};
 use glam::DVec3;
 
 /// Which vertices never move, in the input's vertex order. Part of the result's definition (like
@@ -329,13 +329,21 @@ impl Plan {
 
     /// Mark the vertices on creases sharper than `angle` degrees (see [`Topology::crease`]) of
     /// the plan's current positions (the input's, before smoothing); nothing when `None`. The
-    /// angle is measured on the input's face normals after [`guided::CREASE_ITERATIONS`]
-    /// iterations of the guided normal filter ([`guided::filter_normals`]) that never averages
-    /// two faces whose guidance normals differ by more than `angle`: noise makes no creases, and
-    /// the edges of a clean mesh stay as sharp as they are. The filter's fields are allocated in
-    /// `storage` (scratch out of core) and dropped on return. Every pass is a Jacobi pass, so
-    /// the creases do not depend on the thread count or the storage. Like pins, creases are part
-    /// of the result's definition.
+    /// creases are found where noise cannot make them:
+    /// 1. the input's face normals, [`guided::CREASE_ITERATIONS`] iterations of the guided
+    ///    normal filter ([`guided::filter_normals`]) that never averages two faces whose
+    ///    guidance normals differ by more than `angle`, so that the edges of a clean mesh stay
+    ///    as sharp as they are;
+    /// 2. a copy of the positions, [`guided::CREASE_FIT_STEPS`] steps towards the planes of
+    ///    those normals ([`guided::fit_into`]): on heavy noise the edges along a crease zigzag
+    ///    across it, and the crease test needs them along it;
+    /// 3. the normals of the fitted copy, [`guided::CREASE_REFILTER_ITERATIONS`] more
+    ///    iterations: the crease test's normals and positions (with the input's, which keep the
+    ///    filter's own facets from making creases).
+    ///
+    /// The fields are allocated in `storage` (scratch out of core) and dropped on return. Every
+    /// pass is a Jacobi pass, so the creases do not depend on the thread count or the storage.
+    /// Like pins, creases are part of the result's definition.
     ///
     /// [`Topology::crease`]: crate::Topology::crease
     pub fn crease(&mut self, storage: &Storage, angle: Option<f64>) -> Result<()> {
@@ -343,27 +351,45 @@ impl Plan {
             return Ok(());
         };
         let r = &self.reordered;
-        let faces = r.triangles.len();
+        let (tris, pos) = (&r.triangles[..], &r.positions[..]);
+        let faces = tris.len();
         let mut vectors: Buf<DVec3> = storage.zeroed(guided::FACE_VECTORS * faces)?;
         let mut scalars: Buf<f64> = storage.zeroed(guided::FACE_SCALARS * faces)?;
-        let normals = {
-            let parts = self.topology.parts();
-            let mut alone = Alone {
-                vertices: r.positions.len(),
-                triangles: faces,
-            };
-            let mut exec = ShareExec { share: &mut alone };
+        let mut fitted: Buf<DVec3> = storage.zeroed(pos.len())?;
+        let cut = angle.to_radians().cos();
+        let parts = self.topology.parts();
+        let mut alone = Alone {
+            vertices: pos.len(),
+            triangles: faces,
+        };
+        let mut exec = ShareExec { share: &mut alone };
+        {
+            let mut spare: Buf<DVec3> = storage.zeroed(pos.len())?;
             let fields = FaceFields {
                 vectors: &mut vectors,
                 scalars: &mut scalars,
             };
-            let (tris, pos) = (&r.triangles[..], &r.positions[..]);
-            let cut = angle.to_radians().cos();
             let iterations = guided::CREASE_ITERATIONS;
-            guided::filter_normals(&mut exec, &parts, tris, pos, fields, iterations, cut)
+            let filtered =
+                guided::filter_normals(&mut exec, &parts, tris, pos, fields, iterations, cut);
+            fitted.copy_from_slice(pos);
+            for _ in 0..guided::CREASE_FIT_STEPS {
+                let from: &[DVec3] = &fitted;
+                exec.vertex_pass(&mut spare, &|first, out| {
+                    guided::fit_into(&parts, tris, filtered, from, out, first)
+                });
+                std::mem::swap(&mut fitted, &mut spare);
+            }
+        }
+        let fields = FaceFields {
+            vectors: &mut vectors,
+            scalars: &mut scalars,
         };
+        let iterations = guided::CREASE_REFILTER_ITERATIONS;
+        let normals =
+            guided::filter_normals(&mut exec, &parts, tris, &fitted, fields, iterations, cut);
         self.topology
-            .crease(storage, &r.triangles, &r.positions, normals, angle)
+            .crease(storage, tris, pos, &fitted, normals, angle)
     }
 }
 

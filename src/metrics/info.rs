@@ -47,8 +47,9 @@ pub struct MeshInfo {
     /// `fixed_vertices`.
     #[serde(default)]
     pub pinned_vertices: usize,
-    /// Crease edges of the run (`crease_angle` of [`crate::Options`]): edges whose faces' normals
-    /// differ by more than the angle on the input and on its filtered normals.
+    /// Crease edges of the run (`crease_angle` of [`crate::Options`]) between two crease
+    /// vertices: edges whose faces' normals differ by more than the angle on a denoised copy of
+    /// the input, along lines that are that sharp on the input too.
     #[serde(default)]
     pub crease_edges: usize,
     /// Vertices on two or more crease edges, included in `fixed_vertices`: a corner (three or

@@ -180,7 +180,7 @@ impl FromStr for Method {
 /// | `lambda` | 0.5 | `laplacian` (its step), `taubin` and `vcs-lowpass` (their first step) |
 /// | `mu` | the method's: −0.53 for `taubin`, −0.52 for `vcs-lowpass` | `taubin` and `vcs-lowpass` (their second step; negative, `|μ| > λ`) |
 /// | `reject_energy_increase` | false | `lem`, `vcs`, `vcs-triangle` |
-/// | `crease_angle` | none | every method: edges whose faces' normals differ by more than this many degrees (on the input, and on its filtered normals) are creases; corners are fixed, crease line vertices smoothed along their lines (see the field) |
+/// | `crease_angle` | none | every method: edges whose faces' normals differ by more than this many degrees (on a denoised copy of the input, along lines as sharp on the input) are creases; corners are fixed, crease line vertices smoothed along their lines (see the field) |
 /// | `max_deviation` | none | every method: no vertex ends farther than this from its input position (see below) |
 /// | `weld`, `weld_tolerance` | true, 0 | every method: vertices at one position (or, with a tolerance, closer than it) are smoothed as one |
 ///
@@ -208,8 +208,9 @@ pub struct Options {
     /// Skip a stencil whose 2-step result has a higher stencil energy than before (§3.1).
     pub reject_energy_increase: bool,
     /// Crease angle in degrees, in (0, 180): an edge of two triangles whose normals differ by
-    /// more than this on the input positions and after a guided filter of the input's face
-    /// normals (so that noise makes no creases; see `Plan::crease`) is a crease. Corners (three
+    /// more than this on a denoised copy of the input (a guided filter of its face normals and
+    /// the positions fitted to them, so that noise makes no creases; see `Plan::crease`), on a
+    /// line as sharp on the input, is a crease. Corners (three
     /// or more crease edges) are fixed; a vertex on a crease line (two crease edges going on
     /// nearly straight, see [`Topology::line_neighbors`]) is smoothed along its line by
     /// `laplacian`, `taubin` and `vcs-lowpass` (the umbrella of its two crease neighbours),

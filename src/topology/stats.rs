@@ -43,8 +43,9 @@ pub struct TopologyStats {
     /// their topology, and counted in `fixed_vertices`.
     #[serde(default)]
     pub pinned_vertices: usize,
-    /// Edges of two triangles whose normals differ by more than the run's crease angle
-    /// ([`Topology::crease`](super::Topology::crease)); 0 when no crease angle is given.
+    /// Crease edges between two crease vertices, edges of two triangles whose normals differ by
+    /// more than the run's crease angle ([`Topology::crease`](super::Topology::crease)); 0 when
+    /// no crease angle is given.
     #[serde(default)]
     pub crease_edges: usize,
     /// Vertices on a crease edge: fixed, and counted in `fixed_vertices`.
