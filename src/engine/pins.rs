@@ -17,7 +17,7 @@ use crate::error::{Error, Result};
 use crate::io::PlyLayout;
 use crate::mesh::{Buf, Mesh, Storage};
 use crate::smooth::guided;
-use crate::smooth::method::{Exec, FaceFields};
+use crate::smooth::method::Exec;
 use glam::DVec3;
 
 /// Which vertices never move, in the input's vertex order. Part of the result's definition (like
@@ -354,7 +354,6 @@ impl Plan {
         let (tris, pos) = (&r.triangles[..], &r.positions[..]);
         let faces = tris.len();
         let mut vectors: Buf<DVec3> = storage.zeroed(guided::FACE_VECTORS * faces)?;
-        let mut scalars: Buf<f64> = storage.zeroed(guided::FACE_SCALARS * faces)?;
         let mut fitted: Buf<DVec3> = storage.zeroed(pos.len())?;
         let cut = angle.to_radians().cos();
         let parts = self.topology.parts();
@@ -363,15 +362,22 @@ impl Plan {
             triangles: faces,
         };
         let mut exec = ShareExec { share: &mut alone };
+        // The filter's scalars are made for each filter and go with it: they are not alive
+        // beside the fit's two arrays, nor beside the crease test's.
+        let scalars = || storage.zeroed::<f64>(guided::FACE_SCALARS * faces);
         {
-            let mut spare: Buf<DVec3> = storage.zeroed(pos.len())?;
-            let fields = FaceFields {
-                vectors: &mut vectors,
-                scalars: &mut scalars,
-            };
             let iterations = guided::CREASE_ITERATIONS;
-            let filtered =
-                guided::filter_normals(&mut exec, &parts, tris, pos, fields, iterations, cut);
+            let filtered = guided::filter_normals(
+                &mut exec,
+                &parts,
+                tris,
+                pos,
+                &mut vectors,
+                &mut scalars()?,
+                iterations,
+                cut,
+            );
+            let mut spare: Buf<DVec3> = storage.zeroed(pos.len())?;
             fitted.copy_from_slice(pos);
             for _ in 0..guided::CREASE_FIT_STEPS {
                 let from: &[DVec3] = &fitted;
@@ -381,13 +387,16 @@ impl Plan {
                 std::mem::swap(&mut fitted, &mut spare);
             }
         }
-        let fields = FaceFields {
-            vectors: &mut vectors,
-            scalars: &mut scalars,
-        };
-        let iterations = guided::CREASE_REFILTER_ITERATIONS;
-        let normals =
-            guided::filter_normals(&mut exec, &parts, tris, &fitted, fields, iterations, cut);
+        let normals = guided::filter_normals(
+            &mut exec,
+            &parts,
+            tris,
+            &fitted,
+            &mut vectors,
+            &mut scalars()?,
+            guided::CREASE_REFILTER_ITERATIONS,
+            cut,
+        );
         self.topology
             .crease(storage, tris, pos, &fitted, normals, angle)
     }

@@ -32,7 +32,7 @@
 
 use glam::DVec3;
 
-use super::method::{Exec, FaceFields};
+use super::method::Exec;
 use crate::topology::TopologyParts;
 
 // The defaults were chosen on the machined denoising pairs (tools/denoise_table.py): the largest
@@ -276,25 +276,28 @@ pub fn filter_into(
 }
 
 /// Steps 1 and 2 on the fixed positions `pos`: the unit normals of `tris`, filtered
-/// `iterations` times; returns the filtered field, one of `faces`' vectors. `faces` holds
-/// [`FACE_VECTORS`] and [`FACE_SCALARS`] fields of `tris.len()` entries (the normals, the
-/// patches' means and the guidance; the areas and the consistencies), each pass a Jacobi pass
-/// through `exec`, so any split of the work gives the same bits. Used by `vcs-guided` and by the
-/// crease detection ([`crate::Topology::crease`]'s callers).
-pub fn filter_normals<'f>(
+/// `iterations` times; returns the filtered field, one of `vectors`' fields. `vectors` and
+/// `scalars` hold [`FACE_VECTORS`] and [`FACE_SCALARS`] fields of `tris.len()` entries (the
+/// normals, the patches' means and the guidance; the areas and the consistencies: a method's
+/// [`FaceFields`](super::method::FaceFields)), each pass a Jacobi pass through `exec`, so any split of the work gives the
+/// same bits. The result borrows only `vectors`: the scalars may go once it is made. Used by
+/// `vcs-guided` and by the crease detection ([`crate::Topology::crease`]'s callers).
+#[allow(clippy::too_many_arguments)]
+pub fn filter_normals<'v>(
     exec: &mut dyn Exec,
     topo: &TopologyParts,
     tris: &[[u32; 3]],
     pos: &[DVec3],
-    faces: FaceFields<'f>,
+    vectors: &'v mut [DVec3],
+    scalars: &mut [f64],
     iterations: usize,
     cut: f64,
-) -> &'f [DVec3] {
+) -> &'v [DVec3] {
     let n = tris.len();
-    let (normals, rest) = faces.vectors.split_at_mut(n);
+    let (normals, rest) = vectors.split_at_mut(n);
     let (means, guidance) = rest.split_at_mut(n);
     let guidance = &mut guidance[..n];
-    let (areas, consistency) = faces.scalars.split_at_mut(n);
+    let (areas, consistency) = scalars.split_at_mut(n);
     let consistency = &mut consistency[..n];
     exec.face_pass_f64(areas, &|first, out| areas_into(tris, pos, out, first));
     let areas: &[f64] = areas;

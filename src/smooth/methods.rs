@@ -346,8 +346,16 @@ impl Smoother for VcsGuided {
         let parts = topo.parts();
         let parts = &parts;
         let iterations = guided::NORMAL_ITERATIONS;
-        let filtered =
-            guided::filter_normals(exec, parts, tris, pos, faces, iterations, guided::NO_CUT);
+        let filtered = guided::filter_normals(
+            exec,
+            parts,
+            tris,
+            pos,
+            faces.vectors,
+            faces.scalars,
+            iterations,
+            guided::NO_CUT,
+        );
         exec.vertex_pass(spare, &|first, out| {
             guided::fit_into(parts, tris, filtered, pos, out, first)
         });
