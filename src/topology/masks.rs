@@ -36,7 +36,7 @@ pub const MIN_CREASE_EDGES: u32 = 2;
 const CREASE_ALIGNMENT: f64 = 0.9;
 
 /// A line vertex's two crease edges go on nearly straight through it: the cosine of the angle
-/// between them is below minus this (the angle above 143°), on the input positions.
+/// between them is below minus this (the angle above 143°), on the fitted positions.
 /// Chosen with [`CREASE_ALIGNMENT`] on the machined denoising pairs (tools/denoise_table.py;
 /// CHANGELOG, results version 8).
 const LINE_STRAIGHTNESS: f64 = 0.8;
@@ -72,6 +72,11 @@ const CLEAN_ANGLE: f64 = 10.0;
 /// How far along its lines ([`Topology::crease`], step 3) the input's angle is measured around
 /// a crease vertex, in edges: the line of about `2 · LINE_REACH + 1` vertices it is the middle of.
 const LINE_REACH: usize = 5;
+
+/// The most crease vertices step 3 of [`Topology::crease`] reaches around one: a line's 11
+/// are far below it; a web of crease edges (a coarse tessellation whose every edge is sharp)
+/// would otherwise cost the square of its size per vertex.
+const LINE_REACHED: usize = 64;
 
 /// Flags of a vertex in [`Topology::crease`]: its input is clean; it is on a crease edge
 /// beyond its 64th neighbour (never dropped: there is no bit for that edge).
@@ -124,7 +129,7 @@ impl Topology {
         self.stats.fixed_vertices += newly;
     }
 
-    /// Mark the crease vertices, in four steps:
+    /// Mark the crease vertices, in three steps:
     ///
     /// 1. A crease edge is an edge of two triangles whose normals differ by more than
     ///    `angle_deg` degrees (0° where the surface is flat, 90° on a cube's edge) both in
@@ -139,21 +144,24 @@ impl Topology {
     ///    crease vertices with fewer than two crease neighbours left (the ends of every line,
     ///    one vertex a pass), then as many passes give back to the vertices that survived their
     ///    dropped crease neighbours. What noise makes are short lines and lone edges; a line of
-    ///    fewer than about `4 · SHORT_LINE_PASSES` vertices is gone, one longer is whole again.
+    ///    at most `2 · SHORT_LINE_PASSES` crease vertices is gone, one longer is whole again (a
+    ///    closed loop stays, and so does a spur of a long line, grown back from it).
     ///    A vertex whose faces' normals on `input` are all within [`CLEAN_ANGLE`] of the filtered
-    ///    ones is on clean surface and never dropped: there the crease edges found are the
-    ///    input's own, and a short one is a real edge.
+    ///    ones (faces of zero area aside) is on clean surface and never dropped: there the
+    ///    crease edges found are the input's own, and a short one is a real edge.
     /// 3. A line must be sharp on the input too: a crease vertex stays when the median angle
-    ///    between the `input` normals across the crease edges within [`LINE_REACH`] edges of it
-    ///    along its lines is above `angle_deg`. A filter makes facets on a curved part, and the
-    ///    fitted positions make them edges; the input there is smooth.
+    ///    between the `input` normals across the crease edges that reach the crease vertices
+    ///    within [`LINE_REACH`] edges of it along its lines is above `angle_deg`. A filter makes
+    ///    facets on a curved part, and the fitted positions make them edges; the input there is
+    ///    smooth. A vertex on a crease edge beyond its 64th neighbour skips steps 2 and 3.
     ///
     /// A line vertex's two crease neighbours are kept (in an array from `storage`, two bytes
     /// per vertex; see [`Topology::line_neighbors`]), so that the methods that smooth creases
-    /// move it along its line; every other method keeps it fixed. A corner, and a vertex on a
-    /// crease edge that is not among its first 64 neighbours, are fixed. Counts the crease
-    /// edges between the crease vertices kept in
-    /// [`TopologyStats::crease_edges`](super::TopologyStats::crease_edges), those vertices
+    /// move it along its line; every other method keeps it fixed. A corner, and a vertex on two
+    /// crease edges one of which is not among its first 64 neighbours, are fixed. Counts the
+    /// crease edges between the crease vertices kept in
+    /// [`TopologyStats::crease_edges`](super::TopologyStats::crease_edges) (but those beyond
+    /// the 64th neighbour of their lower end), those vertices
     /// (line vertices and corners) in `crease_vertices` and those not fixed
     /// before in `fixed_vertices` (a line vertex cannot move freely). Every pass is a Jacobi
     /// pass, parallel over vertices: the result does not depend on the number of threads.
@@ -231,12 +239,19 @@ impl Topology {
         // Step 3: sharp on the input along the line.
         {
             let (from, flags, edges) = (&state[..], &flags[..], &edges[..]);
-            self.vertex_pass_u8(&mut next, |v| {
-                let m = from[v as usize];
-                let sharp = m != 0
-                    && (flags[v as usize] & MANY != 0
-                        || self.line_is_sharp(triangles, input, edges, from, v, cos_limit));
-                if sharp { m } else { 0 }
+            next.par_chunks_mut(CHUNK).enumerate().for_each(|(c, out)| {
+                let (mut seen, mut cosines) = (Vec::new(), Vec::new());
+                let first = (c * CHUNK) as u32;
+                for (o, v) in out.iter_mut().zip(first..) {
+                    let m = from[v as usize];
+                    let buffers = (&mut seen, &mut cosines);
+                    let sharp = m != 0
+                        && (flags[v as usize] & MANY != 0
+                            || self.line_is_sharp(
+                                triangles, input, edges, from, v, cos_limit, buffers,
+                            ));
+                    *o = if sharp { m } else { 0 };
+                }
             });
         }
         let marks = next;
@@ -316,7 +331,8 @@ impl Topology {
     }
 
     /// Whether the faces of `v` have their `positions` normals within [`CLEAN_ANGLE`] of
-    /// `normals`: the input is clean around `v`.
+    /// `normals` (a face with a zero normal in either is left out): the input is clean around
+    /// `v`.
     fn is_clean(
         &self,
         triangles: &[[u32; 3]],
@@ -326,14 +342,19 @@ impl Topology {
     ) -> bool {
         let cos_clean = CLEAN_ANGLE.to_radians().cos();
         self.faces_of(v).iter().all(|&f| {
-            let raw = face_normal(triangles, positions, f).normalize_or_zero();
-            raw.dot(normals[f as usize]) > cos_clean
+            let (raw, filtered) = (face_normal(triangles, positions, f), normals[f as usize]);
+            // A face of zero area has no normal to compare: a sliver of a clean CAD mesh.
+            let (l0, l1) = (raw.length(), filtered.length());
+            !(l0 > 0.0 && l1 > 0.0) || raw.dot(filtered) > cos_clean * l0 * l1
         })
     }
 
-    /// Step 3 of [`Topology::crease`] for the marked vertex `v`: the crease edges between marked
-    /// vertices within [`LINE_REACH`] edges of `v` (each reached once, breadth first), and
-    /// whether the median of their angles on `positions` is above the angle of `cos_limit`.
+    /// Step 3 of [`Topology::crease`] for the marked vertex `v`: the crease edges by which a
+    /// breadth-first walk from `v` along crease edges between marked vertices first reaches
+    /// each vertex within [`LINE_REACH`] edges (at most [`LINE_REACHED`] of them), and whether
+    /// the median of their angles on `positions` is above the angle of `cos_limit`. `seen` and
+    /// `cosines` are the caller's buffers, reused from vertex to vertex.
+    #[allow(clippy::too_many_arguments)]
     fn line_is_sharp(
         &self,
         triangles: &[[u32; 3]],
@@ -342,9 +363,11 @@ impl Topology {
         marks: &[u8],
         v: u32,
         cos_limit: f64,
+        (seen, cosines): (&mut Vec<u32>, &mut Vec<f64>),
     ) -> bool {
-        let mut seen = vec![v];
-        let mut cosines = Vec::new();
+        seen.clear();
+        seen.push(v);
+        cosines.clear();
         let mut front = 0;
         for _ in 0..LINE_REACH {
             let end = seen.len();
@@ -357,7 +380,7 @@ impl Topology {
                     let k = rest.trailing_zeros();
                     rest &= rest - 1;
                     let u = nbrs[k as usize];
-                    if !seen.contains(&u) {
+                    if seen.len() < LINE_REACHED && !seen.contains(&u) {
                         seen.push(u);
                         cosines.push(self.edge_cosine(triangles, positions, w, u));
                     }
@@ -580,10 +603,14 @@ mod tests {
         // Clean input (the fitted copy is the input): every line stays, however short.
         assert_eq!(creases_of_fold(6, 90.0, 90.0), line(6));
         assert_eq!(creases_of_fold(30, 90.0, 90.0), line(30));
-        // The input 25° off the filtered normals on one side (not clean): a line of 5 vertices
-        // is noise, one of 29 stays whole.
+        // The input 25° off the filtered normals on one side (not clean): a line of at most
+        // 2 · SHORT_LINE_PASSES = 10 vertices is noise, a longer one stays whole.
         assert!(creases_of_fold(6, 90.0, 115.0).is_empty());
+        assert!(creases_of_fold(11, 90.0, 115.0).is_empty());
+        assert_eq!(creases_of_fold(12, 90.0, 115.0), line(12));
         assert_eq!(creases_of_fold(30, 90.0, 115.0), line(30));
+        // The edge test reads the fitted copy: a crease of the input alone is none.
+        assert!(creases_of_fold(30, 45.0, 35.0).is_empty());
         // A fold of the fitted copy where the input is flat: no crease.
         assert!(creases_of_fold(30, 0.0, 90.0).is_empty());
         // Nor where the input's angle is below the crease angle.
