@@ -59,6 +59,23 @@ fn cosine([n0, n1]: [DVec3; 2]) -> f64 {
     }
 }
 
+/// The neighbour places a crease-edge mask holds (its set bits), ascending.
+fn places(mask: u64) -> impl Iterator<Item = usize> {
+    let mut rest = mask;
+    std::iter::from_fn(move || {
+        (rest != 0).then(|| {
+            let k = rest.trailing_zeros() as usize;
+            rest &= rest - 1;
+            k
+        })
+    })
+}
+
+/// The lowest and highest places of a mask of two or more crease edges: a line vertex's two.
+fn line_places(mask: u64) -> [usize; 2] {
+    [mask.trailing_zeros(), 63 - mask.leading_zeros()].map(|k| k as usize)
+}
+
 /// Passes that drop the ends of crease lines, then give them back ([`Topology::crease`], step
 /// 2): the noise a filter leaves makes short lines. Chosen on the machined denoising pairs
 /// (tools/denoise_table.py; docs/quality-research.md §19): 6 or 7 passes lose Fandisk 0.7's
@@ -215,75 +232,72 @@ impl Topology {
         let mut next: Buf<u8> = storage.zeroed(n)?;
         for _ in 0..SHORT_LINE_PASSES {
             let (from, flags, edges) = (&state[..], &flags[..], &edges[..]);
-            self.vertex_pass_u8(&mut next, |v| {
-                let m = from[v as usize];
-                if m == 0 || flags[v as usize] != 0 {
-                    return m;
-                }
-                let live = self.live_edges(edges[v as usize], v, from);
-                self.crease_mark(fitted, v, live)
-            });
+            self.vertex_pass_u8(
+                &mut next,
+                || (),
+                |_, v| {
+                    let m = from[v as usize];
+                    if m == 0 || flags[v as usize] != 0 {
+                        return m;
+                    }
+                    let live = self.live_edges(edges[v as usize], v, from);
+                    self.crease_mark(fitted, v, live)
+                },
+            );
             std::mem::swap(&mut state, &mut next);
         }
         // ... then back along the lines that kept a vertex.
         for _ in 0..SHORT_LINE_PASSES {
             let (from, base, edges) = (&state[..], &base[..], &edges[..]);
-            self.vertex_pass_u8(&mut next, |v| {
-                let b = base[v as usize];
-                let kept =
-                    from[v as usize] != 0 || self.live_edges(edges[v as usize], v, from) != 0;
-                if b != 0 && kept { b } else { 0 }
-            });
+            self.vertex_pass_u8(
+                &mut next,
+                || (),
+                |_, v| {
+                    let b = base[v as usize];
+                    let kept =
+                        from[v as usize] != 0 || self.live_edges(edges[v as usize], v, from) != 0;
+                    if b != 0 && kept { b } else { 0 }
+                },
+            );
             std::mem::swap(&mut state, &mut next);
         }
         // Step 3: sharp on the input along the line.
         {
             let (from, flags, edges) = (&state[..], &flags[..], &edges[..]);
-            next.par_chunks_mut(CHUNK).enumerate().for_each(|(c, out)| {
-                let (mut seen, mut cosines) = (Vec::new(), Vec::new());
-                let first = (c * CHUNK) as u32;
-                for (o, v) in out.iter_mut().zip(first..) {
-                    let m = from[v as usize];
-                    let buffers = (&mut seen, &mut cosines);
-                    let sharp = m != 0
-                        && (flags[v as usize] & MANY != 0
-                            || self.line_is_sharp(
-                                triangles, input, edges, from, v, cos_limit, buffers,
-                            ));
-                    *o = if sharp { m } else { 0 };
-                }
+            let buffers = || (Vec::new(), Vec::new());
+            self.vertex_pass_u8(&mut next, buffers, |buffers, v| {
+                let m = from[v as usize];
+                let sharp = m != 0
+                    && (flags[v as usize] & MANY != 0
+                        || self
+                            .line_is_sharp(triangles, input, edges, from, v, cos_limit, buffers));
+                if sharp { m } else { 0 }
             });
         }
         let marks = next;
         drop(state);
-        // The edges of the creases kept, each once.
-        let counted: usize = (0..n as u32)
-            .into_par_iter()
-            .filter(|&v| marks[v as usize] != 0)
-            .map(|v| {
-                let live = self.live_edges(edges[v as usize], v, &marks);
-                let nbrs = self.neighbors(v);
-                (0..64)
-                    .filter(|&k| live & (1 << k) != 0 && nbrs[k] > v)
-                    .count()
-            })
-            .sum();
+        // A line vertex's two places, and the edges of the creases kept, each once.
         let mut lines: Buf<u8> = storage.zeroed(2 * n)?;
-        lines
+        let counted: usize = lines
             .par_chunks_mut(2 * CHUNK)
             .enumerate()
-            .for_each(|(c, places)| {
-                let first = c * CHUNK;
-                for (k, place) in places.chunks_exact_mut(2).enumerate() {
-                    let v = first + k;
-                    if marks[v] == CREASE | LINE {
-                        let mask = edges[v];
-                        let low = mask.trailing_zeros();
-                        let high = 63 - mask.leading_zeros();
-                        place.copy_from_slice(&[low as u8, high as u8]);
+            .map(|(c, chunk)| {
+                let first = (c * CHUNK) as u32;
+                let mut counted = 0;
+                for (place, v) in chunk.chunks_exact_mut(2).zip(first..) {
+                    let (mark, mask) = (marks[v as usize], edges[v as usize]);
+                    if mark == CREASE | LINE {
+                        place.copy_from_slice(&line_places(mask).map(|k| k as u8));
+                    }
+                    if mark != 0 {
+                        let nbrs = self.neighbors(v);
+                        let live = places(self.live_edges(mask, v, &marks));
+                        counted += live.filter(|&k| nbrs[k] > v).count();
                     }
                 }
-            });
+                counted
+            })
+            .sum();
         let (vertices, newly) = self.fix_where_as(CREASE, |v| marks[v as usize] == CREASE);
         let (on_lines, newly_on_lines) =
             self.fix_where_as(CREASE | LINE, |v| marks[v as usize] == CREASE | LINE);
@@ -306,8 +320,7 @@ impl Topology {
         } else {
             let nbrs = self.neighbors(v);
             let p = positions[v as usize];
-            let (low, high) = (mask.trailing_zeros(), 63 - mask.leading_zeros());
-            let [a, b] = [low, high].map(|k| positions[nbrs[k as usize] as usize] - p);
+            let [a, b] = line_places(mask).map(|k| positions[nbrs[k] as usize] - p);
             // Two crease edges that turn at the vertex: on noisy input, a zigzag through the
             // noise; the vertex is smoothed as any other.
             let straight = a.dot(b) < -LINE_STRAIGHTNESS * a.length() * b.length();
@@ -318,16 +331,9 @@ impl Topology {
     /// The crease edges of `v` among `mask` whose other end is still marked in `marks`.
     fn live_edges(&self, mask: u64, v: u32, marks: &[u8]) -> u64 {
         let nbrs = self.neighbors(v);
-        let mut live = 0;
-        let mut rest = mask;
-        while rest != 0 {
-            let k = rest.trailing_zeros();
-            rest &= rest - 1;
-            if marks[nbrs[k as usize] as usize] != 0 {
-                live |= 1 << k;
-            }
-        }
-        live
+        places(mask)
+            .filter(|&k| marks[nbrs[k] as usize] != 0)
+            .fold(0, |live, k| live | 1 << k)
     }
 
     /// Whether the faces of `v` have their `positions` normals within [`CLEAN_ANGLE`] of
@@ -363,7 +369,7 @@ impl Topology {
         marks: &[u8],
         v: u32,
         cos_limit: f64,
-        (seen, cosines): (&mut Vec<u32>, &mut Vec<f64>),
+        (seen, cosines): &mut (Vec<u32>, Vec<f64>),
     ) -> bool {
         seen.clear();
         seen.push(v);
@@ -373,13 +379,9 @@ impl Topology {
             let end = seen.len();
             for i in front..end {
                 let w = seen[i];
-                let live = self.live_edges(edges[w as usize], w, marks);
                 let nbrs = self.neighbors(w);
-                let mut rest = live;
-                while rest != 0 {
-                    let k = rest.trailing_zeros();
-                    rest &= rest - 1;
-                    let u = nbrs[k as usize];
+                for k in places(self.live_edges(edges[w as usize], w, marks)) {
+                    let u = nbrs[k];
                     if seen.len() < LINE_REACHED && !seen.contains(&u) {
                         seen.push(u);
                         cosines.push(self.edge_cosine(triangles, positions, w, u));
@@ -405,12 +407,19 @@ impl Topology {
         })
     }
 
-    /// `f(v)` for every vertex into `out`, parallel in fixed chunks.
-    fn vertex_pass_u8(&self, out: &mut [u8], f: impl Fn(u32) -> u8 + Sync) {
+    /// `f(state, v)` for every vertex into `out`, parallel in fixed chunks, each with a `state`
+    /// from `init` (buffers reused from vertex to vertex).
+    fn vertex_pass_u8<S>(
+        &self,
+        out: &mut [u8],
+        init: impl Fn() -> S + Sync,
+        f: impl Fn(&mut S, u32) -> u8 + Sync,
+    ) {
         out.par_chunks_mut(CHUNK).enumerate().for_each(|(c, out)| {
+            let mut state = init();
             let first = (c * CHUNK) as u32;
             for (o, v) in out.iter_mut().zip(first..) {
-                *o = f(v);
+                *o = f(&mut state, v);
             }
         });
     }
