@@ -1,6 +1,8 @@
 //! The plan's phases, each on the output of the one before, as `engine::Plan::new` runs them:
 //! Morton reorder, topology (CSR adjacency, fixed mask), partition (patches) + schedule (conflict
-//! graph colouring). On the armadillo scan, a 1.3M-triangle icosphere and a 4.2M-triangle torus;
+//! graph colouring), and the statistics a report measures of a plan (the counts, components
+//! included, and the geometry walk: volume, area, extent, edge lengths, roughness). On the
+//! armadillo scan, a 1.3M-triangle icosphere and a 4.2M-triangle torus;
 //! throughput in triangles, on all cores.
 //!
 //! `cargo bench --bench prepare`
@@ -10,9 +12,9 @@ mod common;
 use std::hint::black_box;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use vcsmooth::engine::DEFAULT_PATCH_SIZE;
+use vcsmooth::engine::{DEFAULT_PATCH_SIZE, reduce};
 use vcsmooth::mesh::Storage;
-use vcsmooth::{Topology, partition, schedule};
+use vcsmooth::{Topology, metrics, partition, schedule};
 
 fn prepare(c: &mut Criterion) {
     let storage = Storage::heap();
@@ -37,6 +39,23 @@ fn prepare(c: &mut Criterion) {
             b.iter(|| {
                 let patches = partition::patches(n, &reordered.triangles, DEFAULT_PATCH_SIZE);
                 black_box(schedule::schedule(&topo, &patches))
+            })
+        });
+        let source = &mesh.source;
+        group.bench_function("statistics/counts", |b| {
+            b.iter(|| {
+                let counts =
+                    metrics::connectivity(n, reordered.triangles.len(), source, &topo, &storage);
+                black_box(counts.unwrap())
+            })
+        });
+        group.bench_function("statistics/geometry", |b| {
+            b.iter(|| {
+                black_box(reduce::geometry(
+                    &reordered.positions,
+                    &reordered.triangles,
+                    &topo,
+                ))
             })
         });
         group.finish();

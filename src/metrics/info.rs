@@ -9,7 +9,7 @@ use rayon::prelude::*;
 
 use crate::error::Result;
 use crate::mesh::{Mesh, Storage};
-use crate::topology::{Topology, corners_after};
+use crate::topology::{Lanes, Topology, corners_after};
 
 /// Everything `vcsmooth info` reports about a mesh.
 #[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
@@ -413,11 +413,43 @@ impl VertexSums {
 /// the vertices and their faces for every figure, since the reading of the positions and the
 /// faces, not the arithmetic, is most of the cost.
 ///
-/// Each face of `i` with a corner above `i` has its normal computed once there and handed to the
-/// edges `(i, j)` it holds, so a face is measured at most twice in all and an edge's faces need
-/// no search; at its smallest corner the same normal gives its area, and its determinant as
-/// `(p_a − o) · n` (the same in exact arithmetic).
+/// At each vertex `i` the faces holding a corner above `i` have their normals computed once, and
+/// each edge `(i, j)` above `i` takes the normals of the faces holding `j`; so a face is measured
+/// at most twice in all and an edge's faces need no search of the mesh. At its smallest corner the
+/// same normal gives a face's area, and its determinant as `(p_a − o) · n` (the same in exact
+/// arithmetic).
 pub fn vertex_sums(
+    pos: &[DVec3],
+    triangles: &[[u32; 3]],
+    topo: &Topology,
+    vertices: Range<u32>,
+    origin: DVec3,
+) -> VertexSums {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2 (just checked).
+        return unsafe { vertex_sums_avx2(pos, triangles, topo, vertices, origin) };
+    }
+    vertex_sums_lanes(pos, triangles, topo, vertices, origin)
+}
+
+/// [`vertex_sums`] compiled for AVX2: the lanes of a vertex's faces compared in one instruction,
+/// four angles' arithmetic in another. The same operations, so the same bits (no fused
+/// multiply-add: Rust does not contract a product and a sum).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn vertex_sums_avx2(
+    pos: &[DVec3],
+    triangles: &[[u32; 3]],
+    topo: &Topology,
+    vertices: Range<u32>,
+    origin: DVec3,
+) -> VertexSums {
+    vertex_sums_lanes(pos, triangles, topo, vertices, origin)
+}
+
+#[inline(always)]
+fn vertex_sums_lanes(
     pos: &[DVec3],
     triangles: &[[u32; 3]],
     topo: &Topology,
@@ -428,7 +460,6 @@ pub fn vertex_sums(
     let parts = topo.parts();
     let mut all = VertexSums::default();
     let mut wide: Vec<EdgeFaces> = Vec::new();
-    let mut narrow = [EdgeFaces::default(); NARROW];
     let mut angles = Angles::default();
     for i in vertices {
         let p = pos[i as usize];
@@ -439,28 +470,71 @@ pub fn vertex_sums(
             continue;
         }
         let faces = parts.faces_of(i);
-        // The loop over the faces made once for each search, so that none asks which it is.
-        let edges = if above.len() <= NARROW {
-            let edges = &mut narrow[..above.len()];
-            let slot = |v: u32| above.iter().position(|&j| j == v);
-            add_faces(pos, triangles, faces, i, origin, edges, slot, &mut all);
-            edges
+        for &j in above {
+            all.edges.length.0 += p.distance(pos[j as usize]);
+            all.edges.length.1 += 1;
+        }
+        if faces.len() <= LANES {
+            narrow_vertex(pos, triangles, faces, i, above, origin, &mut all, &mut angles);
         } else {
             wide.resize(above.len(), EdgeFaces::default());
             let slot = |v: u32| above.binary_search(&v).ok();
             add_faces(pos, triangles, faces, i, origin, &mut wide, slot, &mut all);
-            &mut wide[..]
-        };
-        for (&j, e) in above.iter().zip(edges.iter()) {
-            all.edges.length.0 += p.distance(pos[j as usize]);
-            all.edges.length.1 += 1;
-            if e.count == 2 && e.usable == 0b11 {
-                angles.push(e.normals, &mut all.edges);
+            for e in &wide {
+                if e.count == 2 {
+                    angles.push(e.normals, &mut all.edges);
+                }
             }
         }
     }
     angles.add_to(&mut all.edges);
     all
+}
+
+/// Faces of a vertex that [`vertex_sums`] holds in the lanes of a [`Lanes`] and searches all at
+/// once for an edge's (more: [`add_faces`]); surface meshes have 6 faces to a vertex.
+const LANES: usize = 8;
+
+/// [`vertex_sums`] at a vertex `i` with at most [`LANES`] faces: their corners after `i` and
+/// their normals in lanes, and each edge `(i, j)` of `above` takes the faces whose lanes hold `j`
+/// (compared all at once: no search, no branch to mispredict but the count's).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn narrow_vertex(
+    pos: &[DVec3],
+    triangles: &[[u32; 3]],
+    faces: &[u32],
+    i: u32,
+    above: &[u32],
+    origin: DVec3,
+    all: &mut VertexSums,
+    angles: &mut Angles,
+) {
+    // No neighbour is u32::MAX: it marks the lanes past the faces.
+    let (mut b, mut c) = ([u32::MAX; LANES], [u32::MAX; LANES]);
+    let mut normals = [DVec3::ZERO; LANES];
+    for (k, &t) in faces.iter().enumerate() {
+        let tri = triangles[t as usize];
+        (b[k], c[k]) = corners_after(tri, i);
+        let [pa, pb, pc] = tri.map(|v| pos[v as usize]);
+        let n = (pb - pa).cross(pc - pa);
+        normals[k] = n;
+        if (b[k] > i) & (c[k] > i) {
+            // `i` is the face's smallest corner: the one place it is counted.
+            all.determinants += (pa - origin).dot(n);
+            all.doubled_area += n.length();
+        }
+    }
+    let (b, c) = (Lanes::new(&b), Lanes::new(&c));
+    for &j in above {
+        // A face of `i` holds `j` as one corner after `i` or the other.
+        let holds = b.equal(j) | c.equal(j);
+        if holds.count_ones() == 2 {
+            let first = holds.trailing_zeros() as usize;
+            let second = (holds & (holds - 1)).trailing_zeros() as usize;
+            angles.push([normals[first], normals[second]], &mut all.edges);
+        }
+    }
 }
 
 /// The faces of `i` into `edges` (the edges `(i, j)` above `i`, at the slots `slot(j)` gives)
@@ -477,8 +551,8 @@ fn add_faces(
     slot: impl Fn(u32) -> Option<usize>,
     all: &mut VertexSums,
 ) {
-    // Only the counts and flags: a normal is read only where they say it was written.
-    edges.iter_mut().for_each(|e| (e.count, e.usable) = (0, 0));
+    // Only the counts: a normal is read only where they say it was written.
+    edges.iter_mut().for_each(|e| e.count = 0);
     for &t in faces {
         let tri = triangles[t as usize];
         // Every corner of a face of `i` is a neighbour of `i`; those above it own the edges.
@@ -494,10 +568,9 @@ fn add_faces(
             all.determinants += (pa - origin).dot(n);
             all.doubled_area += n.length();
         }
-        let usable = usable(n);
         for (v, is_above) in [(b, b_above), (c, c_above)] {
             if is_above && let Some(k) = slot(v) {
-                edges[k].add(n, usable);
+                edges[k].add(n);
             }
         }
     }
@@ -506,13 +579,9 @@ fn add_faces(
 /// Whether a face normal gives an angle: non-zero and finite (`0 · x` is `±0` for a finite `x`
 /// and NaN otherwise, a test without branches).
 #[inline(always)]
-fn usable(n: DVec3) -> bool {
-    n.length_squared() > 0.0 && n.x * 0.0 + n.y * 0.0 + n.z * 0.0 == 0.0
+fn usable([x, y, z]: [f64; 3]) -> bool {
+    x * x + y * y + z * z > 0.0 && x * 0.0 + y * 0.0 + z * 0.0 == 0.0
 }
-
-/// Neighbours above a vertex that [`vertex_sums`] keeps in an array on the stack (more in a
-/// vector): surface meshes have degrees near 6.
-const NARROW: usize = 16;
 
 /// Dihedral angles waiting in [`vertex_sums`]: taken in batches, the arithmetic of the angles
 /// (the pass's longest chains of dependent instructions) runs in vector lanes without the walk
@@ -536,8 +605,10 @@ impl Default for Angles {
 }
 
 impl Angles {
-    /// Queue the angle between `a` and `b`; a full batch is added to `sums` first.
-    #[inline]
+    /// Queue the angle between `a` and `b` (counted if both are usable, see [`usable`]); a full
+    /// batch is added to `sums` first. Inlined with the batch's arithmetic into the walk, so that
+    /// it is compiled for the walk's instructions.
+    #[inline(always)]
     fn push(&mut self, [a, b]: [DVec3; 2], sums: &mut EdgeSums) {
         if self.len == ANGLE_BATCH {
             self.add_to(sums);
@@ -550,13 +621,17 @@ impl Angles {
     }
 
     /// Add the waiting angles, in order, to `sums`.
+    #[inline(always)]
     fn add_to(&mut self, sums: &mut EdgeSums) {
         // The arithmetic first for the whole batch (the unused tail too: no branch, and a value
-        // that is never read), two angles to an instruction; then the sum, with the library
-        // where it must take over. The arguments are [`angle_arguments`]'s, bit for bit.
+        // that is never read), two angles to an instruction; then the sum of the angles between
+        // usable normals (see [`usable`]), with the library where it must take over. The
+        // arguments are [`angle_arguments`]'s, bit for bit.
         let [ax, ay, az, bx, by, bz] = &self.normals;
         let mut args = [(0.0, 0.0); ANGLE_BATCH];
         let mut fast = [0.0; ANGLE_BATCH];
+        // 0: not counted, 1: the fast arithmetic's, 2: the library's.
+        let mut how = [0u8; ANGLE_BATCH];
         for k in 0..ANGLE_BATCH {
             let (cx, cy, cz) = (
                 ay[k] * bz[k] - by[k] * az[k],
@@ -567,34 +642,34 @@ impl Angles {
             let x = ax[k] * bx[k] + ay[k] * by[k] + az[k] * bz[k];
             args[k] = (y, x);
             fast[k] = fast_arithmetic((y, x));
+            let counted = usable([ax[k], ay[k], az[k]]) & usable([bx[k], by[k], bz[k]]);
+            how[k] = counted as u8 * (2 - fast_covers((y, x)) as u8);
         }
-        for (&f, &args) in fast.iter().zip(&args[..self.len]) {
-            sums.angle.0 += if fast_covers(args) {
-                f
-            } else {
-                degrees_of(args)
+        for k in 0..self.len {
+            sums.angle.0 += match how[k] {
+                0 => continue,
+                1 => fast[k],
+                _ => degrees_of(args[k]),
             };
+            sums.angle.1 += 1;
         }
-        sums.angle.1 += self.len;
         self.len = 0;
     }
 }
 
-/// The faces of one edge as [`vertex_sums`] finds them: how many, and the first two's normals,
-/// with a bit each saying whether it is usable (non-zero and finite).
+/// The faces of one edge as [`vertex_sums`] finds them at a vertex with many faces: how many,
+/// and the first two's normals.
 #[derive(Clone, Copy, Default)]
 struct EdgeFaces {
     normals: [DVec3; 2],
     count: u32,
-    usable: u32,
 }
 
 impl EdgeFaces {
     #[inline]
-    fn add(&mut self, n: DVec3, usable: bool) {
+    fn add(&mut self, n: DVec3) {
         if let Some(slot) = self.normals.get_mut(self.count as usize) {
             *slot = n;
-            self.usable |= (usable as u32) << self.count;
         }
         self.count += 1;
     }

@@ -122,12 +122,12 @@ fn padded(x: &[u32]) -> [u32; 8] {
 /// 8 ids, to find which of them equal a given one all at once: a search stopping at the match
 /// mispredicts its exit at nearly every face (most of [`fan_walk`]'s time, before).
 #[cfg(target_arch = "x86_64")]
-struct Lanes(std::arch::x86_64::__m128i, std::arch::x86_64::__m128i);
+pub(crate) struct Lanes(std::arch::x86_64::__m128i, std::arch::x86_64::__m128i);
 
 #[cfg(target_arch = "x86_64")]
 impl Lanes {
     #[inline(always)]
-    fn new(x: &[u32; 8]) -> Lanes {
+    pub(crate) fn new(x: &[u32; 8]) -> Lanes {
         use std::arch::x86_64::*;
         let x = x.map(|x| x as i32);
         // SAFETY: SSE2 is part of the x86_64 baseline. Set from the ids rather than loaded from
@@ -142,7 +142,7 @@ impl Lanes {
 
     /// The lanes equal to `u`, as the bits of a mask.
     #[inline(always)]
-    fn equal(&self, u: u32) -> u32 {
+    pub(crate) fn equal(&self, u: u32) -> u32 {
         use std::arch::x86_64::*;
         // SAFETY: SSE2 is part of the x86_64 baseline.
         unsafe {
@@ -155,15 +155,15 @@ impl Lanes {
 
 /// [`Lanes`] without x86_64's vector instructions.
 #[cfg(not(target_arch = "x86_64"))]
-struct Lanes([u32; 8]);
+pub(crate) struct Lanes([u32; 8]);
 
 #[cfg(not(target_arch = "x86_64"))]
 impl Lanes {
-    fn new(x: &[u32; 8]) -> Lanes {
+    pub(crate) fn new(x: &[u32; 8]) -> Lanes {
         Lanes(*x)
     }
 
-    fn equal(&self, u: u32) -> u32 {
+    pub(crate) fn equal(&self, u: u32) -> u32 {
         self.0
             .iter()
             .rev()

@@ -35,6 +35,7 @@ mod orient;
 mod stats;
 
 pub(crate) use build::split_lens;
+pub(crate) use fans::Lanes;
 pub use fans::corners_after;
 pub use stats::TopologyStats;
 
