@@ -475,7 +475,16 @@ fn vertex_sums_lanes(
             all.edges.length.1 += 1;
         }
         if faces.len() <= LANES {
-            narrow_vertex(pos, triangles, faces, i, above, origin, &mut all, &mut angles);
+            narrow_vertex(
+                pos,
+                triangles,
+                faces,
+                i,
+                above,
+                origin,
+                &mut all,
+                &mut angles,
+            );
         } else {
             wide.resize(above.len(), EdgeFaces::default());
             let slot = |v: u32| above.binary_search(&v).ok();

@@ -114,11 +114,7 @@ const TERM_BATCH: usize = 32;
 /// coordinate by coordinate, their terms computed for the whole batch (in vector lanes), then
 /// added in order. Each term is [`determinant`]'s and [`doubled_area`]'s, operation for operation.
 #[inline(always)]
-fn determinant_and_area_batches(
-    pos: &[DVec3],
-    triangles: &[[u32; 3]],
-    o: DVec3,
-) -> (f64, f64) {
+fn determinant_and_area_batches(pos: &[DVec3], triangles: &[[u32; 3]], o: DVec3) -> (f64, f64) {
     let (mut volume, mut area) = (-0.0, -0.0);
     // x, y, z of the first, second and third corners, and the terms: set once (a short last
     // batch leaves stale lanes, computed and not added).
@@ -130,7 +126,10 @@ fn determinant_and_area_batches(
             // Below the batch length already: said so, the stores need no check.
             let k = k % TERM_BATCH;
             let [a, b, c] = t.map(|v| pos[v as usize]);
-            for (row, x) in at.iter_mut().zip([a.x, a.y, a.z, b.x, b.y, b.z, c.x, c.y, c.z]) {
+            for (row, x) in at
+                .iter_mut()
+                .zip([a.x, a.y, a.z, b.x, b.y, b.z, c.x, c.y, c.z])
+            {
                 row[k] = x;
             }
         }
