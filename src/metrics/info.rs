@@ -410,14 +410,13 @@ impl VertexSums {
 }
 
 /// [`VertexSums`] of `vertices` (determinants about `origin`), in ascending order: one walk over
-/// the vertices and their faces for every figure, since the reading of the positions and the
-/// faces, not the arithmetic, is most of the cost.
+/// the vertices and their faces for every figure.
 ///
-/// At each vertex `i` the faces holding a corner above `i` have their normals computed once, and
-/// each edge `(i, j)` above `i` takes the normals of the faces holding `j`; so a face is measured
-/// at most twice in all and an edge's faces need no search of the mesh. At its smallest corner the
-/// same normal gives a face's area, and its determinant as `(p_a − o) · n` (the same in exact
-/// arithmetic).
+/// At each vertex `i` the faces' normals are computed once (at a vertex of at most [`LANES`]
+/// faces all of them, without a branch; else those holding a corner above `i`), and each edge
+/// `(i, j)` above `i` takes the normals of the faces holding `j`, so an edge's faces need no
+/// search of the mesh. At its smallest corner the same normal gives a face's area, and its
+/// determinant as `(p_a − o) · n` (the same in exact arithmetic).
 pub fn vertex_sums(
     pos: &[DVec3],
     triangles: &[[u32; 3]],
@@ -525,14 +524,7 @@ fn narrow_vertex(
     for (k, &t) in faces.iter().enumerate() {
         let tri = triangles[t as usize];
         (b[k], c[k]) = corners_after(tri, i);
-        let [pa, pb, pc] = tri.map(|v| pos[v as usize]);
-        let n = (pb - pa).cross(pc - pa);
-        normals[k] = n;
-        if (b[k] > i) & (c[k] > i) {
-            // `i` is the face's smallest corner: the one place it is counted.
-            all.determinants += (pa - origin).dot(n);
-            all.doubled_area += n.length();
-        }
+        normals[k] = face_normal(pos, tri, origin, (b[k] > i) & (c[k] > i), all);
     }
     let (b, c) = (Lanes::new(&b), Lanes::new(&c));
     for &j in above {
@@ -570,19 +562,33 @@ fn add_faces(
         if !(b_above | c_above) {
             continue;
         }
-        let [pa, pb, pc] = tri.map(|v| pos[v as usize]);
-        let n = (pb - pa).cross(pc - pa);
-        if b_above & c_above {
-            // `i` is the face's smallest corner: the one place it is counted.
-            all.determinants += (pa - origin).dot(n);
-            all.doubled_area += n.length();
-        }
+        let n = face_normal(pos, tri, origin, b_above & c_above, all);
         for (v, is_above) in [(b, b_above), (c, c_above)] {
             if is_above && let Some(k) = slot(v) {
                 edges[k].add(n);
             }
         }
     }
+}
+
+/// The normal `(p_b − p_a) × (p_c − p_a)` of `tri`; where the vertex at hand is its smallest
+/// corner (`smallest`: the one place a face is counted), its determinant `(p_a − o) · n` and area
+/// added to `all`.
+#[inline(always)]
+fn face_normal(
+    pos: &[DVec3],
+    tri: [u32; 3],
+    origin: DVec3,
+    smallest: bool,
+    all: &mut VertexSums,
+) -> DVec3 {
+    let [pa, pb, pc] = tri.map(|v| pos[v as usize]);
+    let n = (pb - pa).cross(pc - pa);
+    if smallest {
+        all.determinants += (pa - origin).dot(n);
+        all.doubled_area += n.length();
+    }
+    n
 }
 
 /// Whether a face normal gives an angle: non-zero and finite (`0 · x` is `±0` for a finite `x`
@@ -633,7 +639,7 @@ impl Angles {
     #[inline(always)]
     fn add_to(&mut self, sums: &mut EdgeSums) {
         // The arithmetic first for the whole batch (the unused tail too: no branch, and a value
-        // that is never read), two angles to an instruction; then the sum of the angles between
+        // that is never read), in vector lanes; then the sum of the angles between
         // usable normals (see [`usable`]), with the library where it must take over. The
         // arguments are [`angle_arguments`]'s, bit for bit.
         let [ax, ay, az, bx, by, bz] = &self.normals;
