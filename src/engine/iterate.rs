@@ -41,7 +41,7 @@ use crate::partition::Patch;
 use crate::schedule::{LANES, Prefetch};
 use crate::smooth::boundary::{self, Loops};
 use crate::smooth::laplacian::{self, Previous, StepStats};
-use crate::smooth::method::{Exec, FaceFields, Footprint, PassFields, PatchMesh, Schedule};
+use crate::smooth::method::{Exec, FaceFields, Footprint, PassFields, PatchMesh, PatchSweep, Schedule};
 use crate::smooth::stencil::{self, StencilParams};
 use crate::smooth::tiled::{Measure, TilePlan};
 use crate::smooth::{Options, SharedField, Smoother, SweepStats};
@@ -308,7 +308,11 @@ impl Run<'_, '_> {
                 counts,
                 faces,
             );
-            if measure {
+            // A unit that measures its moves in its sweep needs no copy, unless the loops'
+            // restoring pass moves vertices after it or the automatic stop reads the copy.
+            let own_moves =
+                measure && unit.measures_moves() && loops.is_none() && auto.is_none();
+            if measure && !own_moves {
                 let now = &pos[owned.clone()];
                 on_pool(&*self.share, || {
                     reduce::for_chunks_mut(&mut prev[owned.clone()], |at, out| {
@@ -320,29 +324,35 @@ impl Run<'_, '_> {
                 loops.measure(pos);
             }
             let params = stencil_params(unit, self.opts, input);
-            let mut sweep = SweepStats::default();
             let in_sweep = loops.as_ref().filter(|_| !unit.boundary_pass());
-            sweep.add(&self.sweep_colours(
+            let swept = self.sweep_colours(
                 colours,
                 Pass::Stencils(unit),
                 pos,
                 sums,
                 params,
                 in_sweep,
-            ));
+                own_moves,
+            );
+            let mut sweep = swept.stencils;
             if unit.boundary_pass()
                 && let Some(loops) = &loops
             {
                 // The boundary stencils run after the method's, in the edge colouring (they are
                 // edge stencils); what they write into `sums` is not read again.
-                sweep.add(&self.sweep_colours(
-                    mesh.colours,
-                    Pass::Boundaries,
-                    pos,
-                    sums,
-                    params,
-                    Some(loops),
-                ));
+                sweep.add(
+                    &self
+                        .sweep_colours(
+                            mesh.colours,
+                            Pass::Boundaries,
+                            pos,
+                            sums,
+                            params,
+                            Some(loops),
+                            false,
+                        )
+                        .stencils,
+                );
             }
             if let Some(loops) = &mut loops {
                 // Every process walks every loop whole, from the same positions, so each holds
@@ -351,10 +361,14 @@ impl Run<'_, '_> {
                 loops.restore(mesh.topo, mesh.tris, pos, params.deviation);
             }
             let seconds = start.elapsed().as_secs_f64();
-            let moved = measure.then(|| {
-                let (now, before) = (&pos[owned.clone()], &prev[owned.clone()]);
-                on_pool(&*self.share, || reduce::displacement(now, before))
-            });
+            let moved = match own_moves {
+                // A process that ran no patch moved nothing.
+                true => Some(swept.moved.unwrap_or_default()),
+                false => measure.then(|| {
+                    let (now, before) = (&pos[owned.clone()], &prev[owned.clone()]);
+                    on_pool(&*self.share, || reduce::displacement(now, before))
+                }),
+            };
             let stop = self.stop_after(auto.as_deref_mut(), pos, Some(prev));
             let last = stop || it == total;
             let record = self.record(it, pos, moved, wanted || stop, sweep, seconds)?;
@@ -379,7 +393,10 @@ impl Run<'_, '_> {
     }
 
     /// One Gauss–Seidel pass of `pass` over `colours`, colour after colour, each colour's patches
-    /// in parallel, the changes exchanged after each colour.
+    /// in parallel, the changes exchanged after each colour; with `measure`, the moves the
+    /// patches measured ([`Smoother::measures_moves`]), summed in the order of the colours and of
+    /// their patches, so for any thread count.
+    #[allow(clippy::too_many_arguments)]
     fn sweep_colours(
         &mut self,
         colours: &[Vec<u32>],
@@ -388,9 +405,10 @@ impl Run<'_, '_> {
         sums: &mut [DVec3],
         params: StencilParams,
         loops: Option<&Loops>,
-    ) -> SweepStats {
+        measure: bool,
+    ) -> PatchSweep {
         let mesh = self.mesh;
-        let mut sweep = SweepStats::default();
+        let mut sweep = PatchSweep::default();
         for (c, colour) in colours.iter().enumerate() {
             if let Some(prefetch) = mesh.prefetch {
                 // Read ahead the patches of the colours after this one, about a step of them (at
@@ -413,9 +431,9 @@ impl Run<'_, '_> {
             // used otherwise while the views live.
             let (pv, sv) = unsafe { (SharedField::new(pos), SharedField::new(sums)) };
             let done = on_pool(&*self.share, || {
-                sweep_patches(mesh, pv, sv, &mine, pass, params, loops)
+                sweep_patches(mesh, pv, sv, &mine, pass, params, loops, measure)
             });
-            sweep.add(&done);
+            sweep = sweep.then(done);
             self.share.colour_end(pos);
             if self.share.leads() {
                 self.observer.iteration_part(c + 1, colours.len());
@@ -763,7 +781,9 @@ fn stencil_params<'a>(
 
 /// The stencils of `patches` (all of one colour, so they touch disjoint data), in parallel on the
 /// current rayon pool through the shared views, each patch's in ascending order; with `loops`
-/// (`boundary: smooth`), the boundary stencils too.
+/// (`boundary: smooth`), the boundary stencils too. Their sweeps are added in the order of
+/// `patches` (the moves they measure with `measure` are sums).
+#[allow(clippy::too_many_arguments)]
 fn sweep_patches(
     mesh: &Sweep,
     pos: SharedField,
@@ -772,9 +792,10 @@ fn sweep_patches(
     pass: Pass,
     params: StencilParams,
     loops: Option<&Loops>,
-) -> SweepStats {
+    measure: bool,
+) -> PatchSweep {
     let (topo, tris, sorted) = (mesh.topo, mesh.tris, mesh.sorted);
-    patches
+    let swept: Vec<PatchSweep> = patches
         .par_iter()
         .map(|patch| {
             let (mut pv, mut sv) = (pos, sums);
@@ -787,18 +808,18 @@ fn sweep_patches(
                     &mut sv,
                     params,
                     loops,
+                    measure,
                 ),
                 (Pass::Boundaries, Some(loops)) => {
                     let edges = patch.edges(topo);
                     boundary::sweep_edges(topo, tris, &mut pv, &mut sv, edges, params, loops, false)
+                        .into()
                 }
-                (Pass::Boundaries, None) => SweepStats::default(),
+                (Pass::Boundaries, None) => PatchSweep::default(),
             }
         })
-        .reduce(SweepStats::default, |mut a, b| {
-            a.add(&b);
-            a
-        })
+        .collect();
+    swept.into_iter().fold(PatchSweep::default(), PatchSweep::then)
 }
 
 /// What a sweep over patches applies: the method's stencils (with its boundary stencils in

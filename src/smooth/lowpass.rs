@@ -36,7 +36,8 @@ use std::ops::Range;
 
 use glam::DVec3;
 
-use super::method::PatchMesh;
+use super::laplacian::StepStats;
+use super::method::{PatchMesh, PatchSweep};
 use super::stencil::{self, Outcome};
 use super::{Field, SweepStats};
 use crate::topology::{TopologyParts, corners_after};
@@ -90,16 +91,19 @@ struct Scratch {
 
 /// The blocks of the patch `owned`, ascending, Gauss–Seidel (each sees the latest positions):
 /// [`apply_block`], step 1 taking each vertex to `filtered` (the first step's result from the
-/// iteration's positions, e.g. Taubin's λ|μ pair).
+/// iteration's positions, e.g. Taubin's λ|μ pair). With `measure`, also how far the vertices
+/// moved: each is written by its own block alone, once, so its move is measured as it is written.
 pub fn sweep_blocks<P: Field + ?Sized, D: Field + ?Sized>(
     mesh: PatchMesh,
     pos: &mut P,
     filtered: &D,
     owned: Range<u32>,
     deviation: Option<stencil::Deviation>,
-) -> SweepStats {
+    measure: bool,
+) -> PatchSweep {
     let (topo, triangles) = (mesh.topo.parts(), mesh.tris);
     let mut stats = SweepStats::default();
+    let mut moved = measure.then(StepStats::default);
     let mut scratch = Scratch::default();
     for vertices in blocks(owned) {
         let (lo, hi) = (vertices.start, vertices.end);
@@ -120,10 +124,14 @@ pub fn sweep_blocks<P: Field + ?Sized, D: Field + ?Sized>(
             block,
             deviation,
             &mut scratch,
+            moved.as_mut(),
         );
         stencil::count(&mut stats, outcome);
     }
-    stats
+    PatchSweep {
+        stencils: stats,
+        moved,
+    }
 }
 
 /// The blocks of the vertex range `owned`, ascending: `⌊len / BLOCK⌋` blocks (one when the range
@@ -157,6 +165,7 @@ pub fn blocks(owned: Range<u32>) -> impl Iterator<Item = Range<u32>> {
 ///
 /// With AVX2 the same code is compiled for it: a vector's three coordinates are lanes of one
 /// register, every operation lane by lane as the scalar code does it (the bits do not change).
+#[allow(clippy::too_many_arguments)]
 fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
     topo: &TopologyParts,
     triangles: &[[u32; 3]],
@@ -165,19 +174,21 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
     block: Block,
     deviation: Option<stencil::Deviation>,
     scratch: &mut Scratch,
+    moves: Option<&mut StepStats>,
 ) -> Outcome {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU has AVX2 (just checked).
         return unsafe {
-            apply_block_avx2(topo, triangles, pos, filtered, block, deviation, scratch)
+            apply_block_avx2(topo, triangles, pos, filtered, block, deviation, scratch, moves)
         };
     }
-    apply_block_lanes(topo, triangles, pos, filtered, block, deviation, scratch)
+    apply_block_lanes(topo, triangles, pos, filtered, block, deviation, scratch, moves)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
+#[allow(clippy::too_many_arguments)]
 unsafe fn apply_block_avx2<P: Field + ?Sized, D: Field + ?Sized>(
     topo: &TopologyParts,
     triangles: &[[u32; 3]],
@@ -186,11 +197,13 @@ unsafe fn apply_block_avx2<P: Field + ?Sized, D: Field + ?Sized>(
     block: Block,
     deviation: Option<stencil::Deviation>,
     scratch: &mut Scratch,
+    moves: Option<&mut StepStats>,
 ) -> Outcome {
-    apply_block_lanes(topo, triangles, pos, filtered, block, deviation, scratch)
+    apply_block_lanes(topo, triangles, pos, filtered, block, deviation, scratch, moves)
 }
 
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn apply_block_lanes<P: Field + ?Sized, D: Field + ?Sized>(
     topo: &TopologyParts,
     triangles: &[[u32; 3]],
@@ -199,6 +212,7 @@ fn apply_block_lanes<P: Field + ?Sized, D: Field + ?Sized>(
     block: Block,
     deviation: Option<stencil::Deviation>,
     scratch: &mut Scratch,
+    mut moves: Option<&mut StepStats>,
 ) -> Outcome {
     let Block {
         vertices: block,
@@ -398,7 +412,15 @@ fn apply_block_lanes<P: Field + ?Sized, D: Field + ?Sized>(
         }
         for (k, u) in block.clone().enumerate() {
             if scratch.free[k] {
-                pos.add(u, scratch.step[k].vec());
+                let was = pos.get(u);
+                let now = was + scratch.step[k].vec();
+                pos.set(u, now);
+                if let Some(m) = moves.as_deref_mut() {
+                    let d = now.distance(was);
+                    m.moved += 1;
+                    m.max_displacement = m.max_displacement.max(d);
+                    m.sum_displacement += d;
+                }
             }
         }
         return if held_back {
@@ -563,14 +585,26 @@ mod tests {
                 };
                 // Two patches, their blocks not aligned to the patch's start.
                 let cut = 5000;
-                let mut st = sweep_blocks(mesh, &mut p[..], &filtered[..], 0..cut, deviation);
-                st.add(&sweep_blocks(
+                let first = sweep_blocks(mesh, &mut p[..], &filtered[..], 0..cut, deviation, true);
+                let second = sweep_blocks(
                     mesh,
                     &mut p[..],
                     &filtered[..],
                     cut..pos.len() as u32,
                     deviation,
-                ));
+                    true,
+                );
+                let st = first.then(second);
+                // Each vertex's move, measured as it is written, is its distance from where it
+                // was: the largest the same bits, the sum up to its order.
+                let moved = st.moved.unwrap();
+                let (max, sum) = p.iter().zip(&pos).fold((0.0f64, 0.0), |(m, s), (a, b)| {
+                    (m.max(a.distance(*b)), s + a.distance(*b))
+                });
+                assert!(moved.max_displacement > 0.0);
+                assert_eq!(moved.max_displacement, max);
+                assert!((moved.sum_displacement - sum).abs() <= 1e-12 * sum);
+                let st = st.stencils;
                 (p, st.applied, st.deviation_limited)
             };
             let (fast, slow) = (run(true), run(false));

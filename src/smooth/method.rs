@@ -20,6 +20,37 @@ use super::laplacian::StepStats;
 use super::stencil::StencilParams;
 use super::{Options, SharedField, SweepStats, Topology};
 
+/// What the stencils of one patch did ([`Smoother::sweep_patch`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PatchSweep {
+    pub stencils: SweepStats,
+    /// How far the patch's vertices moved, when measured: each distance from the position before
+    /// the sweep to the one written, summed in ascending vertex order.
+    pub moved: Option<StepStats>,
+}
+
+impl PatchSweep {
+    /// Add the sweep of a following patch (its moves summed after these).
+    pub fn then(self, o: PatchSweep) -> PatchSweep {
+        let mut stencils = self.stencils;
+        stencils.add(&o.stencils);
+        let moved = match (self.moved, o.moved) {
+            (Some(a), Some(b)) => Some(a.then(b)),
+            (a, b) => a.or(b),
+        };
+        PatchSweep { stencils, moved }
+    }
+}
+
+impl From<SweepStats> for PatchSweep {
+    fn from(stencils: SweepStats) -> PatchSweep {
+        PatchSweep {
+            stencils,
+            moved: None,
+        }
+    }
+}
+
 /// How the iterations of a method are scheduled.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Schedule {
@@ -243,7 +274,8 @@ pub trait Smoother: Sync {
     /// [`Schedule::Stencils`]: the stencils of one patch (the vertices `vertices` and triangles
     /// `triangles` it owns), in their fixed ascending order, through views that the patches of
     /// one colour share; with `loops` (`boundary: smooth`) the boundary stencils too, unless
-    /// [`Smoother::boundary_pass`] says they run after.
+    /// [`Smoother::boundary_pass`] says they run after. With `measure` (asked only of a unit
+    /// that [`Smoother::measures_moves`]), also how far the patch's vertices moved.
     #[allow(clippy::too_many_arguments)]
     fn sweep_patch(
         &self,
@@ -254,8 +286,17 @@ pub trait Smoother: Sync {
         _sums: &mut SharedField,
         _params: StencilParams,
         _loops: Option<&Loops>,
-    ) -> SweepStats {
+        _measure: bool,
+    ) -> PatchSweep {
         unreachable!("{} has no stencils", self.name())
+    }
+
+    /// [`Schedule::Stencils`]: whether a sweep moves each vertex from its own patch alone, so
+    /// that [`Smoother::sweep_patch`] can measure how far its vertices moved (from their
+    /// positions before and after, as they are written) and the loop need not copy the positions
+    /// before a measured sweep. Not with smoothed boundaries: their pass moves loop vertices too.
+    fn measures_moves(&self) -> bool {
+        false
     }
 
     /// [`Schedule::Stencils`] with smoothed boundaries: whether the boundary stencils run in a

@@ -9,7 +9,8 @@ use glam::DVec3;
 
 use super::boundary::{self, Loops};
 use super::method::{
-    Control, Exec, FaceFields, Footprint, Needs, PatchMesh, Schedule, Settle, Smoother, StopRule,
+    Control, Exec, FaceFields, Footprint, Needs, PatchMesh, PatchSweep, Schedule, Settle, Smoother,
+    StopRule,
 };
 use super::stencil::{self, StencilParams};
 use super::{
@@ -168,13 +169,17 @@ impl Smoother for StencilMethod {
         sums: &mut SharedField,
         params: StencilParams,
         loops: Option<&Loops>,
-    ) -> SweepStats {
+        _: bool,
+    ) -> PatchSweep {
         if sums.is_empty() {
             let mut own = PatchSums::rebuild(mesh.topo, &*pos, vertices.clone());
-            return self.sweep_with(mesh, vertices, triangles, pos, &mut own, params, loops);
+            return self
+                .sweep_with(mesh, vertices, triangles, pos, &mut own, params, loops)
+                .into();
         }
         super::rebuild_patch_sums(mesh.topo, &*pos, &mut *sums, vertices.clone());
         self.sweep_with(mesh, vertices, triangles, pos, sums, params, loops)
+            .into()
     }
 }
 
@@ -283,10 +288,15 @@ impl Smoother for VcsLowpass {
         sums: &mut SharedField,
         params: StencilParams,
         _: Option<&Loops>,
-    ) -> SweepStats {
-        lowpass::sweep_blocks(mesh, pos, sums, vertices, params.deviation)
+        measure: bool,
+    ) -> PatchSweep {
+        lowpass::sweep_blocks(mesh, pos, sums, vertices, params.deviation, measure)
     }
     fn boundary_pass(&self) -> bool {
+        true
+    }
+    /// A vertex is moved by its own block alone, once per sweep.
+    fn measures_moves(&self) -> bool {
         true
     }
 }
@@ -385,8 +395,9 @@ impl Smoother for VcsGuided {
         sums: &mut SharedField,
         params: StencilParams,
         _: Option<&Loops>,
-    ) -> SweepStats {
-        rings::sweep_rings(mesh.topo, mesh.tris, pos, sums, vertices, params.deviation)
+        _: bool,
+    ) -> PatchSweep {
+        rings::sweep_rings(mesh.topo, mesh.tris, pos, sums, vertices, params.deviation).into()
     }
     fn boundary_pass(&self) -> bool {
         true
@@ -435,15 +446,20 @@ mod tests {
                     };
                     let mut st = SweepStats::default();
                     for patch in &patches {
-                        st.add(&unit.sweep_patch(
-                            mesh,
-                            patch.vertices.clone(),
-                            patch.triangles.clone(),
-                            &mut pv,
-                            &mut sv,
-                            params,
-                            smooth_loops,
-                        ));
+                        st.add(
+                            &unit
+                                .sweep_patch(
+                                    mesh,
+                                    patch.vertices.clone(),
+                                    patch.triangles.clone(),
+                                    &mut pv,
+                                    &mut sv,
+                                    params,
+                                    smooth_loops,
+                                    false,
+                                )
+                                .stencils,
+                        );
                     }
                     (p, st.applied)
                 };
