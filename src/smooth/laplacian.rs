@@ -121,12 +121,77 @@ const FROM_SRC: u8 = 1;
 /// Measure against the value of `dst` being overwritten.
 const FROM_DST: u8 = 2;
 
+/// The Jacobi kernel ([`step_of`]), compiled for AVX2 too and chosen at run time: the same
+/// operations (Rust fuses no product and sum), so the same bits.
+#[inline(always)]
+fn step<const MEASURE: u8, const CLAMP: bool>(
+    topo: &Topology,
+    src: &[DVec3],
+    dst: &mut [DVec3],
+    first: usize,
+    lambda: f64,
+    bound: (&[DVec3], f64),
+) -> StepStats {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2 (just checked).
+        return unsafe { step_avx2::<MEASURE, CLAMP>(topo, src, dst, first, lambda, bound) };
+    }
+    step_of::<MEASURE, CLAMP>(topo, src, dst, first, lambda, bound)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn step_avx2<const MEASURE: u8, const CLAMP: bool>(
+    topo: &Topology,
+    src: &[DVec3],
+    dst: &mut [DVec3],
+    first: usize,
+    lambda: f64,
+    bound: (&[DVec3], f64),
+) -> StepStats {
+    step_of::<MEASURE, CLAMP>(topo, src, dst, first, lambda, bound)
+}
+
+/// The sum of the positions of `nbrs`, from zero, in their order. Degrees 5 to 7 (most vertices
+/// of a surface) are unrolled: no loop branch, the same additions in the same order.
+///
+/// # Safety
+/// Every id in `nbrs` is below `src.len()`.
+#[inline(always)]
+unsafe fn neighbour_sum(src: &[DVec3], nbrs: &[u32]) -> DVec3 {
+    #[inline(always)]
+    unsafe fn unrolled<const K: usize>(src: &[DVec3], row: &[u32; K]) -> DVec3 {
+        let mut sum = DVec3::ZERO;
+        for &u in row {
+            // SAFETY: by the caller's contract.
+            sum += unsafe { *src.get_unchecked(u as usize) };
+        }
+        sum
+    }
+    // SAFETY (every arm): by the caller's contract.
+    unsafe {
+        match nbrs.len() {
+            5 => unrolled::<5>(src, nbrs.try_into().unwrap_unchecked()),
+            6 => unrolled::<6>(src, nbrs.try_into().unwrap_unchecked()),
+            7 => unrolled::<7>(src, nbrs.try_into().unwrap_unchecked()),
+            _ => {
+                let mut sum = DVec3::ZERO;
+                for &u in nbrs {
+                    sum += *src.get_unchecked(u as usize);
+                }
+                sum
+            }
+        }
+    }
+}
+
 /// The Jacobi kernel. The CSR arrays are walked directly (one offset load per vertex, the
 /// neighbour slice cut from a running position) and neighbour positions are gathered without a
 /// bounds check per neighbour: this loop is the time of `laplacian` and `taubin` when they run
-/// plain steps (out of core, and in the cluster engine).
+/// plain steps (out of core, and in the cluster engine), and of `vcs-lowpass`'s λ|μ pair.
 #[inline(always)]
-fn step<const MEASURE: u8, const CLAMP: bool>(
+fn step_of<const MEASURE: u8, const CLAMP: bool>(
     topo: &Topology,
     src: &[DVec3],
     dst: &mut [DVec3],
@@ -149,11 +214,8 @@ fn step<const MEASURE: u8, const CLAMP: bool>(
         let p = own[k];
         let stepped = if fixed[k] == 0 {
             let nbrs = &vv[offsets[k]..offsets[k + 1]];
-            let mut sum = DVec3::ZERO;
-            for &u in nbrs {
-                // SAFETY: `u < topo.len() <= src.len()` (asserted above).
-                sum += unsafe { *src.get_unchecked(u as usize) };
-            }
+            // SAFETY: every `u` is below `topo.len() <= src.len()` (asserted above).
+            let sum = unsafe { neighbour_sum(src, nbrs) };
             Some(p + lambda * (sum * inv_deg(nbrs.len()) - p))
         } else {
             // A crease line vertex steps along its line: the umbrella of its two crease
