@@ -41,7 +41,9 @@ use crate::partition::Patch;
 use crate::schedule::{LANES, Prefetch};
 use crate::smooth::boundary::{self, Loops};
 use crate::smooth::laplacian::{self, Previous, StepStats};
-use crate::smooth::method::{Exec, FaceFields, Footprint, PassFields, PatchMesh, PatchSweep, Schedule};
+use crate::smooth::method::{
+    Exec, FaceFields, Footprint, PassFields, PatchMesh, PatchSweep, Schedule,
+};
 use crate::smooth::stencil::{self, StencilParams};
 use crate::smooth::tiled::{Measure, TilePlan};
 use crate::smooth::{Options, SharedField, Smoother, SweepStats};
@@ -310,8 +312,7 @@ impl Run<'_, '_> {
             );
             // A unit that measures its moves in its sweep needs no copy, unless the loops'
             // restoring pass moves vertices after it or the automatic stop reads the copy.
-            let own_moves =
-                measure && unit.measures_moves() && loops.is_none() && auto.is_none();
+            let own_moves = measure && unit.measures_moves() && loops.is_none() && auto.is_none();
             if measure && !own_moves {
                 let now = &pos[owned.clone()];
                 on_pool(&*self.share, || {
@@ -819,7 +820,9 @@ fn sweep_patches(
             }
         })
         .collect();
-    swept.into_iter().fold(PatchSweep::default(), PatchSweep::then)
+    swept
+        .into_iter()
+        .fold(PatchSweep::default(), PatchSweep::then)
 }
 
 /// What a sweep over patches applies: the method's stencils (with its boundary stencils in

@@ -180,10 +180,14 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU has AVX2 (just checked).
         return unsafe {
-            apply_block_avx2(topo, triangles, pos, filtered, block, deviation, scratch, moves)
+            apply_block_avx2(
+                topo, triangles, pos, filtered, block, deviation, scratch, moves,
+            )
         };
     }
-    apply_block_lanes(topo, triangles, pos, filtered, block, deviation, scratch, moves)
+    apply_block_lanes(
+        topo, triangles, pos, filtered, block, deviation, scratch, moves,
+    )
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -199,7 +203,9 @@ unsafe fn apply_block_avx2<P: Field + ?Sized, D: Field + ?Sized>(
     scratch: &mut Scratch,
     moves: Option<&mut StepStats>,
 ) -> Outcome {
-    apply_block_lanes(topo, triangles, pos, filtered, block, deviation, scratch, moves)
+    apply_block_lanes(
+        topo, triangles, pos, filtered, block, deviation, scratch, moves,
+    )
 }
 
 #[inline(always)]
