@@ -154,14 +154,15 @@ unsafe fn step_avx2<const MEASURE: u8, const CLAMP: bool>(
 }
 
 /// The sum of the positions of `nbrs`, from zero, in their order. Degrees 5 to 7 (most vertices
-/// of a surface) are unrolled: no loop branch, the same additions in the same order.
+/// of a surface) are unrolled (a row of a known length): no loop branch, the same additions in
+/// the same order.
 ///
 /// # Safety
 /// Every id in `nbrs` is below `src.len()`.
 #[inline(always)]
 unsafe fn neighbour_sum(src: &[DVec3], nbrs: &[u32]) -> DVec3 {
     #[inline(always)]
-    unsafe fn unrolled<const K: usize>(src: &[DVec3], row: &[u32; K]) -> DVec3 {
+    unsafe fn sum<'a>(src: &[DVec3], row: impl IntoIterator<Item = &'a u32>) -> DVec3 {
         let mut sum = DVec3::ZERO;
         for &u in row {
             // SAFETY: by the caller's contract.
@@ -169,19 +170,14 @@ unsafe fn neighbour_sum(src: &[DVec3], nbrs: &[u32]) -> DVec3 {
         }
         sum
     }
-    // SAFETY (every arm): by the caller's contract.
+    // SAFETY (every arm): by the caller's contract; each row is `nbrs`, whose length the arm
+    // matched.
     unsafe {
         match nbrs.len() {
-            5 => unrolled::<5>(src, nbrs.try_into().unwrap_unchecked()),
-            6 => unrolled::<6>(src, nbrs.try_into().unwrap_unchecked()),
-            7 => unrolled::<7>(src, nbrs.try_into().unwrap_unchecked()),
-            _ => {
-                let mut sum = DVec3::ZERO;
-                for &u in nbrs {
-                    sum += *src.get_unchecked(u as usize);
-                }
-                sum
-            }
+            5 => sum(src, <&[u32; 5]>::try_from(nbrs).unwrap_unchecked()),
+            6 => sum(src, <&[u32; 6]>::try_from(nbrs).unwrap_unchecked()),
+            7 => sum(src, <&[u32; 7]>::try_from(nbrs).unwrap_unchecked()),
+            _ => sum(src, nbrs),
         }
     }
 }
