@@ -310,9 +310,7 @@ impl Run<'_, '_> {
                 counts,
                 faces,
             );
-            // A unit that measures its moves in its sweep needs no copy, unless the loops'
-            // restoring pass moves vertices after it or the automatic stop reads the copy.
-            let own_moves = measure && unit.measures_moves() && loops.is_none() && auto.is_none();
+            let own_moves = measure && !copies_positions(unit, self.opts);
             if measure && !own_moves {
                 let now = &pos[owned.clone()];
                 on_pool(&*self.share, || {
@@ -328,7 +326,7 @@ impl Run<'_, '_> {
             let in_sweep = loops.as_ref().filter(|_| !unit.boundary_pass());
             let swept = self.sweep_colours(
                 colours,
-                Pass::Stencils(unit),
+                Pass::Stencils(unit, self.opts),
                 pos,
                 sums,
                 params,
@@ -764,6 +762,14 @@ impl Run<'_, '_> {
     }
 }
 
+/// Whether a run of the stencil method `unit` with `opts` copies the positions before each
+/// measured sweep (into the loop's `prev`): unless the unit measures its moves in its sweep
+/// ([`Smoother::measures_moves`]), with no pass after it that moves vertices (smoothed
+/// boundaries) and no automatic stop (its rule reads the copy).
+pub fn copies_positions(unit: &dyn Smoother, opts: &Options) -> bool {
+    !unit.measures_moves() || opts.boundary == crate::smooth::Boundary::Smooth || opts.auto_stop
+}
+
 /// The stencil kernel's parameters for `unit` with `opts`; `input`: the input positions, read
 /// when `opts.max_deviation` bounds the deviation.
 fn stencil_params<'a>(
@@ -801,8 +807,9 @@ fn sweep_patches(
         .map(|patch| {
             let (mut pv, mut sv) = (pos, sums);
             match (pass, loops) {
-                (Pass::Stencils(unit), _) => unit.sweep_patch(
+                (Pass::Stencils(unit, opts), _) => unit.sweep_patch(
                     PatchMesh { topo, tris, sorted },
+                    opts,
                     patch.vertices.clone(),
                     patch.triangles.clone(),
                     &mut pv,
@@ -830,7 +837,7 @@ fn sweep_patches(
 /// method's, for a unit whose [`Smoother::boundary_pass`] says so).
 #[derive(Clone, Copy)]
 enum Pass<'u> {
-    Stencils(&'u dyn Smoother),
+    Stencils(&'u dyn Smoother, &'u Options),
     Boundaries,
 }
 

@@ -175,7 +175,11 @@ impl Plan {
             opts.method.unit().needs(),
         );
         let sized = |wanted: bool| if wanted { n } else { 0 };
-        let mut prev: Buf<DVec3> = storage.zeroed(sized(!schedule_of.is_jacobi() || needs.aux))?;
+        // The stencil methods' copy before a measured sweep and their spare buffer, unless the
+        // method measures its moves itself.
+        let copies =
+            !schedule_of.is_jacobi() && iterate::copies_positions(opts.method.unit(), opts);
+        let mut prev: Buf<DVec3> = storage.zeroed(sized(copies || needs.aux))?;
         // Out of core a stencil method's neighbour sums are each patch's own (`PatchSums`): an
         // array of the mesh's size would be 12 B per triangle more to pass through the page cache.
         let keep_sums = *in_memory;

@@ -2,7 +2,8 @@
 
 use glam::DVec3;
 
-use super::{Topology, inv_deg, neighbor_sum};
+use super::{Field, Topology, inv_deg, neighbor_sum};
+use crate::topology::TopologyParts;
 
 /// Umbrella Laplacian `L(v) = (1/deg v) Σ_{u∈N(v)} p_u − p_v`; zero for an isolated vertex.
 #[inline]
@@ -153,33 +154,56 @@ unsafe fn step_avx2<const MEASURE: u8, const CLAMP: bool>(
     step_of::<MEASURE, CLAMP>(topo, src, dst, first, lambda, bound)
 }
 
-/// The sum of the positions of `nbrs`, from zero, in their order. Degrees 5 to 7 (most vertices
-/// of a surface) are unrolled (a row of a known length): no loop branch, the same additions in
-/// the same order.
-///
-/// # Safety
-/// Every id in `nbrs` is below `src.len()`.
+/// The sum of the positions (`get`) of `nbrs`, from zero, in their order. Degrees 5 to 7 (most
+/// vertices of a surface) are unrolled (a row of a known length): no loop branch, the same
+/// additions in the same order.
 #[inline(always)]
-unsafe fn neighbour_sum(src: &[DVec3], nbrs: &[u32]) -> DVec3 {
+fn neighbour_sum(get: impl Fn(u32) -> DVec3, nbrs: &[u32]) -> DVec3 {
     #[inline(always)]
-    unsafe fn sum<'a>(src: &[DVec3], row: impl IntoIterator<Item = &'a u32>) -> DVec3 {
+    fn sum<'a>(get: impl Fn(u32) -> DVec3, row: impl IntoIterator<Item = &'a u32>) -> DVec3 {
         let mut sum = DVec3::ZERO;
         for &u in row {
-            // SAFETY: by the caller's contract.
-            sum += unsafe { *src.get_unchecked(u as usize) };
+            sum += get(u);
         }
         sum
     }
-    // SAFETY (every arm): by the caller's contract; each row is `nbrs`, whose length the arm
-    // matched.
-    unsafe {
-        match nbrs.len() {
-            5 => sum(src, <&[u32; 5]>::try_from(nbrs).unwrap_unchecked()),
-            6 => sum(src, <&[u32; 6]>::try_from(nbrs).unwrap_unchecked()),
-            7 => sum(src, <&[u32; 7]>::try_from(nbrs).unwrap_unchecked()),
-            _ => sum(src, nbrs),
-        }
+    match nbrs.len() {
+        5 => sum(get, <&[u32; 5]>::try_from(nbrs).unwrap_or(&[0; 5])),
+        6 => sum(get, <&[u32; 6]>::try_from(nbrs).unwrap_or(&[0; 6])),
+        7 => sum(get, <&[u32; 7]>::try_from(nbrs).unwrap_or(&[0; 7])),
+        _ => sum(get, nbrs),
     }
+}
+
+/// One Jacobi step `p + λ L(p)` at vertex `v`, at `p` in the step's source (read through `get`),
+/// `free` when it is not fixed, `nbrs` its neighbours: `None` for a fixed vertex that stays. A
+/// crease line vertex steps along its line: the umbrella of its two crease neighbours (a lookup
+/// only fixed vertices make).
+#[inline(always)]
+fn stepped(
+    topo: &TopologyParts,
+    get: impl Fn(u32) -> DVec3,
+    v: u32,
+    p: DVec3,
+    free: bool,
+    nbrs: &[u32],
+    lambda: f64,
+) -> Option<DVec3> {
+    if free {
+        let sum = neighbour_sum(&get, nbrs);
+        Some(p + lambda * (sum * inv_deg(nbrs.len()) - p))
+    } else {
+        topo.line_neighbors(v)
+            .map(|[a, b]| p + lambda * ((get(a) + get(b)) * 0.5 - p))
+    }
+}
+
+/// Vertex `v` after one Jacobi step from `src`: the bits [`jacobi_step`] writes for it.
+#[inline(always)]
+pub fn jacobi_at<F: Field + ?Sized>(topo: &TopologyParts, src: &F, v: u32, lambda: f64) -> DVec3 {
+    let p = src.get(v);
+    let free = topo.fixed[v as usize] == 0;
+    stepped(topo, |u| src.get(u), v, p, free, topo.neighbors(v), lambda).unwrap_or(p)
 }
 
 /// The Jacobi kernel. The CSR arrays are walked directly (one offset load per vertex, the
@@ -196,10 +220,14 @@ fn step_of<const MEASURE: u8, const CLAMP: bool>(
     (input, limit): (&[DVec3], f64),
 ) -> StepStats {
     let n = dst.len();
-    let (offsets, vv) = topo.csr();
+    let parts = topo.parts();
+    let (offsets, vv) = (parts.vv_offsets, parts.vv);
     // The unchecked gather below relies on this: every id in `vv` is below `topo.len()` (the
     // topology's invariant, checked when it is built), so it is below `src.len()`.
     assert!(src.len() >= topo.len());
+    // SAFETY: `u < topo.len() <= src.len()` (asserted above) for every neighbour and crease
+    // neighbour `u` of the topology.
+    let get = |u: u32| unsafe { *src.get_unchecked(u as usize) };
     // The mask, offsets and old positions of the range as slices: one bounds check for the range
     // instead of one per vertex.
     let fixed = &topo.fixed_mask()[first..first + n];
@@ -208,18 +236,9 @@ fn step_of<const MEASURE: u8, const CLAMP: bool>(
     let mut st = StepStats::default();
     for k in 0..n {
         let p = own[k];
-        let stepped = if fixed[k] == 0 {
-            let nbrs = &vv[offsets[k]..offsets[k + 1]];
-            // SAFETY: every `u` is below `topo.len() <= src.len()` (asserted above).
-            let sum = unsafe { neighbour_sum(src, nbrs) };
-            Some(p + lambda * (sum * inv_deg(nbrs.len()) - p))
-        } else {
-            // A crease line vertex steps along its line: the umbrella of its two crease
-            // neighbours (a lookup only fixed vertices make).
-            topo.line_neighbors((first + k) as u32)
-                .map(|[a, b]| p + lambda * ((src[a as usize] + src[b as usize]) * 0.5 - p))
-        };
-        let new = match stepped {
+        let nbrs = &vv[offsets[k]..offsets[k + 1]];
+        let v = (first + k) as u32;
+        let new = match stepped(&parts, get, v, p, fixed[k] == 0, nbrs, lambda) {
             Some(new) => {
                 st.moved += 1;
                 if CLAMP {
@@ -256,6 +275,28 @@ mod tests {
         let mut out = vec![DVec3::ZERO; 7];
         jacobi_step(&topo, &pos, &mut out, 0, 0.5);
         assert_eq!(out, pos);
+    }
+
+    /// The step of one vertex, as the default method's blocks take it, is the whole step's, bit
+    /// for bit: at free vertices of every degree and at the fixed ones of an open border.
+    #[test]
+    fn jacobi_at_is_the_step_of_each_vertex() {
+        let (pos, tris) = crate::shapes::open_sorted_sphere(4, 5);
+        let topo = Topology::build(pos.len(), &tris).unwrap();
+        assert!((0..topo.len() as u32).any(|v| topo.is_fixed(v)));
+        let parts = topo.parts();
+        for lambda in [0.5, -0.52] {
+            let mut out = vec![DVec3::ZERO; pos.len()];
+            jacobi_step(&topo, &pos, &mut out, 0, lambda);
+            assert!(out != pos);
+            for (v, &want) in out.iter().enumerate() {
+                assert_eq!(
+                    jacobi_at(&parts, &pos[..], v as u32, lambda),
+                    want,
+                    "vertex {v}"
+                );
+            }
+        }
     }
 
     #[test]

@@ -29,14 +29,15 @@
 //! multiple of a Taubin iteration.
 //!
 //! What a block reads and writes (the schedule's conflict rule rests on it): it writes its own
-//! vertices, which are owned by its patch, and reads the corners of their faces (one ring out)
-//! and their own filtered positions; the edge stencils' colouring covers that.
+//! vertices, which are owned by its patch, and reads the corners of their faces (one ring out);
+//! the edge stencils' colouring covers that. It also reads the λ step's positions of its
+//! vertices and their neighbours, an array no block writes.
 
 use std::ops::Range;
 
 use glam::DVec3;
 
-use super::laplacian::StepStats;
+use super::laplacian::{self, StepStats};
 use super::method::{PatchMesh, PatchSweep};
 use super::stencil::{self, Outcome};
 use super::{Field, SweepStats};
@@ -75,6 +76,8 @@ struct Shared {
 struct Scratch {
     /// Per member: whether it moves (movable, and not left out by the deviation bound).
     free: Vec<bool>,
+    /// Per member: where step 1 takes it (absolute).
+    target: Vec<V4>,
     /// Per member: where it is before step 1, about the block's origin.
     here: Vec<V4>,
     /// Per member: its volume gradient after step 1, then that gradient's direction.
@@ -90,13 +93,16 @@ struct Scratch {
 }
 
 /// The blocks of the patch `owned`, ascending, Gauss–Seidel (each sees the latest positions):
-/// [`apply_block`], step 1 taking each vertex to `filtered` (the first step's result from the
-/// iteration's positions, e.g. Taubin's λ|μ pair). With `measure`, also how far the vertices
+/// [`apply_block`], step 1 taking each vertex to one Jacobi step `μ` from `half` (Taubin's λ step
+/// from the iteration's positions: the pair's second step is taken here, by each block for its
+/// vertices, so that it needs no array of its own). With `measure`, also how far the vertices
 /// moved: each is written by its own block alone, once, so its move is measured as it is written.
+#[allow(clippy::too_many_arguments)]
 pub fn sweep_blocks<P: Field + ?Sized, D: Field + ?Sized>(
     mesh: PatchMesh,
     pos: &mut P,
-    filtered: &D,
+    half: &D,
+    mu: f64,
     owned: Range<u32>,
     deviation: Option<stencil::Deviation>,
     measure: bool,
@@ -120,7 +126,7 @@ pub fn sweep_blocks<P: Field + ?Sized, D: Field + ?Sized>(
             &topo,
             triangles,
             pos,
-            filtered,
+            (half, mu),
             block,
             deviation,
             &mut scratch,
@@ -155,8 +161,9 @@ pub fn blocks(owned: Range<u32>) -> impl Iterator<Item = Range<u32>> {
         .filter(|b| !b.is_empty())
 }
 
-/// One block (see the module doc): its free members move to `filtered` (step 1: a vertex is
-/// moved only by its own block, so its position is still the iteration's), then each by the
+/// One block (see the module doc): its free members move to one Jacobi step `μ` from the λ step's
+/// positions, `filtered` (step 1: a vertex is moved only by its own block, so its position is
+/// still the iteration's, and the λ step's is from it), then each by the
 /// common distance `s` along its own unit volume gradient, `s` the root of the faces' volume
 /// change, a cubic in `s`, found by Newton from the linear solution. Under a deviation bound the
 /// members that would end beyond it are held back (they do not move) and the rest is solved
@@ -170,7 +177,7 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
     topo: &TopologyParts,
     triangles: &[[u32; 3]],
     pos: &mut P,
-    filtered: &D,
+    filtered: (&D, f64),
     block: Block,
     deviation: Option<stencil::Deviation>,
     scratch: &mut Scratch,
@@ -197,7 +204,7 @@ unsafe fn apply_block_avx2<P: Field + ?Sized, D: Field + ?Sized>(
     topo: &TopologyParts,
     triangles: &[[u32; 3]],
     pos: &mut P,
-    filtered: &D,
+    filtered: (&D, f64),
     block: Block,
     deviation: Option<stencil::Deviation>,
     scratch: &mut Scratch,
@@ -214,7 +221,7 @@ fn apply_block_lanes<P: Field + ?Sized, D: Field + ?Sized>(
     topo: &TopologyParts,
     triangles: &[[u32; 3]],
     pos: &mut P,
-    filtered: &D,
+    filtered: (&D, f64),
     block: Block,
     deviation: Option<stencil::Deviation>,
     scratch: &mut Scratch,
@@ -233,10 +240,20 @@ fn apply_block_lanes<P: Field + ?Sized, D: Field + ?Sized>(
         return Outcome::SkippedFixed;
     }
     let origin = V4::of(pos.get(start));
+    // Step 1's target, the second step of the pair from the first's result (computed here
+    // rather than stored: an array of the mesh's size less).
+    let (half, mu) = filtered;
+    scratch.target.clear();
+    scratch.target.extend(
+        block
+            .clone()
+            .map(|u| V4::of(laplacian::jacobi_at(topo, half, u, mu))),
+    );
     let mut held_back = false;
     for _ in 0..DEVIATION_ROUNDS {
         let Scratch {
             free,
+            target,
             here,
             dir,
             moved,
@@ -251,10 +268,11 @@ fn apply_block_lanes<P: Field + ?Sized, D: Field + ?Sized>(
         // loaded again after every store of the passes, with each index's bounds check.
         let read: &P = pos;
         let at = move |u: u32| V4::of(read.get(u));
-        // Step 1's displacement (computed here rather than stored: one pass over memory less).
-        let disp = move |u: u32| V4::of(filtered.get(u)) - at(u);
         // A member's index in the block's arrays (ids below the block wrap to beyond it).
         let local = move |u: u32| u.wrapping_sub(start) as usize;
+        // Step 1's displacement (computed here rather than stored: one pass over memory less).
+        let target = &target[..len];
+        let disp = move |u: u32| target[local(u)] - at(u);
         let member = move |u: u32| {
             let k = local(u);
             k < len && (all_free || free[k])
@@ -591,11 +609,14 @@ mod tests {
                 };
                 // Two patches, their blocks not aligned to the patch's start.
                 let cut = 5000;
-                let first = sweep_blocks(mesh, &mut p[..], &filtered[..], 0..cut, deviation, true);
+                let mu = -0.52;
+                let first =
+                    sweep_blocks(mesh, &mut p[..], &filtered[..], mu, 0..cut, deviation, true);
                 let second = sweep_blocks(
                     mesh,
                     &mut p[..],
                     &filtered[..],
+                    mu,
                     cut..pos.len() as u32,
                     deviation,
                     true,

@@ -256,7 +256,8 @@ pub trait Smoother: Sync {
     /// [`Schedule::Stencils`]: before every sweep, what its stencils read beside the positions
     /// into `sums` (nothing by default: the neighbour sums of the stencil methods are rebuilt by
     /// each patch, [`super::rebuild_patch_sums`]); `spare` is a buffer the method may use (it is
-    /// overwritten after), `counts` its byte field, `faces` its per-triangle fields.
+    /// overwritten after; empty for a unit that [`Smoother::measures_moves`] when the run keeps no
+    /// copy), `counts` its byte field, `faces` its per-triangle fields.
     #[allow(clippy::too_many_arguments)]
     fn prepare(
         &self,
@@ -280,6 +281,7 @@ pub trait Smoother: Sync {
     fn sweep_patch(
         &self,
         _mesh: PatchMesh,
+        _opts: &Options,
         _vertices: Range<u32>,
         _triangles: Range<u32>,
         _pos: &mut SharedField,
@@ -294,7 +296,9 @@ pub trait Smoother: Sync {
     /// [`Schedule::Stencils`]: whether a sweep moves each vertex from its own patch alone, so
     /// that [`Smoother::sweep_patch`] can measure how far its vertices moved (from their
     /// positions before and after, as they are written) and the loop need not copy the positions
-    /// before a measured sweep. Not with smoothed boundaries: their pass moves loop vertices too.
+    /// before a measured sweep. Not with smoothed boundaries (their pass moves loop vertices too)
+    /// nor with the automatic stop (its rule reads the copy); otherwise the run keeps no copy, and
+    /// [`Smoother::prepare`]'s `spare` is empty.
     fn measures_moves(&self) -> bool {
         false
     }

@@ -163,6 +163,7 @@ impl Smoother for StencilMethod {
     fn sweep_patch(
         &self,
         mesh: PatchMesh,
+        _: &Options,
         vertices: Range<u32>,
         triangles: Range<u32>,
         pos: &mut SharedField,
@@ -253,9 +254,9 @@ impl Smoother for VcsLowpass {
     fn default_mu(&self) -> f64 {
         -0.52
     }
-    /// Step 1's target into `sums`: a λ|μ pair from `pos` through `spare`, each step exchanged
-    /// (the blocks take the difference from `pos`). Every entry depends only on `pos`, so any
-    /// split gives the same bits.
+    /// The λ step of step 1's pair from `pos` into `sums`, exchanged; each block takes the μ step
+    /// from it for its own vertices ([`lowpass::sweep_blocks`]). Every entry depends only on
+    /// `pos`, so any split gives the same bits.
     fn prepare(
         &self,
         mesh: PatchMesh,
@@ -263,18 +264,13 @@ impl Smoother for VcsLowpass {
         exec: &mut dyn Exec,
         pos: &[DVec3],
         sums: &mut [DVec3],
-        spare: &mut [DVec3],
+        _: &mut [DVec3],
         _: &[u8],
         _: FaceFields,
     ) {
-        let topo = mesh.topo;
-        let (lambda, mu) = (opts.lambda, opts.mu());
-        exec.vertex_pass(spare, &|first, out| {
-            laplacian::jacobi_step(topo, pos, out, first, lambda);
-        });
-        let half: &[DVec3] = spare;
+        let (topo, lambda) = (mesh.topo, opts.lambda);
         exec.vertex_pass(sums, &|first, out| {
-            laplacian::jacobi_step(topo, half, out, first, mu);
+            laplacian::jacobi_step(topo, pos, out, first, lambda);
         });
     }
     /// The blocks of the patch's vertices, ascending; its boundary stencils run after
@@ -282,6 +278,7 @@ impl Smoother for VcsLowpass {
     fn sweep_patch(
         &self,
         mesh: PatchMesh,
+        opts: &Options,
         vertices: Range<u32>,
         _: Range<u32>,
         pos: &mut SharedField,
@@ -290,7 +287,8 @@ impl Smoother for VcsLowpass {
         _: Option<&Loops>,
         measure: bool,
     ) -> PatchSweep {
-        lowpass::sweep_blocks(mesh, pos, sums, vertices, params.deviation, measure)
+        let (deviation, mu) = (params.deviation, opts.mu());
+        lowpass::sweep_blocks(mesh, pos, sums, mu, vertices, deviation, measure)
     }
     fn boundary_pass(&self) -> bool {
         true
@@ -389,6 +387,7 @@ impl Smoother for VcsGuided {
     fn sweep_patch(
         &self,
         mesh: PatchMesh,
+        _: &Options,
         vertices: Range<u32>,
         _: Range<u32>,
         pos: &mut SharedField,
@@ -450,6 +449,7 @@ mod tests {
                             &unit
                                 .sweep_patch(
                                     mesh,
+                                    &Options::default(),
                                     patch.vertices.clone(),
                                     patch.triangles.clone(),
                                     &mut pv,
