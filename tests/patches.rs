@@ -371,14 +371,19 @@ fn multi_iteration_rounds_equal_plain_steps() {
                 "{method}, {threads} threads: every iteration"
             );
             assert!(last == plain, "{method}, {threads} threads: last only");
-            // The last iteration's statistics agree; the others are measured only when asked.
+            // The last iteration's statistics agree (every iteration's volume is measured inside
+            // the tiles, summed in another order); the others are measured only when asked.
             let (a, b) = (rec_every.last().unwrap(), rec_last.last().unwrap());
-            assert_eq!(a.volume, b.volume);
+            assert!((a.volume - b.volume).abs() <= 1e-12 * a.volume.abs());
             assert_eq!(a.max_displacement, b.max_displacement);
             assert!(
                 (a.mean_displacement - b.mean_displacement).abs() <= 1e-12 * a.mean_displacement
             );
-            assert!(rec_every.iter().all(|r| r.max_displacement > 0.0));
+            assert!(
+                rec_every
+                    .iter()
+                    .all(|r| r.max_displacement > 0.0 && r.volume.is_finite() && r.area_pct > 0.0)
+            );
             assert!(rec_last[..iterations - 1].iter().all(|r| r.volume.is_nan()));
         }
     }

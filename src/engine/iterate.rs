@@ -45,7 +45,7 @@ use crate::smooth::method::{
     Exec, FaceFields, Footprint, PassFields, PatchMesh, PatchSweep, Schedule,
 };
 use crate::smooth::stencil::{self, StencilParams};
-use crate::smooth::tiled::{Measure, TilePlan};
+use crate::smooth::tiled::{Measure, Measured, TilePlan};
 use crate::smooth::{Options, SharedField, Smoother, SweepStats};
 use crate::topology::Topology;
 
@@ -79,6 +79,26 @@ fn volume_area(mesh: &Sweep, pos: &[DVec3], origin: DVec3, share: &dyn Share) ->
     let (v, a) = on_pool(share, || reduce::volume_area(pos, tris, origin));
     let total = share.sum(&[v, a]);
     (total[0], total[1])
+}
+
+/// Where an iteration's record takes its volume and area from.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Volume {
+    /// Not measured (NaN in the record).
+    Unmeasured,
+    /// Measured on the positions the record is made with ([`volume_area`]).
+    Measure,
+    /// Measured already (the volume and the area, about the run's origin), by this process.
+    Sums(f64, f64),
+}
+
+impl Volume {
+    fn when(measure: bool) -> Volume {
+        match measure {
+            true => Volume::Measure,
+            false => Volume::Unmeasured,
+        }
+    }
 }
 
 /// The mesh as the loop sees it: topology, triangles, patches and their colours.
@@ -370,7 +390,8 @@ impl Run<'_, '_> {
             };
             let stop = self.stop_after(auto.as_deref_mut(), pos, Some(prev));
             let last = stop || it == total;
-            let record = self.record(it, pos, moved, wanted || stop, sweep, seconds)?;
+            let record =
+                self.record(it, pos, moved, Volume::when(wanted || stop), sweep, seconds)?;
             self.keep(
                 &record,
                 pos,
@@ -460,11 +481,16 @@ impl Run<'_, '_> {
     /// ping-ponging between `pos` and `scratch` (the result ends in `pos`).
     ///
     /// With a [`TilePlan`] (when the mesh may hold one, and as long as every tile can be planned)
-    /// a round runs several iterations in one pass over memory: up to the plan's depth in steps,
-    /// and never past a measured iteration (it ends the round, and its displacement is measured in
-    /// the round). The iterations of a round share its time equally in their records; the first
-    /// round also plans the tiles. Without a plan every iteration is one or two plain steps over
-    /// the owned vertices, each followed by the exchange. Both give bit-identical positions.
+    /// a round runs several iterations in one pass over memory. With statistics every iteration
+    /// (and the triangles sorted by their first corner, as the plan sorts them), each tile
+    /// measures every iteration's displacement and its triangles' volume and area itself, so a
+    /// round runs up to the plan's depth less one in steps (the tiles keep one ring more exact,
+    /// the corners of their triangles). Otherwise a round runs up to the depth in steps and never
+    /// past a measured iteration (it ends the round, its displacement measured in the round and
+    /// its volume after it), and with the automatic stop one iteration. The iterations of a round
+    /// share its time equally in their records; the first round also plans the tiles. Without a
+    /// plan every iteration is one or two plain steps over the owned vertices, each followed by
+    /// the exchange. All give bit-identical positions.
     fn jacobi(&mut self, buf: Buffers, first_iteration: usize, factors: &[f64]) -> Result<()> {
         let Buffers {
             pos,
@@ -488,28 +514,56 @@ impl Run<'_, '_> {
         let mut in_scratch = false;
         let mut first = first_iteration;
         while first <= total {
-            // The automatic stop looks at every iteration's result: one per round.
+            // Measured inside the tiles (the triangles sorted, so that each tile has a run of
+            // them): rounds of `depth − 1` steps, whatever they measure. Otherwise a round ends
+            // at a measured iteration, whose volume is measured after it; and the automatic stop
+            // looks at every iteration's result, one per round.
+            let per = factors.len();
+            let inside = plan.as_ref().is_some_and(|p| p.depth() > per)
+                && mesh.sorted
+                && auto.is_none()
+                && self.when == Statistics::Every;
             let per_round = match &plan {
-                Some(p) if auto.is_none() => (p.depth() / factors.len()).max(1),
+                Some(p) if inside => (p.depth() - 1) / per,
+                Some(p) if auto.is_none() => (p.depth() / per).max(1),
                 _ => 1,
             };
             let mut last = first;
-            while last < total && last - first + 1 < per_round && !self.when.wanted(last, total) {
+            while last < total
+                && last - first + 1 < per_round
+                && (inside || !self.when.wanted(last, total))
+            {
                 last += 1;
             }
-            let wanted = self.when.wanted(last, total);
-            let measure = wanted || auto.is_some();
+            let when = self.when;
+            let wanted = |it: usize| when.wanted(it, total);
+            let measure = wanted(last) || auto.is_some();
             let (src, dst): (&mut [DVec3], &mut [DVec3]) = if in_scratch {
                 (&mut *scratch, &mut *pos)
             } else {
                 (&mut *pos, &mut *scratch)
             };
-            let moved = match &plan {
+            // Per iteration of the round: its displacement and volume, where measured.
+            let mut measured: Vec<(Option<StepStats>, Volume)> =
+                vec![(None, Volume::Unmeasured); last - first + 1];
+            match &plan {
                 Some(tiles) => {
                     let steps: Vec<f64> = (first..=last).flat_map(|_| factors.to_vec()).collect();
-                    let measured = measure.then_some(steps.len() - factors.len());
-                    let Some(st) =
-                        on_pool(&*self.share, || round(tiles, src, dst, &steps, measured))
+                    let iterations = match inside {
+                        true => (first..=last)
+                            .enumerate()
+                            .filter(|&(_, it)| wanted(it))
+                            .fold(0u64, |bits, (j, _)| bits | 1 << j),
+                        false => (measure as u64) << (last - first),
+                    };
+                    let m = Measure {
+                        per,
+                        iterations,
+                        block: reduce::CHUNK,
+                        volume: inside.then_some((mesh.tris, self.origin)),
+                    };
+                    let m = (iterations != 0).then_some(m);
+                    let Some(rounds) = on_pool(&*self.share, || round(tiles, src, dst, &steps, m))
                     else {
                         // A tile could not be planned: the same iterations in plain steps, from
                         // the untouched `src`.
@@ -517,7 +571,17 @@ impl Run<'_, '_> {
                         continue;
                     };
                     in_scratch = !in_scratch;
-                    measure.then_some(st)
+                    let named = (0..measured.len()).filter(|&j| iterations >> j & 1 == 1);
+                    for (j, r) in named.zip(rounds) {
+                        let volume = match (inside, r.sums) {
+                            (true, Some((det, area))) => Volume::Sums(det / 6.0, area / 2.0),
+                            // A tile that could not take its triangles' sums: none by
+                            // construction (a triangle's corners are neighbours).
+                            (true, None) => Volume::Unmeasured,
+                            (false, _) => Volume::Measure,
+                        };
+                        measured[j] = (Some(r.moved), volume);
+                    }
                 }
                 None => {
                     let mut moved = self.step(src, dst, &owned, factors[0], Previous::Src, clamp);
@@ -528,15 +592,19 @@ impl Run<'_, '_> {
                     } else {
                         in_scratch = !in_scratch;
                     }
-                    measure.then_some(moved)
+                    if measure {
+                        measured[0] = (Some(moved), Volume::Measure);
+                    }
                 }
             };
             let seconds = start.elapsed().as_secs_f64() / (last - first + 1) as f64;
             let current: &[DVec3] = if in_scratch { scratch } else { pos };
             let stop = self.stop_after(auto.as_deref_mut(), current, None);
-            for it in first..=last {
-                let moved = if it == last { moved } else { None };
-                let volume = it == last && (wanted || stop);
+            for (it, (moved, mut volume)) in (first..=last).zip(measured) {
+                if !(wanted(it) || it == last && stop) {
+                    // Measured for the automatic stop only: no volume in the record.
+                    volume = Volume::Unmeasured;
+                }
                 let ends = it == last && (stop || it == total);
                 let record = self.record(it, current, moved, volume, sweep, seconds)?;
                 let stats = auto.as_deref().map(AutoStop::stats);
@@ -621,7 +689,14 @@ impl Run<'_, '_> {
             let seconds = start.elapsed().as_secs_f64();
             let stop = self.stop_after(auto.as_deref_mut(), dst, Some(src));
             let measured = (wanted || auto.is_some()).then_some(moved);
-            let record = self.record(it, dst, measured, wanted || stop, sweep, seconds)?;
+            let record = self.record(
+                it,
+                dst,
+                measured,
+                Volume::when(wanted || stop),
+                sweep,
+                seconds,
+            )?;
             let stats = auto.as_deref().map(AutoStop::stats);
             self.keep(&record, dst, stop || it == total, stats.as_ref())?;
             if stop {
@@ -680,21 +755,24 @@ impl Run<'_, '_> {
     }
 
     /// The record of iteration `it`, which ended at `pos`, shown to the observer; `moved` is its
-    /// displacement when it is measured, `None` otherwise; `measure_volume`: measure its volume
-    /// and area.
+    /// displacement when it is measured, `None` otherwise; `volume`: where its volume and area
+    /// come from.
     fn record(
         &mut self,
         it: usize,
         pos: &[DVec3],
         moved: Option<StepStats>,
-        measure_volume: bool,
+        volume: Volume,
         stencils: SweepStats,
         seconds: f64,
     ) -> Result<IterationRecord> {
-        let (volume, area) = if measure_volume {
-            volume_area(self.mesh, pos, self.origin, &*self.share)
-        } else {
-            (f64::NAN, f64::NAN)
+        let (volume, area) = match volume {
+            Volume::Unmeasured => (f64::NAN, f64::NAN),
+            Volume::Measure => volume_area(self.mesh, pos, self.origin, &*self.share),
+            Volume::Sums(v, a) => {
+                let total = self.share.sum(&[v, a]);
+                (total[0], total[1])
+            }
         };
         let (max_d, sum_d) = moved.map_or((f64::NAN, f64::NAN), |m| {
             (m.max_displacement, m.sum_displacement)
@@ -887,32 +965,51 @@ impl Exec for ShareExec<'_> {
 const _: () = assert!(crate::smooth::tiled::TILE % reduce::CHUNK == 0);
 
 /// One round of `factors.len()` Jacobi steps from `src` into `dst`, tile by tile in parallel (see
-/// [`TilePlan::run_tile`]). The displacement is summed per [`reduce::CHUNK`] block in block order,
-/// exactly as plain steps sum it, so the statistics do not depend on the thread count, the tile
-/// size or the storage either. `None` when a tile cannot be planned: then `src` is untouched.
+/// [`TilePlan::run_tile`]), with the iterations `measure` names measured: for each, in order, how
+/// far the vertices moved and (with [`Measure::volume`]) the determinant and doubled-area sums.
+/// The displacement is summed per [`reduce::CHUNK`] block in block order, exactly as plain steps
+/// sum it, and the volume's sums tile after tile, so neither depends on the thread count (nor
+/// the displacement on the tile size or the storage). `None` when a tile cannot be planned: then
+/// `src` is untouched.
 pub fn round(
     plan: &TilePlan,
     src: &[DVec3],
     dst: &mut [DVec3],
     factors: &[f64],
-    measure: Option<usize>,
-) -> Option<StepStats> {
-    let per_tile: Vec<Option<Vec<StepStats>>> = dst
+    measure: Option<Measure>,
+) -> Option<Vec<RoundMeasure>> {
+    let per_tile: Vec<Option<Vec<Measured>>> = dst
         .par_chunks_mut(plan.tile_size())
         .enumerate()
-        .map(|(t, out)| {
-            let measure = measure.map(|from_step| Measure {
-                from_step,
-                block: reduce::CHUNK,
-            });
-            plan.run_tile(t, src, out, factors, measure)
-        })
+        .map(|(t, out)| plan.run_tile(t, src, out, factors, measure))
         .collect();
-    let mut total = StepStats::default();
-    for blocks in per_tile {
-        total = blocks?.into_iter().fold(total, StepStats::then);
+    let count = measure.map_or(0, |m| m.iterations.count_ones() as usize);
+    let mut total = vec![
+        RoundMeasure {
+            moved: StepStats::default(),
+            sums: measure.and_then(|m| m.volume).map(|_| (-0.0, -0.0)),
+        };
+        count
+    ];
+    for tile in per_tile {
+        for (sum, m) in total.iter_mut().zip(tile?) {
+            sum.moved = m.blocks.into_iter().fold(sum.moved, StepStats::then);
+            sum.sums = sum
+                .sums
+                .zip(m.sums)
+                .map(|((v, a), (tv, ta))| (v + tv, a + ta));
+        }
     }
     Some(total)
+}
+
+/// What a round measured of one iteration over the whole mesh.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RoundMeasure {
+    pub moved: StepStats,
+    /// `(Σ det, Σ doubled area)` about the measure's origin (`None` when not asked, or when a
+    /// tile could not give them).
+    pub sums: Option<(f64, f64)>,
 }
 
 #[cfg(test)]
@@ -922,7 +1019,7 @@ mod tests {
 
     /// A noisy sphere in a random vertex order (so that rings reach far), with an open hole (so
     /// that some vertices are fixed).
-    fn shuffled_open_sphere() -> (Topology, Vec<DVec3>) {
+    fn shuffled_open_sphere() -> (Topology, Vec<DVec3>, Vec<[u32; 3]>) {
         let mut mesh = shapes::icosphere(5);
         shapes::add_normal_noise(&mut mesh, 0.3, 4);
         let n = mesh.positions.len();
@@ -939,12 +1036,28 @@ mod tests {
         tris.truncate(tris.len() - 3);
         let topo = Topology::build(n, &tris).unwrap();
         assert!(topo.stats.fixed_vertices > 0);
-        (topo, pos)
+        // As the plan keeps them: smallest corner first, sorted by it.
+        for t in &mut tris {
+            let k = (0..3).min_by_key(|&k| t[k]).unwrap();
+            t.rotate_left(k);
+        }
+        tris.sort_unstable();
+        (topo, pos, tris)
+    }
+
+    /// The displacement of the last of `k` steps, one per iteration.
+    fn last_step(k: usize) -> Option<Measure<'static>> {
+        Some(Measure {
+            per: 1,
+            iterations: 1 << (k - 1),
+            block: reduce::CHUNK,
+            volume: None,
+        })
     }
 
     #[test]
     fn a_round_equals_plain_steps_for_any_tile_depth_and_thread_count() {
-        let (topo, pos) = shuffled_open_sphere();
+        let (topo, pos, _) = shuffled_open_sphere();
         let n = pos.len();
         let factors = [0.5, -0.53, 0.5, -0.53, 0.5, -0.53];
         // The plain steps, and the displacement over the last two.
@@ -964,8 +1077,9 @@ mod tests {
                 for k in 1..=depth.min(factors.len()) {
                     let mut got = vec![DVec3::ZERO; n];
                     let st = pool
-                        .install(|| round(&plan, &pos, &mut got, &factors[..k], Some(k - 1)))
-                        .unwrap();
+                        .install(|| round(&plan, &pos, &mut got, &factors[..k], last_step(k)))
+                        .unwrap()[0]
+                        .moved;
                     assert_eq!(
                         got, want[k],
                         "tile {tile}, depth {depth}, {threads} threads, {k} steps"
@@ -1001,18 +1115,91 @@ mod tests {
 
     #[test]
     fn statistics_do_not_depend_on_the_thread_count() {
-        let (topo, pos) = shuffled_open_sphere();
+        let (topo, pos, tris) = shuffled_open_sphere();
         let plan = TilePlan::lazy(&topo, 300, 4);
+        let measure = Some(Measure {
+            per: 2,
+            iterations: 1,
+            block: reduce::CHUNK,
+            volume: Some((&tris[..], DVec3::new(0.1, -0.2, 0.3))),
+        });
         let run = |threads| {
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(threads)
                 .build()
                 .unwrap();
             let mut out = vec![DVec3::ZERO; pos.len()];
-            pool.install(|| round(&plan, &pos, &mut out, &[0.5, -0.53], Some(0)))
+            pool.install(|| round(&plan, &pos, &mut out, &[0.5, -0.53], measure))
                 .unwrap()
         };
         assert_eq!(run(1), run(4));
+    }
+
+    /// A round that measures several of its iterations inside the tiles gives each the
+    /// displacement and the volume's sums of the plain steps (the largest move the same bits,
+    /// the sums up to their order), keeps the positions of the plain steps, and gives the same
+    /// bits for any thread count.
+    #[test]
+    fn a_round_measures_each_named_iteration_inside_the_tiles() {
+        let (topo, pos, tris) = shuffled_open_sphere();
+        let n = pos.len();
+        let origin = DVec3::new(0.25, -0.5, 0.125);
+        let factors = [0.5, -0.53, 0.5, -0.53, 0.5, -0.53];
+        let mut want = vec![pos.clone()];
+        for &f in &factors {
+            let mut next = vec![DVec3::ZERO; n];
+            laplacian::jacobi_step(&topo, want.last().unwrap(), &mut next, 0, f);
+            want.push(next);
+        }
+        for (tile, depth) in [(1, 7), (97, 5), (1000, 7), (n, 8)] {
+            let plan = TilePlan::lazy(&topo, tile, depth);
+            // Whole iterations of two steps, one step short of the depth.
+            let k = (depth - 1) / 2 * 2;
+            // Every iteration but the second.
+            let iterations = (1u64 << (k / 2)) - 1 - 0b10;
+            let measure = Some(Measure {
+                per: 2,
+                iterations,
+                block: reduce::CHUNK,
+                volume: Some((&tris[..], origin)),
+            });
+            let mut runs = Vec::new();
+            for threads in [1, 3] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                let mut got = vec![DVec3::ZERO; n];
+                let r = pool
+                    .install(|| round(&plan, &pos, &mut got, &factors[..k], measure))
+                    .unwrap();
+                assert_eq!(
+                    got, want[k],
+                    "tile {tile}, depth {depth}, {threads} threads"
+                );
+                runs.push(r);
+            }
+            assert_eq!(runs[0], runs[1], "tile {tile}, depth {depth}");
+            let named: Vec<usize> = (0..k / 2).filter(|&j| iterations >> j & 1 == 1).collect();
+            assert_eq!(runs[0].len(), named.len());
+            for (r, &j) in runs[0].iter().zip(&named) {
+                let (from, to) = (&want[2 * j], &want[2 * j + 2]);
+                let d: Vec<f64> = (0..n).map(|v| to[v].distance(from[v])).collect();
+                assert_eq!(
+                    r.moved.max_displacement,
+                    d.iter().cloned().fold(0.0, f64::max)
+                );
+                let sum: f64 = d.iter().sum();
+                assert!((r.moved.sum_displacement - sum).abs() <= 1e-12 * sum);
+                let (det, area) = crate::metrics::determinant_and_area_sums(to, &tris, origin);
+                let (got_det, got_area) = r.sums.unwrap();
+                assert!(
+                    (got_det - det).abs() <= 1e-12 * det.abs(),
+                    "{got_det} {det}"
+                );
+                assert!((got_area - area).abs() <= 1e-12 * area, "{got_area} {area}");
+            }
+        }
     }
 
     #[test]

@@ -115,6 +115,17 @@ const TERM_BATCH: usize = 32;
 /// added in order. Each term is [`determinant`]'s and [`doubled_area`]'s, operation for operation.
 #[inline(always)]
 fn determinant_and_area_batches(pos: &[DVec3], triangles: &[[u32; 3]], o: DVec3) -> (f64, f64) {
+    determinant_and_area_by(triangles, |v| pos[v as usize], o)
+}
+
+/// [`determinant_and_area_batches`] with each corner's position from `corner`: for positions held
+/// elsewhere than in one array by vertex id (a tile's local copy, [`crate::smooth::tiled`]).
+#[inline(always)]
+pub(crate) fn determinant_and_area_by(
+    triangles: &[[u32; 3]],
+    corner: impl Fn(u32) -> DVec3,
+    o: DVec3,
+) -> (f64, f64) {
     let (mut volume, mut area) = (-0.0, -0.0);
     // x, y, z of the first, second and third corners, and the terms: set once (a short last
     // batch leaves stale lanes, computed and not added).
@@ -125,7 +136,7 @@ fn determinant_and_area_batches(pos: &[DVec3], triangles: &[[u32; 3]], o: DVec3)
         for (k, t) in batch.iter().enumerate() {
             // Below the batch length already: said so, the stores need no check.
             let k = k % TERM_BATCH;
-            let [a, b, c] = t.map(|v| pos[v as usize]);
+            let [a, b, c] = t.map(&corner);
             for (row, x) in at
                 .iter_mut()
                 .zip([a.x, a.y, a.z, b.x, b.y, b.z, c.x, c.y, c.z])

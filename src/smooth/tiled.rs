@@ -78,6 +78,9 @@ struct Tile {
     kinds: Vec<u8>,
     /// Local adjacency of the rows that are not interior, row after row.
     nbrs: Vec<u16>,
+    /// Ring 1 as (global id, local id), ascending: where a measuring round finds the corners of
+    /// the tile's triangles that are not its own.
+    ring1: Vec<(u32, u32)>,
 }
 
 /// The kind of a row that reads its neighbours from the topology.
@@ -157,7 +160,11 @@ impl<'t> TilePlan<'t> {
     /// Bytes the plan holds.
     pub fn bytes(&self) -> usize {
         self.planned()
-            .map(|t| 4 * (t.ring_end.len() + t.gather.len()) + t.kinds.len() + 2 * t.nbrs.len())
+            .map(|t| {
+                4 * (t.ring_end.len() + t.gather.len() + 2 * t.ring1.len())
+                    + t.kinds.len()
+                    + 2 * t.nbrs.len()
+            })
             .sum()
     }
 }
@@ -183,6 +190,19 @@ fn build_tile(topo: &Topology, own: Range<usize>, depth: usize, ids: &mut RingId
         let nb = if fixed[v] == 0 {
             nbrs_of(v)
         } else {
+            if is_own(v as u32) {
+                // Every neighbour of an own vertex is in ring 1, so that a measuring round finds
+                // the corners of the tile's triangles there; a fixed vertex's row does not
+                // discover them all.
+                for &u in nbrs_of(v) {
+                    if !is_own(u) {
+                        let next = own.len() + gather.len();
+                        if ids.get_or_insert(u, next as u32) as usize == next {
+                            gather.push(u);
+                        }
+                    }
+                }
+            }
             match topo.line_neighbors(v as u32) {
                 // A crease line vertex: a row of its two crease neighbours, whose mean is
                 // `jacobi_step`'s (a sum from zero, times 1/2).
@@ -258,12 +278,19 @@ fn build_tile(topo: &Topology, own: Range<usize>, depth: usize, ids: &mut RingId
             at += kind as usize;
         }
     }
+    let mut ring1: Vec<(u32, u32)> = gather[..ring_end[1] as usize - own.len()]
+        .iter()
+        .zip(own.len() as u32..)
+        .map(|(&g, l)| (g, l))
+        .collect();
+    ring1.sort_unstable();
     Some(Tile {
         start: own.start,
         ring_end,
         gather,
         kinds,
         nbrs,
+        ring1,
     })
 }
 
@@ -363,16 +390,14 @@ impl TilePlan<'_> {
     /// One round on tile `t`: `factors.len()` Jacobi steps `p ← p + f L(p)` (one factor per step,
     /// at most [`TilePlan::depth`]) from `src` into `out`, the tile's own vertices of the result
     /// (`out.len()` = the tile's length). Plans the tile first if no round has yet. With a
-    /// [`Measure`] also measures how far each vertex moved from its position before step
-    /// `from_step` to the end, one [`StepStats`] per block of `block` vertices (blocks start at
-    /// multiples of `block`, so that folding them in order gives the same sums as plain steps
-    /// measured over chunks of that size); `moved` counts the vertices that are not fixed. Without
-    /// it the list is empty. The positions are bit-identical to the steps run one by one with
+    /// [`Measure`] also measures the iterations it names, one [`Measured`] each, in order. The
+    /// positions are bit-identical to the steps run one by one with
     /// [`crate::smooth::laplacian::jacobi_step`]. `None` when the tile cannot be planned (see
     /// [`TilePlan::new`]): then `out` is untouched.
     ///
     /// # Panics
-    /// If `src` does not have one entry per vertex, or there are more factors than the depth.
+    /// If `src` does not have one entry per vertex, or there are more factors than the depth (one
+    /// less when the volume is measured).
     pub fn run_tile(
         &self,
         t: usize,
@@ -380,10 +405,11 @@ impl TilePlan<'_> {
         out: &mut [DVec3],
         factors: &[f64],
         measure: Option<Measure>,
-    ) -> Option<Vec<StepStats>> {
+    ) -> Option<Vec<Measured>> {
         assert!(src.len() == self.topo.len());
-        assert!(!factors.is_empty() && factors.len() <= self.depth);
-        assert!(measure.is_none_or(|m| m.from_step < factors.len() && m.block > 0));
+        let extra = measure.is_some_and(|m| m.volume.is_some()) as usize;
+        assert!(!factors.is_empty() && factors.len() + extra <= self.depth);
+        assert!(measure.is_none_or(|m| m.per > 0 && m.block > 0));
         let tile = self.tile(t)?;
         Some(
             LOCAL.with_borrow_mut(|local| {
@@ -393,12 +419,30 @@ impl TilePlan<'_> {
     }
 }
 
-/// What a round measures: the displacement from before step `from_step` to the end of the round,
-/// summed per block of `block` vertices.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Measure {
-    pub from_step: usize,
+/// What a round measures: each iteration (`per` steps) whose bit is set in `iterations` (bit `j`
+/// for steps `j · per .. (j + 1) · per` of the round), from its start to its end.
+#[derive(Debug, Clone, Copy)]
+pub struct Measure<'m> {
+    pub per: usize,
+    pub iterations: u64,
+    /// How far each own vertex moved, summed per block of `block` vertices (blocks start at
+    /// multiples of `block`, so that folding them in order gives the same sums as plain steps
+    /// measured over chunks of that size).
     pub block: usize,
+    /// The triangles, sorted by their first corner (their smallest), and an origin: then also the
+    /// sums of the determinants about the origin and of the doubled areas of the tile's
+    /// triangles (those whose first corner it owns), in their order. The round then keeps ring
+    /// 1 exact to its end, so it runs at most `depth − 1` steps.
+    pub volume: Option<(&'m [[u32; 3]], DVec3)>,
+}
+
+/// What a round measured of one iteration on one tile.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Measured {
+    /// Per block of the own vertices; `moved` counts those that are not fixed.
+    pub blocks: Vec<StepStats>,
+    /// `(Σ det, Σ doubled area)` over the tile's triangles, with [`Measure::volume`].
+    pub sums: Option<(f64, f64)>,
 }
 
 fn run_tile(
@@ -409,10 +453,12 @@ fn run_tile(
     factors: &[f64],
     measure: Option<Measure>,
     local: &mut Local,
-) -> Vec<StepStats> {
+) -> Vec<Measured> {
     let k = factors.len();
     let own = tile.ring_end[0] as usize;
-    let len = tile.ring_end[k] as usize;
+    // Measuring the volume keeps ring 1 exact through the last step: one ring more each step.
+    let extra = measure.is_some_and(|m| m.volume.is_some()) as usize;
+    let len = tile.ring_end[k + extra] as usize;
     let Local { a, b, before } = local;
     if a.len() < len {
         a.resize(len, P4::default());
@@ -434,15 +480,19 @@ fn run_tile(
         vv,
         start: tile.start,
     };
+    let mut measured = Vec::new();
+    let per = measure.map_or(1, |m| m.per);
+    // Whether iteration `j` of the round is measured.
+    let named = |j: usize| measure.is_some_and(|m| j < 64 && m.iterations >> j & 1 == 1);
     for (s, &f) in factors.iter().enumerate() {
-        if measure.is_some_and(|m| m.from_step == s) {
+        if s % per == 0 && named(s / per) {
             before.clear();
             before.extend_from_slice(&a[..own]);
         }
         // Step `s` updates the rows the following steps still read: the own vertices and the
-        // rings inside ring `k − s`.
-        let rows = tile.ring_end[k - 1 - s] as usize;
-        let reach = tile.ring_end[k - s] as usize;
+        // rings inside ring `k − s` (one more when measuring the volume).
+        let rows = tile.ring_end[k - 1 - s + extra] as usize;
+        let reach = tile.ring_end[k - s + extra] as usize;
         relax(
             &interior,
             &tile.kinds[..rows],
@@ -452,27 +502,72 @@ fn run_tile(
             f,
         );
         std::mem::swap(a, b);
+        if let Some(m) = measure
+            && s % per == per - 1
+            && named(s / per)
+        {
+            measured.push(Measured {
+                blocks: moves(tile, &a[..own], before, m.block),
+                sums: m.volume.map(|(tris, origin)| sums(tile, a, tris, origin)),
+            });
+        }
     }
     for (o, l) in out.iter_mut().zip(&a[..own]) {
         *o = l.vec();
     }
+    measured
+}
+
+/// How far each own vertex moved from `before` to `now`, per block of `block` vertices.
+fn moves(tile: &Tile, now: &[P4], before: &[P4], block: usize) -> Vec<StepStats> {
     let mut blocks = Vec::new();
-    if let Some(Measure { block, .. }) = measure {
-        let mut i = 0;
-        while i < own {
-            let end = (own).min(i + block - (tile.start + i) % block);
-            let mut st = StepStats::default();
-            for j in i..end {
-                let d = out[j].distance(before[j].vec());
-                st.moved += (tile.kinds[j] != 0) as u64;
-                st.max_displacement = st.max_displacement.max(d);
-                st.sum_displacement += d;
-            }
-            blocks.push(st);
-            i = end;
+    let mut i = 0;
+    while i < now.len() {
+        let end = now.len().min(i + block - (tile.start + i) % block);
+        let mut st = StepStats::default();
+        for j in i..end {
+            let d = now[j].vec().distance(before[j].vec());
+            st.moved += (tile.kinds[j] != 0) as u64;
+            st.max_displacement = st.max_displacement.max(d);
+            st.sum_displacement += d;
         }
+        blocks.push(st);
+        i = end;
     }
     blocks
+}
+
+/// `(Σ det(a − o, b − o, c − o), Σ |(b − a) × (c − a)|)` over the triangles whose first corner the
+/// tile owns (a run of `tris`, sorted by it), in their order, from the local positions `at` (own
+/// and ring 1), with [`crate::metrics::determinant_and_area_by`]'s arithmetic.
+fn sums(tile: &Tile, at: &[P4], tris: &[[u32; 3]], o: DVec3) -> (f64, f64) {
+    let own = tile.ring_end[0] as usize;
+    let first = |v: usize| tris.partition_point(|t| (t[0] as usize) < v);
+    let run = &tris[first(tile.start)..first(tile.start + own)];
+    let (start, ring1) = (tile.start, &tile.ring1[..]);
+    let corner = move |v: u32| -> DVec3 {
+        let l = (v as usize).wrapping_sub(start);
+        if l < own {
+            return at[l].vec();
+        }
+        // A triangle's corners are neighbours, so a corner that is not own is in ring 1.
+        match ring1.binary_search_by_key(&v, |&(g, _)| g) {
+            Ok(k) => at[ring1[k].1 as usize].vec(),
+            Err(_) => DVec3::NAN,
+        }
+    };
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2 (just checked).
+        return unsafe { sums_avx2(run, corner, o) };
+    }
+    crate::metrics::determinant_and_area_by(run, corner, o)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn sums_avx2(run: &[[u32; 3]], corner: impl Fn(u32) -> DVec3, o: DVec3) -> (f64, f64) {
+    crate::metrics::determinant_and_area_by(run, corner, o)
 }
 
 /// Where the interior rows of a tile find their neighbours: the topology's adjacency of the own
