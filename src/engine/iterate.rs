@@ -1045,6 +1045,17 @@ mod tests {
         (topo, pos, tris)
     }
 
+    /// `pos`, then its positions after each plain step of `factors`, in turn.
+    fn plain_steps(topo: &Topology, pos: &[DVec3], factors: &[f64]) -> Vec<Vec<DVec3>> {
+        let mut steps = vec![pos.to_vec()];
+        for &f in factors {
+            let mut next = vec![DVec3::ZERO; pos.len()];
+            laplacian::jacobi_step(topo, steps.last().unwrap(), &mut next, 0, f);
+            steps.push(next);
+        }
+        steps
+    }
+
     /// The displacement of the last of `k` steps, one per iteration.
     fn last_step(k: usize) -> Option<Measure<'static>> {
         Some(Measure {
@@ -1060,13 +1071,7 @@ mod tests {
         let (topo, pos, _) = shuffled_open_sphere();
         let n = pos.len();
         let factors = [0.5, -0.53, 0.5, -0.53, 0.5, -0.53];
-        // The plain steps, and the displacement over the last two.
-        let mut want = vec![pos.clone()];
-        for &f in &factors {
-            let mut next = vec![DVec3::ZERO; n];
-            laplacian::jacobi_step(&topo, want.last().unwrap(), &mut next, 0, f);
-            want.push(next);
-        }
+        let want = plain_steps(&topo, &pos, &factors);
         for (tile, depth) in [(1, 6), (97, 3), (1000, 6), (n, 8)] {
             let plan = TilePlan::lazy(&topo, tile, depth);
             for threads in [1, 2, 3] {
@@ -1145,12 +1150,7 @@ mod tests {
         let n = pos.len();
         let origin = DVec3::new(0.25, -0.5, 0.125);
         let factors = [0.5, -0.53, 0.5, -0.53, 0.5, -0.53];
-        let mut want = vec![pos.clone()];
-        for &f in &factors {
-            let mut next = vec![DVec3::ZERO; n];
-            laplacian::jacobi_step(&topo, want.last().unwrap(), &mut next, 0, f);
-            want.push(next);
-        }
+        let want = plain_steps(&topo, &pos, &factors);
         for (tile, depth) in [(1, 7), (97, 5), (1000, 7), (n, 8)] {
             let plan = TilePlan::lazy(&topo, tile, depth);
             // Whole iterations of two steps, one step short of the depth.
