@@ -42,7 +42,7 @@ pub struct SmoothArgs {
     /// Write an SVG plot of volume % per iteration.
     #[arg(long, value_name = "FILE.svg")]
     pub plot: Option<PathBuf>,
-    /// Which iterations measure volume, area and displacement (each costs passes over the whole mesh, about one taubin iteration for volume and area); the others show '-' in the table and null in the report. With laplacian and taubin, 'last' also lets up to 8 iterations share one pass over memory: their smoothing runs about twice as fast. The output is the same bit for bit.
+    /// Which iterations measure volume, area and displacement (each costs passes over the whole mesh, about one taubin iteration for volume and area); the others show '-' in the table and null in the report. With laplacian and taubin, 'last' also lets up to 8 steps share one pass over memory (with 'every' up to 7, each iteration measured inside the pass): their smoothing runs up to about twice as fast. The output is the same bit for bit.
     #[arg(long, value_enum, value_name = "WHEN", default_value_t = Statistics::Every)]
     pub stats: Statistics,
     /// Write each vertex's deviation into OUT as the PLY vertex property 'quality' (an OBJ or glTF output carries its colours alone, with --deviation-colours) (MeshLab and CloudCompare read it as a scalar field): its displacement along the input's vertex normal, signed, positive outward; print its statistics (RMS, mean, percentiles of the distance, histogram), also in --report. The rest of OUT is as without it [default: off].
