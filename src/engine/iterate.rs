@@ -573,13 +573,10 @@ impl Run<'_, '_> {
                     in_scratch = !in_scratch;
                     let named = (0..measured.len()).filter(|&j| iterations >> j & 1 == 1);
                     for (j, r) in named.zip(rounds) {
-                        let volume = match (inside, r.sums) {
-                            (true, Some((det, area))) => Volume::Sums(det / 6.0, area / 2.0),
-                            // A tile that could not take its triangles' sums: none by
-                            // construction (a triangle's corners are neighbours).
-                            (true, None) => Volume::Unmeasured,
-                            (false, _) => Volume::Measure,
-                        };
+                        // The tiles' sums when they measured inside (`inside`), else after.
+                        let volume = r.sums.map_or(Volume::Measure, |(det, area)| {
+                            Volume::Sums(det / 6.0, area / 2.0)
+                        });
                         measured[j] = (Some(r.moved), volume);
                     }
                 }
@@ -1007,8 +1004,7 @@ pub fn round(
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RoundMeasure {
     pub moved: StepStats,
-    /// `(Σ det, Σ doubled area)` about the measure's origin (`None` when not asked, or when a
-    /// tile could not give them).
+    /// `(Σ det, Σ doubled area)` about the measure's origin, when [`Measure::volume`] asked.
     pub sums: Option<(f64, f64)>,
 }
 

@@ -162,8 +162,8 @@ pub fn blocks(owned: Range<u32>) -> impl Iterator<Item = Range<u32>> {
 }
 
 /// One block (see the module doc): its free members move to one Jacobi step `μ` from the λ step's
-/// positions, `filtered` (step 1: a vertex is moved only by its own block, so its position is
-/// still the iteration's, and the λ step's is from it), then each by the
+/// positions (`lambda_step`: those positions and `μ`; step 1: a vertex is moved only by its own
+/// block, so its position is still the iteration's, and the λ step's is from it), then each by the
 /// common distance `s` along its own unit volume gradient, `s` the root of the faces' volume
 /// change, a cubic in `s`, found by Newton from the linear solution. Under a deviation bound the
 /// members that would end beyond it are held back (they do not move) and the rest is solved
@@ -177,7 +177,7 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
     topo: &TopologyParts,
     triangles: &[[u32; 3]],
     pos: &mut P,
-    filtered: (&D, f64),
+    lambda_step: (&D, f64),
     block: Block,
     deviation: Option<stencil::Deviation>,
     scratch: &mut Scratch,
@@ -188,12 +188,26 @@ fn apply_block<P: Field + ?Sized, D: Field + ?Sized>(
         // SAFETY: the CPU has AVX2 (just checked).
         return unsafe {
             apply_block_avx2(
-                topo, triangles, pos, filtered, block, deviation, scratch, moves,
+                topo,
+                triangles,
+                pos,
+                lambda_step,
+                block,
+                deviation,
+                scratch,
+                moves,
             )
         };
     }
     apply_block_lanes(
-        topo, triangles, pos, filtered, block, deviation, scratch, moves,
+        topo,
+        triangles,
+        pos,
+        lambda_step,
+        block,
+        deviation,
+        scratch,
+        moves,
     )
 }
 
@@ -204,14 +218,21 @@ unsafe fn apply_block_avx2<P: Field + ?Sized, D: Field + ?Sized>(
     topo: &TopologyParts,
     triangles: &[[u32; 3]],
     pos: &mut P,
-    filtered: (&D, f64),
+    lambda_step: (&D, f64),
     block: Block,
     deviation: Option<stencil::Deviation>,
     scratch: &mut Scratch,
     moves: Option<&mut StepStats>,
 ) -> Outcome {
     apply_block_lanes(
-        topo, triangles, pos, filtered, block, deviation, scratch, moves,
+        topo,
+        triangles,
+        pos,
+        lambda_step,
+        block,
+        deviation,
+        scratch,
+        moves,
     )
 }
 
@@ -221,7 +242,7 @@ fn apply_block_lanes<P: Field + ?Sized, D: Field + ?Sized>(
     topo: &TopologyParts,
     triangles: &[[u32; 3]],
     pos: &mut P,
-    filtered: (&D, f64),
+    lambda_step: (&D, f64),
     block: Block,
     deviation: Option<stencil::Deviation>,
     scratch: &mut Scratch,
@@ -242,7 +263,7 @@ fn apply_block_lanes<P: Field + ?Sized, D: Field + ?Sized>(
     let origin = V4::of(pos.get(start));
     // Step 1's target, the second step of the pair from the first's result (computed here
     // rather than stored: an array of the mesh's size less).
-    let (half, mu) = filtered;
+    let (half, mu) = lambda_step;
     scratch.target.clear();
     scratch.target.extend(
         block
