@@ -388,3 +388,45 @@ fn multi_iteration_rounds_equal_plain_steps() {
         }
     }
 }
+
+/// The stencil methods' patches measure how far their vertices moved (each patch when it ends,
+/// its vertices next to an earlier patch against their positions at the sweep's start), with no
+/// copy of the positions: the records agree with those of the loop's copy, which smoothed
+/// boundaries keep (a closed sphere has none, so the positions are the same), for small and
+/// default patches, any thread count, and the patch's own sums (scratch) or the array (heap).
+#[test]
+fn patches_measure_their_moves_as_the_copy_does() {
+    let mesh = noisy_sphere(5, 0.4, 23);
+    let scratch = tempfile::tempdir().unwrap();
+    let mapped = Storage::scratch(scratch.path()).unwrap();
+    for method in [
+        Method::Vcs,
+        Method::Lem,
+        Method::VcsTriangle,
+        Method::VcsLowpass,
+    ] {
+        for patch_size in [200, 16384] {
+            let opts = Options {
+                method,
+                iterations: 2,
+                ..Options::default()
+            };
+            let copied = Options {
+                boundary: vcsmooth::smooth::Boundary::Smooth,
+                ..opts
+            };
+            let (reference, by_copy, _) = run(&mesh, &Storage::heap(), patch_size, &copied, 1);
+            for (storage, threads) in [(&Storage::heap(), 1), (&Storage::heap(), 3), (&mapped, 2)] {
+                let (out, records, _) = run(&mesh, storage, patch_size, &opts, threads);
+                let case = format!("{method}, patches of {patch_size}, {threads} threads");
+                assert!(out == reference, "{case}: positions");
+                for (a, b) in records.iter().zip(&by_copy) {
+                    assert!(a.max_displacement > 0.0, "{case}");
+                    assert_eq!(a.max_displacement, b.max_displacement, "{case}");
+                    let mean = (a.mean_displacement - b.mean_displacement).abs();
+                    assert!(mean <= 1e-12 * b.mean_displacement, "{case}: {a:?} {b:?}");
+                }
+            }
+        }
+    }
+}

@@ -50,13 +50,14 @@ use glam::DVec3;
 use store::{PlanKey, StateDoc, StoredPlan, WorkDir};
 
 use crate::engine::auto::AutoStop;
-use crate::engine::iterate::{Buffers, Reference, Share, Sweep, iterate};
+use crate::engine::iterate::{Buffers, Reference, Share, Sweep, iterate, keeps_seam};
+use crate::engine::seam::Seam;
 use crate::engine::{
     self, ClusterStats, EngineSettings, IterationRecord, MemoryStats, Observer, PhaseTimings,
     PlanStats, Report, Statistics, memory, run,
 };
 use crate::error::{Error, Result};
-use crate::mesh::Buf;
+use crate::mesh::{Buf, Storage};
 use crate::partition::Patch;
 use crate::smooth::Options;
 use crate::smooth::boundary::{self, Loops};
@@ -738,6 +739,16 @@ impl<'a> RankRun<'a> {
         let faces = mesh.tris.len();
         let mut face_vectors: Buf<DVec3> = Buf::sparse(needs.face_vectors * faces)?;
         let mut face_scalars: Buf<f64> = Buf::sparse(needs.face_scalars * faces)?;
+        // The seam of the rank's own patches, for a method whose patches measure their moves.
+        let unit = opts.method.unit();
+        let mut seam = match keeps_seam(unit, opts) {
+            true => {
+                let mine = self.part.patches.clone();
+                let runs = move |p: usize| mine.contains(&p);
+                Some(Seam::of(mesh.topo, mesh.patches, runs, &Storage::heap())?)
+            }
+            false => None,
+        };
         let buffers = Buffers {
             pos: &mut pos,
             scratch: &mut scratch,
@@ -749,6 +760,7 @@ impl<'a> RankRun<'a> {
                 .as_deref()
                 .filter(|_| opts.keeps_input())
                 .unwrap_or(&[]),
+            seam: seam.as_mut(),
             auto: auto.as_mut(),
         };
         iterate(

@@ -33,6 +33,7 @@ use rayon::prelude::*;
 use super::auto::AutoStop;
 use super::observer::{AutoStopStats, IterationRecord, Observer, Statistics};
 use super::reduce;
+use super::seam::Seam;
 use super::share::on_pool;
 pub use super::share::{Alone, Share};
 use crate::error::{Error, Result};
@@ -42,7 +43,7 @@ use crate::schedule::{LANES, Prefetch};
 use crate::smooth::boundary::{self, Loops};
 use crate::smooth::laplacian::{self, Previous, StepStats};
 use crate::smooth::method::{
-    Exec, FaceFields, Footprint, PassFields, PatchMesh, PatchSweep, Schedule,
+    Exec, FaceFields, Footprint, Moves, PassFields, PatchMesh, PatchSweep, Schedule,
 };
 use crate::smooth::stencil::{self, StencilParams};
 use crate::smooth::tiled::{Measure, Measured, TilePlan};
@@ -153,6 +154,9 @@ pub struct Buffers<'b> {
     /// The input positions, read when the options keep them ([`Options::keeps_input`]); empty
     /// otherwise.
     pub input: &'b [DVec3],
+    /// The seam of the process's patches ([`Seam`]), for a unit whose [`Smoother::moves`] are
+    /// [`Moves::Seam`] when the run copies no positions ([`copies_positions`]).
+    pub seam: Option<&'b mut Seam>,
     /// The automatic stop's state, required when the options ask for it (`auto_stop`); a run
     /// that resumes after iteration 1 passes it started and resumed.
     pub auto: Option<&'b mut AutoStop>,
@@ -283,8 +287,10 @@ impl Run<'_, '_> {
             face_vectors,
             face_scalars,
             input,
+            mut seam,
             mut auto,
         } = buf;
+        let no_seam = Seam::default();
         let mesh = self.mesh;
         let owned = self.share.owned();
         // The loops of `boundary: smooth`, their normals measured at each iteration's start.
@@ -331,6 +337,9 @@ impl Run<'_, '_> {
                 faces,
             );
             let own_moves = measure && !copies_positions(unit, self.opts);
+            if own_moves && let Some(seam) = seam.as_deref_mut() {
+                on_pool(&*self.share, || seam.capture(pos));
+            }
             if measure && !own_moves {
                 let now = &pos[owned.clone()];
                 on_pool(&*self.share, || {
@@ -351,7 +360,7 @@ impl Run<'_, '_> {
                 sums,
                 params,
                 in_sweep,
-                own_moves,
+                own_moves.then(|| seam.as_deref().unwrap_or(&no_seam)),
             );
             let mut sweep = swept.stencils;
             if unit.boundary_pass()
@@ -368,7 +377,7 @@ impl Run<'_, '_> {
                             sums,
                             params,
                             Some(loops),
-                            false,
+                            None,
                         )
                         .stencils,
                 );
@@ -381,8 +390,15 @@ impl Run<'_, '_> {
             }
             let seconds = start.elapsed().as_secs_f64();
             let moved = match own_moves {
-                // A process that ran no patch moved nothing.
-                true => Some(swept.moved.unwrap_or_default()),
+                true => {
+                    // A process that ran no patch moved nothing; the seam's moves follow the
+                    // patches'.
+                    let patches = swept.moved.unwrap_or_default();
+                    Some(match seam.as_deref() {
+                        Some(seam) => patches.then(on_pool(&*self.share, || seam.moves(pos))),
+                        None => patches,
+                    })
+                }
                 false => measure.then(|| {
                     let (now, before) = (&pos[owned.clone()], &prev[owned.clone()]);
                     on_pool(&*self.share, || reduce::displacement(now, before))
@@ -413,9 +429,9 @@ impl Run<'_, '_> {
     }
 
     /// One Gauss–Seidel pass of `pass` over `colours`, colour after colour, each colour's patches
-    /// in parallel, the changes exchanged after each colour; with `measure`, the moves the
-    /// patches measured ([`Smoother::measures_moves`]), summed in the order of the colours and of
-    /// their patches, so for any thread count.
+    /// in parallel, the changes exchanged after each colour; with `measure` (the seam, empty but
+    /// for [`Moves::Seam`]), the moves the patches measured ([`Smoother::moves`]), summed in the
+    /// order of the colours and of their patches, so for any thread count.
     #[allow(clippy::too_many_arguments)]
     fn sweep_colours(
         &mut self,
@@ -425,7 +441,7 @@ impl Run<'_, '_> {
         sums: &mut [DVec3],
         params: StencilParams,
         loops: Option<&Loops>,
-        measure: bool,
+        measure: Option<&Seam>,
     ) -> PatchSweep {
         let mesh = self.mesh;
         let mut sweep = PatchSweep::default();
@@ -838,11 +854,19 @@ impl Run<'_, '_> {
 }
 
 /// Whether a run of the stencil method `unit` with `opts` copies the positions before each
-/// measured sweep (into the loop's `prev`): unless the unit measures its moves in its sweep
-/// ([`Smoother::measures_moves`]), with no pass after it that moves vertices (smoothed
-/// boundaries) and no automatic stop (its rule reads the copy).
+/// measured sweep (into the loop's `prev`): unless the unit's patches measure its moves
+/// ([`Smoother::moves`]), with no pass after it that moves vertices (smoothed boundaries) and no
+/// automatic stop (its rule reads the copy).
 pub fn copies_positions(unit: &dyn Smoother, opts: &Options) -> bool {
-    !unit.measures_moves() || opts.boundary == crate::smooth::Boundary::Smooth || opts.auto_stop
+    unit.moves() == Moves::Copied
+        || opts.boundary == crate::smooth::Boundary::Smooth
+        || opts.auto_stop
+}
+
+/// Whether a run of `unit` with `opts` keeps the seam of its patches ([`Seam`]) in place of the
+/// copy of the positions.
+pub fn keeps_seam(unit: &dyn Smoother, opts: &Options) -> bool {
+    unit.moves() == Moves::Seam && !copies_positions(unit, opts)
 }
 
 /// The stencil kernel's parameters for `unit` with `opts`; `input`: the input positions, read
@@ -874,7 +898,7 @@ fn sweep_patches(
     pass: Pass,
     params: StencilParams,
     loops: Option<&Loops>,
-    measure: bool,
+    measure: Option<&Seam>,
 ) -> PatchSweep {
     let (topo, tris, sorted) = (mesh.topo, mesh.tris, mesh.sorted);
     let swept: Vec<PatchSweep> = patches
@@ -891,7 +915,7 @@ fn sweep_patches(
                     &mut sv,
                     params,
                     loops,
-                    measure,
+                    measure.map(|seam| seam.part(&patch.vertices)),
                 ),
                 (Pass::Boundaries, Some(loops)) => {
                     let edges = patch.edges(topo);

@@ -27,6 +27,7 @@ pub mod pins;
 pub mod plan;
 pub mod reduce;
 pub mod run;
+pub mod seam;
 pub mod share;
 
 use glam::DVec3;
@@ -180,6 +181,11 @@ impl Plan {
         let copies =
             !schedule_of.is_jacobi() && iterate::copies_positions(opts.method.unit(), opts);
         let mut prev: Buf<DVec3> = storage.zeroed(sized(copies || needs.aux))?;
+        // Instead of the copy, the seam's positions, for a method whose patches measure it.
+        let mut seam = match iterate::keeps_seam(opts.method.unit(), opts) {
+            true => Some(seam::Seam::of(topo, patches, |_| true, storage)?),
+            false => None,
+        };
         // Out of core a stencil method's neighbour sums are each patch's own (`PatchSums`): an
         // array of the mesh's size would be 12 B per triangle more to pass through the page cache.
         let keep_sums = *in_memory;
@@ -235,6 +241,7 @@ impl Plan {
                 face_vectors: &mut face_vectors,
                 face_scalars: &mut face_scalars,
                 input: &input,
+                seam: seam.as_mut(),
                 auto: auto.as_mut(),
             };
             match records {

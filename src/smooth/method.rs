@@ -18,7 +18,7 @@ use glam::DVec3;
 use super::boundary::Loops;
 use super::laplacian::StepStats;
 use super::stencil::StencilParams;
-use super::{Options, SharedField, SweepStats, Topology};
+use super::{Field, Options, SharedField, SweepStats, Topology};
 
 /// What the stencils of one patch did ([`Smoother::sweep_patch`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -47,6 +47,59 @@ impl From<SweepStats> for PatchSweep {
         PatchSweep {
             stencils,
             moved: None,
+        }
+    }
+}
+
+/// Who measures how far a stencil method's sweep moved each vertex ([`Smoother::moves`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Moves {
+    /// The loop: it copies the positions before the sweep and compares them after.
+    Copied,
+    /// The patches: each vertex is moved by its own patch alone, which measures its moves as it
+    /// writes them.
+    Own,
+    /// The patches and the loop: a patch's stencils also move vertices of later patches (an
+    /// edge stencil `(i, j)` and a triangle stencil belong to the patch of their smallest
+    /// vertex), and the colours run patches out of their order. Each patch measures, when it
+    /// ends, its vertices that no other patch moves (no neighbour in an earlier patch) against
+    /// its own copy taken when it starts; the loop measures the others, the seam, after the
+    /// sweep against their positions at its start.
+    Seam,
+}
+
+/// What a measured patch sweep leaves out of its moves: its vertices that stencils of other
+/// patches move too, ascending (for [`Moves::Seam`]; empty otherwise), which the loop measures.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct SeamPart<'a> {
+    pub seam: &'a [u32],
+}
+
+impl SeamPart<'_> {
+    /// How far the vertices `vertices` but the seam's moved to `pos`, each from its entry in
+    /// `copy` (the positions when the patch started, one per vertex); summed in ascending
+    /// vertex order.
+    pub fn moves<P: Field + ?Sized>(
+        &self,
+        pos: &P,
+        vertices: Range<u32>,
+        copy: &[DVec3],
+    ) -> StepStats {
+        let mut seam = self.seam.iter().peekable();
+        let (mut max, mut sum) = (0.0f64, 0.0);
+        for (v, &before) in vertices.zip(copy) {
+            if seam.next_if(|&&s| s == v).is_some() {
+                continue;
+            }
+            let d = pos.get(v).distance(before);
+            max = max.max(d);
+            sum += d;
+        }
+        debug_assert!(seam.next().is_none(), "the seam's vertices are the patch's");
+        StepStats {
+            moved: 0,
+            max_displacement: max,
+            sum_displacement: sum,
         }
     }
 }
@@ -275,8 +328,9 @@ pub trait Smoother: Sync {
     /// [`Schedule::Stencils`]: the stencils of one patch (the vertices `vertices` and triangles
     /// `triangles` it owns), in their fixed ascending order, through views that the patches of
     /// one colour share; with `loops` (`boundary: smooth`) the boundary stencils too, unless
-    /// [`Smoother::boundary_pass`] says they run after. With `measure` (asked only of a unit
-    /// that [`Smoother::measures_moves`]), also how far the patch's vertices moved.
+    /// [`Smoother::boundary_pass`] says they run after. With `measure` (given only to a unit
+    /// whose [`Smoother::moves`] are not [`Moves::Copied`]), also how far the patch's vertices
+    /// moved.
     #[allow(clippy::too_many_arguments)]
     fn sweep_patch(
         &self,
@@ -288,19 +342,17 @@ pub trait Smoother: Sync {
         _sums: &mut SharedField,
         _params: StencilParams,
         _loops: Option<&Loops>,
-        _measure: bool,
+        _measure: Option<SeamPart>,
     ) -> PatchSweep {
         unreachable!("{} has no stencils", self.name())
     }
 
-    /// [`Schedule::Stencils`]: whether a sweep moves each vertex from its own patch alone, so
-    /// that [`Smoother::sweep_patch`] can measure how far its vertices moved (from their
-    /// positions before and after, as they are written) and the loop need not copy the positions
-    /// before a measured sweep. Not with smoothed boundaries (their pass moves loop vertices too)
-    /// nor with the automatic stop (its rule reads the copy); otherwise the run keeps no copy, and
-    /// [`Smoother::prepare`]'s `spare` is empty.
-    fn measures_moves(&self) -> bool {
-        false
+    /// [`Schedule::Stencils`]: how a measured sweep's moves are measured, [`Moves`]. Unless
+    /// they are [`Moves::Copied`], the loop copies no positions before a measured sweep (but with
+    /// smoothed boundaries, whose pass moves loop vertices too, and with the automatic stop,
+    /// whose rule reads the copy), and [`Smoother::prepare`]'s `spare` is empty.
+    fn moves(&self) -> Moves {
+        Moves::Copied
     }
 
     /// [`Schedule::Stencils`] with smoothed boundaries: whether the boundary stencils run in a

@@ -9,8 +9,8 @@ use glam::DVec3;
 
 use super::boundary::{self, Loops};
 use super::method::{
-    Control, Exec, FaceFields, Footprint, Needs, PatchMesh, PatchSweep, Schedule, Settle, Smoother,
-    StopRule,
+    Control, Exec, FaceFields, Footprint, Moves, Needs, PatchMesh, PatchSweep, Schedule, SeamPart,
+    Settle, Smoother, StopRule,
 };
 use super::stencil::{self, StencilParams};
 use super::{
@@ -170,17 +170,38 @@ impl Smoother for StencilMethod {
         sums: &mut SharedField,
         params: StencilParams,
         loops: Option<&Loops>,
-        _: bool,
+        measure: Option<SeamPart>,
     ) -> PatchSweep {
-        if sums.is_empty() {
-            let mut own = PatchSums::rebuild(mesh.topo, &*pos, vertices.clone());
-            return self
-                .sweep_with(mesh, vertices, triangles, pos, &mut own, params, loops)
-                .into();
+        let copy: Option<Vec<DVec3>> =
+            measure.map(|_| vertices.clone().map(|v| pos.get(v)).collect());
+        let stencils = match sums.is_empty() {
+            true => {
+                let mut own = PatchSums::rebuild(mesh.topo, &*pos, vertices.clone());
+                self.sweep_with(
+                    mesh,
+                    vertices.clone(),
+                    triangles,
+                    pos,
+                    &mut own,
+                    params,
+                    loops,
+                )
+            }
+            false => {
+                super::rebuild_patch_sums(mesh.topo, &*pos, &mut *sums, vertices.clone());
+                self.sweep_with(mesh, vertices.clone(), triangles, pos, sums, params, loops)
+            }
+        };
+        PatchSweep {
+            stencils,
+            moved: measure
+                .zip(copy)
+                .map(|(before, copy)| before.moves(&*pos, vertices, &copy)),
         }
-        super::rebuild_patch_sums(mesh.topo, &*pos, &mut *sums, vertices.clone());
-        self.sweep_with(mesh, vertices, triangles, pos, sums, params, loops)
-            .into()
+    }
+    /// An edge or a triangle stencil moves its other ends in later patches.
+    fn moves(&self) -> Moves {
+        Moves::Seam
     }
 }
 
@@ -285,17 +306,18 @@ impl Smoother for VcsLowpass {
         sums: &mut SharedField,
         params: StencilParams,
         _: Option<&Loops>,
-        measure: bool,
+        measure: Option<SeamPart>,
     ) -> PatchSweep {
         let (deviation, mu) = (params.deviation, opts.mu());
+        let measure = measure.is_some();
         lowpass::sweep_blocks(mesh, pos, sums, mu, vertices, deviation, measure)
     }
     fn boundary_pass(&self) -> bool {
         true
     }
     /// A vertex is moved by its own block alone, once per sweep.
-    fn measures_moves(&self) -> bool {
-        true
+    fn moves(&self) -> Moves {
+        Moves::Own
     }
 }
 
@@ -394,7 +416,7 @@ impl Smoother for VcsGuided {
         sums: &mut SharedField,
         params: StencilParams,
         _: Option<&Loops>,
-        _: bool,
+        _: Option<SeamPart>,
     ) -> PatchSweep {
         rings::sweep_rings(mesh.topo, mesh.tris, pos, sums, vertices, params.deviation).into()
     }
@@ -456,7 +478,7 @@ mod tests {
                                     &mut sv,
                                     params,
                                     smooth_loops,
-                                    false,
+                                    None,
                                 )
                                 .stencils,
                         );
