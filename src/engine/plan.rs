@@ -11,7 +11,7 @@ use rayon::prelude::*;
 use super::observer::{Meter, Observer, Phase, Quiet, metered};
 use super::reduce;
 use crate::error::{Error, Result};
-use crate::mesh::Storage;
+use crate::mesh::{Buf, Storage};
 use crate::partition::{self, Patch, Reordered, Weld};
 use crate::schedule::{self, Schedule};
 use crate::smooth::method::Footprint;
@@ -300,6 +300,14 @@ impl Plan {
     pub fn positions_in_input_order_metered(&self, out: &mut [DVec3], meter: &Meter) {
         let r = &self.reordered;
         partition::scatter_metered(out, &r.order, |new| r.positions[r.source_of(new)], meter);
+    }
+
+    /// Give back the triangles and the adjacency, once only the positions are left to put back
+    /// in the input's order ([`Plan::positions_in_input_order_metered`]).
+    pub fn release_connectivity(&mut self) {
+        self.reordered.triangles = Buf::default();
+        self.topology = Topology::default();
+        self.patches = Vec::new();
     }
 
     /// Move each welded copy to the position of the vertex it is welded to (see

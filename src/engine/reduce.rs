@@ -76,11 +76,22 @@ pub fn geometry_about(
     topo: &Topology,
     origin: DVec3,
 ) -> metrics::Geometry {
+    geometry_about_as(pos, pos, tris, topo, origin)
+}
+
+/// [`geometry_about`] of the positions `pos` as `read` reads them (`read` views `pos`).
+pub fn geometry_about_as<P: metrics::Positions + ?Sized>(
+    pos: &[DVec3],
+    read: &P,
+    tris: &[[u32; 3]],
+    topo: &Topology,
+    origin: DVec3,
+) -> metrics::Geometry {
     map_fold(
         pos,
         |first, chunk| {
             let vertices = first as u32..(first + chunk.len()) as u32;
-            metrics::vertex_sums(pos, tris, topo, vertices, origin)
+            metrics::vertex_sums(read, tris, topo, vertices, origin)
         },
         metrics::VertexSums::default(),
         |a, b| a + b,

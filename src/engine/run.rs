@@ -262,32 +262,37 @@ pub(crate) fn run_file_with(
         )?;
         let r = &plan.reordered;
         observer.mesh_at(Moment::AfterSmoothing, &r.positions, &r.triangles, &storage)?;
-        mesh.positions = metered(observer, Phase::Restore, n as u64, |m| {
+        // Out of core the output is measured here, and the plan's connectivity is given back
+        // before the positions are put back in the input's order when the measure leaves them
+        // as they are (its layout is `f64` or `f32`): what is alive then is the positions twice
+        // and the permutation, not the whole plan beside the restored positions (40 B per
+        // triangle less). Else (integers, text: positions rounded in place for the measure, and
+        // the write's normals come from the unrounded ones) the output is measured after the
+        // restore. The plan is given back before the input is read again. In core the output is
+        // measured beside the write.
+        let early = kept.is_some() && !measuring_rounds_in_place(output, &mesh);
+        let mut measured = None;
+        if early {
+            if engine.with_stats {
+                let stats = measure_output(&mut plan, output, &mesh, &smoothed, observer, &mut t);
+                measured = Some(stats?);
+            }
+            plan.release_connectivity();
+        }
+        let positions = metered(observer, Phase::Restore, n as u64, |m| {
             let mut positions = storage.zeroed(n)?;
             plan.positions_in_input_order_metered(&mut positions, m);
             Ok(positions)
         })?;
+        mesh.positions = positions;
         let Some(kept) = kept else {
             // The plan is kept past the write only to measure the output as written, beside it.
             return Ok((smoothed, input_positions, Some(plan), None));
         };
-        // Out of core the output is measured here, and the plan (its adjacency above all) is
-        // given back before the input is read again: at most the plan and the restored
-        // positions are alive at once, not those and the input as well (12 B per triangle
-        // less at the run's peak, for the statistics no longer beside the write).
-        let measured = match engine.with_stats {
-            true => {
-                let clock = Instant::now();
-                let stats = metered(observer, Phase::Statistics, 1, |m| {
-                    let stats = output_stats(&mut plan, output, &mesh, &smoothed);
-                    m.add(1);
-                    Ok(stats)
-                })?;
-                t.metrics += clock.elapsed().as_secs_f64();
-                Some(stats)
-            }
-            false => None,
-        };
+        if !early && engine.with_stats {
+            let stats = measure_output(&mut plan, output, &mesh, &smoothed, observer, &mut t);
+            measured = Some(stats?);
+        }
         drop(plan);
         let clock = Instant::now();
         let read = metered(observer, Phase::Read, bytes_read, |m| {
@@ -549,6 +554,25 @@ pub(crate) fn write_measured(
     }
 }
 
+/// [`output_stats`] as a phase of its own, timed into `t`.
+fn measure_output(
+    plan: &mut Plan,
+    output: &Path,
+    mesh: &Mesh,
+    smoothed: &Smoothed,
+    observer: &mut dyn Observer,
+    t: &mut PhaseTimings,
+) -> Result<Option<MeshInfo>> {
+    let clock = Instant::now();
+    let stats = metered(observer, Phase::Statistics, 1, |m| {
+        let stats = output_stats(plan, output, mesh, smoothed);
+        m.add(1);
+        Ok(stats)
+    })?;
+    t.metrics += clock.elapsed().as_secs_f64();
+    Ok(stats)
+}
+
 /// The statistics of the output file as stored (rounded to its coordinate type: `float`, or
 /// `uchar`, `short`, … of a PLY layout, or printed as single-precision text), from the plan's
 /// positions rounded in place as [`io::Stored`] says, without reading the file back. The counts
@@ -573,9 +597,10 @@ fn output_stats(
 }
 
 /// `info`, the input's statistics, with the geometry of `positions` (plan order, over the plan's
-/// `triangles` and `topo`) as the write stores them in `output`: rounded here in place as
-/// [`io::Stored`] says. `None` for an output that `write_mesh` refuses (its error is the
-/// write's). The engine's and the cluster's writes measure their outputs so.
+/// `triangles` and `topo`) as the write stores them in `output`: read as stored when that is
+/// `f64` or `f32`, else rounded here in place as [`io::Stored`] says
+/// ([`measuring_rounds_in_place`]). `None` for an output that `write_mesh` refuses (its error is
+/// the write's). The engine's and the cluster's writes measure their outputs so.
 pub(crate) fn stored_output_stats(
     mut info: MeshInfo,
     output: &Path,
@@ -585,14 +610,26 @@ pub(crate) fn stored_output_stats(
     topo: &crate::Topology,
 ) -> Option<MeshInfo> {
     let stored = io::Stored::of(output, mesh)?;
-    if !stored.is_exact() {
+    let origin = glam::DVec3::from(info.volume_origin);
+    let geometry = if stored.is_exact() {
+        reduce::geometry_about(positions, triangles, topo, origin)
+    } else if stored.is_f32() {
+        let read = crate::metrics::AsF32(positions);
+        reduce::geometry_about_as(positions, &read, triangles, topo, origin)
+    } else {
         reduce::for_chunks_mut(positions, |_, chunk| {
             chunk.iter_mut().for_each(|p| *p = stored.round(*p))
         });
-    }
-    let origin = glam::DVec3::from(info.volume_origin);
-    info.set_geometry(reduce::geometry_about(positions, triangles, topo, origin));
+        reduce::geometry_about(positions, triangles, topo, origin)
+    };
+    info.set_geometry(geometry);
     Some(info)
+}
+
+/// Whether [`stored_output_stats`] rounds the positions in place to measure `mesh` written to
+/// `output` (a layout other than `f64` or `f32`: integers, text).
+fn measuring_rounds_in_place(output: &Path, mesh: &Mesh) -> bool {
+    io::Stored::of(output, mesh).is_some_and(|s| !s.is_exact() && !s.is_f32())
 }
 
 /// Smooth an in-memory `mesh` in place (see [`crate::smooth()`], the crate's front door).

@@ -544,6 +544,11 @@ impl Stored {
         self.0 == [Axis::Binary(ply::Scalar::F64); 3]
     }
 
+    /// Whether every `f64` reads back as itself rounded to `f32` (a binary `float` layout).
+    pub fn is_f32(&self) -> bool {
+        self.0 == [Axis::Binary(ply::Scalar::F32); 3]
+    }
+
     /// `p` as it reads back. `p` must be writable (see [`write_mesh`]'s checks: in the range of
     /// an integer type, finite in `f32`).
     pub fn round(&self, p: glam::DVec3) -> glam::DVec3 {

@@ -409,6 +409,35 @@ impl VertexSums {
     }
 }
 
+/// Positions by vertex id, as the vertex pass ([`vertex_sums`]) reads them: a slice, or one
+/// read as a file stores it ([`AsF32`]).
+pub trait Positions: Sync {
+    fn at(&self, v: u32) -> DVec3;
+}
+
+impl Positions for [DVec3] {
+    #[inline(always)]
+    fn at(&self, v: u32) -> DVec3 {
+        self[v as usize]
+    }
+}
+
+/// Positions read rounded to `f32`, as a binary `float` file stores them: an output measured as
+/// written without rounding the array itself.
+pub struct AsF32<'a>(pub &'a [DVec3]);
+
+impl Positions for AsF32<'_> {
+    #[inline(always)]
+    fn at(&self, v: u32) -> DVec3 {
+        let p = self.0[v as usize];
+        DVec3::new(
+            f64::from(p.x as f32),
+            f64::from(p.y as f32),
+            f64::from(p.z as f32),
+        )
+    }
+}
+
 /// [`VertexSums`] of `vertices` (determinants about `origin`), in ascending order: one walk over
 /// the vertices and their faces for every figure.
 ///
@@ -417,8 +446,8 @@ impl VertexSums {
 /// `(i, j)` above `i` takes the normals of the faces holding `j`, so an edge's faces need no
 /// search of the mesh. At its smallest corner the same normal gives a face's area, and its
 /// determinant as `(p_a − o) · n` (the same in exact arithmetic).
-pub fn vertex_sums(
-    pos: &[DVec3],
+pub fn vertex_sums<P: Positions + ?Sized>(
+    pos: &P,
     triangles: &[[u32; 3]],
     topo: &Topology,
     vertices: Range<u32>,
@@ -437,8 +466,8 @@ pub fn vertex_sums(
 /// multiply-add: Rust does not contract a product and a sum).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn vertex_sums_avx2(
-    pos: &[DVec3],
+unsafe fn vertex_sums_avx2<P: Positions + ?Sized>(
+    pos: &P,
     triangles: &[[u32; 3]],
     topo: &Topology,
     vertices: Range<u32>,
@@ -448,8 +477,8 @@ unsafe fn vertex_sums_avx2(
 }
 
 #[inline(always)]
-fn vertex_sums_lanes(
-    pos: &[DVec3],
+fn vertex_sums_lanes<P: Positions + ?Sized>(
+    pos: &P,
     triangles: &[[u32; 3]],
     topo: &Topology,
     vertices: Range<u32>,
@@ -461,7 +490,7 @@ fn vertex_sums_lanes(
     let mut wide: Vec<EdgeFaces> = Vec::new();
     let mut angles = Angles::default();
     for i in vertices {
-        let p = pos[i as usize];
+        let p = pos.at(i);
         all.extent = extent_union(all.extent, (p, p));
         let above = parts.neighbors(i);
         let above = &above[above.partition_point(|&j| j <= i)..];
@@ -470,7 +499,7 @@ fn vertex_sums_lanes(
         }
         let faces = parts.faces_of(i);
         for &j in above {
-            all.edges.length.0 += p.distance(pos[j as usize]);
+            all.edges.length.0 += p.distance(pos.at(j));
             all.edges.length.1 += 1;
         }
         if faces.len() <= LANES {
@@ -508,8 +537,8 @@ const LANES: usize = 8;
 /// (compared all at once: no search, no branch to mispredict but the count's).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn narrow_vertex(
-    pos: &[DVec3],
+fn narrow_vertex<P: Positions + ?Sized>(
+    pos: &P,
     triangles: &[[u32; 3]],
     faces: &[u32],
     i: u32,
@@ -542,8 +571,8 @@ fn narrow_vertex(
 /// and, where `i` is a face's smallest corner, its determinant and area into `all`.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn add_faces(
-    pos: &[DVec3],
+fn add_faces<P: Positions + ?Sized>(
+    pos: &P,
     triangles: &[[u32; 3]],
     faces: &[u32],
     i: u32,
@@ -575,14 +604,14 @@ fn add_faces(
 /// corner (`smallest`: the one place a face is counted), its determinant `(p_a − o) · n` and area
 /// added to `all`.
 #[inline(always)]
-fn face_normal(
-    pos: &[DVec3],
+fn face_normal<P: Positions + ?Sized>(
+    pos: &P,
     tri: [u32; 3],
     origin: DVec3,
     smallest: bool,
     all: &mut VertexSums,
 ) -> DVec3 {
-    let [pa, pb, pc] = tri.map(|v| pos[v as usize]);
+    let [pa, pb, pc] = tri.map(|v| pos.at(v));
     let n = (pb - pa).cross(pc - pa);
     if smallest {
         all.determinants += (pa - origin).dot(n);
@@ -994,7 +1023,7 @@ mod tests {
         assert!((roughness(&m.positions, &m.triangles, &t) - 90.0).abs() < 1e-12);
         // Only edge 0-1 counts.
         let angles = |range| {
-            let s = vertex_sums(&m.positions, &m.triangles, &t, range, DVec3::ZERO);
+            let s = vertex_sums(&m.positions[..], &m.triangles, &t, range, DVec3::ZERO);
             s.edges.angle.1
         };
         assert_eq!(angles(0..1), 1);
@@ -1032,7 +1061,7 @@ mod tests {
         }
         m.triangles.push([3, 7, 3]);
         let t = topo(&m);
-        let pos = &m.positions;
+        let pos: &[DVec3] = &m.positions;
         let origin = DVec3::new(0.1, -0.2, 0.3);
         let definition = |vertices: Range<u32>| {
             let mut expected = VertexSums::default();
@@ -1099,6 +1128,14 @@ mod tests {
             );
             assert_eq!(bits(got), bits(expected), "vertices {range:?}");
         }
+        // Read as `f32`, the bits of the positions rounded first.
+        let rounded: Vec<DVec3> = pos.iter().map(|p| p.as_vec3().as_dvec3()).collect();
+        assert!(rounded.iter().zip(pos.iter()).any(|(a, b)| a != b));
+        let (got, expected) = (
+            vertex_sums(&AsF32(pos), &m.triangles, &t, 0..n, origin),
+            vertex_sums(&rounded[..], &m.triangles, &t, 0..n, origin),
+        );
+        assert_eq!(bits(got), bits(expected), "read as f32");
     }
 
     /// The arctangent of the roughness against the library's: within 1e-15 relative over the
