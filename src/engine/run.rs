@@ -279,12 +279,11 @@ pub(crate) fn run_file_with(
             }
             plan.release_connectivity();
         }
-        let positions = metered(observer, Phase::Restore, n as u64, |m| {
+        mesh.positions = metered(observer, Phase::Restore, n as u64, |m| {
             let mut positions = storage.zeroed(n)?;
             plan.positions_in_input_order_metered(&mut positions, m);
             Ok(positions)
         })?;
-        mesh.positions = positions;
         let Some(kept) = kept else {
             // The plan is kept past the write only to measure the output as written, beside it.
             return Ok((smoothed, input_positions, Some(plan), None));
@@ -575,7 +574,7 @@ fn measure_output(
 
 /// The statistics of the output file as stored (rounded to its coordinate type: `float`, or
 /// `uchar`, `short`, … of a PLY layout, or printed as single-precision text), from the plan's
-/// positions rounded in place as [`io::Stored`] says, without reading the file back. The counts
+/// positions as [`stored_output_stats`] reads them, without reading the file back. The counts
 /// are the input's: the output has the same connectivity. STL rebuilds its vertices from the
 /// triangles' corners when read; its figures are those of the plan's vertices in `f32`.
 fn output_stats(
