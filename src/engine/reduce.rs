@@ -129,12 +129,19 @@ pub fn position_sum(pos: &[DVec3]) -> DVec3 {
 
 /// Largest and summed distance between `a` and `b`, vertex by vertex.
 pub fn displacement(a: &[DVec3], b: &[DVec3]) -> StepStats {
+    moves(a, |k, p| p.distance(b[k]))
+}
+
+/// Largest and summed `distance(k, item)` over `items`, in fixed chunks folded in their order
+/// (the same for any thread count): how far each of a set of vertices moved.
+pub fn moves<T: Sync>(items: &[T], distance: impl Fn(usize, &T) -> f64 + Sync) -> StepStats {
     let (max, sum) = map_fold(
-        a,
-        |first, x| {
-            let y = &b[first..first + x.len()];
-            x.iter().zip(y).fold((0.0f64, 0.0), |(m, s), (p, q)| {
-                let d = p.distance(*q);
+        items,
+        |first, chunk| {
+            let mut k = first;
+            chunk.iter().fold((0.0f64, 0.0), |(m, s), item| {
+                let d = distance(k, item);
+                k += 1;
                 (m.max(d), s + d)
             })
         },

@@ -89,24 +89,8 @@ impl Seam {
     /// How far the seam's vertices moved to `pos` since [`Seam::capture`], summed in ascending
     /// vertex order (in fixed chunks, so for any thread count).
     pub fn moves(&self, pos: &[DVec3]) -> StepStats {
-        let (max, sum) = reduce::map_fold(
-            &self.vertices,
-            |first, seam| {
-                let before = &self.positions[first..first + seam.len()];
-                seam.iter()
-                    .zip(before)
-                    .fold((0.0f64, 0.0), |(m, s), (&v, p)| {
-                        let d = pos[v as usize].distance(*p);
-                        (m.max(d), s + d)
-                    })
-            },
-            (0.0f64, 0.0),
-            |(m, s), (pm, ps)| (m.max(pm), s + ps),
-        );
-        StepStats {
-            moved: 0,
-            max_displacement: max,
-            sum_displacement: sum,
-        }
+        reduce::moves(&self.vertices, |k, &v| {
+            pos[v as usize].distance(self.positions[k])
+        })
     }
 }
