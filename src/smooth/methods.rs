@@ -196,7 +196,7 @@ impl Smoother for StencilMethod {
             stencils,
             moved: measure
                 .zip(copy)
-                .map(|(before, copy)| before.moves(&*pos, vertices, &copy)),
+                .map(|(seam, copy)| seam.moves(&*pos, vertices, &copy)),
         }
     }
     /// An edge or a triangle stencil moves its other ends in later patches.
