@@ -87,24 +87,35 @@ pub fn determinant_and_area_sums(
     triangles: &[[u32; 3]],
     origin: DVec3,
 ) -> (f64, f64) {
+    determinant_and_area_by(triangles, |v| pos[v as usize], origin)
+}
+
+/// [`determinant_and_area_sums`] with each corner's position from `corner`: for positions held
+/// elsewhere than in one array by vertex id (a tile's local copy, [`crate::smooth::tiled`]).
+#[inline(always)]
+pub(crate) fn determinant_and_area_by(
+    triangles: &[[u32; 3]],
+    corner: impl Fn(u32) -> DVec3,
+    origin: DVec3,
+) -> (f64, f64) {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU has AVX2 (just checked).
-        return unsafe { determinant_and_area_sums_avx2(pos, triangles, origin) };
+        return unsafe { determinant_and_area_avx2(triangles, corner, origin) };
     }
-    determinant_and_area_batches(pos, triangles, origin)
+    determinant_and_area_batches(triangles, corner, origin)
 }
 
-/// [`determinant_and_area_sums`] compiled for AVX2: four triangles' arithmetic to an instruction.
+/// [`determinant_and_area_by`] compiled for AVX2: four triangles' arithmetic to an instruction.
 /// The same operations, so the same bits (Rust does not fuse a product and a sum).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn determinant_and_area_sums_avx2(
-    pos: &[DVec3],
+unsafe fn determinant_and_area_avx2(
     triangles: &[[u32; 3]],
+    corner: impl Fn(u32) -> DVec3,
     origin: DVec3,
 ) -> (f64, f64) {
-    determinant_and_area_batches(pos, triangles, origin)
+    determinant_and_area_batches(triangles, corner, origin)
 }
 
 /// Triangles whose terms [`determinant_and_area_batches`] computes at once.
@@ -114,14 +125,7 @@ const TERM_BATCH: usize = 32;
 /// coordinate by coordinate, their terms computed for the whole batch (in vector lanes), then
 /// added in order. Each term is [`determinant`]'s and [`doubled_area`]'s, operation for operation.
 #[inline(always)]
-fn determinant_and_area_batches(pos: &[DVec3], triangles: &[[u32; 3]], o: DVec3) -> (f64, f64) {
-    determinant_and_area_by(triangles, |v| pos[v as usize], o)
-}
-
-/// [`determinant_and_area_batches`] with each corner's position from `corner`: for positions held
-/// elsewhere than in one array by vertex id (a tile's local copy, [`crate::smooth::tiled`]).
-#[inline(always)]
-pub(crate) fn determinant_and_area_by(
+fn determinant_and_area_batches(
     triangles: &[[u32; 3]],
     corner: impl Fn(u32) -> DVec3,
     o: DVec3,
@@ -219,7 +223,7 @@ mod tests {
             assert_eq!(got.0.is_finite(), len <= 301, "{len} triangles");
             let bits = |(v, s): (f64, f64)| (v.to_bits(), s.to_bits());
             assert_eq!(bits(got), bits(plain), "{len} triangles");
-            let lanes = determinant_and_area_batches(&pos, t, origin);
+            let lanes = determinant_and_area_batches(t, |v| pos[v as usize], origin);
             assert_eq!(bits(lanes), bits(plain), "{len} triangles, without AVX2");
         }
     }

@@ -556,17 +556,6 @@ fn sums(tile: &Tile, at: &[P4], tris: &[[u32; 3]], o: DVec3) -> (f64, f64) {
             Err(_) => DVec3::NAN,
         }
     };
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU has AVX2 (just checked).
-        return unsafe { sums_avx2(run, corner, o) };
-    }
-    crate::metrics::determinant_and_area_by(run, corner, o)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn sums_avx2(run: &[[u32; 3]], corner: impl Fn(u32) -> DVec3, o: DVec3) -> (f64, f64) {
     crate::metrics::determinant_and_area_by(run, corner, o)
 }
 
