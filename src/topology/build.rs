@@ -152,78 +152,64 @@ impl Topology {
         // Pass 1, chunk by chunk: sort the region by vertex into `vf` and its offsets, then per
         // vertex the number of distinct neighbours, edge counts and the fixed flag. The
         // neighbours go to `vv` laid out as `vf`, which is their final place when every vertex
-        // has as many neighbours as faces (a closed manifold: no pass 2 then).
+        // has as many neighbours as faces (a closed manifold: no pass 2 then). A vertex's
+        // neighbours less its faces go to `misfit`, a byte each (the neighbours' offsets would
+        // be 8, and are needed only where some vertex differs).
         let mut vf_offsets: Buf<usize> = storage.zeroed(n_vertices + 1)?;
-        let mut vv_offsets: Buf<usize> = storage.zeroed(n_vertices + 1)?;
+        let mut misfit: Buf<u8> = storage.zeroed(n_vertices)?;
         let mut vv: Buf<u32> = storage.zeroed(total)?;
         let region_lens: Vec<usize> = region_start.windows(2).map(|w| w[1] - w[0]).collect();
-        // Each chunk's stats, vertices with more or fewer neighbours than faces, and neighbours.
-        let found: Vec<(TopologyStats, usize, usize)> = split_lens(&mut vf, &region_lens)
+        let found: Vec<Found> = split_lens(&mut vf, &region_lens)
             .into_par_iter()
             .zip(split_lens(&mut vv, &region_lens))
             .zip(vf_offsets[1..].par_chunks_mut(CHUNK))
-            .zip(vv_offsets[1..].par_chunks_mut(CHUNK))
+            .zip(misfit.par_chunks_mut(CHUNK))
             .zip(fixed.par_chunks_mut(CHUNK))
             .enumerate()
             .map_init(
                 <(ChunkScratch, VertexScratch)>::default,
-                |(link, scratch), (c, ((((region, nbrs), ends), degs), fixed))| {
+                |(link, scratch), (c, ((((region, nbrs), ends), misfit), fixed))| {
                     let lo = (c * CHUNK) as u32;
                     sort_region(lo, region, region_start[c], ends, triangles, link);
-                    let mut st = TopologyStats::default();
-                    let mut misfits = 0;
+                    let mut found = Found::default();
                     let mut start = 0;
-                    // The offsets in `vv` as if every vertex before had as many neighbours as
-                    // faces, as in a closed manifold; those of a mesh with misfits are shifted
-                    // below. So the offsets are summed here, in parallel, not in a sequential
-                    // pass after.
-                    let mut placed = region_start[c];
-                    for (k, (deg, fix)) in degs.iter_mut().zip(fixed.iter_mut()).enumerate() {
+                    for (k, (m, fix)) in misfit.iter_mut().zip(fixed.iter_mut()).enumerate() {
                         let end = ends[k] - region_start[c];
                         let (b, c) = (&link.b[start..end], &link.c[start..end]);
                         let a = analyse_vertex(lo + k as u32, b, c, scratch, &mut nbrs[start..]);
                         start = end;
-                        placed += a.degree;
-                        *deg = placed;
-                        misfits += (a.degree != b.len()) as usize;
-                        st.count(&a, fix);
+                        found.neighbours += a.degree;
+                        if a.degree != b.len() {
+                            found.misfits += 1;
+                            *m = match i8::try_from(a.degree as isize - b.len() as isize) {
+                                Ok(d) if d != ESCAPE => d as u8,
+                                _ => {
+                                    found.escaped.push((k, a.degree));
+                                    ESCAPE as u8
+                                }
+                            };
+                        }
+                        found.stats.count(&a, fix);
                     }
-                    meter.add(degs.len() as u64);
-                    (st, misfits, placed - region_start[c])
+                    meter.add(misfit.len() as u64);
+                    found
                 },
             )
             .collect();
         let mut misfits = 0;
-        for &(st, m, _) in &found {
-            stats = stats.add(st);
-            misfits += m;
+        for f in &found {
+            stats = stats.add(f.stats);
+            misfits += f.misfits;
         }
-        if misfits > 0 {
-            // Shift each chunk's offsets by how much its neighbours' place in `vv` differs from
-            // its faces' in `vf` (the sums over the chunks before it).
-            let mut placed = 0usize;
-            let shifts: Vec<usize> = (found.iter().zip(&region_start))
-                .map(|(&(_, _, n), &start)| {
-                    let shift = placed.wrapping_sub(start);
-                    placed += n;
-                    shift
-                })
-                .collect();
-            vv_offsets[1..]
-                .par_chunks_mut(CHUNK)
-                .zip(shifts)
-                .filter(|(_, shift)| *shift != 0)
-                .for_each(|(offsets, shift)| {
-                    offsets.iter_mut().for_each(|o| *o = o.wrapping_add(shift));
-                });
-        }
+        let mut vv_offsets = Buf::default();
         if misfits == 0 {
             // The skipped pass 2, for the meter. The neighbours' offsets are then the faces'
             // (`Topology::vv_offsets`).
             meter.add(n_vertices as u64);
-            vv_offsets = Buf::default();
         } else {
-            // Pass 1's array goes before pass 2's is made, so the two are never held at once.
+            vv_offsets = neighbour_offsets(storage, &vf_offsets, &misfit, &found)?;
+            // Pass 1's arrays go before pass 2's is made, so the two are never held at once.
+            drop(std::mem::take(&mut misfit));
             drop(std::mem::take(&mut vv));
             vv = pass_2(storage, &vv_offsets, &vf_offsets, &vf, triangles, meter)?;
         }
@@ -237,6 +223,61 @@ impl Topology {
             stats,
         })
     }
+}
+
+/// The `misfit` byte of a vertex whose neighbours less faces is not an `i8`, or is this one: its
+/// degree is in [`Found::escaped`].
+const ESCAPE: i8 = i8::MIN;
+
+/// What pass 1 found in one chunk of vertices.
+#[derive(Default)]
+struct Found {
+    stats: TopologyStats,
+    /// Vertices with more or fewer neighbours than faces.
+    misfits: usize,
+    /// Neighbours of all the chunk's vertices.
+    neighbours: usize,
+    /// `(k, degree)` of the chunk's vertices whose neighbours less faces is not an `i8` other
+    /// than [`ESCAPE`], ascending (hubs and badly broken fans: rare).
+    escaped: Vec<(usize, usize)>,
+}
+
+/// The vertex → vertex offsets, from the faces' and pass 1's `misfit` bytes (a vertex's
+/// neighbours less its faces, or [`ESCAPE`]), each chunk after the neighbours of those before.
+fn neighbour_offsets(
+    storage: &Storage,
+    vf_offsets: &[usize],
+    misfit: &[u8],
+    found: &[Found],
+) -> Result<Buf<usize>> {
+    let mut offsets: Buf<usize> = storage.zeroed(vf_offsets.len())?;
+    let mut placed = 0;
+    let bases: Vec<usize> = found
+        .iter()
+        .map(|f| {
+            let base = placed;
+            placed += f.neighbours;
+            base
+        })
+        .collect();
+    offsets[1..]
+        .par_chunks_mut(CHUNK)
+        .zip(misfit.par_chunks(CHUNK))
+        .zip(found.par_iter().zip(bases))
+        .enumerate()
+        .for_each(|(c, ((out, misfit), (found, base)))| {
+            let mut at = base;
+            let mut escaped = found.escaped.iter().peekable();
+            for (k, (o, &m)) in out.iter_mut().zip(misfit).enumerate() {
+                let v = c * CHUNK + k;
+                at += match m as i8 {
+                    ESCAPE => escaped.next().expect("an escaped vertex").1,
+                    d => (vf_offsets[v + 1] - vf_offsets[v]).wrapping_add_signed(d as isize),
+                };
+                *o = at;
+            }
+        });
+    Ok(offsets)
 }
 
 /// Pass 2 of the build, for a mesh whose vertices do not all have as many neighbours as faces:
@@ -678,6 +719,15 @@ mod tests {
             }
         }
         cases.push(("bipyramids", base as usize, cones));
+        // Vertices whose neighbours less faces do not fit a byte: a hub of 300 separate faces
+        // (600 neighbours) and one face repeated 300 times (2 neighbours), in two chunks, with a
+        // boundary vertex of a small misfit between them.
+        let hub = CHUNK as u32 + 5;
+        let mut escapes: Vec<[u32; 3]> = (0..300).map(|k| [hub, 2 * k, 2 * k + 1]).collect();
+        let repeated = 3 * CHUNK as u32 + 1;
+        escapes.extend((0..300).map(|_| [repeated, 700, 701]));
+        escapes.push([2 * CHUNK as u32, 702, 703]);
+        cases.push(("escapes", 3 * CHUNK + 7, escapes));
         let bunny =
             std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/stanford-bunny.ply");
         let scan = crate::io::read_mesh(&bunny).unwrap();
