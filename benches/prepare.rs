@@ -14,6 +14,7 @@ use std::hint::black_box;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use vcsmooth::engine::{DEFAULT_PATCH_SIZE, reduce};
 use vcsmooth::mesh::Storage;
+use vcsmooth::meter::Meter;
 use vcsmooth::{Topology, metrics, partition, schedule};
 
 fn prepare(c: &mut Criterion) {
@@ -44,9 +45,15 @@ fn prepare(c: &mut Criterion) {
         let source = &mesh.source;
         group.bench_function("statistics/counts", |b| {
             b.iter(|| {
-                let counts =
-                    metrics::connectivity(n, reordered.triangles.len(), source, &topo, &storage);
-                black_box(counts.unwrap())
+                let tris = &reordered.triangles;
+                let components = metrics::components(n, tris, &storage, &Meter::default()).unwrap();
+                black_box(metrics::connectivity(
+                    n,
+                    tris.len(),
+                    source,
+                    &topo,
+                    components,
+                ))
             })
         });
         group.bench_function("statistics/geometry", |b| {

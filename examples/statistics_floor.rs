@@ -18,6 +18,7 @@ use glam::DVec3;
 use vcsmooth::engine::plan::{Layout, Plan};
 use vcsmooth::engine::reduce;
 use vcsmooth::mesh::Storage;
+use vcsmooth::meter::Meter;
 use vcsmooth::metrics::{self, EdgeSums, VertexSums};
 
 fn median(repeats: usize, mut f: impl FnMut() -> f64) -> f64 {
@@ -127,12 +128,9 @@ fn main() {
                 .map(|&(y2, x, d2)| y2.sqrt().atan2(x).to_degrees() + d2.sqrt())
                 .sum::<f64>()
         };
-        let source = &mesh.source;
         let heap = Storage::heap();
         let components = || {
-            metrics::connectivity(plan.len(), tris.len(), source, topo, &heap)
-                .expect("counts")
-                .components as f64
+            metrics::components(plan.len(), tris, &heap, &Meter::default()).expect("counts") as f64
         };
         println!(
             "{} vertices, {} edges, one thread, medians of {repeats}",

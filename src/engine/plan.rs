@@ -59,6 +59,9 @@ pub struct Plan {
     pub stored: Option<crate::io::Stored>,
     /// Seconds spent in each preparation phase.
     pub timings: PrepTimings,
+    /// The mesh's connected components ([`crate::metrics::components`]), when the run counted
+    /// them before building the topology, so that their forest was not alive beside it.
+    pub components: Option<usize>,
 }
 
 /// Seconds spent preparing.
@@ -276,6 +279,7 @@ impl Plan {
                 topology: topology_s,
                 partition: clock.elapsed().as_secs_f64(),
             },
+            components: None,
         })
     }
 
@@ -348,13 +352,18 @@ impl Plan {
         storage: &Storage,
         meter: &Meter,
     ) -> Result<crate::metrics::MeshInfo> {
+        let triangles = &self.reordered.triangles;
+        let components = match self.components {
+            Some(count) => count,
+            None => crate::metrics::components(self.len(), triangles, storage, &Meter::default())?,
+        };
         let mut info = crate::metrics::connectivity(
             self.len(),
-            self.reordered.triangles.len(),
+            triangles.len(),
             source,
             &self.topology,
-            storage,
-        )?;
+            components,
+        );
         info.count_welded(self.reordered.welded);
         meter.add(1);
         info.set_geometry(self.geometry());

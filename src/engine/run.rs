@@ -489,8 +489,27 @@ pub(crate) fn prepare(
             mesh.positions = Buf::default();
             mesh.triangles = Buf::default();
         }
+        // A run that measures its input counts its components now, while only the plan's
+        // positions and triangles are alive, not beside the adjacency (2 B per triangle at the
+        // run's peak out of core).
+        let clock = Instant::now();
+        let (vertices, triangles) = (
+            ordered.reordered.positions.len(),
+            &ordered.reordered.triangles,
+        );
+        let components = match engine.with_stats {
+            true => Some(metered(
+                observer,
+                Phase::Statistics,
+                triangles.len() as u64,
+                |m| crate::metrics::components(vertices, triangles, &storage, m),
+            )?),
+            false => None,
+        };
+        t.metrics += clock.elapsed().as_secs_f64();
         let mut plan = Plan::of_reordered(&storage, ordered, layout, observer)
             .map_err(|e| e.in_file(input))?;
+        plan.components = components;
         plan.pin(&pins);
         plan.crease(&storage, opts.crease_angle)
             .map_err(|e| e.in_file(input))?;

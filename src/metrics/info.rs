@@ -9,7 +9,8 @@ use rayon::prelude::*;
 
 use crate::error::Result;
 use crate::mesh::{Mesh, Storage};
-use crate::topology::{Lanes, Topology, corners_after};
+use crate::meter::Meter;
+use crate::topology::{Lanes, Topology, corners_after, is_degenerate};
 
 /// Everything `vcsmooth info` reports about a mesh.
 #[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
@@ -120,28 +121,30 @@ pub fn info_of(
     source: &crate::mesh::Source,
     topo: &Topology,
 ) -> Result<MeshInfo> {
-    let mut info = connectivity(pos.len(), triangles.len(), source, topo, &Storage::heap())?;
+    let components = components(pos.len(), triangles, &Storage::heap(), &Meter::default())?;
+    let mut info = connectivity(pos.len(), triangles.len(), source, topo, components);
     info.set_geometry(geometry(pos, triangles, topo));
     Ok(info)
 }
 
 /// The counts of [`MeshInfo`] (everything but the [`Geometry`], left at zero) of a mesh of
-/// `vertices` and `triangles` with the topology `topo`. They do not depend on the positions: a
-/// run counts its input once and gives its output the same counts.
+/// `vertices` and `triangles` with the topology `topo` and `components` ([`components`]). They
+/// do not depend on the positions: a run counts its input once and gives its output the same
+/// counts.
 pub fn connectivity(
     vertices: usize,
     triangles: usize,
     source: &crate::mesh::Source,
     topo: &Topology,
-    storage: &Storage,
-) -> Result<MeshInfo> {
+    components: usize,
+) -> MeshInfo {
     debug_assert_eq!(
         topo.len(),
         vertices,
         "topology built for another vertex count"
     );
     let s = &topo.stats;
-    Ok(MeshInfo {
+    MeshInfo {
         vertices,
         triangles,
         input_faces: source.input_faces,
@@ -159,11 +162,11 @@ pub fn connectivity(
         pinned_vertices: s.pinned_vertices,
         crease_edges: s.crease_edges,
         crease_vertices: s.crease_vertices,
-        components: components(topo, storage)?,
+        components,
         unreferenced_vertices: s.unreferenced_vertices,
         closed: s.boundary_edges == 0 && s.non_manifold_edges == 0 && triangles > 0,
         ..MeshInfo::default()
-    })
+    }
 }
 
 /// What [`MeshInfo`] reports of the positions, as sums and extremes so that parts of a mesh can
@@ -235,31 +238,33 @@ fn bounding((lo, hi): (DVec3, DVec3)) -> (DVec3, DVec3) {
     (DVec3::new(x.0, y.0, z.0), DVec3::new(x.1, y.1, z.1))
 }
 
-/// Connected components over the adjacency, counting only vertices with a neighbour: a
-/// union–find over the edges, in parallel on the current pool (a count, the same for any order
-/// of the unions). Its forest, one entry per vertex, is a working array of `storage`
+/// Connected components of the `n` vertices joined by `triangles`, counting only vertices with a
+/// neighbour (a corner of a face with three distinct corners; degenerate faces join nothing, as
+/// in the topology): a union–find over the faces, in parallel on the current pool (a count, the
+/// same for any order of the unions). It needs no adjacency, so a run counts it before building
+/// one. Its forest, one entry per vertex, is a working array of `storage`
 /// ([`Storage::working`]: a scratch file for a mesh larger than the memory budget, else memory
-/// given back when the count is done).
-fn components(topo: &Topology, storage: &Storage) -> Result<usize> {
-    // Vertices per work item: enough to make scheduling negligible.
+/// given back when the count is done). `meter` counts the faces.
+pub fn components(
+    n: usize,
+    triangles: &[[u32; 3]],
+    storage: &Storage,
+    meter: &Meter,
+) -> Result<usize> {
+    // Faces or vertices per work item: enough to make scheduling negligible.
     const GRAIN: usize = 1 << 14;
-    let n = topo.len();
+    // A vertex no face has joined yet: its own root once one does.
+    const UNSEEN: u32 = u32::MAX;
     let mut forest = storage.working::<u32>(n)?;
-    forest
-        .par_chunks_mut(GRAIN)
-        .enumerate()
-        .for_each(|(c, chunk)| {
-            for (k, p) in chunk.iter_mut().enumerate() {
-                *p = (c * GRAIN + k) as u32;
-            }
-        });
+    forest.par_chunks_mut(GRAIN).for_each(|c| c.fill(UNSEEN));
     // SAFETY: `AtomicU32` has the size, alignment and bit validity of `u32`, and the exclusive
     // borrow of `forest` keeps every other access out while this view lives.
     let parent: &[AtomicU32] =
         unsafe { std::slice::from_raw_parts(forest.as_mut_ptr().cast::<AtomicU32>(), n) };
-    // parent[v] ≤ v always: a root is linked under a smaller root, so no cycle can form whatever
-    // the interleaving. Relaxed is enough: each compare-exchange sees the latest value of its
-    // slot, and a stale read only makes a find or a link retry; rayon's join orders the passes.
+    // parent[v] ≤ v for every vertex seen: a root is linked under a smaller root, so no cycle can
+    // form whatever the interleaving. Relaxed is enough: each compare-exchange sees the latest
+    // value of its slot, and a stale read only makes a find or a link retry; rayon's join orders
+    // the passes. A find starts at a vertex its face has seen, and follows links to roots seen.
     let find = |mut v: u32| loop {
         let p = parent[v as usize].load(Relaxed);
         if p == v {
@@ -273,40 +278,36 @@ fn components(topo: &Topology, storage: &Storage) -> Result<usize> {
         let _ = parent[v as usize].compare_exchange(p, g, Relaxed, Relaxed);
         v = g;
     };
-    (0..n as u32)
-        .into_par_iter()
-        .with_min_len(GRAIN)
-        .for_each(|v| {
-            // v's root, found once for all its edges: the neighbours of a vertex are nearly always
-            // in its component already, so each edge costs one find. A root that has since been
-            // linked under another only makes the next find differ, and the link retry.
-            let mut root = None;
-            for &u in topo.neighbors(v) {
-                if u < v {
-                    continue;
-                }
-                let mut a = *root.get_or_insert_with(|| find(v));
-                loop {
-                    let b = find(u);
-                    if a == b {
-                        break;
-                    }
-                    let (lo, hi) = if a < b { (a, b) } else { (b, a) };
-                    if parent[hi as usize]
-                        .compare_exchange(hi, lo, Relaxed, Relaxed)
-                        .is_ok()
-                    {
-                        root = Some(lo);
-                        break;
-                    }
-                    a = find(a);
-                }
+    let link = |a: u32, b: u32| {
+        let (mut a, mut b) = (find(a), find(b));
+        while a != b {
+            let (lo, hi) = if a < b { (a, b) } else { (b, a) };
+            if parent[hi as usize]
+                .compare_exchange(hi, lo, Relaxed, Relaxed)
+                .is_ok()
+            {
+                return;
             }
-        });
+            (a, b) = (find(a), find(b));
+        }
+    };
+    triangles.par_chunks(GRAIN).for_each(|chunk| {
+        for t in chunk {
+            if is_degenerate(t) {
+                continue;
+            }
+            for &v in t {
+                let _ = parent[v as usize].compare_exchange(UNSEEN, v, Relaxed, Relaxed);
+            }
+            link(t[0], t[1]);
+            link(t[0], t[2]);
+        }
+        meter.add(chunk.len() as u64);
+    });
     Ok((0..n as u32)
         .into_par_iter()
         .with_min_len(GRAIN)
-        .filter(|&v| topo.deg(v) > 0 && parent[v as usize].load(Relaxed) == v)
+        .filter(|&v| parent[v as usize].load(Relaxed) == v)
         .count())
 }
 
@@ -840,13 +841,14 @@ mod tests {
         let mut tris = a.triangles.to_vec();
         let n = a.positions.len() as u32;
         tris.extend(a.triangles.iter().map(|t| t.map(|v| v + n)));
-        let t = Topology::build(2 * n as usize, &tris).unwrap();
-        let source = crate::mesh::Source::default();
-        let heap = connectivity(2 * n as usize, tris.len(), &source, &t, &Storage::heap()).unwrap();
+        let count = |storage: &Storage| {
+            components(2 * n as usize, &tris, storage, &Meter::default()).unwrap()
+        };
+        let heap = count(&Storage::heap());
         let dir = tempfile::tempdir().unwrap();
         let scratch = Storage::scratch(dir.path()).unwrap();
-        let mapped = connectivity(2 * n as usize, tris.len(), &source, &t, &scratch).unwrap();
-        assert_eq!((heap.components, mapped.components), (2, 2));
+        let mapped = count(&scratch);
+        assert_eq!((heap, mapped), (2, 2));
         assert_eq!(
             scratch.mapped_bytes(),
             4 * 2 * n as u64,
@@ -858,7 +860,8 @@ mod tests {
     fn components_are_counted_the_same_for_any_thread_count() {
         // 60 spheres whose vertex ids are shuffled together (so that every chunk holds pieces of
         // many), every third joined to the next by a triangle, and a few unreferenced vertices:
-        // the union-find's count against a sequential search, on 1, 2 and 4 threads.
+        // the union-find over the faces against a search over the topology, on 1, 2 and 4
+        // threads.
         let s = icosphere(3);
         let (n, k) = (s.positions.len() as u32, 60u32);
         let total = n * k + 5;
@@ -872,6 +875,9 @@ mod tests {
                 .step_by(3)
                 .map(|c| [c * n, c * n + 1, (c + 1) * n]),
         );
+        // Degenerate faces join nothing: not two spheres, not two unreferenced vertices.
+        tris.push([n, n, 2 * n]);
+        tris.push([n * k, n * k + 1, n * k]);
         let tris: Vec<[u32; 3]> = tris.iter().map(|t| t.map(id)).collect();
         let t = Topology::build(total as usize, &tris).unwrap();
         let mut seen = vec![false; total as usize];
@@ -897,7 +903,9 @@ mod tests {
                 .num_threads(threads)
                 .build()
                 .unwrap();
-            let counted = pool.install(|| components(&t, &Storage::heap()).unwrap());
+            let counted = pool.install(|| {
+                components(total as usize, &tris, &Storage::heap(), &Meter::default()).unwrap()
+            });
             assert_eq!(counted, expected, "{threads} threads");
         }
     }

@@ -207,10 +207,11 @@ impl Topology {
             // (`Topology::vv_offsets`).
             meter.add(n_vertices as u64);
         } else {
-            vv_offsets = neighbour_offsets(storage, &vf_offsets, &misfit, &found)?;
-            // Pass 1's arrays go before pass 2's is made, so the two are never held at once.
-            drop(std::mem::take(&mut misfit));
+            // Pass 1's neighbours go before the offsets and pass 2's are made, so that they are
+            // never held together.
             drop(std::mem::take(&mut vv));
+            vv_offsets = neighbour_offsets(storage, &vf_offsets, &misfit, &found)?;
+            drop(std::mem::take(&mut misfit));
             vv = pass_2(storage, &vv_offsets, &vf_offsets, &vf, triangles, meter)?;
         }
         Ok(Topology {
@@ -436,7 +437,7 @@ fn sort_region(
     ends.iter_mut().for_each(|e| *e += start);
 }
 
-pub(super) fn is_degenerate(t: &[u32; 3]) -> bool {
+pub(crate) fn is_degenerate(t: &[u32; 3]) -> bool {
     t[0] == t[1] || t[1] == t[2] || t[0] == t[2]
 }
 

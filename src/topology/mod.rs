@@ -34,7 +34,7 @@ mod masks;
 mod orient;
 mod stats;
 
-pub(crate) use build::split_lens;
+pub(crate) use build::{is_degenerate, split_lens};
 pub(crate) use fans::Lanes;
 pub use fans::corners_after;
 pub use stats::TopologyStats;
