@@ -1,13 +1,13 @@
 //! `vcsmooth info`: counts, topology, volume, area, bounding box, edge length and roughness of a mesh.
 
 use std::ops::Range;
-use std::sync::atomic::AtomicU32;
-use std::sync::atomic::Ordering::Relaxed;
+use std::sync::atomic::Ordering::{AcqRel, Acquire, Relaxed};
+use std::sync::atomic::{AtomicBool, AtomicU32};
 
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::mesh::{Mesh, Storage};
 use crate::meter::Meter;
 use crate::topology::{Lanes, Topology, corners_after, is_degenerate};
@@ -244,13 +244,19 @@ fn bounding((lo, hi): (DVec3, DVec3)) -> (DVec3, DVec3) {
 /// same for any order of the unions). It needs no adjacency, so a run counts it before building
 /// one. Its forest, one entry per vertex, is a working array of `storage`
 /// ([`Storage::working`]: a scratch file for a mesh larger than the memory budget, else memory
-/// given back when the count is done). `meter` counts the faces.
+/// given back when the count is done). `meter` counts the faces. Fails, as the topology's build
+/// does, when a triangle indexes a vertex `>= n` or `n` exceeds the 32-bit ids.
 pub fn components(
     n: usize,
     triangles: &[[u32; 3]],
     storage: &Storage,
     meter: &Meter,
 ) -> Result<usize> {
+    if n > u32::MAX as usize {
+        return Err(Error::topology(format!(
+            "{n} vertices exceed the 2^32 limit"
+        )));
+    }
     // Faces or vertices per work item: enough to make scheduling negligible.
     const GRAIN: usize = 1 << 14;
     // A vertex no face has joined yet: its own root once one does.
@@ -262,20 +268,21 @@ pub fn components(
     let parent: &[AtomicU32] =
         unsafe { std::slice::from_raw_parts(forest.as_mut_ptr().cast::<AtomicU32>(), n) };
     // parent[v] ≤ v for every vertex seen: a root is linked under a smaller root, so no cycle can
-    // form whatever the interleaving. Relaxed is enough: each compare-exchange sees the latest
-    // value of its slot, and a stale read only makes a find or a link retry; rayon's join orders
-    // the passes. A find starts at a vertex its face has seen, and follows links to roots seen.
+    // form whatever the interleaving; a stale read only makes a find or a link retry, and
+    // rayon's join orders the passes. A find starts at a vertex its face has seen and follows
+    // links to vertices seen; the links are published with Release and read with Acquire, so
+    // that a thread that reads a link also sees its target marked seen (never UNSEEN).
     let find = |mut v: u32| loop {
-        let p = parent[v as usize].load(Relaxed);
+        let p = parent[v as usize].load(Acquire);
         if p == v {
             return v;
         }
-        let g = parent[p as usize].load(Relaxed);
+        let g = parent[p as usize].load(Acquire);
         if g == p {
             return p;
         }
         // Path halving: point v at its grandparent (a no-op if another thread moved it already).
-        let _ = parent[v as usize].compare_exchange(p, g, Relaxed, Relaxed);
+        let _ = parent[v as usize].compare_exchange(p, g, AcqRel, Acquire);
         v = g;
     };
     let link = |a: u32, b: u32| {
@@ -283,7 +290,7 @@ pub fn components(
         while a != b {
             let (lo, hi) = if a < b { (a, b) } else { (b, a) };
             if parent[hi as usize]
-                .compare_exchange(hi, lo, Relaxed, Relaxed)
+                .compare_exchange(hi, lo, AcqRel, Acquire)
                 .is_ok()
             {
                 return;
@@ -291,19 +298,29 @@ pub fn components(
             (a, b) = (find(a), find(b));
         }
     };
+    let out_of_range = AtomicBool::new(false);
     triangles.par_chunks(GRAIN).for_each(|chunk| {
         for t in chunk {
+            if t.iter().any(|&v| v as usize >= n) {
+                out_of_range.store(true, Relaxed);
+                continue;
+            }
             if is_degenerate(t) {
                 continue;
             }
             for &v in t {
-                let _ = parent[v as usize].compare_exchange(UNSEEN, v, Relaxed, Relaxed);
+                let _ = parent[v as usize].compare_exchange(UNSEEN, v, AcqRel, Acquire);
             }
             link(t[0], t[1]);
             link(t[0], t[2]);
         }
         meter.add(chunk.len() as u64);
     });
+    if out_of_range.into_inner() {
+        return Err(Error::topology(format!(
+            "a triangle indexes a vertex out of range (0..{n})"
+        )));
+    }
     Ok((0..n as u32)
         .into_par_iter()
         .with_min_len(GRAIN)
@@ -854,6 +871,17 @@ mod tests {
             4 * 2 * n as u64,
             "one u32 per vertex, mapped"
         );
+    }
+
+    #[test]
+    fn a_face_out_of_range_is_an_error_not_a_panic() {
+        let count = components(
+            3,
+            &[[0, 1, 2], [0, 1, 5]],
+            &Storage::heap(),
+            &Meter::default(),
+        );
+        assert!(count.is_err());
     }
 
     #[test]

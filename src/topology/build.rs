@@ -268,11 +268,15 @@ fn neighbour_offsets(
         .enumerate()
         .for_each(|(c, ((out, misfit), (found, base)))| {
             let mut at = base;
-            let mut escaped = found.escaped.iter().peekable();
+            let mut escaped = found.escaped.iter();
             for (k, (o, &m)) in out.iter_mut().zip(misfit).enumerate() {
                 let v = c * CHUNK + k;
                 at += match m as i8 {
-                    ESCAPE => escaped.next().expect("an escaped vertex").1,
+                    ESCAPE => {
+                        let &(at_k, degree) = escaped.next().expect("an escaped vertex");
+                        debug_assert_eq!(at_k, k, "escaped vertices in order");
+                        degree
+                    }
                     d => (vf_offsets[v + 1] - vf_offsets[v]).wrapping_add_signed(d as isize),
                 };
                 *o = at;
@@ -672,7 +676,7 @@ mod tests {
             .collect();
         cases.push(("sphere", n, sphere.triangles.to_vec()));
         cases.push(("shuffled sphere", n, shuffled.clone()));
-        // Holes (so pass 2 and shifted offsets), flipped faces, degenerate faces, a duplicated
+        // Holes (so pass 2 and summed offsets), flipped faces, degenerate faces, a duplicated
         // face and a fin (non-manifold edges), unreferenced vertices.
         let mut rough = shuffled.clone();
         for k in (0..rough.len()).step_by(997) {
@@ -720,13 +724,15 @@ mod tests {
             }
         }
         cases.push(("bipyramids", base as usize, cones));
-        // Vertices whose neighbours less faces do not fit a byte: a hub of 300 separate faces
-        // (600 neighbours) and one face repeated 300 times (2 neighbours), in two chunks, with a
-        // boundary vertex of a small misfit between them.
+        // Vertices whose neighbours less faces do not fit a byte, or are the escape value: a hub
+        // of 300 separate faces (600 neighbours), one face repeated 300 times (2 neighbours, and
+        // so for its other two corners) and one repeated 130 times (-128), in several chunks,
+        // with a boundary vertex of a small misfit between them.
         let hub = CHUNK as u32 + 5;
         let mut escapes: Vec<[u32; 3]> = (0..300).map(|k| [hub, 2 * k, 2 * k + 1]).collect();
         let repeated = 3 * CHUNK as u32 + 1;
         escapes.extend((0..300).map(|_| [repeated, 700, 701]));
+        escapes.extend((0..130).map(|_| [repeated + 2, 704, 705]));
         escapes.push([2 * CHUNK as u32, 702, 703]);
         cases.push(("escapes", 3 * CHUNK + 7, escapes));
         let bunny =
