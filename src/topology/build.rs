@@ -441,6 +441,8 @@ fn sort_region(
     ends.iter_mut().for_each(|e| *e += start);
 }
 
+/// Whether a face repeats a corner: it joins no vertices, in the topology (whose corners are
+/// fixed and counted) and in [`crate::metrics::components`] alike.
 pub(crate) fn is_degenerate(t: &[u32; 3]) -> bool {
     t[0] == t[1] || t[1] == t[2] || t[0] == t[2]
 }
