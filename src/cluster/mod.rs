@@ -708,6 +708,8 @@ impl<'a> RankRun<'a> {
             prefetch: None,
             tiles: false,
             loops: loops.as_ref(),
+            // A rank's shares are exchanged whole with the other ranks'.
+            border: None,
         };
         let reference = match self.state.reference {
             Some(r) => r,

@@ -120,6 +120,9 @@ pub struct Sweep<'a> {
     /// The boundary loops of `boundary: smooth` when found beforehand (a cluster rank's, from
     /// the stored plan); `None`: found from the mesh when the options ask for them.
     pub loops: Option<&'a Loops>,
+    /// The patches' border when the method's shares are kept for it alone
+    /// ([`PatchMesh::border`]; `scratch` then holds one entry per border vertex).
+    pub border: Option<&'a [u32]>,
 }
 
 impl Sweep<'_> {
@@ -136,9 +139,9 @@ impl Sweep<'_> {
 pub struct Buffers<'b> {
     /// The positions: smoothed in place.
     pub pos: &'b mut [DVec3],
-    /// What the stencils read beside the positions: a method's shares ([`Smoother::prepare`]),
-    /// the neighbour sums each patch of a stencil method rebuilds, or the second buffer of the
-    /// Jacobi steps.
+    /// What the stencils read beside the positions: a method's shares ([`Smoother::prepare`];
+    /// with [`Sweep::border`], one per border vertex), the neighbour sums each patch of a stencil
+    /// method rebuilds, or the second buffer of the Jacobi steps.
     pub scratch: &'b mut [DVec3],
     /// The stencil methods' copy before a measured sweep (and the spare buffer of their
     /// preparation), or the auxiliary field of a [`Schedule::TwoPass`] method; may be empty for
@@ -321,6 +324,7 @@ impl Run<'_, '_> {
                 topo: mesh.topo,
                 tris: mesh.tris,
                 sorted: mesh.sorted,
+                border: mesh.border,
             };
             let faces = FaceFields {
                 vectors: face_vectors,
@@ -907,7 +911,12 @@ fn sweep_patches(
             let (mut pv, mut sv) = (pos, sums);
             match (pass, loops) {
                 (Pass::Stencils(unit, opts), _) => unit.sweep_patch(
-                    PatchMesh { topo, tris, sorted },
+                    PatchMesh {
+                        topo,
+                        tris,
+                        sorted,
+                        border: mesh.border,
+                    },
                     opts,
                     patch.vertices.clone(),
                     patch.triangles.clone(),

@@ -186,11 +186,21 @@ impl Plan {
             true => Some(seam::Seam::of(topo, patches, |_| true, storage)?),
             false => None,
         };
-        // Out of core a stencil method's neighbour sums are each patch's own (`PatchSums`): an
+        // Out of core a stencil method's neighbour sums are each patch's own (`PatchField::sums`): an
         // array of the mesh's size would be 12 B per triangle more to pass through the page cache.
         let keep_sums = *in_memory;
-        let mut scratch: Buf<DVec3> =
-            storage.zeroed(sized(schedule_of.is_jacobi() || needs.shares || keep_sums))?;
+        // Out of core a method that can is given its shares on the patches' border alone: the
+        // patches take the others' as they start. Not when the boundary loops are smoothed: their
+        // stencils, after the method's, use the array of the mesh's size as neighbour sums.
+        let smooth_loops = opts.boundary == crate::smooth::Boundary::Smooth;
+        let border: Option<Buf<u32>> = match needs.border && !*in_memory && !smooth_loops {
+            true => Some(crate::partition::border(topo, patches, storage)?),
+            false => None,
+        };
+        let mut scratch: Buf<DVec3> = match &border {
+            Some(border) => storage.zeroed(border.len())?,
+            None => storage.zeroed(sized(schedule_of.is_jacobi() || needs.shares || keep_sums))?,
+        };
         let mut counts: Buf<u8> = storage.zeroed(sized(needs.counts))?;
         let faces = reordered.triangles.len();
         let mut face_vectors: Buf<DVec3> = storage.zeroed(needs.face_vectors * faces)?;
@@ -231,6 +241,7 @@ impl Plan {
                 prefetch: (!*in_memory).then_some(prefetch),
                 loops: None,
                 tiles: *in_memory,
+                border: border.as_deref(),
             };
             let reference = reference.unwrap_or_else(|| Reference::measure(&mesh, pos, &alone));
             let buffers = iterate::Buffers {

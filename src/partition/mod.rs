@@ -572,6 +572,28 @@ pub fn patches(n_vertices: usize, triangles: &[[u32; 3]], patch_size: usize) -> 
         .collect()
 }
 
+/// The vertices with a neighbour in another patch, ascending: those whose shares a patch cannot
+/// take from the positions at its start (`smooth::method::PatchMesh::border`). `patches` are the
+/// ranges [`patches`] cut, ascending; the list is in `storage` (out of core, a few % of the
+/// vertices).
+pub fn border(topo: &Topology, patches: &[Patch], storage: &Storage) -> Result<Buf<u32>> {
+    let on = |p: &Patch| {
+        let own = p.vertices.clone();
+        p.vertices
+            .clone()
+            .filter(move |&v| topo.neighbors(v).iter().any(|u| !own.contains(u)))
+    };
+    let counts: Vec<usize> = patches.par_iter().map(|p| on(p).count()).collect();
+    let mut out: Buf<u32> = storage.zeroed(counts.iter().sum())?;
+    let parts = crate::topology::split_lens(&mut out, &counts);
+    patches.par_iter().zip(parts).for_each(|(p, dst)| {
+        for (slot, v) in dst.iter_mut().zip(on(p)) {
+            *slot = v;
+        }
+    });
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -37,11 +37,13 @@ use std::ops::Range;
 
 use glam::DVec3;
 
+use rayon::prelude::*;
+
 use super::laplacian::{self, StepStats};
 use super::method::{PatchMesh, PatchSweep};
 use super::stencil::{self, Outcome};
-use super::{Field, SweepStats};
-use crate::topology::{TopologyParts, corners_after};
+use super::{Field, PatchField, SweepStats};
+use crate::topology::{Topology, TopologyParts, corners_after};
 
 /// Vertices per block, at least: a patch is cut evenly into blocks of consecutive vertices of
 /// the plan's (Morton) order, each of `BLOCK` to `2 · BLOCK − 1` vertices unless the patch is
@@ -138,6 +140,67 @@ pub fn sweep_blocks<P: Field + ?Sized, D: Field + ?Sized>(
         stencils: stats,
         moved,
     }
+}
+
+/// The λ step of the vertices `border` (ascending) from `pos` into `out`, one entry each in
+/// that order: the bits [`laplacian::jacobi_step`] gives them, in parallel chunks (each entry
+/// depends only on `pos`). Taken before the sweep, for the vertices whose step a patch cannot take
+/// when it starts ([`patch_step`]).
+pub fn border_step(topo: &Topology, pos: &[DVec3], border: &[u32], out: &mut [DVec3], lambda: f64) {
+    // Chunks of a few pages of output each: enough work per task, any split the same bits.
+    const CHUNK: usize = 4096;
+    let parts = topo.parts();
+    out.par_chunks_mut(CHUNK)
+        .zip(border.par_chunks(CHUNK))
+        .for_each(|(out, ids)| {
+            for (o, &v) in out.iter_mut().zip(ids) {
+                *o = laplacian::jacobi_at(&parts, pos, v, lambda);
+            }
+        });
+}
+
+/// The λ step that the blocks of the patch of `vertices` read (its vertices' and their
+/// neighbours'), held by the patch: the step of a vertex whose neighbours are all in the patch
+/// from `pos` as the patch starts (only the patch's blocks move its vertices, and none has run),
+/// every other's from `values`, the step of the vertices `border` (ascending) that
+/// [`border_step`] took before the sweep, when no patch had moved any. The same bits as the step
+/// of the whole mesh from the sweep's start.
+pub fn patch_step<P: Field + ?Sized, S: Field + ?Sized>(
+    topo: &Topology,
+    pos: &P,
+    border: &[u32],
+    values: &S,
+    vertices: Range<u32>,
+    lambda: f64,
+) -> PatchField {
+    let parts = topo.parts();
+    let value = |k: usize| values.get(k as u32);
+    let mut next = border.partition_point(|&b| b < vertices.start);
+    let inner = vertices
+        .clone()
+        .map(|v| match border.get(next) == Some(&v) {
+            true => {
+                next += 1;
+                value(next - 1)
+            }
+            false => laplacian::jacobi_at(&parts, pos, v, lambda),
+        })
+        .collect();
+    let mut ring: Vec<u32> = vertices
+        .clone()
+        .flat_map(|v| topo.neighbors(v).iter().copied())
+        .filter(|u| !vertices.contains(u))
+        .collect();
+    ring.sort_unstable();
+    ring.dedup();
+    let outer = ring
+        .iter()
+        .map(|u| {
+            let k = border.binary_search(u);
+            value(k.expect("a neighbour in another patch is on the border"))
+        })
+        .collect();
+    PatchField::new(vertices.start, inner, ring, outer)
 }
 
 /// The blocks of the vertex range `owned`, ascending: `⌊len / BLOCK⌋` blocks (one when the range
@@ -627,6 +690,7 @@ mod tests {
                     topo: &topo,
                     tris: &tris,
                     sorted,
+                    border: None,
                 };
                 // Two patches, their blocks not aligned to the patch's start.
                 let cut = 5000;

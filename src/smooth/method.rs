@@ -156,8 +156,12 @@ pub struct Needs {
     /// A vector field per vertex that [`Smoother::prepare`] fills before each sweep and the
     /// stencils read ([`Schedule::Stencils`]; a Jacobi method's second buffer is there anyway).
     /// Without it, a stencil method gets the array only in core, for its neighbour sums (out of
-    /// core each patch holds its own: [`super::PatchSums`]).
+    /// core each patch holds its own: [`super::PatchField::sums`]).
     pub shares: bool,
+    /// Whether a patch can compute the shares of its vertices whose neighbours are all its own
+    /// when it starts, from the positions then (nothing has moved them yet), so that a run out of
+    /// core keeps them only for the patches' borders ([`PatchMesh::border`]).
+    pub border: bool,
     /// A byte per vertex, filled once per run by [`Smoother::start`].
     pub counts: bool,
     /// Vector fields per triangle ([`FaceFields::vectors`], this many times the triangle count).
@@ -244,6 +248,11 @@ pub struct PatchMesh<'a> {
     /// Whether `tris` are sorted by their first corner, which is their smallest (the plan's
     /// Morton layout, not the input's own order).
     pub sorted: bool,
+    /// For a method whose shares are kept only on the patches' borders ([`Needs::border`]) in
+    /// a run without the array of the mesh's size (out of core): the vertices with a neighbour
+    /// in another patch, ascending. [`Smoother::prepare`]'s `sums` and
+    /// [`Smoother::sweep_patch`]'s then hold one entry per such vertex, in this order.
+    pub border: Option<&'a [u32]>,
 }
 
 /// What the passes of a [`Schedule::TwoPass`] method read.

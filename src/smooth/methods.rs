@@ -14,7 +14,8 @@ use super::method::{
 };
 use super::stencil::{self, StencilParams};
 use super::{
-    Field, Options, PatchSums, SharedField, SweepStats, Topology, guided, laplacian, lowpass, rings,
+    Field, Options, PatchField, SharedField, SweepStats, Topology, guided, laplacian, lowpass,
+    rings,
 };
 
 /// Umbrella Laplacian, forward Euler `p += λ L(p)`, Jacobi (Liu et al. 2002, eq. 3–6). Shrinks.
@@ -158,7 +159,7 @@ impl Smoother for StencilMethod {
         self.volume
     }
     /// The patch's neighbour sums rebuilt ([`super::rebuild_patch_sums`]) in `sums`, or in the
-    /// patch alone ([`PatchSums`]) when the run keeps no such array (out of core), then
+    /// patch alone ([`PatchField::sums`]) when the run keeps no such array (out of core), then
     /// [`StencilMethod::sweep_with`]: the same bits either way.
     fn sweep_patch(
         &self,
@@ -176,7 +177,7 @@ impl Smoother for StencilMethod {
             measure.map(|_| vertices.clone().map(|v| pos.get(v)).collect());
         let stencils = match sums.is_empty() {
             true => {
-                let mut own = PatchSums::rebuild(mesh.topo, &*pos, vertices.clone());
+                let mut own = PatchField::sums(mesh.topo, &*pos, vertices.clone());
                 self.sweep_with(
                     mesh,
                     vertices.clone(),
@@ -258,6 +259,7 @@ impl Smoother for VcsLowpass {
     fn needs(&self) -> Needs {
         Needs {
             shares: true,
+            border: true,
             ..Needs::default()
         }
     }
@@ -277,7 +279,8 @@ impl Smoother for VcsLowpass {
     }
     /// The λ step of step 1's pair from `pos` into `sums`, exchanged; each block takes the μ step
     /// from it for its own vertices ([`lowpass::sweep_blocks`]). Every entry depends only on
-    /// `pos`, so any split gives the same bits.
+    /// `pos`, so any split gives the same bits. With [`PatchMesh::border`], only the border's
+    /// (the patches take the others' themselves: [`Smoother::sweep_patch`]).
     fn prepare(
         &self,
         mesh: PatchMesh,
@@ -290,9 +293,12 @@ impl Smoother for VcsLowpass {
         _: FaceFields,
     ) {
         let (topo, lambda) = (mesh.topo, opts.lambda);
-        exec.vertex_pass(sums, &|first, out| {
-            laplacian::jacobi_step(topo, pos, out, first, lambda);
-        });
+        match mesh.border {
+            None => exec.vertex_pass(sums, &|first, out| {
+                laplacian::jacobi_step(topo, pos, out, first, lambda);
+            }),
+            Some(border) => lowpass::border_step(topo, pos, border, sums, lambda),
+        }
     }
     /// The blocks of the patch's vertices, ascending; its boundary stencils run after
     /// ([`Smoother::boundary_pass`]).
@@ -310,7 +316,20 @@ impl Smoother for VcsLowpass {
     ) -> PatchSweep {
         let (deviation, mu) = (params.deviation, opts.mu());
         let measure = measure.is_some();
-        lowpass::sweep_blocks(mesh, pos, sums, mu, vertices, deviation, measure)
+        match mesh.border {
+            None => lowpass::sweep_blocks(mesh, pos, sums, mu, vertices, deviation, measure),
+            Some(border) => {
+                let step = lowpass::patch_step(
+                    mesh.topo,
+                    &*pos,
+                    border,
+                    sums,
+                    vertices.clone(),
+                    opts.lambda,
+                );
+                lowpass::sweep_blocks(mesh, pos, &step, mu, vertices, deviation, measure)
+            }
+        }
     }
     fn boundary_pass(&self) -> bool {
         true
@@ -448,6 +467,7 @@ mod tests {
             topo: &topo,
             tris: &tris,
             sorted: true,
+            border: None,
         };
         let params = StencilParams {
             volume: true,
@@ -491,10 +511,84 @@ mod tests {
                 assert!(from_nan.iter().all(|p| p.is_finite()), "{}", unit.name);
                 assert_eq!(exact, from_nan, "{}", unit.name);
                 // No array of the mesh's size (out of core): the sums held by each patch
-                // ([`PatchSums`], which panics on a vertex beyond its two rings), the same bits.
+                // ([`PatchField::sums`], which panics on a vertex beyond its two rings), the same bits.
                 let (own, _) = run(Vec::new());
                 assert_eq!(exact, own, "{}", unit.name);
             }
+        }
+    }
+
+    /// The default method out of core keeps its λ step for the patches' border alone: a sweep of
+    /// the patches one by one, each taking the step of its other vertices as it starts, gives the
+    /// bits of the step of the whole mesh, with and without a deviation bound. A border vertex's
+    /// step taken at its patch's start instead would read neighbours that earlier patches moved.
+    /// On a noisy open sphere cut into small patches (most blocks reach outside their patch).
+    #[test]
+    fn the_default_method_on_the_border_alone_gives_the_bits_of_the_whole_step() {
+        let (pos, tris) = crate::shapes::open_sorted_sphere(4, 5);
+        let topo = Topology::build(pos.len(), &tris).unwrap();
+        let patches = partition::patches(pos.len(), &tris, 97);
+        let border = partition::border(&topo, &patches, &crate::mesh::Storage::heap()).unwrap();
+        assert!(!border.is_empty() && border.len() < pos.len() && border.is_sorted());
+        let opts = Options {
+            method: crate::smooth::Method::VcsLowpass,
+            ..Options::default()
+        };
+        let bound = stencil::Deviation {
+            input: &pos,
+            limit: 0.01,
+        };
+        for deviation in [None, Some(bound)] {
+            let params = StencilParams {
+                volume: true,
+                reject_energy_increase: false,
+                deviation,
+            };
+            let run = |border: Option<&[u32]>| {
+                let mut p = pos.clone();
+                // The λ step as `VcsLowpass::prepare` takes it, from the sweep's start.
+                let mut shares = match border {
+                    None => {
+                        let mut all = vec![DVec3::ZERO; pos.len()];
+                        laplacian::jacobi_step(&topo, &p, &mut all, 0, opts.lambda);
+                        all
+                    }
+                    Some(border) => {
+                        let mut some = vec![DVec3::ZERO; border.len()];
+                        lowpass::border_step(&topo, &p, border, &mut some, opts.lambda);
+                        some
+                    }
+                };
+                let mesh = PatchMesh {
+                    topo: &topo,
+                    tris: &tris,
+                    sorted: true,
+                    border,
+                };
+                // SAFETY: one thread, nothing else uses the arrays while the views live.
+                let (mut pv, mut sv) =
+                    unsafe { (SharedField::new(&mut p), SharedField::new(&mut shares)) };
+                let mut st = SweepStats::default();
+                for patch in &patches {
+                    let swept = VcsLowpass.sweep_patch(
+                        mesh,
+                        &opts,
+                        patch.vertices.clone(),
+                        patch.triangles.clone(),
+                        &mut pv,
+                        &mut sv,
+                        params,
+                        None,
+                        None,
+                    );
+                    st.add(&swept.stencils);
+                }
+                (p, st.applied + st.deviation_limited)
+            };
+            let (whole, blocks) = run(None);
+            let (own, _) = run(Some(&border));
+            assert!(blocks > 0 && whole != pos);
+            assert_eq!(whole, own, "deviation {deviation:?}");
         }
     }
 }

@@ -633,25 +633,26 @@ fn two_rings(topo: &Topology, vertices: &Range<u32>) -> Vec<u32> {
     ring
 }
 
-/// The sums of [`rebuild_patch_sums`] held by the patch itself while it runs: its vertices' in one
-/// array, its two rings' beside a sorted list of them. The same bits as the sums of the mesh's
-/// size rebuilt per patch, without that array: what a run out of core uses, where that array
-/// would be 12 B per triangle more of scratch to pass through the page cache. In core the array
-/// is cheaper to read (no test of which part holds a vertex).
-pub struct PatchSums {
+/// A field held by a patch itself while it runs: its vertices' values in one array, a few
+/// rings' around them beside a sorted list of those vertices. The neighbour sums of
+/// [`rebuild_patch_sums`] ([`PatchField::sums`]) and the default method's λ step
+/// ([`lowpass`]) are held so out of core, the same bits as in the array of the mesh's size,
+/// which would be 12 B per triangle more of scratch to pass through the page cache. In core the
+/// array is cheaper to read (no test of which part holds a vertex).
+pub struct PatchField {
     first: u32,
-    /// The sums of the patch's vertices, from `first` on.
+    /// The values of the patch's vertices, from `first` on.
     inner: Vec<DVec3>,
-    /// The two rings around them, ascending, and their sums.
+    /// The rings around them, ascending, and their values.
     ring: Vec<u32>,
     outer: Vec<DVec3>,
 }
 
-impl PatchSums {
-    /// The sums of the patch of `vertices` from `pos`.
-    pub fn rebuild<P: Field + ?Sized>(topo: &Topology, pos: &P, vertices: Range<u32>) -> PatchSums {
+impl PatchField {
+    /// The neighbour sums of the patch of `vertices` and its two rings, from `pos`.
+    pub fn sums<P: Field + ?Sized>(topo: &Topology, pos: &P, vertices: Range<u32>) -> PatchField {
         let ring = two_rings(topo, &vertices);
-        PatchSums {
+        PatchField {
             first: vertices.start,
             inner: vertices.map(|v| neighbor_sum(topo, pos, v)).collect(),
             outer: ring.iter().map(|&v| neighbor_sum(topo, pos, v)).collect(),
@@ -659,7 +660,19 @@ impl PatchSums {
         }
     }
 
-    /// Where `v`'s sum is held.
+    /// The field of the vertices from `first` on (`inner`) and of the vertices `ring` (ascending,
+    /// none of them among the first), `outer` in the same order.
+    pub fn new(first: u32, inner: Vec<DVec3>, ring: Vec<u32>, outer: Vec<DVec3>) -> PatchField {
+        debug_assert!(ring.is_sorted() && ring.len() == outer.len());
+        PatchField {
+            first,
+            inner,
+            ring,
+            outer,
+        }
+    }
+
+    /// Where `v`'s value is held.
     #[inline]
     fn slot_mut(&mut self, v: u32) -> &mut DVec3 {
         let i = v.wrapping_sub(self.first) as usize;
@@ -671,19 +684,18 @@ impl PatchSums {
         }
     }
 
-    /// The slot of `v`, one of the two rings (kept out of the kernels' inlined code: most reads
-    /// are the patch's own vertices). A vertex more than two rings from the patch has none: a
-    /// stencil of the patch never reads it.
+    /// The slot of `v`, one of the rings (kept out of the kernels' inlined code: most reads are
+    /// the patch's own vertices). A vertex beyond them has none: the patch never reads it.
     #[cold]
     #[inline(never)]
     fn ring_slot(&self, v: u32) -> usize {
         self.ring
             .binary_search(&v)
-            .unwrap_or_else(|_| panic!("vertex {v} is beyond the patch's two rings"))
+            .unwrap_or_else(|_| panic!("vertex {v} is beyond the patch's rings"))
     }
 }
 
-impl Field for PatchSums {
+impl Field for PatchField {
     #[inline]
     fn get(&self, v: u32) -> DVec3 {
         let i = v.wrapping_sub(self.first) as usize;
