@@ -175,7 +175,8 @@ pub fn patch_step<P: Field + ?Sized, S: Field + ?Sized>(
 ) -> PatchField {
     let parts = topo.parts();
     let value = |k: usize| values.get(k as u32);
-    let mut next = border.partition_point(|&b| b < vertices.start);
+    let first = border.partition_point(|&b| b < vertices.start);
+    let mut next = first;
     let inner = vertices
         .clone()
         .map(|v| match border.get(next) == Some(&v) {
@@ -186,9 +187,10 @@ pub fn patch_step<P: Field + ?Sized, S: Field + ?Sized>(
             false => laplacian::jacobi_at(&parts, pos, v, lambda),
         })
         .collect();
-    let mut ring: Vec<u32> = vertices
-        .clone()
-        .flat_map(|v| topo.neighbors(v).iter().copied())
+    // The neighbours outside the patch: those of its border vertices (`first .. next`).
+    let mut ring: Vec<u32> = border[first..next]
+        .iter()
+        .flat_map(|&v| topo.neighbors(v).iter().copied())
         .filter(|u| !vertices.contains(u))
         .collect();
     ring.sort_unstable();
