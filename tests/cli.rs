@@ -847,10 +847,11 @@ fn vcs_lowpass_output_identical_across_threads_and_memory_budgets() {
     assert_eq!(rm["memory"]["storage"], "scratch");
     assert!(mapped == one, "scratch-mapped run differs from in-core");
     // Out of core the λ step is kept for the patches' border alone (each patch takes its other
-    // vertices' as it starts): the peak is the smoothing's as for `vcs` (55.3 B per triangle, see
-    // `smooth_output_identical_across_threads_and_memory_budgets`) and the border's steps (24 B
-    // and a 4 B id for each of about 8 % of the vertices at this patch size): 56.0, where the
-    // step of every vertex made 66.5.
+    // vertices' as it starts): the peak is the smoothing's, the arrays of `vcs`'s (see
+    // `smooth_output_identical_across_threads_and_memory_budgets`) but the seam (the blocks
+    // measure their own moves), and the border's steps (24 B and a 4 B id for each of the 11 % of
+    // the vertices with a neighbour in another patch at this patch size): 56.0 B per triangle,
+    // where the step of every vertex made 66.5.
     let m = rm["input"]["stats"]["triangles"].as_u64().unwrap();
     let peak = rm["memory"]["scratch_peak_bytes"].as_u64().unwrap();
     assert!(

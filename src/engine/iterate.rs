@@ -135,7 +135,8 @@ impl Sweep<'_> {
     }
 }
 
-/// The arrays the loop works in, one entry per vertex each (a rank touches only its region).
+/// The arrays the loop works in, one entry per vertex each (a rank touches only its region), but
+/// `scratch` with [`Sweep::border`]: one per border vertex.
 pub struct Buffers<'b> {
     /// The positions: smoothed in place.
     pub pos: &'b mut [DVec3],

@@ -186,7 +186,7 @@ impl Plan {
             true => Some(seam::Seam::of(topo, patches, |_| true, storage)?),
             false => None,
         };
-        // Out of core a stencil method's neighbour sums are each patch's own (`PatchField::sums`): an
+        // Out of core a stencil method's neighbour sums are each patch's own (`PatchField::rebuild_sums`): an
         // array of the mesh's size would be 12 B per triangle more to pass through the page cache.
         let keep_sums = *in_memory;
         // Out of core a method that can is given its shares on the patches' border alone: the
@@ -194,7 +194,7 @@ impl Plan {
         // stencils, after the method's, use the array of the mesh's size as neighbour sums.
         let smooth_loops = opts.boundary == crate::smooth::Boundary::Smooth;
         let border: Option<Buf<u32>> = match needs.border && !*in_memory && !smooth_loops {
-            true => Some(crate::partition::border(topo, patches, storage)?),
+            true => Some(crate::partition::patch_border(topo, patches, storage)?),
             false => None,
         };
         let mut scratch: Buf<DVec3> = match &border {
@@ -215,9 +215,11 @@ impl Plan {
             true => Some(auto::AutoStop::new(storage, n, opts)?),
             false => None,
         };
+        // The read-ahead advises each patch's vertex range: not of the border's array, which is
+        // indexed otherwise (and small).
         let advisors: Vec<_> = [
             reordered.positions.advisor(),
-            scratch.advisor(),
+            scratch.advisor().filter(|_| border.is_none()),
             input.advisor(),
         ]
         .into_iter()

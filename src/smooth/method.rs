@@ -153,10 +153,10 @@ pub struct Needs {
     pub input: bool,
     /// An auxiliary vector field ([`Schedule::TwoPass`]).
     pub aux: bool,
-    /// A vector field per vertex that [`Smoother::prepare`] fills before each sweep and the
-    /// stencils read ([`Schedule::Stencils`]; a Jacobi method's second buffer is there anyway).
+    /// A vector field per vertex (per border vertex with [`PatchMesh::border`]) that
+    /// [`Smoother::prepare`] fills before each sweep and the stencils read ([`Schedule::Stencils`]; a Jacobi method's second buffer is there anyway).
     /// Without it, a stencil method gets the array only in core, for its neighbour sums (out of
-    /// core each patch holds its own: [`super::PatchField::sums`]).
+    /// core each patch holds its own: [`super::PatchField::rebuild_sums`]).
     pub shares: bool,
     /// Whether a patch can compute the shares of its vertices whose neighbours are all its own
     /// when it starts, from the positions then (nothing has moved them yet), so that a run out of

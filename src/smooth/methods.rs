@@ -159,7 +159,7 @@ impl Smoother for StencilMethod {
         self.volume
     }
     /// The patch's neighbour sums rebuilt ([`super::rebuild_patch_sums`]) in `sums`, or in the
-    /// patch alone ([`PatchField::sums`]) when the run keeps no such array (out of core), then
+    /// patch alone ([`PatchField::rebuild_sums`]) when the run keeps no such array (out of core), then
     /// [`StencilMethod::sweep_with`]: the same bits either way.
     fn sweep_patch(
         &self,
@@ -177,7 +177,7 @@ impl Smoother for StencilMethod {
             measure.map(|_| vertices.clone().map(|v| pos.get(v)).collect());
         let stencils = match sums.is_empty() {
             true => {
-                let mut own = PatchField::sums(mesh.topo, &*pos, vertices.clone());
+                let mut own = PatchField::rebuild_sums(mesh.topo, &*pos, vertices.clone());
                 self.sweep_with(
                     mesh,
                     vertices.clone(),
@@ -297,6 +297,8 @@ impl Smoother for VcsLowpass {
             None => exec.vertex_pass(sums, &|first, out| {
                 laplacian::jacobi_step(topo, pos, out, first, lambda);
             }),
+            // Only a single process keeps the border alone (the cluster's ranks exchange the
+            // whole array through `exec`), so nothing is exchanged here.
             Some(border) => lowpass::border_step(topo, pos, border, sums, lambda),
         }
     }
@@ -511,7 +513,7 @@ mod tests {
                 assert!(from_nan.iter().all(|p| p.is_finite()), "{}", unit.name);
                 assert_eq!(exact, from_nan, "{}", unit.name);
                 // No array of the mesh's size (out of core): the sums held by each patch
-                // ([`PatchField::sums`], which panics on a vertex beyond its two rings), the same bits.
+                // ([`PatchField::rebuild_sums`], which panics on a vertex beyond its two rings), the same bits.
                 let (own, _) = run(Vec::new());
                 assert_eq!(exact, own, "{}", unit.name);
             }
@@ -521,74 +523,80 @@ mod tests {
     /// The default method out of core keeps its λ step for the patches' border alone: a sweep of
     /// the patches one by one, each taking the step of its other vertices as it starts, gives the
     /// bits of the step of the whole mesh, with and without a deviation bound. A border vertex's
-    /// step taken at its patch's start instead would read neighbours that earlier patches moved.
-    /// On a noisy open sphere cut into small patches (most blocks reach outside their patch).
+    /// step taken at its patch's start instead would read neighbours that earlier patches moved,
+    /// and an inner vertex's taken when its block starts would read vertices the patch's earlier
+    /// blocks moved. On noisy open spheres cut into small patches (one block each, most reaching
+    /// outside their patch) and into patches of four blocks.
     #[test]
     fn the_default_method_on_the_border_alone_gives_the_bits_of_the_whole_step() {
-        let (pos, tris) = crate::shapes::open_sorted_sphere(4, 5);
-        let topo = Topology::build(pos.len(), &tris).unwrap();
-        let patches = partition::patches(pos.len(), &tris, 97);
-        let border = partition::border(&topo, &patches, &crate::mesh::Storage::heap()).unwrap();
-        assert!(!border.is_empty() && border.len() < pos.len() && border.is_sorted());
-        let opts = Options {
-            method: crate::smooth::Method::VcsLowpass,
-            ..Options::default()
-        };
-        let bound = stencil::Deviation {
-            input: &pos,
-            limit: 0.01,
-        };
-        for deviation in [None, Some(bound)] {
-            let params = StencilParams {
-                volume: true,
-                reject_energy_increase: false,
-                deviation,
+        for (level, patch_size) in [(4, 97), (6, 4 * lowpass::BLOCK as usize)] {
+            let (pos, tris) = crate::shapes::open_sorted_sphere(level, 5);
+            let topo = Topology::build(pos.len(), &tris).unwrap();
+            let patches = partition::patches(pos.len(), &tris, patch_size);
+            let border =
+                partition::patch_border(&topo, &patches, &crate::mesh::Storage::heap()).unwrap();
+            assert!(!border.is_empty() && border.len() < pos.len() && border.is_sorted());
+            let opts = Options {
+                method: crate::smooth::Method::VcsLowpass,
+                ..Options::default()
             };
-            let run = |border: Option<&[u32]>| {
-                let mut p = pos.clone();
-                // The λ step as `VcsLowpass::prepare` takes it, from the sweep's start.
-                let mut shares = match border {
-                    None => {
-                        let mut all = vec![DVec3::ZERO; pos.len()];
-                        laplacian::jacobi_step(&topo, &p, &mut all, 0, opts.lambda);
-                        all
-                    }
-                    Some(border) => {
-                        let mut some = vec![DVec3::ZERO; border.len()];
-                        lowpass::border_step(&topo, &p, border, &mut some, opts.lambda);
-                        some
-                    }
-                };
-                let mesh = PatchMesh {
-                    topo: &topo,
-                    tris: &tris,
-                    sorted: true,
-                    border,
-                };
-                // SAFETY: one thread, nothing else uses the arrays while the views live.
-                let (mut pv, mut sv) =
-                    unsafe { (SharedField::new(&mut p), SharedField::new(&mut shares)) };
-                let mut st = SweepStats::default();
-                for patch in &patches {
-                    let swept = VcsLowpass.sweep_patch(
-                        mesh,
-                        &opts,
-                        patch.vertices.clone(),
-                        patch.triangles.clone(),
-                        &mut pv,
-                        &mut sv,
-                        params,
-                        None,
-                        None,
-                    );
-                    st.add(&swept.stencils);
-                }
-                (p, st.applied + st.deviation_limited)
+            let bound = stencil::Deviation {
+                input: &pos,
+                limit: 0.01,
             };
-            let (whole, blocks) = run(None);
-            let (own, _) = run(Some(&border));
-            assert!(blocks > 0 && whole != pos);
-            assert_eq!(whole, own, "deviation {deviation:?}");
+            for deviation in [None, Some(bound)] {
+                let params = StencilParams {
+                    volume: true,
+                    reject_energy_increase: false,
+                    deviation,
+                };
+                let run = |border: Option<&[u32]>| {
+                    let mut p = pos.clone();
+                    // The λ step as `VcsLowpass::prepare` takes it, from the sweep's start.
+                    let mut shares = match border {
+                        None => {
+                            let mut all = vec![DVec3::ZERO; pos.len()];
+                            laplacian::jacobi_step(&topo, &p, &mut all, 0, opts.lambda);
+                            all
+                        }
+                        Some(border) => {
+                            let mut some = vec![DVec3::ZERO; border.len()];
+                            lowpass::border_step(&topo, &p, border, &mut some, opts.lambda);
+                            some
+                        }
+                    };
+                    let mesh = PatchMesh {
+                        topo: &topo,
+                        tris: &tris,
+                        sorted: true,
+                        border,
+                    };
+                    // SAFETY: one thread, nothing else uses the arrays while the views live.
+                    let (mut pv, mut sv) =
+                        unsafe { (SharedField::new(&mut p), SharedField::new(&mut shares)) };
+                    let mut st = SweepStats::default();
+                    for patch in &patches {
+                        let swept = VcsLowpass.sweep_patch(
+                            mesh,
+                            &opts,
+                            patch.vertices.clone(),
+                            patch.triangles.clone(),
+                            &mut pv,
+                            &mut sv,
+                            params,
+                            None,
+                            None,
+                        );
+                        st.add(&swept.stencils);
+                    }
+                    (p, st.applied + st.deviation_limited)
+                };
+                let (whole, blocks) = run(None);
+                let (own, own_blocks) = run(Some(&border));
+                assert!(blocks > 0 && whole != pos);
+                assert_eq!(blocks, own_blocks);
+                assert_eq!(whole, own, "level {level}, deviation {deviation:?}");
+            }
         }
     }
 }

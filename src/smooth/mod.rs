@@ -635,7 +635,7 @@ fn two_rings(topo: &Topology, vertices: &Range<u32>) -> Vec<u32> {
 
 /// A field held by a patch itself while it runs: its vertices' values in one array, a few
 /// rings' around them beside a sorted list of those vertices. The neighbour sums of
-/// [`rebuild_patch_sums`] ([`PatchField::sums`]) and the default method's λ step
+/// [`rebuild_patch_sums`] ([`PatchField::rebuild_sums`]) and the default method's λ step
 /// ([`lowpass`]) are held so out of core, the same bits as in the array of the mesh's size,
 /// which would be 12 B per triangle more of scratch to pass through the page cache. In core the
 /// array is cheaper to read (no test of which part holds a vertex).
@@ -650,7 +650,11 @@ pub struct PatchField {
 
 impl PatchField {
     /// The neighbour sums of the patch of `vertices` and its two rings, from `pos`.
-    pub fn sums<P: Field + ?Sized>(topo: &Topology, pos: &P, vertices: Range<u32>) -> PatchField {
+    pub fn rebuild_sums<P: Field + ?Sized>(
+        topo: &Topology,
+        pos: &P,
+        vertices: Range<u32>,
+    ) -> PatchField {
         let ring = two_rings(topo, &vertices);
         PatchField {
             first: vertices.start,
@@ -663,7 +667,9 @@ impl PatchField {
     /// The field of the vertices from `first` on (`inner`) and of the vertices `ring` (ascending,
     /// none of them among the first), `outer` in the same order.
     pub fn new(first: u32, inner: Vec<DVec3>, ring: Vec<u32>, outer: Vec<DVec3>) -> PatchField {
+        let mine = first as usize..first as usize + inner.len();
         debug_assert!(ring.is_sorted() && ring.len() == outer.len());
+        debug_assert!(ring.iter().all(|&v| !mine.contains(&(v as usize))));
         PatchField {
             first,
             inner,
