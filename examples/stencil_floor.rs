@@ -22,7 +22,7 @@ use glam::DVec3;
 use vcsmooth::engine::plan::{Layout, Plan};
 use vcsmooth::mesh::Storage;
 use vcsmooth::smooth::neighbor_sums;
-use vcsmooth::smooth::stencil::{self, StencilParams};
+use vcsmooth::smooth::stencil::{self, StencilParams, shared_face};
 use vcsmooth::topology::{Topology, corners_after};
 
 fn median(mut seconds: Vec<f64>) -> f64 {
@@ -58,35 +58,6 @@ fn fans(topo: &Topology, tris: &[[u32; 3]]) -> Option<(Vec<usize>, Vec<u32>)> {
         }
     }
     Some((offsets.to_vec(), ring))
-}
-
-/// The stencil's shared face `(f, b, c)` with free corners among b and c: see
-/// `stencil::shared_face`, the same formula.
-#[allow(clippy::too_many_arguments)]
-#[inline(always)]
-fn shared(
-    p: DVec3,
-    q: DVec3,
-    r: DVec3,
-    df: DVec3,
-    db: DVec3,
-    dc: DVec3,
-    bf: bool,
-    cf: bool,
-) -> (f64, DVec3, f64) {
-    let (bp, bq, br) = (p + df, q + db, r + dc);
-    let (qr, qr0) = (bq.cross(br), q.cross(r));
-    let dv = bp.dot(qr) - p.dot(qr0);
-    let (mut nt, mut nt0) = (qr, qr0);
-    if bf {
-        nt += br.cross(bp);
-        nt0 += r.cross(p);
-    }
-    if cf {
-        nt += bp.cross(bq);
-        nt0 += p.cross(q);
-    }
-    (dv, nt, nt0.length_squared())
 }
 
 /// One `vcs` edge stencil on fan-ordered rings; false when skipped as degenerate.
@@ -188,10 +159,12 @@ fn fan_stencil(
     dv += d[0].dot(sf) + d[1].dot(sg);
     n += sf + sg;
     let (p, q1, q2) = (pf - origin, pg - origin, rel_f[jn]);
-    let (x, nt, s) = shared(p, q1, q2, d[0], d[1], DVec3::ZERO, true, false);
-    (dv, n, scale) = (dv + x, n + nt, scale + s);
-    let (x, nt, s) = shared(p, rel_f[jp], q1, d[0], DVec3::ZERO, d[1], false, true);
-    (dv, n, scale) = (dv + x, n + nt, scale + s);
+    let z = DVec3::ZERO;
+    let acc = (&mut dv, &mut n, &mut scale);
+    shared_face(p, q1, q2, d[0], d[1], z, true, false, acc.0, acc.1, acc.2);
+    shared_face(
+        p, rel_f[jp], q1, d[0], z, d[1], false, true, acc.0, acc.1, acc.2,
+    );
     let nn = n.length_squared();
     if !(nn > 1e-20 * scale) {
         return false;

@@ -418,7 +418,7 @@ fn volume_translation<const N: usize, P: Field + ?Sized>(
 /// size before the step, the face's share of the yardstick, to `scale`.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-pub(crate) fn shared_face(
+pub fn shared_face(
     p: DVec3,
     q: DVec3,
     r: DVec3,
