@@ -868,6 +868,13 @@ pub fn copies_positions(unit: &dyn Smoother, opts: &Options) -> bool {
         || opts.auto_stop
 }
 
+/// Whether a run of `unit` with `opts` out of core keeps the method's shares for the patches'
+/// border alone ([`Sweep::border`]): not when the boundary loops are smoothed, whose stencils,
+/// after the method's, use the array of the mesh's size as neighbour sums.
+pub fn keeps_border(unit: &dyn Smoother, opts: &Options) -> bool {
+    unit.needs().border && opts.boundary != crate::smooth::Boundary::Smooth
+}
+
 /// Whether a run of `unit` with `opts` keeps the seam of its patches ([`Seam`]) in place of the
 /// copy of the positions.
 pub fn keeps_seam(unit: &dyn Smoother, opts: &Options) -> bool {

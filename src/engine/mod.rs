@@ -186,14 +186,14 @@ impl Plan {
             true => Some(seam::Seam::of(topo, patches, |_| true, storage)?),
             false => None,
         };
-        // Out of core a stencil method's neighbour sums are each patch's own (`PatchField::rebuild_sums`): an
-        // array of the mesh's size would be 12 B per triangle more to pass through the page cache.
+        // Out of core a stencil method's neighbour sums are each patch's own
+        // (`PatchField::rebuild_sums`): an array of the mesh's size would be 12 B per triangle
+        // more to pass through the page cache.
         let keep_sums = *in_memory;
         // Out of core a method that can is given its shares on the patches' border alone: the
-        // patches take the others' as they start. Not when the boundary loops are smoothed: their
-        // stencils, after the method's, use the array of the mesh's size as neighbour sums.
-        let smooth_loops = opts.boundary == crate::smooth::Boundary::Smooth;
-        let border: Option<Buf<u32>> = match needs.border && !*in_memory && !smooth_loops {
+        // patches take the others' as they start.
+        let border_only = !*in_memory && iterate::keeps_border(opts.method.unit(), opts);
+        let border: Option<Buf<u32>> = match border_only {
             true => Some(crate::partition::patch_border(topo, patches, storage)?),
             false => None,
         };

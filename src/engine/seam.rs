@@ -14,14 +14,13 @@
 use std::ops::Range;
 
 use glam::DVec3;
-use rayon::prelude::*;
 
 use crate::error::Result;
 use crate::mesh::{Buf, Storage};
 use crate::partition::Patch;
 use crate::smooth::laplacian::StepStats;
 use crate::smooth::method::SeamPart;
-use crate::topology::{Topology, split_lens};
+use crate::topology::Topology;
 
 use super::reduce;
 
@@ -40,26 +39,11 @@ impl Seam {
         runs: impl Fn(usize) -> bool + Sync,
         storage: &Storage,
     ) -> Result<Seam> {
-        let on_seam =
-            |start: u32| move |&v: &u32| topo.neighbors(v).first().is_some_and(|&u| u < start);
-        let counts: Vec<usize> = (0..patches.len())
-            .into_par_iter()
-            .map(|p| match runs(p) {
-                true => {
-                    let vertices = patches[p].vertices.clone();
-                    vertices.clone().filter(on_seam(vertices.start)).count()
-                }
-                false => 0,
-            })
-            .collect();
-        let mut vertices: Buf<u32> = storage.zeroed(counts.iter().sum())?;
-        split_lens(&mut vertices, &counts)
-            .into_par_iter()
-            .zip(patches)
-            .for_each(|(out, patch)| {
-                let mut seam = patch.vertices.clone().filter(on_seam(patch.vertices.start));
-                out.fill_with(|| seam.next().expect("counted"));
-            });
+        let vertices = crate::partition::select_vertices(patches, runs, storage, |p, v| {
+            topo.neighbors(v)
+                .first()
+                .is_some_and(|&u| u < p.vertices.start)
+        })?;
         let positions = storage.zeroed(vertices.len())?;
         Ok(Seam {
             vertices,

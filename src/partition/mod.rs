@@ -578,20 +578,39 @@ pub fn patches(n_vertices: usize, triangles: &[[u32; 3]], patch_size: usize) -> 
 /// are the ranges [`patches`] cut, ascending; the list is in `storage` (out of core; 5 % of the
 /// vertices of a 1.3M-triangle sphere at the default patch size, 11 % at 4096).
 pub fn patch_border(topo: &Topology, patches: &[Patch], storage: &Storage) -> Result<Buf<u32>> {
-    let on = |p: &Patch| {
-        let own = p.vertices.clone();
-        p.vertices
-            .clone()
-            .filter(move |&v| topo.neighbors(v).iter().any(|u| !own.contains(u)))
+    select_vertices(
+        patches,
+        |_| true,
+        storage,
+        |p, v| topo.neighbors(v).iter().any(|u| !p.vertices.contains(u)),
+    )
+}
+
+/// The vertices `keep` selects of each patch that `runs`, patch after patch, ascending, in
+/// `storage`: counted, then written, in parallel over the patches.
+pub fn select_vertices(
+    patches: &[Patch],
+    runs: impl Fn(usize) -> bool + Sync,
+    storage: &Storage,
+    keep: impl Fn(&Patch, u32) -> bool + Sync,
+) -> Result<Buf<u32>> {
+    let kept = |k: usize| {
+        let p = &patches[k];
+        let vertices = if runs(k) { p.vertices.clone() } else { 0..0 };
+        vertices.filter(|&v| keep(p, v))
     };
-    let counts: Vec<usize> = patches.par_iter().map(|p| on(p).count()).collect();
+    let counts: Vec<usize> = (0..patches.len())
+        .into_par_iter()
+        .map(|k| kept(k).count())
+        .collect();
     let mut out: Buf<u32> = storage.zeroed(counts.iter().sum())?;
-    let parts = crate::topology::split_lens(&mut out, &counts);
-    patches.par_iter().zip(parts).for_each(|(p, dst)| {
-        for (slot, v) in dst.iter_mut().zip(on(p)) {
-            *slot = v;
-        }
-    });
+    crate::topology::split_lens(&mut out, &counts)
+        .into_par_iter()
+        .enumerate()
+        .for_each(|(k, dst)| {
+            let mut vertices = kept(k);
+            dst.fill_with(|| vertices.next().expect("counted"));
+        });
     Ok(out)
 }
 

@@ -188,13 +188,7 @@ pub fn patch_step<P: Field + ?Sized, S: Field + ?Sized>(
         })
         .collect();
     // The neighbours outside the patch: those of its border vertices (`first .. next`).
-    let mut ring: Vec<u32> = border[first..next]
-        .iter()
-        .flat_map(|&v| topo.neighbors(v).iter().copied())
-        .filter(|u| !vertices.contains(u))
-        .collect();
-    ring.sort_unstable();
-    ring.dedup();
+    let ring = super::neighbors_outside(topo, border[first..next].iter().copied(), &vertices);
     let outer = ring
         .iter()
         .map(|u| {

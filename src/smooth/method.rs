@@ -154,7 +154,8 @@ pub struct Needs {
     /// An auxiliary vector field ([`Schedule::TwoPass`]).
     pub aux: bool,
     /// A vector field per vertex (per border vertex with [`PatchMesh::border`]) that
-    /// [`Smoother::prepare`] fills before each sweep and the stencils read ([`Schedule::Stencils`]; a Jacobi method's second buffer is there anyway).
+    /// [`Smoother::prepare`] fills before each sweep and the stencils read
+    /// ([`Schedule::Stencils`]; a Jacobi method's second buffer is there anyway).
     /// Without it, a stencil method gets the array only in core, for its neighbour sums (out of
     /// core each patch holds its own: [`super::PatchField::rebuild_sums`]).
     pub shares: bool,

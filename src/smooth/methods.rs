@@ -159,8 +159,8 @@ impl Smoother for StencilMethod {
         self.volume
     }
     /// The patch's neighbour sums rebuilt ([`super::rebuild_patch_sums`]) in `sums`, or in the
-    /// patch alone ([`PatchField::rebuild_sums`]) when the run keeps no such array (out of core), then
-    /// [`StencilMethod::sweep_with`]: the same bits either way.
+    /// patch alone ([`PatchField::rebuild_sums`]) when the run keeps no such array (out of
+    /// core), then [`StencilMethod::sweep_with`]: the same bits either way.
     fn sweep_patch(
         &self,
         mesh: PatchMesh,
@@ -513,7 +513,8 @@ mod tests {
                 assert!(from_nan.iter().all(|p| p.is_finite()), "{}", unit.name);
                 assert_eq!(exact, from_nan, "{}", unit.name);
                 // No array of the mesh's size (out of core): the sums held by each patch
-                // ([`PatchField::rebuild_sums`], which panics on a vertex beyond its two rings), the same bits.
+                // ([`PatchField::rebuild_sums`], which panics on a vertex beyond its two rings),
+                // the same bits.
                 let (own, _) = run(Vec::new());
                 assert_eq!(exact, own, "{}", unit.name);
             }

@@ -614,23 +614,28 @@ pub fn rebuild_patch_sums<P: Field + ?Sized, S: Field + ?Sized>(
 
 /// The vertices outside `vertices` within two rings of them, ascending.
 fn two_rings(topo: &Topology, vertices: &Range<u32>) -> Vec<u32> {
-    let inside = |v: u32| vertices.contains(&v);
-    let mut ring: Vec<u32> = vertices
-        .clone()
-        .flat_map(|v| topo.neighbors(v).iter().copied())
-        .filter(|&u| !inside(u))
-        .collect();
-    ring.sort_unstable();
-    ring.dedup();
-    let mut second: Vec<u32> = ring
-        .iter()
-        .flat_map(|&v| topo.neighbors(v).iter().copied())
-        .filter(|&u| !inside(u) && ring.binary_search(&u).is_err())
-        .collect();
+    let mut ring = neighbors_outside(topo, vertices.clone(), vertices);
+    let mut second = neighbors_outside(topo, ring.iter().copied(), vertices);
     ring.append(&mut second);
     ring.sort_unstable();
     ring.dedup();
     ring
+}
+
+/// The neighbours of the vertices `of` outside the patch of `vertices`, ascending, each once.
+pub(crate) fn neighbors_outside(
+    topo: &Topology,
+    of: impl IntoIterator<Item = u32>,
+    vertices: &Range<u32>,
+) -> Vec<u32> {
+    let mut out: Vec<u32> = of
+        .into_iter()
+        .flat_map(|v| topo.neighbors(v).iter().copied())
+        .filter(|u| !vertices.contains(u))
+        .collect();
+    out.sort_unstable();
+    out.dedup();
+    out
 }
 
 /// A field held by a patch itself while it runs: its vertices' values in one array, a few
