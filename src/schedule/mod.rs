@@ -36,8 +36,6 @@
 //! owned ranges are at most 2 + 3 = 5 rings apart: the same rule with 5 conflict rings instead of
 //! 4. Both colourings come from one breadth-first walk of 5 rings per patch.
 
-use std::collections::HashSet;
-
 use petgraph::graph::UnGraph;
 use rayon::prelude::*;
 
@@ -179,29 +177,35 @@ fn colour<'a>(near: impl Iterator<Item = &'a Near>, steps: usize) -> (Vec<Vec<u3
     (colours, near.iter().map(|n| n.halo).collect())
 }
 
-/// The vertices outside `p`'s owned range, ring by ring (ring 1 first), up to `depth` rings.
+/// The vertices outside `p`'s owned range, ring by ring (ring 1 first), up to `depth` rings; each
+/// ring ascending. A breadth-first walk: ring k + 1's vertices are the neighbours of ring k that
+/// lie neither inside nor in rings k − 1 and k, which holds every other neighbour (sorted runs
+/// rather than a hash set of everything seen: this ran for every patch of every run).
 fn rings_outside(topo: &Topology, p: &Patch, depth: usize) -> Vec<Vec<u32>> {
-    let inside = |v: u32| p.vertices.contains(&v);
-    let mut seen = HashSet::new();
-    let mut ring: Vec<u32> = Vec::new();
-    for v in p.vertices.clone() {
-        for &u in topo.neighbors(v) {
-            if !inside(u) && seen.insert(u) {
-                ring.push(u);
-            }
+    let outside = |v: &u32| !p.vertices.contains(v);
+    let mut rings: Vec<Vec<u32>> = Vec::with_capacity(depth);
+    for k in 0..depth {
+        let mut ring: Vec<u32> = match k {
+            0 => p
+                .vertices
+                .clone()
+                .flat_map(|v| topo.neighbors(v))
+                .copied()
+                .filter(outside)
+                .collect(),
+            _ => rings[k - 1]
+                .iter()
+                .flat_map(|&v| topo.neighbors(v))
+                .copied()
+                .filter(outside)
+                .collect(),
+        };
+        ring.sort_unstable();
+        ring.dedup();
+        for earlier in rings.iter().skip(k.saturating_sub(2)) {
+            ring.retain(|v| earlier.binary_search(v).is_err());
         }
-    }
-    let mut rings = vec![ring];
-    while rings.len() < depth {
-        let mut next = Vec::new();
-        for &v in rings.last().into_iter().flatten() {
-            for &u in topo.neighbors(v) {
-                if !inside(u) && seen.insert(u) {
-                    next.push(u);
-                }
-            }
-        }
-        rings.push(next);
+        rings.push(ring);
     }
     rings
 }
@@ -282,6 +286,55 @@ mod tests {
                 ]
             })
             .collect()
+    }
+
+    /// Each ring holds exactly the vertices at that graph distance from the patch (a plain
+    /// breadth-first search of distances over the whole mesh), on a sphere whose Morton patches
+    /// have ragged borders, and on the patch of the whole mesh (no ring).
+    #[test]
+    fn rings_are_the_vertices_at_each_distance_from_the_patch() {
+        let m = crate::shapes::icosphere(4);
+        let mut tris = m.triangles.to_vec();
+        tris.iter_mut().for_each(|t| t.sort_unstable());
+        tris.sort_unstable();
+        let n = m.positions.len();
+        let topo = Topology::build(n, &tris).unwrap();
+        let mut ps = partition::patches(n, &tris, 97);
+        ps.push(Patch {
+            vertices: 0..n as u32,
+            triangles: 0..tris.len() as u32,
+        });
+        for p in &ps {
+            let mut dist = vec![usize::MAX; n];
+            let mut front: Vec<u32> = p.vertices.clone().collect();
+            front.iter().for_each(|&v| dist[v as usize] = 0);
+            for d in 1..=RING_CONFLICT_RINGS {
+                let mut next = Vec::new();
+                for &v in &front {
+                    for &u in topo.neighbors(v) {
+                        if dist[u as usize] == usize::MAX {
+                            dist[u as usize] = d;
+                            next.push(u);
+                        }
+                    }
+                }
+                front = next;
+            }
+            let rings = rings_outside(&topo, p, RING_CONFLICT_RINGS);
+            assert_eq!(rings.len(), RING_CONFLICT_RINGS);
+            for (k, ring) in rings.iter().enumerate() {
+                let want: Vec<u32> = (0..n as u32)
+                    .filter(|&v| dist[v as usize] == k + 1)
+                    .collect();
+                assert_eq!(ring, &want, "patch {:?}, ring {}", p.vertices, k + 1);
+            }
+            let crossing = p
+                .edges(&topo)
+                .filter(|[_, j]| !p.vertices.contains(j))
+                .count() as u64;
+            assert_eq!(p.crossing_edges(&topo), crossing);
+        }
+        assert!(ps.len() > 20 && ps.iter().any(|p| p.crossing_edges(&topo) > 0));
     }
 
     #[test]
