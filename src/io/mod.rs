@@ -870,20 +870,28 @@ impl std::ops::Deref for Contents {
     }
 }
 
+/// The first index of `items` where `pred` holds, the chunks searched in parallel (the checks
+/// before a write look at every position and triangle).
+pub(crate) fn first_where<T: Sync>(items: &[T], pred: impl Fn(&T) -> bool + Sync) -> Option<usize> {
+    use rayon::prelude::*;
+    const CHUNK: usize = 1 << 16;
+    items
+        .par_chunks(CHUNK)
+        .enumerate()
+        .filter_map(|(c, chunk)| chunk.iter().position(&pred).map(|k| c * CHUNK + k))
+        .min()
+}
+
 /// Positions finite and triangle indices in range: the preconditions of every writer.
 fn check_mesh(mesh: &Mesh) -> std::result::Result<(), String> {
-    if let Some(i) = mesh.positions.iter().position(|p| !p.is_finite()) {
+    if let Some(i) = first_where(&mesh.positions, |p| !p.is_finite()) {
         return Err(format!(
             "vertex {i} has a non-finite coordinate {}",
             mesh.positions[i]
         ));
     }
     let n = mesh.positions.len();
-    if let Some(t) = mesh
-        .triangles
-        .iter()
-        .position(|t| t.iter().any(|&v| v as usize >= n))
-    {
+    if let Some(t) = first_where(&mesh.triangles, |t| t.iter().any(|&v| v as usize >= n)) {
         return Err(format!(
             "triangle {t} {:?} has a vertex index out of range (0..{n})",
             mesh.triangles[t]

@@ -2,13 +2,15 @@
 
 use std::borrow::Cow;
 use std::io::{self, Write};
+use std::ops::Range;
 
 use glam::DVec3;
+use rayon::prelude::*;
 
 use super::header::{Element, FaceRole, Kind, Property, Roles, Scalar, walk_record};
 use super::read::{Origin, decode_faces, decode_strips};
 use super::{Fallible, PlyEncoding, PlyLayout, ascii};
-use crate::io::{FaceBuilder, Faces, Precision, VertexValues, vertex_normals};
+use crate::io::{FaceBuilder, Faces, Precision, VertexValues, first_where, vertex_normals};
 use crate::mesh::Mesh;
 use crate::meter::Meter;
 
@@ -157,7 +159,7 @@ pub(crate) fn check_writable(mesh: &Mesh) -> Fallible<()> {
     }
     for (c, &k) in roles.xyz.iter().enumerate() {
         let t = vertex.scalar(k);
-        if let Some(i) = mesh.positions.iter().position(|p| !t.holds(p[c])) {
+        if let Some(i) = first_where(&mesh.positions, |p| !t.holds(p[c])) {
             let (v, name) = (mesh.positions[i][c], &vertex.props[k].name);
             return Err(format!(
                 "vertex {i}: coordinate {v} does not fit PLY property '{name}' ({})",
@@ -219,7 +221,11 @@ pub(crate) fn check_writable(mesh: &Mesh) -> Fallible<()> {
     }
     // The indices the faces use, not the vertex count: a `uchar` list may index the first 256
     // vertices of many.
-    let largest = mesh.triangles.iter().flatten().max();
+    let largest = mesh
+        .triangles
+        .par_chunks(1 << 16)
+        .filter_map(|chunk| chunk.iter().flatten().max())
+        .max();
     if let Some(&v) = largest.filter(|&&v| !index.holds(v as f64)) {
         return Err(format!(
             "vertex index {v} does not fit the PLY index type {}",
@@ -408,7 +414,6 @@ fn write_vertices(out: &mut impl Write, el: &Element, mesh: &Mesh, ascii: bool) 
         .iter()
         .map(|&(k, t, v)| (el.offset(k), t, v))
         .collect();
-    const CHUNK: usize = 1 << 15; // records per buffer
     // The plain layout, `x y z` of one floating-point type and nothing else: encode straight
     // from the positions.
     let plain = match &el.props[..] {
@@ -425,20 +430,15 @@ fn write_vertices(out: &mut impl Write, el: &Element, mesh: &Mesh, ascii: bool) 
         _ => None,
     };
     if let (false, None, Some(coordinate)) = (ascii, &el.records, plain) {
-        let mut buf = Vec::with_capacity(CHUNK * stride);
-        for chunk in mesh.positions.chunks(CHUNK) {
-            buf.clear();
-            for p in chunk {
-                put_xyz(coordinate, *p, &mut buf);
+        return write_encoded(out, mesh.positions.len(), |range, buf| {
+            for p in &mesh.positions[range] {
+                put_xyz(coordinate, *p, buf);
             }
-            out.write_all(&buf)?;
-        }
-        return Ok(());
+            Ok(())
+        });
     }
-    let mut buf = Vec::with_capacity(CHUNK * stride);
-    for start in (0..mesh.positions.len()).step_by(CHUNK) {
-        let end = (start + CHUNK).min(mesh.positions.len());
-        buf.clear();
+    let encode = |range: Range<usize>, buf: &mut Vec<u8>| {
+        let (start, end) = (range.start, range.end);
         match &el.records {
             Some(records) => buf.extend_from_slice(&records[start * stride..end * stride]),
             None => buf.resize((end - start) * stride, 0),
@@ -448,7 +448,68 @@ fn write_vertices(out: &mut impl Write, el: &Element, mesh: &Mesh, ascii: bool) 
                 t.put(value(i, t, v), &mut record[at..]);
             }
         }
-        emit(out, &el.props, &buf, ascii)?;
+        Ok(())
+    };
+    match ascii {
+        // Text goes through `emit` record by record, sequentially.
+        true => {
+            let mut buf = Vec::with_capacity(PIECE * stride);
+            for start in (0..mesh.positions.len()).step_by(PIECE) {
+                buf.clear();
+                encode(start..(start + PIECE).min(mesh.positions.len()), &mut buf)?;
+                emit(out, &el.props, &buf, ascii)?;
+            }
+            Ok(())
+        }
+        false => write_encoded(out, mesh.positions.len(), encode),
+    }
+}
+
+/// Items per piece of [`write_encoded`] (and per buffer of the sequential text writers).
+const PIECE: usize = 1 << 14;
+
+/// Pieces [`write_encoded`] encodes at once: one step of its pipeline.
+const PIECES_PER_STEP: usize = 16;
+
+/// Writes the binary records of items `0..count` to `out` in their order, `encode(range, buf)`
+/// appending those of the items `range` to `buf`. Pieces of [`PIECE`] items are encoded in
+/// parallel, a step of them while the step before is written: the write is not one thread's
+/// encoding. The bytes do not depend on the threads; the first error (in item order) is returned.
+fn write_encoded(
+    out: &mut impl Write,
+    count: usize,
+    encode: impl Fn(Range<usize>, &mut Vec<u8>) -> io::Result<()> + Sync,
+) -> io::Result<()> {
+    let pieces = count.div_ceil(PIECE);
+    let steps = pieces.div_ceil(PIECES_PER_STEP);
+    let encode_step = |step: usize, bufs: &mut Vec<Vec<u8>>| -> io::Result<()> {
+        let first = step * PIECES_PER_STEP;
+        bufs.resize_with(PIECES_PER_STEP.min(pieces - first), Vec::new);
+        bufs.par_iter_mut()
+            .enumerate()
+            .map(|(k, buf)| {
+                buf.clear();
+                let start = (first + k) * PIECE;
+                encode(start..(start + PIECE).min(count), buf)
+            })
+            .collect::<io::Result<()>>()
+    };
+    let (mut ready, mut next) = (Vec::new(), Vec::new());
+    if steps > 0 {
+        encode_step(0, &mut ready)?;
+    }
+    for step in 1..=steps {
+        let mut encoded = Ok(());
+        let written = rayon::in_place_scope(|scope| {
+            if step < steps {
+                let (next, encoded) = (&mut next, &mut encoded);
+                scope.spawn(move |_| *encoded = encode_step(step, next));
+            }
+            ready.iter().try_for_each(|buf| out.write_all(buf))
+        });
+        written?;
+        encoded?;
+        std::mem::swap(&mut ready, &mut next);
     }
     Ok(())
 }
@@ -614,17 +675,14 @@ fn write_faces(
 ) -> io::Result<()> {
     let FaceRole { count, index, .. } = face;
     const FLUSH: usize = 1 << 20; // bytes per buffer
-    if !ascii && faces.sizes.is_none() && (count, index) == (Scalar::U8, Scalar::I32) {
-        // Triangles as `list uchar int`: fixed 13-byte records, encoded in one tight loop.
-        let mut buf = Vec::with_capacity(FLUSH);
-        for chunk in faces.triangles.chunks(FLUSH / 13) {
-            buf.clear();
-            for t in chunk {
-                put_face(Scalar::U8, Scalar::I32, t, &mut buf);
+    if !ascii && faces.sizes.is_none() {
+        // Triangles: records of one length, encoded in parallel pieces.
+        return write_encoded(out, faces.triangles.len(), |range, buf| {
+            for t in &faces.triangles[range] {
+                put_face(count, index, t, buf);
             }
-            out.write_all(&buf)?;
-        }
-        return Ok(());
+            Ok(())
+        });
     }
     let mut buf = Vec::with_capacity(FLUSH + 1024);
     faces.try_for_each(|corners| {
@@ -636,4 +694,47 @@ fn write_faces(
         Ok::<_, io::Error>(())
     })?;
     emit(out, &el.props, &buf, ascii)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The pipeline writes its pieces in item order over several steps (a last short piece and
+    /// step included), for any thread count, and returns the first piece's error.
+    #[test]
+    fn encoded_pieces_are_written_in_item_order() {
+        let count = 2 * PIECES_PER_STEP * PIECE + 3 * PIECE + 17;
+        let encode = |range: Range<usize>, buf: &mut Vec<u8>| {
+            for i in range {
+                buf.extend_from_slice(&(i as u32).to_le_bytes());
+            }
+            Ok(())
+        };
+        let want: Vec<u8> = (0..count as u32).flat_map(u32::to_le_bytes).collect();
+        for threads in [1, 2, 3] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let mut out = Vec::new();
+            pool.install(|| write_encoded(&mut out, count, encode))
+                .unwrap();
+            assert!(out == want, "{threads} threads");
+            let failing = |range: Range<usize>, buf: &mut Vec<u8>| match range.start / PIECE {
+                k if k == PIECES_PER_STEP + 2 || k == PIECES_PER_STEP + 5 => {
+                    Err(io::Error::other(format!("piece {k}")))
+                }
+                _ => encode(range, buf),
+            };
+            let e = pool.install(|| write_encoded(&mut Vec::new(), count, failing));
+            assert_eq!(
+                e.unwrap_err().to_string(),
+                format!("piece {}", PIECES_PER_STEP + 2)
+            );
+        }
+        let mut out = Vec::new();
+        write_encoded(&mut out, 0, encode).unwrap();
+        assert!(out.is_empty());
+    }
 }
