@@ -177,37 +177,76 @@ fn colour<'a>(near: impl Iterator<Item = &'a Near>, steps: usize) -> (Vec<Vec<u3
     (colours, near.iter().map(|n| n.halo).collect())
 }
 
-/// The vertices outside `p`'s owned range, ring by ring (ring 1 first), up to `depth` rings; each
-/// ring ascending. A breadth-first walk: ring k + 1's vertices are the neighbours of ring k that
-/// lie neither inside nor in rings k − 1 and k, which holds every other neighbour (sorted runs
-/// rather than a hash set of everything seen: this ran for every patch of every run).
+/// The vertices outside `p`'s owned range, ring by ring (ring 1 first), up to `depth` rings: a
+/// breadth-first walk, each vertex in the ring where it is first met (in no particular order
+/// within it).
 fn rings_outside(topo: &Topology, p: &Patch, depth: usize) -> Vec<Vec<u32>> {
-    let outside = |v: &u32| !p.vertices.contains(v);
+    let outside = |v: u32| !p.vertices.contains(&v);
+    let mut seen = VertexSet::default();
     let mut rings: Vec<Vec<u32>> = Vec::with_capacity(depth);
-    for k in 0..depth {
-        let mut ring: Vec<u32> = match k {
-            0 => p
-                .vertices
-                .clone()
-                .flat_map(|v| topo.neighbors(v))
-                .copied()
-                .filter(outside)
-                .collect(),
-            _ => rings[k - 1]
-                .iter()
-                .flat_map(|&v| topo.neighbors(v))
-                .copied()
-                .filter(outside)
-                .collect(),
-        };
-        ring.sort_unstable();
-        ring.dedup();
-        for earlier in rings.iter().skip(k.saturating_sub(2)) {
-            ring.retain(|v| earlier.binary_search(v).is_err());
+    // The neighbours of a range of vertices are one run of the adjacency.
+    let (offsets, vv) = topo.csr();
+    let (s, e) = (p.vertices.start as usize, p.vertices.end as usize);
+    let mut ring: Vec<u32> = Vec::new();
+    for &u in &vv[offsets[s]..offsets[e]] {
+        if outside(u) && seen.insert(u) {
+            ring.push(u);
         }
+    }
+    while rings.len() + 1 < depth {
+        let mut next = Vec::new();
+        for &v in &ring {
+            for &u in topo.neighbors(v) {
+                if outside(u) && seen.insert(u) {
+                    next.push(u);
+                }
+            }
+        }
+        rings.push(std::mem::replace(&mut ring, next));
+    }
+    if depth > 0 {
         rings.push(ring);
     }
     rings
+}
+
+/// A set of vertex ids (open addressing, linear probing): the rings' walk meets each vertex of
+/// a ring several times.
+#[derive(Default)]
+struct VertexSet {
+    slots: Vec<u32>,
+    len: usize,
+}
+
+impl VertexSet {
+    const EMPTY: u32 = u32::MAX;
+
+    /// Adds `u`; whether it was new.
+    fn insert(&mut self, u: u32) -> bool {
+        if 2 * (self.len + 1) > self.slots.len() {
+            let old = std::mem::replace(
+                &mut self.slots,
+                vec![Self::EMPTY; (4 * self.len).max(1 << 12)],
+            );
+            self.len = 0;
+            for k in old.into_iter().filter(|&k| k != Self::EMPTY) {
+                self.insert(k);
+            }
+        }
+        let mask = self.slots.len() - 1;
+        let mut i = (u.wrapping_mul(0x9e37_79b1) as usize) & mask;
+        loop {
+            match self.slots[i] {
+                k if k == u => return false,
+                Self::EMPTY => {
+                    self.slots[i] = u;
+                    self.len += 1;
+                    return true;
+                }
+                _ => i = (i + 1) & mask,
+            }
+        }
+    }
 }
 
 /// The bounded read-ahead pipeline of out-of-core runs: while the patches of one colour are
@@ -326,7 +365,9 @@ mod tests {
                 let want: Vec<u32> = (0..n as u32)
                     .filter(|&v| dist[v as usize] == k + 1)
                     .collect();
-                assert_eq!(ring, &want, "patch {:?}, ring {}", p.vertices, k + 1);
+                let mut ring = ring.clone();
+                ring.sort_unstable();
+                assert_eq!(ring, want, "patch {:?}, ring {}", p.vertices, k + 1);
             }
             let crossing = p
                 .edges(&topo)
