@@ -480,6 +480,16 @@ fn write_encoded(
     count: usize,
     encode: impl Fn(Range<usize>, &mut Vec<u8>) -> io::Result<()> + Sync,
 ) -> io::Result<()> {
+    if rayon::current_num_threads() == 1 {
+        // Nothing to overlap: one buffer, piece after piece.
+        let mut buf = Vec::new();
+        for start in (0..count).step_by(PIECE) {
+            buf.clear();
+            encode(start..(start + PIECE).min(count), &mut buf)?;
+            out.write_all(&buf)?;
+        }
+        return Ok(());
+    }
     let pieces = count.div_ceil(PIECE);
     let steps = pieces.div_ceil(PIECES_PER_STEP);
     let encode_step = |step: usize, bufs: &mut Vec<Vec<u8>>| -> io::Result<()> {
