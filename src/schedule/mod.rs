@@ -234,7 +234,9 @@ impl VertexSet {
             }
         }
         let mask = self.slots.len() - 1;
-        let mut i = (u.wrapping_mul(0x9e37_79b1) as usize) & mask;
+        // The product's high bits: its low bits depend on the id's low bits alone.
+        let shift = 64 - self.slots.len().trailing_zeros();
+        let mut i = ((u as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15) >> shift) as usize;
         loop {
             match self.slots[i] {
                 k if k == u => return false,

@@ -495,14 +495,18 @@ fn write_encoded(
     let encode_step = |step: usize, bufs: &mut Vec<Vec<u8>>| -> io::Result<()> {
         let first = step * PIECES_PER_STEP;
         bufs.resize_with(PIECES_PER_STEP.min(pieces - first), Vec::new);
-        bufs.par_iter_mut()
+        // Each piece's result kept, so that the first error is the first piece's, not the one
+        // that happened first.
+        let results: Vec<io::Result<()>> = bufs
+            .par_iter_mut()
             .enumerate()
             .map(|(k, buf)| {
                 buf.clear();
                 let start = (first + k) * PIECE;
                 encode(start..(start + PIECE).min(count), buf)
             })
-            .collect::<io::Result<()>>()
+            .collect();
+        results.into_iter().collect()
     };
     let (mut ready, mut next) = (Vec::new(), Vec::new());
     if steps > 0 {
