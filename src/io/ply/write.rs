@@ -430,7 +430,7 @@ fn write_vertices(out: &mut impl Write, el: &Element, mesh: &Mesh, ascii: bool) 
         _ => None,
     };
     if let (false, None, Some(coordinate)) = (ascii, &el.records, plain) {
-        return write_encoded(out, mesh.positions.len(), |range, buf| {
+        return write_encoded(out, mesh.positions.len(), stride, |range, buf| {
             for p in &mesh.positions[range] {
                 put_xyz(coordinate, *p, buf);
             }
@@ -461,36 +461,47 @@ fn write_vertices(out: &mut impl Write, el: &Element, mesh: &Mesh, ascii: bool) 
             }
             Ok(())
         }
-        false => write_encoded(out, mesh.positions.len(), encode),
+        false => write_encoded(out, mesh.positions.len(), stride, encode),
     }
 }
 
-/// Items per piece of [`write_encoded`] (and per buffer of the sequential text writers).
+/// Records per buffer of the sequential text writer.
 const PIECE: usize = 1 << 14;
+
+/// Bytes of records per piece of [`write_encoded`].
+const PIECE_BYTES: usize = 1 << 18;
 
 /// Pieces [`write_encoded`] encodes at once: one step of its pipeline.
 const PIECES_PER_STEP: usize = 16;
 
-/// Writes the binary records of items `0..count` to `out` in their order, `encode(range, buf)`
-/// appending those of the items `range` to `buf`. Pieces of [`PIECE`] items are encoded in
-/// parallel, a step of them while the step before is written: the write is not one thread's
-/// encoding. The bytes do not depend on the threads; the first error (in item order) is returned.
+/// Items per piece of [`write_encoded`] for records of `record` bytes.
+fn piece_len(record: usize) -> usize {
+    (PIECE_BYTES / record.max(1)).max(1)
+}
+
+/// Writes the binary records of items `0..count`, `record` bytes each, to `out` in their order,
+/// `encode(range, buf)` appending those of the items `range` to `buf`. Pieces of
+/// [`PIECE_BYTES`] are encoded in parallel, a step of them while the step before is written: the
+/// write is not one thread's encoding, and two steps' buffers (8 MiB) are what it holds. The
+/// bytes do not depend on the threads; the first error (in item order) is returned.
 fn write_encoded(
     out: &mut impl Write,
     count: usize,
+    record: usize,
     encode: impl Fn(Range<usize>, &mut Vec<u8>) -> io::Result<()> + Sync,
 ) -> io::Result<()> {
+    let piece = piece_len(record);
     if rayon::current_num_threads() == 1 {
         // Nothing to overlap: one buffer, piece after piece.
         let mut buf = Vec::new();
-        for start in (0..count).step_by(PIECE) {
+        for start in (0..count).step_by(piece) {
             buf.clear();
-            encode(start..(start + PIECE).min(count), &mut buf)?;
+            encode(start..(start + piece).min(count), &mut buf)?;
             out.write_all(&buf)?;
         }
         return Ok(());
     }
-    let pieces = count.div_ceil(PIECE);
+    let pieces = count.div_ceil(piece);
     let steps = pieces.div_ceil(PIECES_PER_STEP);
     let encode_step = |step: usize, bufs: &mut Vec<Vec<u8>>| -> io::Result<()> {
         let first = step * PIECES_PER_STEP;
@@ -502,8 +513,8 @@ fn write_encoded(
             .enumerate()
             .map(|(k, buf)| {
                 buf.clear();
-                let start = (first + k) * PIECE;
-                encode(start..(start + PIECE).min(count), buf)
+                let start = (first + k) * piece;
+                encode(start..(start + piece).min(count), buf)
             })
             .collect();
         results.into_iter().collect()
@@ -691,7 +702,8 @@ fn write_faces(
     const FLUSH: usize = 1 << 20; // bytes per buffer
     if !ascii && faces.sizes.is_none() {
         // Triangles: records of one length, encoded in parallel pieces.
-        return write_encoded(out, faces.triangles.len(), |range, buf| {
+        let record = count.size() + 3 * index.size();
+        return write_encoded(out, faces.triangles.len(), record, |range, buf| {
             for t in &faces.triangles[range] {
                 put_face(count, index, t, buf);
             }
@@ -718,7 +730,8 @@ mod tests {
     /// step included), for any thread count, and returns the first piece's error.
     #[test]
     fn encoded_pieces_are_written_in_item_order() {
-        let count = 2 * PIECES_PER_STEP * PIECE + 3 * PIECE + 17;
+        let piece = piece_len(4);
+        let count = 2 * PIECES_PER_STEP * piece + 3 * piece + 17;
         let encode = |range: Range<usize>, buf: &mut Vec<u8>| {
             for i in range {
                 buf.extend_from_slice(&(i as u32).to_le_bytes());
@@ -732,23 +745,23 @@ mod tests {
                 .build()
                 .unwrap();
             let mut out = Vec::new();
-            pool.install(|| write_encoded(&mut out, count, encode))
+            pool.install(|| write_encoded(&mut out, count, 4, encode))
                 .unwrap();
             assert!(out == want, "{threads} threads");
-            let failing = |range: Range<usize>, buf: &mut Vec<u8>| match range.start / PIECE {
+            let failing = |range: Range<usize>, buf: &mut Vec<u8>| match range.start / piece {
                 k if k == PIECES_PER_STEP + 2 || k == PIECES_PER_STEP + 5 => {
                     Err(io::Error::other(format!("piece {k}")))
                 }
                 _ => encode(range, buf),
             };
-            let e = pool.install(|| write_encoded(&mut Vec::new(), count, failing));
+            let e = pool.install(|| write_encoded(&mut Vec::new(), count, 4, failing));
             assert_eq!(
                 e.unwrap_err().to_string(),
                 format!("piece {}", PIECES_PER_STEP + 2)
             );
         }
         let mut out = Vec::new();
-        write_encoded(&mut out, 0, encode).unwrap();
+        write_encoded(&mut out, 0, 4, encode).unwrap();
         assert!(out.is_empty());
     }
 }
