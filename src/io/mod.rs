@@ -870,6 +870,78 @@ impl std::ops::Deref for Contents {
     }
 }
 
+/// Bytes of records per piece of [`write_encoded`].
+const PIECE_BYTES: usize = 1 << 18;
+
+/// Pieces [`write_encoded`] encodes at once: one step of its pipeline.
+const PIECES_PER_STEP: usize = 16;
+
+/// Items per piece of [`write_encoded`] for records of `record` bytes.
+fn piece_len(record: usize) -> usize {
+    (PIECE_BYTES / record.max(1)).max(1)
+}
+
+/// Writes the records of items `0..count`, about `record` bytes each, to `out` in their order,
+/// `encode(range, buf)` appending those of the items `range` to `buf`. Pieces of
+/// [`PIECE_BYTES`] are encoded in parallel, a step of them while the step before is written: the
+/// write is not one thread's encoding, and two steps' buffers (8 MiB) are what it holds. The
+/// bytes do not depend on the threads; the first error (in item order) is returned.
+pub(crate) fn write_encoded(
+    out: &mut impl Write,
+    count: usize,
+    record: usize,
+    encode: impl Fn(std::ops::Range<usize>, &mut Vec<u8>) -> std::io::Result<()> + Sync,
+) -> std::io::Result<()> {
+    use rayon::prelude::*;
+    let piece = piece_len(record);
+    if rayon::current_num_threads() == 1 {
+        // Nothing to overlap: one buffer, piece after piece.
+        let mut buf = Vec::new();
+        for start in (0..count).step_by(piece) {
+            buf.clear();
+            encode(start..(start + piece).min(count), &mut buf)?;
+            out.write_all(&buf)?;
+        }
+        return Ok(());
+    }
+    let pieces = count.div_ceil(piece);
+    let steps = pieces.div_ceil(PIECES_PER_STEP);
+    let encode_step = |step: usize, bufs: &mut Vec<Vec<u8>>| -> std::io::Result<()> {
+        let first = step * PIECES_PER_STEP;
+        bufs.resize_with(PIECES_PER_STEP.min(pieces - first), Vec::new);
+        // Each piece's result kept, so that the first error is the first piece's, not the one
+        // that happened first.
+        let results: Vec<std::io::Result<()>> = bufs
+            .par_iter_mut()
+            .enumerate()
+            .map(|(k, buf)| {
+                buf.clear();
+                let start = (first + k) * piece;
+                encode(start..(start + piece).min(count), buf)
+            })
+            .collect();
+        results.into_iter().collect()
+    };
+    let (mut ready, mut next) = (Vec::new(), Vec::new());
+    if steps > 0 {
+        encode_step(0, &mut ready)?;
+    }
+    for step in 1..=steps {
+        let mut encoded = Ok(());
+        let written = rayon::in_place_scope(|scope| {
+            if step < steps {
+                let (next, encoded) = (&mut next, &mut encoded);
+                scope.spawn(move |_| *encoded = encode_step(step, next));
+            }
+            ready.iter().try_for_each(|buf| out.write_all(buf))
+        });
+        written?;
+        encoded?;
+        std::mem::swap(&mut ready, &mut next);
+    }
+    Ok(())
+}
+
 /// The first index of `items` where `pred` holds, the chunks searched in parallel (the checks
 /// before a write look at every position and triangle).
 pub(crate) fn first_where<T: Sync>(items: &[T], pred: impl Fn(&T) -> bool + Sync) -> Option<usize> {

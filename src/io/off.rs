@@ -15,7 +15,7 @@ use std::sync::Arc;
 
 use super::{
     Digits, FaceBuilder, Faces, Format, MAX_HEADER_LINE, Source, Spelling, bad_index, integer,
-    number, show, text_position, tokens, vertex_normals, without_bom, write_xyz,
+    number, show, text_position, tokens, vertex_normals, without_bom, write_encoded, write_xyz,
 };
 use crate::mesh::{Carried, FileLayout, Mesh};
 
@@ -371,15 +371,34 @@ fn token_spans(line: &[u8]) -> Vec<(usize, usize)> {
 fn write_plain(out: &mut impl Write, mesh: &Mesh) -> io::Result<()> {
     let faces = Faces::of(mesh);
     writeln!(out, "OFF\n{} {} 0", mesh.positions.len(), faces.len())?;
-    for &p in &mesh.positions {
-        write_xyz(out, p, Spelling::of(&mesh.source))?;
-        out.write_all(b"\n")?;
-    }
-    faces.try_for_each(|corners| {
+    let spelling = Spelling::of(&mesh.source);
+    // Lines of about 36 and 24 bytes: what sizes the pieces encoded in parallel.
+    write_encoded(out, mesh.positions.len(), 36, |range, buf| {
+        for &p in &mesh.positions[range] {
+            write_xyz(buf, p, spelling)?;
+            buf.push(b'\n');
+        }
+        Ok(())
+    })?;
+    let face = |out: &mut Vec<u8>, corners: &[u32]| {
         write!(out, "{}", corners.len())?;
         for &v in corners {
             write!(out, " {v}")?;
         }
-        out.write_all(b"\n")
-    })
+        out.push(b'\n');
+        Ok(())
+    };
+    match faces.sizes {
+        None => write_encoded(out, faces.triangles.len(), 24, |range, buf| {
+            faces.triangles[range].iter().try_for_each(|t| face(buf, t))
+        }),
+        Some(_) => {
+            let mut line = Vec::new();
+            faces.try_for_each(|corners| {
+                line.clear();
+                face(&mut line, corners)?;
+                out.write_all(&line)
+            })
+        }
+    }
 }

@@ -36,7 +36,7 @@ pub(crate) use layout::check_writable;
 
 use super::{
     Digits, FaceBuilder, Faces, Format, Source, Spelling, integer, lines, show, text_position,
-    tokens, without_bom, write_xyz,
+    tokens, without_bom, write_encoded, write_xyz,
 };
 use crate::mesh::{Carried, Mesh};
 
@@ -263,21 +263,40 @@ pub(crate) fn write(
         mesh.positions.len(),
         faces.len()
     )?;
-    for (i, &p) in mesh.positions.iter().enumerate() {
-        out.write_all(b"v ")?;
-        write_xyz(out, p, Spelling::of(&mesh.source))?;
-        if let Some(colour) = colours {
-            write_colour(out, colour(i))?;
+    let spelling = Spelling::of(&mesh.source);
+    // Lines of about 40 and 24 bytes: what sizes the pieces encoded in parallel.
+    write_encoded(out, mesh.positions.len(), 40, |range, buf| {
+        for i in range {
+            buf.extend_from_slice(b"v ");
+            write_xyz(buf, mesh.positions[i], spelling)?;
+            if let Some(colour) = colours {
+                write_colour(buf, colour(i))?;
+            }
+            buf.push(b'\n');
         }
-        out.write_all(b"\n")?;
-    }
-    faces.try_for_each(|corners| {
-        out.write_all(b"f")?;
+        Ok(())
+    })?;
+    let face = |out: &mut Vec<u8>, corners: &[u32]| {
+        out.push(b'f');
         for &v in corners {
             write!(out, " {}", u64::from(v) + 1)?;
         }
-        out.write_all(b"\n")
-    })
+        out.push(b'\n');
+        Ok(())
+    };
+    match faces.sizes {
+        None => write_encoded(out, faces.triangles.len(), 24, |range, buf| {
+            faces.triangles[range].iter().try_for_each(|t| face(buf, t))
+        }),
+        Some(_) => {
+            let mut line = Vec::new();
+            faces.try_for_each(|corners| {
+                line.clear();
+                face(&mut line, corners)?;
+                out.write_all(&line)
+            })
+        }
+    }
 }
 
 /// ` r g b` after a vertex's position: the colour's bytes over 255, in four decimals, which read

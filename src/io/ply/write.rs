@@ -10,7 +10,9 @@ use rayon::prelude::*;
 use super::header::{Element, FaceRole, Kind, Property, Roles, Scalar, walk_record};
 use super::read::{Origin, decode_faces, decode_strips};
 use super::{Fallible, PlyEncoding, PlyLayout, ascii};
-use crate::io::{FaceBuilder, Faces, Precision, VertexValues, first_where, vertex_normals};
+use crate::io::{
+    FaceBuilder, Faces, Precision, VertexValues, first_where, vertex_normals, write_encoded,
+};
 use crate::mesh::Mesh;
 use crate::meter::Meter;
 
@@ -468,77 +470,6 @@ fn write_vertices(out: &mut impl Write, el: &Element, mesh: &Mesh, ascii: bool) 
 /// Records per buffer of the sequential text writer.
 const PIECE: usize = 1 << 14;
 
-/// Bytes of records per piece of [`write_encoded`].
-const PIECE_BYTES: usize = 1 << 18;
-
-/// Pieces [`write_encoded`] encodes at once: one step of its pipeline.
-const PIECES_PER_STEP: usize = 16;
-
-/// Items per piece of [`write_encoded`] for records of `record` bytes.
-fn piece_len(record: usize) -> usize {
-    (PIECE_BYTES / record.max(1)).max(1)
-}
-
-/// Writes the binary records of items `0..count`, `record` bytes each, to `out` in their order,
-/// `encode(range, buf)` appending those of the items `range` to `buf`. Pieces of
-/// [`PIECE_BYTES`] are encoded in parallel, a step of them while the step before is written: the
-/// write is not one thread's encoding, and two steps' buffers (8 MiB) are what it holds. The
-/// bytes do not depend on the threads; the first error (in item order) is returned.
-fn write_encoded(
-    out: &mut impl Write,
-    count: usize,
-    record: usize,
-    encode: impl Fn(Range<usize>, &mut Vec<u8>) -> io::Result<()> + Sync,
-) -> io::Result<()> {
-    let piece = piece_len(record);
-    if rayon::current_num_threads() == 1 {
-        // Nothing to overlap: one buffer, piece after piece.
-        let mut buf = Vec::new();
-        for start in (0..count).step_by(piece) {
-            buf.clear();
-            encode(start..(start + piece).min(count), &mut buf)?;
-            out.write_all(&buf)?;
-        }
-        return Ok(());
-    }
-    let pieces = count.div_ceil(piece);
-    let steps = pieces.div_ceil(PIECES_PER_STEP);
-    let encode_step = |step: usize, bufs: &mut Vec<Vec<u8>>| -> io::Result<()> {
-        let first = step * PIECES_PER_STEP;
-        bufs.resize_with(PIECES_PER_STEP.min(pieces - first), Vec::new);
-        // Each piece's result kept, so that the first error is the first piece's, not the one
-        // that happened first.
-        let results: Vec<io::Result<()>> = bufs
-            .par_iter_mut()
-            .enumerate()
-            .map(|(k, buf)| {
-                buf.clear();
-                let start = (first + k) * piece;
-                encode(start..(start + piece).min(count), buf)
-            })
-            .collect();
-        results.into_iter().collect()
-    };
-    let (mut ready, mut next) = (Vec::new(), Vec::new());
-    if steps > 0 {
-        encode_step(0, &mut ready)?;
-    }
-    for step in 1..=steps {
-        let mut encoded = Ok(());
-        let written = rayon::in_place_scope(|scope| {
-            if step < steps {
-                let (next, encoded) = (&mut next, &mut encoded);
-                scope.spawn(move |_| *encoded = encode_step(step, next));
-            }
-            ready.iter().try_for_each(|buf| out.write_all(buf))
-        });
-        written?;
-        encoded?;
-        std::mem::swap(&mut ready, &mut next);
-    }
-    Ok(())
-}
-
 /// What a vertex property written with [`VertexValues`] is rebuilt from.
 #[derive(Clone, Copy, PartialEq)]
 enum Role {
@@ -720,48 +651,4 @@ fn write_faces(
         Ok::<_, io::Error>(())
     })?;
     emit(out, &el.props, &buf, ascii)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// The pipeline writes its pieces in item order over several steps (a last short piece and
-    /// step included), for any thread count, and returns the first piece's error.
-    #[test]
-    fn encoded_pieces_are_written_in_item_order() {
-        let piece = piece_len(4);
-        let count = 2 * PIECES_PER_STEP * piece + 3 * piece + 17;
-        let encode = |range: Range<usize>, buf: &mut Vec<u8>| {
-            for i in range {
-                buf.extend_from_slice(&(i as u32).to_le_bytes());
-            }
-            Ok(())
-        };
-        let want: Vec<u8> = (0..count as u32).flat_map(u32::to_le_bytes).collect();
-        for threads in [1, 2, 3] {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap();
-            let mut out = Vec::new();
-            pool.install(|| write_encoded(&mut out, count, 4, encode))
-                .unwrap();
-            assert!(out == want, "{threads} threads");
-            let failing = |range: Range<usize>, buf: &mut Vec<u8>| match range.start / piece {
-                k if k == PIECES_PER_STEP + 2 || k == PIECES_PER_STEP + 5 => {
-                    Err(io::Error::other(format!("piece {k}")))
-                }
-                _ => encode(range, buf),
-            };
-            let e = pool.install(|| write_encoded(&mut Vec::new(), count, 4, failing));
-            assert_eq!(
-                e.unwrap_err().to_string(),
-                format!("piece {}", PIECES_PER_STEP + 2)
-            );
-        }
-        let mut out = Vec::new();
-        write_encoded(&mut out, 0, 4, encode).unwrap();
-        assert!(out.is_empty());
-    }
 }
