@@ -882,10 +882,11 @@ fn piece_len(record: usize) -> usize {
 }
 
 /// Writes the records of items `0..count`, about `record` bytes each, to `out` in their order,
-/// `encode(range, buf)` appending those of the items `range` to `buf`. Pieces of
+/// `encode(range, buf)` appending those of the items `range` to `buf`. Pieces of about
 /// [`PIECE_BYTES`] are encoded in parallel, a step of them while the step before is written: the
-/// write is not one thread's encoding, and two steps' buffers (8 MiB) are what it holds. The
-/// bytes do not depend on the threads; the first error (in item order) is returned.
+/// write is not one thread's encoding, and two steps' buffers (about 8 MiB, more where text
+/// lines run longer than `record`) are what it holds. The bytes do not depend on the threads;
+/// the first error (in item order) is returned.
 pub(crate) fn write_encoded(
     out: &mut impl Write,
     count: usize,
