@@ -943,6 +943,28 @@ pub(crate) fn write_encoded(
     Ok(())
 }
 
+/// The text writers' face lines, `face(buf, corners)` appending one: triangles through
+/// [`write_encoded`] (lines of about 24 bytes), polygons line by line.
+pub(crate) fn write_face_lines(
+    out: &mut impl Write,
+    faces: &Faces,
+    face: impl Fn(&mut Vec<u8>, &[u32]) -> std::io::Result<()> + Sync,
+) -> std::io::Result<()> {
+    match faces.sizes {
+        None => write_encoded(out, faces.triangles.len(), 24, |range, buf| {
+            faces.triangles[range].iter().try_for_each(|t| face(buf, t))
+        }),
+        Some(_) => {
+            let mut line = Vec::new();
+            faces.try_for_each(|corners| {
+                line.clear();
+                face(&mut line, corners)?;
+                out.write_all(&line)
+            })
+        }
+    }
+}
+
 /// The first index of `items` where `pred` holds, the chunks searched in parallel (the checks
 /// before a write look at every position and triangle).
 pub(crate) fn first_where<T: Sync>(items: &[T], pred: impl Fn(&T) -> bool + Sync) -> Option<usize> {

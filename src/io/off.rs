@@ -15,7 +15,8 @@ use std::sync::Arc;
 
 use super::{
     Digits, FaceBuilder, Faces, Format, MAX_HEADER_LINE, Source, Spelling, bad_index, integer,
-    number, show, text_position, tokens, vertex_normals, without_bom, write_encoded, write_xyz,
+    number, show, text_position, tokens, vertex_normals, without_bom, write_encoded,
+    write_face_lines, write_xyz,
 };
 use crate::mesh::{Carried, FileLayout, Mesh};
 
@@ -388,17 +389,5 @@ fn write_plain(out: &mut impl Write, mesh: &Mesh) -> io::Result<()> {
         out.push(b'\n');
         Ok(())
     };
-    match faces.sizes {
-        None => write_encoded(out, faces.triangles.len(), 24, |range, buf| {
-            faces.triangles[range].iter().try_for_each(|t| face(buf, t))
-        }),
-        Some(_) => {
-            let mut line = Vec::new();
-            faces.try_for_each(|corners| {
-                line.clear();
-                face(&mut line, corners)?;
-                out.write_all(&line)
-            })
-        }
-    }
+    write_face_lines(out, &faces, face)
 }

@@ -36,7 +36,7 @@ pub(crate) use layout::check_writable;
 
 use super::{
     Digits, FaceBuilder, Faces, Format, Source, Spelling, integer, lines, show, text_position,
-    tokens, without_bom, write_encoded, write_xyz,
+    tokens, without_bom, write_encoded, write_face_lines, write_xyz,
 };
 use crate::mesh::{Carried, Mesh};
 
@@ -284,19 +284,7 @@ pub(crate) fn write(
         out.push(b'\n');
         Ok(())
     };
-    match faces.sizes {
-        None => write_encoded(out, faces.triangles.len(), 24, |range, buf| {
-            faces.triangles[range].iter().try_for_each(|t| face(buf, t))
-        }),
-        Some(_) => {
-            let mut line = Vec::new();
-            faces.try_for_each(|corners| {
-                line.clear();
-                face(&mut line, corners)?;
-                out.write_all(&line)
-            })
-        }
-    }
+    write_face_lines(out, &faces, face)
 }
 
 /// ` r g b` after a vertex's position: the colour's bytes over 255, in four decimals, which read
