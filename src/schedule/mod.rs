@@ -41,7 +41,7 @@ use rayon::prelude::*;
 
 use crate::meter::Meter;
 use crate::partition::Patch;
-use crate::topology::Topology;
+use crate::topology::{Topology, rings_outside};
 
 /// Rings around a patch's owned range within which another patch's owned vertices conflict.
 const CONFLICT_RINGS: usize = 4;
@@ -105,7 +105,7 @@ pub fn schedule_metered(topo: &Topology, patches: &[Patch], meter: &Meter) -> Sc
         .par_iter()
         .enumerate()
         .map(|(a, p)| {
-            let rings = rings_outside(topo, p, RING_CONFLICT_RINGS);
+            let rings = rings_outside(topo, &p.vertices, RING_CONFLICT_RINGS);
             let within = |conflict: usize, halo: usize| {
                 let halo = rings.iter().take(halo).map(|r| r.len() as u32).sum();
                 // A patch has a handful of near patches: gathered as found, so that what each
@@ -175,80 +175,6 @@ fn colour<'a>(near: impl Iterator<Item = &'a Near>, steps: usize) -> (Vec<Vec<u3
         colours.extend(mine.into_iter().filter(|c| !c.is_empty()));
     }
     (colours, near.iter().map(|n| n.halo).collect())
-}
-
-/// The vertices outside `p`'s owned range, ring by ring (ring 1 first), up to `depth` rings: a
-/// breadth-first walk, each vertex in the ring where it is first met (in no particular order
-/// within it).
-fn rings_outside(topo: &Topology, p: &Patch, depth: usize) -> Vec<Vec<u32>> {
-    let outside = |v: u32| !p.vertices.contains(&v);
-    let mut seen = VertexSet::default();
-    let mut rings: Vec<Vec<u32>> = Vec::with_capacity(depth);
-    // The neighbours of a range of vertices are one run of the adjacency.
-    let (offsets, vv) = topo.csr();
-    let (s, e) = (p.vertices.start as usize, p.vertices.end as usize);
-    let mut ring: Vec<u32> = Vec::new();
-    for &u in &vv[offsets[s]..offsets[e]] {
-        if outside(u) && seen.insert(u) {
-            ring.push(u);
-        }
-    }
-    while rings.len() + 1 < depth {
-        let mut next = Vec::new();
-        for &v in &ring {
-            for &u in topo.neighbors(v) {
-                if outside(u) && seen.insert(u) {
-                    next.push(u);
-                }
-            }
-        }
-        rings.push(std::mem::replace(&mut ring, next));
-    }
-    if depth > 0 {
-        rings.push(ring);
-    }
-    rings
-}
-
-/// A set of vertex ids (open addressing, linear probing): the rings' walk meets each vertex of
-/// a ring several times.
-#[derive(Default)]
-struct VertexSet {
-    slots: Vec<u32>,
-    len: usize,
-}
-
-impl VertexSet {
-    const EMPTY: u32 = u32::MAX;
-
-    /// Adds `u`; whether it was new.
-    fn insert(&mut self, u: u32) -> bool {
-        if 2 * (self.len + 1) > self.slots.len() {
-            let old = std::mem::replace(
-                &mut self.slots,
-                vec![Self::EMPTY; (4 * self.len).max(1 << 12)],
-            );
-            self.len = 0;
-            for k in old.into_iter().filter(|&k| k != Self::EMPTY) {
-                self.insert(k);
-            }
-        }
-        let mask = self.slots.len() - 1;
-        // The product's high bits: its low bits depend on the id's low bits alone.
-        let shift = 64 - self.slots.len().trailing_zeros();
-        let mut i = ((u as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15) >> shift) as usize;
-        loop {
-            match self.slots[i] {
-                k if k == u => return false,
-                Self::EMPTY => {
-                    self.slots[i] = u;
-                    self.len += 1;
-                    return true;
-                }
-                _ => i = (i + 1) & mask,
-            }
-        }
-    }
 }
 
 /// The bounded read-ahead pipeline of out-of-core runs: while the patches of one colour are
@@ -361,7 +287,7 @@ mod tests {
                 }
                 front = next;
             }
-            let rings = rings_outside(&topo, p, RING_CONFLICT_RINGS);
+            let rings = rings_outside(&topo, &p.vertices, RING_CONFLICT_RINGS);
             assert_eq!(rings.len(), RING_CONFLICT_RINGS);
             for (k, ring) in rings.iter().enumerate() {
                 let want: Vec<u32> = (0..n as u32)

@@ -614,12 +614,9 @@ pub fn rebuild_patch_sums<P: Field + ?Sized, S: Field + ?Sized>(
 
 /// The vertices outside `vertices` within two rings of them, ascending.
 fn two_rings(topo: &Topology, vertices: &Range<u32>) -> Vec<u32> {
-    let mut ring = neighbors_outside(topo, vertices.clone(), vertices);
-    let mut second = neighbors_outside(topo, ring.iter().copied(), vertices);
-    ring.append(&mut second);
-    ring.sort_unstable();
-    ring.dedup();
-    ring
+    let mut rings = crate::topology::rings_outside(topo, vertices, 2).concat();
+    rings.sort_unstable();
+    rings
 }
 
 /// The neighbours of the vertices `of` outside the patch of `vertices`, ascending, each once.

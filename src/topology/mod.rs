@@ -32,11 +32,13 @@ mod build;
 mod fans;
 mod masks;
 mod orient;
+mod rings;
 mod stats;
 
 pub(crate) use build::{is_degenerate, split_lens};
 pub(crate) use fans::Lanes;
 pub use fans::corners_after;
+pub use rings::rings_outside;
 pub use stats::TopologyStats;
 
 use crate::mesh::Buf;
