@@ -252,7 +252,15 @@ pub struct Kept {
 impl Kept {
     /// The mesh read again, as the first read made it; an error, before any decoding, if the file
     /// changed since (and, as every read, if it changes while being read).
-    pub fn read_again(mut self, storage: &crate::mesh::Storage, meter: &Meter) -> Result<Mesh> {
+    /// With [`Coordinates::Skip`] a binary or ASCII PLY file's vertex records are passed over
+    /// (the mesh has no positions; other formats decode them anyway). Returns the mesh and the
+    /// file's vertex count.
+    pub fn read_again(
+        mut self,
+        storage: &crate::mesh::Storage,
+        meter: &Meter,
+        coordinates: Coordinates,
+    ) -> Result<(Mesh, usize)> {
         let path = self.path.clone();
         let now = self.file.metadata().map_err(|e| Error::io(&path, e))?;
         if let Some(what) = change(&self.seen, &now) {
@@ -263,10 +271,17 @@ impl Kept {
         }
         std::io::Seek::seek(&mut self.file, std::io::SeekFrom::Start(0))
             .map_err(|e| Error::io(&path, e))?;
-        let mesh = read_open(&mut self.file, now.len(), &path, storage, meter)?;
+        let read = read_open(
+            &mut self.file,
+            now.len(),
+            &path,
+            storage,
+            meter,
+            coordinates,
+        )?;
         changed_while_read(&mut self.file, &now, &path)?;
         meter.complete();
-        Ok(mesh)
+        Ok(read)
     }
 }
 
@@ -303,7 +318,15 @@ fn read_mesh_observed(
     if kind == detect::Kind::Stream {
         return read_stream(&mut file, path).map(|mesh| (mesh, None));
     }
-    let mesh = read_open(&mut file, before.len(), path, storage, meter);
+    let mesh = read_open(
+        &mut file,
+        before.len(),
+        path,
+        storage,
+        meter,
+        Coordinates::Decode,
+    )
+    .map(|(mesh, _)| mesh);
     decoded(path);
     changed_while_read(&mut file, &before, path)?;
     let kept = Kept {
@@ -666,7 +689,8 @@ fn read_open(
     path: &Path,
     storage: &crate::mesh::Storage,
     meter: &Meter,
-) -> Result<Mesh> {
+    coordinates: Coordinates,
+) -> Result<(Mesh, usize)> {
     let mut head = Vec::with_capacity(detect::HEAD.min(usize::try_from(len).unwrap_or(0)));
     Read::take(&mut *file, detect::HEAD as u64)
         .read_to_end(&mut head)
@@ -683,33 +707,53 @@ fn read_open(
         let len = contents.len() as u64;
         let format = detect::detect_inner(&contents, len, path)
             .map_err(|what| Error::invalid(path, what))?;
-        return decode_contents(&contents, format, path, storage, &Meter::default());
+        let meter = &Meter::default();
+        return decode_contents(&contents, format, path, storage, meter, coordinates);
     }
     let format = detect::detect(&head, len, path).map_err(|what| Error::invalid(path, what))?;
     let contents = Contents::load(file, head, len).map_err(|e| Error::io(path, e))?;
-    decode_contents(&contents, format, path, storage, meter)
+    decode_contents(&contents, format, path, storage, meter, coordinates)
 }
 
-/// Decodes a whole input's bytes with the reader of `format`.
+/// Whether a read decodes the vertex coordinates, or passes over them where the format lets it
+/// (a write that holds the smoothed positions reads its input again for the rest).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Coordinates {
+    Decode,
+    Skip,
+}
+
+/// Decodes a whole input's bytes with the reader of `format` (see [`Coordinates`]); returns the
+/// mesh and its vertex count.
 fn decode_contents(
     contents: &Contents,
     format: Format,
     path: &Path,
     storage: &crate::mesh::Storage,
     meter: &Meter,
-) -> Result<Mesh> {
+    coordinates: Coordinates,
+) -> Result<(Mesh, usize)> {
+    let counted = |mesh: Mesh| {
+        let n = mesh.positions.len();
+        (mesh, n)
+    };
     match format {
-        Format::Ply => ply::read_metered(contents, storage, meter).map_err(|e| match e {
-            ply::ReadError::Invalid(what) => Error::invalid(path, what),
-            ply::ReadError::Storage(e) => e,
-        }),
+        Format::Ply => {
+            ply::read_metered(contents, storage, meter, coordinates).map_err(|e| match e {
+                ply::ReadError::Invalid(what) => Error::invalid(path, what),
+                ply::ReadError::Storage(e) => e,
+            })
+        }
         // External buffers are relative to the file's directory.
         Format::Gltf | Format::Glb => {
             let dir = path.parent().unwrap_or(Path::new(""));
             gltf::read(contents, format == Format::Glb, Some(dir))
+                .map(counted)
                 .map_err(|what| Error::invalid(path, what))
         }
-        format => decode(contents, format).map_err(|what| Error::invalid(path, what)),
+        format => decode(contents, format)
+            .map(counted)
+            .map_err(|what| Error::invalid(path, what)),
     }
 }
 

@@ -924,19 +924,21 @@ fn a_kept_file_reads_again_unless_it_changed() {
         assert_eq!(&first.triangles[..], &stored.triangles[..]);
         kept.expect("a file is kept")
     };
-    let same = |again: Result<Mesh>| {
-        let again = again.unwrap();
+    let same = |again: Result<(Mesh, usize)>| {
+        let (again, vertices) = again.unwrap();
         assert_eq!(&again.triangles[..], &stored.triangles[..]);
         assert_eq!(&again.positions[..], &stored.positions[..]);
+        assert_eq!(vertices, stored.positions.len());
     };
-    same(kept().read_again(&heap, &Meter::default()));
+    let decode = Coordinates::Decode;
+    same(kept().read_again(&heap, &Meter::default(), decode));
     let k = kept();
     std::fs::rename(&path, dir.path().join("away.ply")).unwrap();
-    same(k.read_again(&heap, &Meter::default()));
+    same(k.read_again(&heap, &Meter::default(), decode));
     std::fs::rename(dir.path().join("away.ply"), &path).unwrap();
     let k = kept();
     std::fs::remove_file(&path).unwrap();
-    same(k.read_again(&heap, &Meter::default()));
+    same(k.read_again(&heap, &Meter::default(), decode));
     write_mesh(&path, &mesh).unwrap();
 
     let changed = |change: &dyn Fn(&Path), what: &str| {
@@ -944,7 +946,7 @@ fn a_kept_file_reads_again_unless_it_changed() {
         let k = kept();
         change(&path);
         let e = k
-            .read_again(&heap, &Meter::default())
+            .read_again(&heap, &Meter::default(), Coordinates::Skip)
             .unwrap_err()
             .to_string();
         assert_eq!(
@@ -972,6 +974,66 @@ fn a_kept_file_reads_again_unless_it_changed() {
         },
         "modification time changed",
     );
+}
+
+/// Issue #33: the write's second read of its input passes over the coordinates it has no use
+/// for, so that the disk holds the triangles alone beside the smoothed positions: binary and
+/// ASCII PLY, records of one length or with a list among the vertex properties, with other
+/// vertex properties kept for the writer. The triangles and the vertex count are the first
+/// read's; the scratch files made are the triangles' alone (other formats decode the positions
+/// anyway).
+#[test]
+fn reading_again_without_coordinates_keeps_the_triangles_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let mesh = crate::shapes::icosphere(2);
+    let (n, m) = (mesh.positions.len(), mesh.triangles.len());
+    let ascii_with_list = {
+        let mut text = format!(
+            "ply\nformat ascii 1.0\nelement vertex {n}\nproperty float x\nproperty list uchar \
+             int tags\nproperty float y\nproperty float z\nproperty uchar red\n\
+             element face {m}\nproperty list uchar int vertex_indices\nend_header\n"
+        );
+        for (k, p) in mesh.positions.iter().enumerate() {
+            let tags = " 7".repeat(k % 3);
+            text += &format!("{} {}{tags} {} {} {}\n", p.x, k % 3, p.y, p.z, k % 256);
+        }
+        for t in mesh.triangles.iter() {
+            text += &format!("3 {} {} {}\n", t[0], t[1], t[2]);
+        }
+        text
+    };
+    let binary = dir.path().join("b.ply");
+    write_mesh(&binary, &mesh).unwrap();
+    let listed = dir.path().join("l.ply");
+    std::fs::write(&listed, ascii_with_list).unwrap();
+    let obj = dir.path().join("m.obj");
+    write_mesh(&obj, &mesh).unwrap();
+    for (path, skips) in [(&binary, true), (&listed, true), (&obj, false)] {
+        let first = read_mesh(path).unwrap();
+        assert_eq!(&first.triangles[..], &mesh.triangles[..], "{path:?}");
+        for coordinates in [Coordinates::Skip, Coordinates::Decode] {
+            let scratch_dir = tempfile::tempdir().unwrap();
+            let scratch = crate::mesh::Storage::scratch(scratch_dir.path()).unwrap();
+            let (_, kept) = read_mesh_kept(path, &scratch, &Meter::default()).unwrap();
+            let before = scratch.mapped_bytes();
+            let (again, vertices) = kept
+                .unwrap()
+                .read_again(&scratch, &Meter::default(), coordinates)
+                .unwrap();
+            let made = scratch.mapped_bytes() - before;
+            assert_eq!(&again.triangles[..], &mesh.triangles[..], "{path:?}");
+            assert_eq!(vertices, n, "{path:?}");
+            if skips && coordinates == Coordinates::Skip {
+                assert!(again.positions.is_empty(), "{path:?}");
+                assert_eq!(made, 12 * m as u64, "{path:?}: the triangles alone");
+            } else {
+                assert_eq!(&again.positions[..], &first.positions[..], "{path:?}");
+                if skips {
+                    assert_eq!(made, (24 * n + 12 * m) as u64, "{path:?}");
+                }
+            }
+        }
+    }
 }
 
 #[test]
@@ -1629,9 +1691,9 @@ fn gzip_inputs_read_as_what_they_hold_in_memory_in_scratch_and_from_a_stream() {
             members.len() as u64,
             "the compressed bytes are counted"
         );
-        let again = kept
+        let (again, _) = kept
             .unwrap()
-            .read_again(&scratch, &Meter::default())
+            .read_again(&scratch, &Meter::default(), Coordinates::Decode)
             .unwrap();
         assert!(same_mesh(&again, &want));
         // A pipe.

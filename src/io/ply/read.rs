@@ -11,7 +11,7 @@ use super::header::{
     Element, FaceRole, Field, Header, Kind, Roles, Scalar, WalkError, parse_header, walk_record,
 };
 use super::{Fallible, PlyEncoding, PlyLayout, ascii};
-use crate::io::{FaceBuilder, Format, Precision, Source, bad_index};
+use crate::io::{Coordinates, FaceBuilder, Format, Precision, Source, bad_index};
 use crate::mesh::{Buf, Mesh, Storage};
 use crate::meter::Meter;
 
@@ -86,16 +86,19 @@ pub(crate) fn read(bytes: &[u8]) -> Fallible<Mesh> {
 
 /// Reads a PLY file's bytes, decoding positions and triangles into arrays from `storage`.
 pub(crate) fn read_in(bytes: &[u8], storage: &Storage) -> Result<Mesh, ReadError> {
-    read_metered(bytes, storage, &Meter::default())
+    read_metered(bytes, storage, &Meter::default(), Coordinates::Decode).map(|(mesh, _)| mesh)
 }
 
 /// [`read_in`], counting into `meter` where it stands in `bytes`: the header, each element as it
 /// ends, and the vertices and triangles of a binary body chunk by chunk as they are decoded.
+/// With [`Coordinates::Skip`] the vertex records are passed over (the mesh has no positions);
+/// returns the mesh and the file's vertex count.
 pub(crate) fn read_metered(
     bytes: &[u8],
     storage: &Storage,
     meter: &Meter,
-) -> Result<Mesh, ReadError> {
+    coordinates: Coordinates,
+) -> Result<(Mesh, usize), ReadError> {
     let header = parse_header(bytes)?;
     meter.reach(header.body as u64);
     let body = &bytes[header.body..];
@@ -107,6 +110,7 @@ pub(crate) fn read_metered(
     let mut mesh = Decoded {
         storage,
         meter,
+        coordinates,
         positions: Buf::default(),
         faces: None,
     };
@@ -163,6 +167,7 @@ pub(crate) fn read_metered(
         }
     }
     // A `double` in any coordinate asks for double precision wherever the output has a choice.
+    let vertices = elements[roles.vertex].count;
     let double = |k: usize| elements[roles.vertex].props[k].kind == Kind::Scalar(Scalar::F64);
     let precision = match roles.xyz.iter().any(|&k| double(k)) {
         true => Precision::Double,
@@ -180,7 +185,7 @@ pub(crate) fn read_metered(
         ..Source::default()
     };
     let faces = mesh.faces.unwrap_or_else(|| FaceBuilder::with_capacity(0));
-    Ok(faces.into_mesh(mesh.positions, source))
+    Ok((faces.into_mesh(mesh.positions, source), vertices))
 }
 
 /// A binary header whose counts need more bytes than the body has is a lie (a truncated transfer,
@@ -219,6 +224,7 @@ struct Decoded<'s> {
     storage: &'s Storage,
     /// Counts the bytes of the vertices and faces as the binary decoders go.
     meter: &'s Meter,
+    coordinates: Coordinates,
     positions: Buf<DVec3>,
     faces: Option<FaceBuilder>,
 }
@@ -234,7 +240,9 @@ impl Decoded<'_> {
         data: Cow<[u8]>,
         origin: Origin,
     ) -> Result<usize, ReadError> {
-        let len = if e == roles.vertex {
+        let len = if e == roles.vertex && self.coordinates == Coordinates::Skip {
+            extent(&data, el, origin)?
+        } else if e == roles.vertex {
             let mut positions = self.storage.zeroed(el.count).map_err(ReadError::Storage)?;
             let len = decode_positions(&data, el, roles.xyz, origin, &mut positions, self.meter)?;
             self.positions = positions;
