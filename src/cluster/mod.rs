@@ -387,6 +387,7 @@ fn output_stats(
         output,
         mesh,
         &mut positions,
+        engine::run::Afterwards::Unread,
         tris,
         topo,
     ))

@@ -274,7 +274,10 @@ pub(crate) fn run_file_with(
         let mut measured = None;
         if early {
             if engine.with_stats {
-                let stats = measure_output(&mut plan, output, &mesh, &smoothed, observer, &mut t);
+                // The restore reads the positions next.
+                let read = Afterwards::Read;
+                let stats =
+                    measure_output(&mut plan, output, &mesh, &smoothed, read, observer, &mut t);
                 measured = Some(stats?);
             }
             plan.release_connectivity();
@@ -289,7 +292,10 @@ pub(crate) fn run_file_with(
             return Ok((smoothed, input_positions, Some(plan), None));
         };
         if !early && engine.with_stats {
-            let stats = measure_output(&mut plan, output, &mesh, &smoothed, observer, &mut t);
+            let unread = Afterwards::Unread;
+            let stats = measure_output(
+                &mut plan, output, &mesh, &smoothed, unread, observer, &mut t,
+            );
             measured = Some(stats?);
         }
         drop(plan);
@@ -363,7 +369,7 @@ pub(crate) fn run_file_with(
     let (m, sm) = (&mesh, &smoothed);
     let measure = plan
         .filter(|_| engine.with_stats)
-        .map(|mut plan| move || Ok(output_stats(&mut plan, output, m, sm)));
+        .map(|mut plan| move || Ok(output_stats(&mut plan, output, m, sm, Afterwards::Unread)));
     let written = write_measured(
         &start.pool,
         output,
@@ -584,12 +590,13 @@ fn measure_output(
     output: &Path,
     mesh: &Mesh,
     smoothed: &Smoothed,
+    afterwards: Afterwards,
     observer: &mut dyn Observer,
     t: &mut PhaseTimings,
 ) -> Result<Option<MeshInfo>> {
     let clock = Instant::now();
     let stats = metered(observer, Phase::Statistics, 1, |m| {
-        let stats = output_stats(plan, output, mesh, smoothed);
+        let stats = output_stats(plan, output, mesh, smoothed, afterwards);
         m.add(1);
         Ok(stats)
     })?;
@@ -607,6 +614,7 @@ fn output_stats(
     output: &Path,
     mesh: &Mesh,
     smoothed: &Smoothed,
+    afterwards: Afterwards,
 ) -> Option<MeshInfo> {
     let r = &mut plan.reordered;
     let info = smoothed.input_stats.clone()?;
@@ -615,21 +623,33 @@ fn output_stats(
         output,
         mesh,
         &mut r.positions,
+        afterwards,
         &r.triangles,
         &plan.topology,
     )
 }
 
+/// Whether the positions [`stored_output_stats`] measures are read after it (then an `f32`
+/// output is measured through [`crate::metrics::AsF32`]) or not (then they are rounded in place
+/// once, which costs less than rounding each read).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Afterwards {
+    Read,
+    Unread,
+}
+
 /// `info`, the input's statistics, with the geometry of `positions` (plan order, over the plan's
 /// `triangles` and `topo`) as the write stores them in `output`: read as stored when that is
-/// `f64` or `f32`, else rounded here in place as [`io::Stored`] says
-/// ([`measuring_rounds_in_place`]). `None` for an output that `write_mesh` refuses (its error is
-/// the write's). The engine's and the cluster's writes measure their outputs so.
+/// `f64`, or `f32` with the positions read `afterwards`; else rounded here in place as
+/// [`io::Stored`] says ([`measuring_rounds_in_place`]). `None` for an output that `write_mesh`
+/// refuses (its error is the write's). The engine's and the cluster's writes measure their
+/// outputs so.
 pub(crate) fn stored_output_stats(
     mut info: MeshInfo,
     output: &Path,
     mesh: &Mesh,
     positions: &mut [glam::DVec3],
+    afterwards: Afterwards,
     triangles: &[[u32; 3]],
     topo: &crate::Topology,
 ) -> Option<MeshInfo> {
@@ -637,7 +657,7 @@ pub(crate) fn stored_output_stats(
     let origin = glam::DVec3::from(info.volume_origin);
     let geometry = if stored.is_exact() {
         reduce::geometry_about(positions, triangles, topo, origin)
-    } else if stored.is_f32() {
+    } else if stored.is_f32() && afterwards == Afterwards::Read {
         let read = crate::metrics::AsF32(positions);
         reduce::geometry_about_as(positions, &read, triangles, topo, origin)
     } else {
