@@ -275,10 +275,15 @@ pub(crate) fn run_file_with(
         if early {
             if engine.with_stats {
                 // The restore reads the positions next.
-                let read = Afterwards::Read;
-                let stats =
-                    measure_output(&mut plan, output, &mesh, &smoothed, read, observer, &mut t);
-                measured = Some(stats?);
+                measured = Some(measure_output(
+                    &mut plan,
+                    output,
+                    &mesh,
+                    &smoothed,
+                    Afterwards::Read,
+                    observer,
+                    &mut t,
+                )?);
             }
             plan.release_connectivity();
         }
@@ -292,16 +297,22 @@ pub(crate) fn run_file_with(
             return Ok((smoothed, input_positions, Some(plan), None));
         };
         if !early && engine.with_stats {
-            let unread = Afterwards::Unread;
-            let stats = measure_output(
-                &mut plan, output, &mesh, &smoothed, unread, observer, &mut t,
-            );
-            measured = Some(stats?);
+            // Integers or text (an `f32` output is measured early), rounded in place.
+            measured = Some(measure_output(
+                &mut plan,
+                output,
+                &mesh,
+                &smoothed,
+                Afterwards::Unread,
+                observer,
+                &mut t,
+            )?);
         }
         drop(plan);
         let clock = Instant::now();
-        // The input's positions are read again only for the deviation field: the write has
-        // the smoothed ones (12 B per triangle less on the disk beside the input and output).
+        // The input's positions are read again only when the deviation is measured
+        // (`--deviation-stats`, `--deviation-field`, `--tolerance`): the write has the smoothed
+        // ones (12 B per triangle less on the disk beside the input and output).
         let coordinates = match engine.deviation.is_on() {
             true => io::Coordinates::Decode,
             false => io::Coordinates::Skip,

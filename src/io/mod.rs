@@ -253,8 +253,8 @@ impl Kept {
     /// The mesh read again, as the first read made it; an error, before any decoding, if the file
     /// changed since (and, as every read, if it changes while being read).
     /// With [`Coordinates::Skip`] a binary or ASCII PLY file's vertex records are passed over
-    /// (the mesh has no positions; other formats decode them anyway). Returns the mesh and the
-    /// file's vertex count.
+    /// (the mesh has no positions, and its layout keeps no vertex records for a writer; other
+    /// formats decode them anyway). Returns the mesh and the file's vertex count.
     pub fn read_again(
         mut self,
         storage: &crate::mesh::Storage,

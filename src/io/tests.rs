@@ -977,38 +977,84 @@ fn a_kept_file_reads_again_unless_it_changed() {
 }
 
 /// Issue #33: the write's second read of its input passes over the coordinates it has no use
-/// for, so that the disk holds the triangles alone beside the smoothed positions: binary and
-/// ASCII PLY, records of one length or with a list among the vertex properties, with other
-/// vertex properties kept for the writer. The triangles and the vertex count are the first
-/// read's; the scratch files made are the triangles' alone (other formats decode the positions
-/// anyway).
+/// for, so that the disk holds the triangles alone beside the smoothed positions: binary (both
+/// byte orders) and ASCII PLY, records of one length or with a list among the vertex properties
+/// (and a colour), plain or compressed. The triangles and the vertex count are the first read's;
+/// the scratch files made are the triangles' alone (other formats decode the positions anyway).
 #[test]
 fn reading_again_without_coordinates_keeps_the_triangles_alone() {
     let dir = tempfile::tempdir().unwrap();
     let mesh = crate::shapes::icosphere(2);
     let (n, m) = (mesh.positions.len(), mesh.triangles.len());
-    let ascii_with_list = {
-        let mut text = format!(
-            "ply\nformat ascii 1.0\nelement vertex {n}\nproperty float x\nproperty list uchar \
-             int tags\nproperty float y\nproperty float z\nproperty uchar red\n\
-             element face {m}\nproperty list uchar int vertex_indices\nend_header\n"
-        );
+    // The sphere with a colour and, with `list`, a list of 0–2 tags among the vertex properties.
+    let ply = |format: &str, list: bool| -> Vec<u8> {
+        let tags = if list {
+            "property list uchar int tags\n"
+        } else {
+            ""
+        };
+        let mut out = format!(
+            "ply\nformat {format} 1.0\nelement vertex {n}\nproperty float x\n{tags}\
+             property float y\nproperty float z\nproperty uchar red\nelement face {m}\n\
+             property list uchar int vertex_indices\nend_header\n"
+        )
+        .into_bytes();
+        let big = format == "binary_big_endian";
+        let f = |x: f64| match big {
+            true => (x as f32).to_be_bytes(),
+            false => (x as f32).to_le_bytes(),
+        };
+        let i = |x: u32| match big {
+            true => x.to_be_bytes(),
+            false => x.to_le_bytes(),
+        };
         for (k, p) in mesh.positions.iter().enumerate() {
-            let tags = " 7".repeat(k % 3);
-            text += &format!("{} {}{tags} {} {} {}\n", p.x, k % 3, p.y, p.z, k % 256);
+            let count = if list { k % 3 } else { 0 };
+            if format == "ascii" {
+                let listed = match list {
+                    true => format!(" {count}{}", " 7".repeat(count)),
+                    false => String::new(),
+                };
+                let line = format!("{}{listed} {} {} {}\n", p.x, p.y, p.z, k % 256);
+                out.extend(line.bytes());
+                continue;
+            }
+            out.extend(f(p.x));
+            if list {
+                out.push(count as u8);
+                (0..count).for_each(|_| out.extend(i(7)));
+            }
+            out.extend(f(p.y));
+            out.extend(f(p.z));
+            out.push((k % 256) as u8);
         }
         for t in mesh.triangles.iter() {
-            text += &format!("3 {} {} {}\n", t[0], t[1], t[2]);
+            match format {
+                "ascii" => out.extend(format!("3 {} {} {}\n", t[0], t[1], t[2]).bytes()),
+                _ => {
+                    out.push(3);
+                    t.iter().for_each(|&v| out.extend(i(v)));
+                }
+            }
         }
-        text
+        out
     };
-    let binary = dir.path().join("b.ply");
-    write_mesh(&binary, &mesh).unwrap();
-    let listed = dir.path().join("l.ply");
-    std::fs::write(&listed, ascii_with_list).unwrap();
+    let mut files = Vec::new();
+    for format in ["ascii", "binary_little_endian", "binary_big_endian"] {
+        for list in [false, true] {
+            let path = dir.path().join(format!("{format}-{list}.ply"));
+            std::fs::write(&path, ply(format, list)).unwrap();
+            files.push((path, true));
+        }
+    }
+    let packed = dir.path().join("packed.ply.gz");
+    std::fs::write(&packed, gz(&ply("binary_big_endian", true))).unwrap();
+    files.push((packed, true));
     let obj = dir.path().join("m.obj");
     write_mesh(&obj, &mesh).unwrap();
-    for (path, skips) in [(&binary, true), (&listed, true), (&obj, false)] {
+    files.push((obj, false));
+    for (path, skips) in &files {
+        let (path, skips) = (path, *skips);
         let first = read_mesh(path).unwrap();
         assert_eq!(&first.triangles[..], &mesh.triangles[..], "{path:?}");
         for coordinates in [Coordinates::Skip, Coordinates::Decode] {
@@ -1023,6 +1069,7 @@ fn reading_again_without_coordinates_keeps_the_triangles_alone() {
             let made = scratch.mapped_bytes() - before;
             assert_eq!(&again.triangles[..], &mesh.triangles[..], "{path:?}");
             assert_eq!(vertices, n, "{path:?}");
+            // A small compressed file is inflated in memory: only the arrays are in scratch.
             if skips && coordinates == Coordinates::Skip {
                 assert!(again.positions.is_empty(), "{path:?}");
                 assert_eq!(made, 12 * m as u64, "{path:?}: the triangles alone");

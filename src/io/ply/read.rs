@@ -147,7 +147,9 @@ pub(crate) fn read_metered(
                     )
                     .into());
                 }
-                let data = if big {
+                // Records of one length that are passed over need no byte swap to be measured.
+                let passed_over = mesh.passes_over(&roles, e) && el.stride().is_some();
+                let data = if big && !passed_over {
                     Cow::Owned(to_little_endian(rest, el, origin)?)
                 } else {
                     Cow::Borrowed(rest)
@@ -230,6 +232,11 @@ struct Decoded<'s> {
 }
 
 impl Decoded<'_> {
+    /// Whether element `e` is the vertices a read for the triangles alone passes over.
+    fn passes_over(&self, roles: &Roles, e: usize) -> bool {
+        e == roles.vertex && self.coordinates == Coordinates::Skip
+    }
+
     /// Decodes element `e` from `data` (little-endian; for a little-endian file, the rest of the
     /// body), keeps its records when the writer will need them, and returns its length in bytes.
     fn take(
@@ -240,8 +247,9 @@ impl Decoded<'_> {
         data: Cow<[u8]>,
         origin: Origin,
     ) -> Result<usize, ReadError> {
-        let len = if e == roles.vertex && self.coordinates == Coordinates::Skip {
-            extent(&data, el, origin)?
+        let len = if self.passes_over(roles, e) {
+            // Nor are its records kept: the read is for the triangles alone.
+            return Ok(extent(&data, el, origin)?);
         } else if e == roles.vertex {
             let mut positions = self.storage.zeroed(el.count).map_err(ReadError::Storage)?;
             let len = decode_positions(&data, el, roles.xyz, origin, &mut positions, self.meter)?;
