@@ -986,69 +986,48 @@ fn reading_again_without_coordinates_keeps_the_triangles_alone() {
     let dir = tempfile::tempdir().unwrap();
     let mesh = crate::shapes::icosphere(2);
     let (n, m) = (mesh.positions.len(), mesh.triangles.len());
-    // The sphere with a colour and, with `list`, a list of 0–2 tags among the vertex properties.
-    let ply = |format: &str, list: bool| -> Vec<u8> {
-        let tags = if list {
-            "property list uchar int tags\n"
-        } else {
-            ""
+    // The sphere with a colour and, with `list`, a list of 0–2 tags among the vertex properties,
+    // as ASCII; its binary encodings through ply-rs-bw.
+    let ascii = |list: bool| -> Vec<u8> {
+        let tags = match list {
+            true => "property list uchar int tags\n",
+            false => "",
         };
-        let mut out = format!(
-            "ply\nformat {format} 1.0\nelement vertex {n}\nproperty float x\n{tags}\
+        let mut text = format!(
+            "ply\nformat ascii 1.0\nelement vertex {n}\nproperty float x\n{tags}\
              property float y\nproperty float z\nproperty uchar red\nelement face {m}\n\
              property list uchar int vertex_indices\nend_header\n"
-        )
-        .into_bytes();
-        let big = format == "binary_big_endian";
-        let f = |x: f64| match big {
-            true => (x as f32).to_be_bytes(),
-            false => (x as f32).to_le_bytes(),
-        };
-        let i = |x: u32| match big {
-            true => x.to_be_bytes(),
-            false => x.to_le_bytes(),
-        };
+        );
         for (k, p) in mesh.positions.iter().enumerate() {
-            let count = if list { k % 3 } else { 0 };
-            if format == "ascii" {
-                let listed = match list {
-                    true => format!(" {count}{}", " 7".repeat(count)),
-                    false => String::new(),
-                };
-                let line = format!("{}{listed} {} {} {}\n", p.x, p.y, p.z, k % 256);
-                out.extend(line.bytes());
-                continue;
-            }
-            out.extend(f(p.x));
-            if list {
-                out.push(count as u8);
-                (0..count).for_each(|_| out.extend(i(7)));
-            }
-            out.extend(f(p.y));
-            out.extend(f(p.z));
-            out.push((k % 256) as u8);
+            let listed = match list {
+                true => format!(" {}{}", k % 3, " 7".repeat(k % 3)),
+                false => String::new(),
+            };
+            text += &format!("{}{listed} {} {} {}\n", p.x, p.y, p.z, k % 256);
         }
         for t in mesh.triangles.iter() {
-            match format {
-                "ascii" => out.extend(format!("3 {} {} {}\n", t[0], t[1], t[2]).bytes()),
-                _ => {
-                    out.push(3);
-                    t.iter().for_each(|&v| out.extend(i(v)));
-                }
-            }
+            text += &format!("3 {} {} {}\n", t[0], t[1], t[2]);
         }
-        out
+        text.into_bytes()
     };
     let mut files = Vec::new();
-    for format in ["ascii", "binary_little_endian", "binary_big_endian"] {
-        for list in [false, true] {
-            let path = dir.path().join(format!("{format}-{list}.ply"));
-            std::fs::write(&path, ply(format, list)).unwrap();
+    for list in [false, true] {
+        let text = ascii(list);
+        let parsed = oracle_read(&text);
+        let encodings = [
+            ("ascii", text),
+            ("le", oracle_write(&parsed, Encoding::BinaryLittleEndian)),
+            ("be", oracle_write(&parsed, Encoding::BinaryBigEndian)),
+        ];
+        for (name, bytes) in encodings {
+            let path = dir.path().join(format!("{name}-{list}.ply"));
+            std::fs::write(&path, bytes).unwrap();
             files.push((path, true));
         }
     }
     let packed = dir.path().join("packed.ply.gz");
-    std::fs::write(&packed, gz(&ply("binary_big_endian", true))).unwrap();
+    let listed_be = oracle_write(&oracle_read(&ascii(true)), Encoding::BinaryBigEndian);
+    std::fs::write(&packed, gz(&listed_be)).unwrap();
     files.push((packed, true));
     let obj = dir.path().join("m.obj");
     write_mesh(&obj, &mesh).unwrap();

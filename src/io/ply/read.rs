@@ -247,10 +247,11 @@ impl Decoded<'_> {
         data: Cow<[u8]>,
         origin: Origin,
     ) -> Result<usize, ReadError> {
-        let len = if self.passes_over(roles, e) {
-            // Nor are its records kept: the read is for the triangles alone.
+        if self.passes_over(roles, e) {
+            // Measured, not decoded, and its records not kept: the read is for the triangles.
             return Ok(extent(&data, el, origin)?);
-        } else if e == roles.vertex {
+        }
+        let len = if e == roles.vertex {
             let mut positions = self.storage.zeroed(el.count).map_err(ReadError::Storage)?;
             let len = decode_positions(&data, el, roles.xyz, origin, &mut positions, self.meter)?;
             self.positions = positions;
