@@ -71,11 +71,10 @@ fn main() {
         for i in 0..topo.len() as u32 {
             for &j in topo.neighbors(i).iter().filter(|&&j| j > i) {
                 let mut faces = topo
-                    .faces_of(i)
-                    .iter()
-                    .filter(|&&t| tris[t as usize].contains(&j));
+                    .faces_of(i, tris)
+                    .filter(|&t| tris[t as usize].contains(&j));
                 let pair = match (faces.next(), faces.next(), faces.next()) {
-                    (Some(&a), Some(&b), None) => Some([a, b]),
+                    (Some(a), Some(b), None) => Some([a, b]),
                     _ => None,
                 };
                 edges.push((i, j, pair));

@@ -40,9 +40,8 @@ fn fans(topo: &Topology, tris: &[[u32; 3]]) -> Option<(Vec<usize>, Vec<u32>)> {
     for v in 0..topo.len() as u32 {
         next.clear();
         next.extend(
-            topo.faces_of(v)
-                .iter()
-                .map(|&t| corners_after(tris[t as usize], v)),
+            topo.faces_of(v, tris)
+                .map(|t| corners_after(tris[t as usize], v)),
         );
         let out = &mut ring[offsets[v as usize]..offsets[v as usize + 1]];
         if next.len() != out.len() {

@@ -847,7 +847,8 @@ fn vcs_lowpass_output_identical_across_threads_and_memory_budgets() {
     assert_eq!(rm["memory"]["storage"], "scratch");
     assert!(mapped == one, "scratch-mapped run differs from in-core");
     // Out of core the λ step is kept for the patches' border alone (each patch takes its other
-    // vertices' as it starts): the peak is the smoothing's, the arrays of `vcs`'s (see
+    // vertices' as it starts). The peak is the topology build's since the smoothing finds the
+    // faces in the triangles' runs (12 B per triangle less); it was the smoothing's, the arrays of `vcs`'s (see
     // `smooth_output_identical_across_threads_and_memory_budgets`) but the seam (the blocks
     // measure their own moves), and the border's steps (24 B and a 4 B id for each of the 11 % of
     // the vertices with a neighbour in another patch at this patch size): 56.0 B per triangle,
@@ -1023,8 +1024,9 @@ fn smooth_output_identical_across_threads_and_memory_budgets() {
     // The input's arrays go once the plan has its copy, the triangles and adjacency before the
     // positions are put back in the input's order (the output, binary, measured before), and the
     // plan before the input is read again for the write; the components are counted before the
-    // adjacency is built. The peak (a closed mesh, n ≈ m / 2) is the smoothing's, or the topology
-    // build's just below it: the f64 positions (24 B per vertex; no copy: the patches measure
+    // adjacency is built. The peak (a closed mesh, n ≈ m / 2) is the topology build's, the
+    // smoothing's 10 B per triangle below it since it finds the faces in the triangles' runs
+    // (no vertex → face list): the f64 positions (24 B per vertex; no copy: the patches measure
     // their moves, and out of core the neighbour sums are each patch's own), the plan's
     // triangles and both adjacency lists (36 B per triangle), one array of offsets (8 B per
     // vertex: on a closed manifold it serves both lists, and the build keeps each vertex's

@@ -709,3 +709,59 @@ fn a_checkpoint_is_reused_only_for_the_same_content() {
         "a changed buffer was not noticed"
     );
 }
+
+/// A plan made out of core finds its faces in the triangles' runs and stores their starts
+/// (`face_runs.u32`) rather than the vertex → face lists; ranks that map it write the bytes of
+/// the in-core single-process run, for `vcs` and the default method.
+#[test]
+fn a_plan_made_out_of_core_stores_face_runs_and_ranks_give_the_same_bytes() {
+    let tmp = tempfile::tempdir().unwrap();
+    // Large enough (1.3M triangles) for the least budget to put the plan on the disk.
+    let input = sphere_file(tmp.path(), 8);
+    for method in [Method::Vcs, Method::VcsLowpass] {
+        let opts = Options {
+            method,
+            iterations: 1,
+            ..Options::default()
+        };
+        let reference = tmp.path().join(format!("{method}-plain.ply"));
+        engine::run_file(
+            &input,
+            &reference,
+            &opts,
+            &engine_settings(4000, 2),
+            &mut Quiet,
+        )
+        .unwrap();
+        let expected = std::fs::read(&reference).unwrap();
+        let ranks = 2;
+        let out = tmp.path().join(format!("{method}-{ranks}.ply"));
+        let work = tmp.path().join(format!("{method}-{ranks}.work"));
+        let engine = EngineSettings {
+            memory_budget: Some(64 << 20),
+            scratch: Some(tmp.path().to_path_buf()),
+            ..engine_settings(4000, 1)
+        };
+        run_ranks(
+            ranks,
+            &input,
+            &out,
+            &opts,
+            &engine,
+            &cluster_settings(&work, true, 1),
+        )
+        .into_iter()
+        .for_each(|r| {
+            r.unwrap();
+        });
+        assert!(
+            std::fs::read(&out).unwrap() == expected,
+            "{method} on {ranks} ranks from a plan out of core differs"
+        );
+        assert!(
+            work.join("face_runs.u32").exists(),
+            "{method}: the runs stored"
+        );
+        assert!(!work.join("vf.u32").exists() && !work.join("vf_offsets.u64").exists());
+    }
+}

@@ -496,7 +496,7 @@ fn rings_around(
         if v >= n || !topo.check_vertex(v) {
             return Err(format!("the adjacency of vertex {v} is damaged"));
         }
-        for &f in topo.faces_of(v) {
+        for f in topo.faces_of(v, &plan.triangles) {
             if plan.triangles[f as usize].iter().any(|&u| u >= n) {
                 return Err(format!("triangle {f} names a vertex out of range"));
             }
@@ -563,17 +563,17 @@ fn rings_around(
 /// the owned vertices and ring 1, whose adjacency [`rings_around`] checked.
 fn face_halo(plan: &StoredPlan, owned: &Range<u32>, triangles: &Range<u32>) -> Vec<u32> {
     let topo = &plan.topology;
-    let outside = |f: &&u32| !triangles.contains(*f);
+    let outside = |f: &u32| !triangles.contains(f);
     let mut halo: Vec<u32> = Vec::new();
     for v in owned.clone() {
-        halo.extend(topo.faces_of(v).iter().filter(outside));
+        halo.extend(topo.faces_of(v, &plan.triangles).filter(outside));
     }
     for t in triangles.clone() {
         for &c in plan.triangles[t as usize]
             .iter()
             .filter(|c| !owned.contains(*c))
         {
-            halo.extend(topo.faces_of(c).iter().filter(outside));
+            halo.extend(topo.faces_of(c, &plan.triangles).filter(outside));
         }
     }
     halo.sort_unstable();

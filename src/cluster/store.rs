@@ -6,7 +6,9 @@
 //! - `plan.json`: what the arrays hold and what they were made from (the SHA-256 of the input
 //!   and of the files it names, method options, patch size, pins). Written last: a directory without it holds no usable plan.
 //! - `order.u32` (reordered → input vertex), `triangles.u32` (reordered, smallest vertex first),
-//!   `vv_offsets.u64`, `vv.u32`, `vf_offsets.u64`, `vf.u32`, `fixed.u8` (the adjacency);
+//!   `vv_offsets.u64`, `vv.u32`, `fixed.u8` (the adjacency) and `face_runs.u32` (where each
+//!   vertex's run of triangles starts: [`crate::topology::FaceIndex::Runs`]), or
+//!   `vf_offsets.u64`, `vf.u32` (the faces listed) for a plan in the input's order;
 //!   `welded.u32` (reordered → the vertex whose position it takes), only when some are welded;
 //!   `lines.u8` (the crease line vertices' crease neighbours), only with creases.
 //! - `positions-0.f64`, `positions-1.f64`: two slots of `3 × f64` per reordered vertex. An
@@ -31,20 +33,21 @@ use crate::mesh::Buf;
 use crate::mesh::storage::{Pod, as_bytes};
 use crate::metrics::MeshInfo;
 use crate::partition::Patch;
-use crate::topology::{Topology, TopologyStats};
+use crate::topology::{FaceIndex, FaceParts, Topology, TopologyStats};
 
-/// 2: vertices welded (a plan of format 1 is made again).
-const FORMAT: u32 = 2;
+/// 2: vertices welded; 3: faces found in runs (a plan of an earlier format is made again).
+const FORMAT: u32 = 3;
 const PLAN: &str = "plan.json";
 const STATE: &str = "state.json";
 const INPUT: &str = "input.f64";
 const LOOPS: &str = "loops.u32";
 const WELDED: &str = "welded.u32";
 const LINES: &str = "lines.u8";
+const RUNS: &str = "face_runs.u32";
 
 /// Every file a run writes in its work directory (and removes from it after a run without
 /// `--checkpoint`): no other file of the run may be one of them.
-pub const FILES: [&str; 15] = [
+pub const FILES: [&str; 16] = [
     PLAN,
     STATE,
     "order.u32",
@@ -60,6 +63,7 @@ pub const FILES: [&str; 15] = [
     LOOPS,
     WELDED,
     LINES,
+    RUNS,
 ];
 
 /// What a plan was made from; a plan is reused only when all of it matches.
@@ -178,6 +182,9 @@ pub struct PlanDoc {
     /// Whether the crease line array is stored in `lines.u8` (with creases).
     #[serde(default)]
     pub crease_lines: bool,
+    /// Whether the faces are found in runs (`face_runs.u32`) rather than listed.
+    #[serde(default)]
+    pub face_runs: bool,
     pub crossing_edge_stencils: u64,
     pub topology: TopologyStats,
     /// Input statistics, when the run that made the plan measured them.
@@ -288,8 +295,13 @@ impl WorkDir {
         self.write_array("triangles.u32", &made.reordered.triangles)?;
         self.write_array("vv_offsets.u64", parts.vv_offsets)?;
         self.write_array("vv.u32", parts.vv)?;
-        self.write_array("vf_offsets.u64", parts.vf_offsets)?;
-        self.write_array("vf.u32", parts.vf)?;
+        match parts.faces {
+            FaceParts::Lists { offsets, faces } => {
+                self.write_array("vf_offsets.u64", offsets)?;
+                self.write_array("vf.u32", faces)?;
+            }
+            FaceParts::Runs { starts } => self.write_array(RUNS, starts)?,
+        }
         self.write_array("fixed.u8", parts.fixed)?;
         if !parts.lines.is_empty() {
             self.write_array(LINES, parts.lines)?;
@@ -333,6 +345,7 @@ impl WorkDir {
             boundary_edges: loops.len(),
             welded: made.reordered.welded,
             crease_lines: !parts.lines.is_empty(),
+            face_runs: matches!(parts.faces, FaceParts::Runs { .. }),
             crossing_edge_stencils: stats.crossing_edge_stencils,
             topology: made.topology.stats,
             input_stats,
@@ -361,8 +374,18 @@ impl WorkDir {
         let topology = Topology::from_parts(
             Buf::map_file(&m("vv_offsets.u64"), n + 1)?,
             Buf::map_file(&m("vv.u32"), doc.topology.edges * 2)?,
-            Buf::map_file(&m("vf_offsets.u64"), n + 1)?,
-            Buf::map_file(&m("vf.u32"), 3 * (t - doc.topology.degenerate_triangles))?,
+            match doc.face_runs {
+                true => FaceIndex::Runs {
+                    starts: Buf::map_file(&m(RUNS), n + 1)?,
+                },
+                false => FaceIndex::Lists {
+                    offsets: Buf::map_file(&m("vf_offsets.u64"), n + 1)?,
+                    faces: Buf::map_file(
+                        &m("vf.u32"),
+                        3 * (t - doc.topology.degenerate_triangles),
+                    )?,
+                },
+            },
             Buf::map_file(&m("fixed.u8"), n)?,
             match doc.crease_lines {
                 true => Buf::map_file(&m(LINES), 2 * n)?,

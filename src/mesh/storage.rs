@@ -137,6 +137,11 @@ impl Storage {
         self.held.total.load(Ordering::Relaxed)
     }
 
+    /// Bytes of scratch files alive now.
+    pub fn held_bytes(&self) -> u64 {
+        self.held.now.load(Ordering::Relaxed)
+    }
+
     /// The most bytes of scratch files alive at one time: the disk space the run needed.
     pub fn peak_mapped_bytes(&self) -> u64 {
         self.held.peak.load(Ordering::Relaxed)

@@ -515,16 +515,23 @@ fn vertex_sums_lanes<P: Positions + ?Sized>(
         if above.is_empty() {
             continue;
         }
-        let faces = parts.faces_of(i);
         for &j in above {
             all.edges.length.0 += p.distance(pos.at(j));
             all.edges.length.1 += 1;
         }
-        if faces.len() <= LANES {
+        // The faces into lanes, and the wide walk for a vertex with more.
+        let (mut lanes, mut count) = ([0u32; LANES], 0);
+        crate::for_each_face!(parts, i, triangles, u32::MAX, |t, _tri| {
+            if let Some(lane) = lanes.get_mut(count) {
+                *lane = t;
+            }
+            count += 1;
+        });
+        if count <= LANES {
             narrow_vertex(
                 pos,
                 triangles,
-                faces,
+                &lanes[..count],
                 i,
                 above,
                 origin,
@@ -534,6 +541,7 @@ fn vertex_sums_lanes<P: Positions + ?Sized>(
         } else {
             wide.resize(above.len(), EdgeFaces::default());
             let slot = |v: u32| above.binary_search(&v).ok();
+            let faces = parts.faces_of(i, triangles);
             add_faces(pos, triangles, faces, i, origin, &mut wide, slot, &mut all);
             for e in &wide {
                 if e.count == 2 {
@@ -592,7 +600,7 @@ fn narrow_vertex<P: Positions + ?Sized>(
 fn add_faces<P: Positions + ?Sized>(
     pos: &P,
     triangles: &[[u32; 3]],
-    faces: &[u32],
+    faces: impl Iterator<Item = u32>,
     i: u32,
     origin: DVec3,
     edges: &mut [EdgeFaces],
@@ -601,7 +609,7 @@ fn add_faces<P: Positions + ?Sized>(
 ) {
     // Only the counts: a normal is read only where they say it was written.
     edges.iter_mut().for_each(|e| e.count = 0);
-    for &t in faces {
+    for t in faces {
         let tri = triangles[t as usize];
         // Every corner of a face of `i` is a neighbour of `i`; those above it own the edges.
         let (b, c) = corners_after(tri, i);
@@ -1108,7 +1116,7 @@ mod tests {
             for i in vertices {
                 let p = pos[i as usize];
                 expected.extent = extent_union(expected.extent, (p, p));
-                for &f in t.faces_of(i) {
+                for f in t.faces_of(i, &m.triangles) {
                     let tri = m.triangles[f as usize];
                     if tri.iter().all(|&v| v >= i) {
                         let a = pos[tri[0] as usize] - origin;
@@ -1121,9 +1129,8 @@ mod tests {
                     e.length.0 += p.distance(pos[j as usize]);
                     e.length.1 += 1;
                     let normals: Vec<DVec3> = t
-                        .faces_of(i)
-                        .iter()
-                        .map(|&f| m.triangles[f as usize])
+                        .faces_of(i, &m.triangles)
+                        .map(|f| m.triangles[f as usize])
                         .filter(|tri| tri.contains(&j))
                         .map(normal)
                         .collect();

@@ -127,7 +127,7 @@ fn place(
     let (mut a, mut b) = (DMat3::ZERO, DVec3::ZERO);
     for k in members {
         let v = k[1] as u32;
-        for &f in topo.faces_of(v) {
+        for f in topo.faces_of(v, triangles) {
             let t = triangles[f as usize];
             // Count each face once per cluster: at its first corner inside the cluster.
             let first = t.iter().position(|&u| map[u as usize] == c);

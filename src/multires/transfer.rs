@@ -276,7 +276,7 @@ fn volume_gradient(
     v: u32,
     origin: DVec3,
 ) -> DVec3 {
-    topo.faces_of(v).iter().fold(DVec3::ZERO, |s, &f| {
+    topo.faces_of(v, triangles).fold(DVec3::ZERO, |s, f| {
         let t = triangles[f as usize];
         let i = t.iter().position(|&u| u == v).unwrap_or(0);
         let b = pos[t[(i + 1) % 3] as usize] - origin;

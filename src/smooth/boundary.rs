@@ -291,9 +291,8 @@ pub fn boundary_edges(topo: &Topology, triangles: &[[u32; 3]]) -> Vec<[u32; 2]> 
                 continue;
             }
             let holding = topo
-                .faces_of(a)
-                .iter()
-                .filter(|&&f| triangles[f as usize].contains(&b))
+                .faces_of(a, triangles)
+                .filter(|&f| triangles[f as usize].contains(&b))
                 .take(2)
                 .count();
             if holding == 1 {

@@ -86,13 +86,12 @@ pub const FACE_SCALARS: usize = 2;
 fn patch_of(topo: &TopologyParts, tris: &[[u32; 3]], t: u32, out: &mut Vec<u32>) {
     out.clear();
     let [a, b, c] = tris[t as usize];
-    out.extend_from_slice(topo.faces_of(a));
+    out.extend(topo.faces_of(a, tris));
     out.extend(
-        topo.faces_of(b)
-            .iter()
-            .filter(|&&f| !tris[f as usize].contains(&a)),
+        topo.faces_of(b, tris)
+            .filter(|&f| !tris[f as usize].contains(&a)),
     );
-    out.extend(topo.faces_of(c).iter().filter(|&&f| {
+    out.extend(topo.faces_of(c, tris).filter(|&f| {
         let tf = tris[f as usize];
         !tf.contains(&a) && !tf.contains(&b)
     }));
@@ -138,6 +137,7 @@ pub fn consistency_into(
 ) {
     let mut patch = Vec::with_capacity(32);
     let mut units = Vec::with_capacity(32);
+    let mut fan = Vec::with_capacity(32);
     for (k, o) in out.iter_mut().enumerate() {
         let t = (first + k) as u32;
         patch_of(topo, tris, t, &mut patch);
@@ -154,7 +154,8 @@ pub fn consistency_into(
         let corners = tris[t as usize];
         let (mut largest, mut sum) = (0.0f64, 0.0f64);
         for &c in &corners {
-            let fan = topo.faces_of(c);
+            fan.clear();
+            fan.extend(topo.faces_of(c, tris));
             for (x, &fa) in fan.iter().enumerate() {
                 let ta = tris[fa as usize];
                 for &fb in &fan[x + 1..] {
@@ -339,17 +340,20 @@ pub fn fit_into(
     for (k, o) in out.iter_mut().enumerate() {
         let v = (first + k) as u32;
         let p = from[v as usize];
-        let faces = topo.faces_of(v);
-        if !topo.is_free_or_on_line(v) || faces.is_empty() {
+        if !topo.is_free_or_on_line(v) {
             *o = p;
             continue;
         }
-        let mut step = DVec3::ZERO;
-        for &f in faces {
+        let (mut step, mut count) = (DVec3::ZERO, 0usize);
+        for f in topo.faces_of(v, tris) {
             let n = normals[f as usize];
             step += n * n.dot(centroid(tris, from, f) - p);
+            count += 1;
         }
-        *o = p + step * (1.0 / faces.len() as f64);
+        *o = match count {
+            0 => p,
+            _ => p + step * (1.0 / count as f64),
+        };
     }
 }
 

@@ -330,6 +330,7 @@ fn apply_block_lanes<P: Field + ?Sized, D: Field + ?Sized>(
             .map(|u| V4::of(laplacian::jacobi_at(topo, half, u, mu))),
     );
     let mut held_back = false;
+    let slots = topo.faces_bound(block.clone());
     for _ in 0..DEVIATION_ROUNDS {
         let Scratch {
             free,
@@ -376,9 +377,8 @@ fn apply_block_lanes<P: Field + ?Sized, D: Field + ?Sized>(
         dir.clear();
         dir.resize(len, V4::default());
         let dir = &mut dir[..len];
-        // No more faces than the members' face lists hold: written by index into a slice, whose
+        // No more faces than the topology's bound for the block: written by index into a slice, whose
         // pointer stays in a register (a push loaded the vector's pointer, length and capacity).
-        let slots = topo.vf_offsets[block.end as usize] - topo.vf_offsets[start as usize];
         if shared.len() < slots {
             shared.resize(slots, Shared::default());
         }
@@ -424,16 +424,13 @@ fn apply_block_lanes<P: Field + ?Sized, D: Field + ?Sized>(
             let member = move |u: u32| local(u) < len;
             for a in block.clone() {
                 let (pa, qa) = (here[local(a)], moved[local(a)]);
-                for &t in topo.faces_of(a) {
-                    if t >= own.start {
-                        break;
-                    }
-                    let (b, c) = corners_after(triangles[t as usize], a);
+                crate::for_each_face!(topo, a, triangles, own.start, |_t, tri| {
+                    let (b, c) = corners_after(tri, a);
                     let (mb, mc) = (member(b), member(c));
                     if !((mb && b < a) || (mc && c < a)) {
                         face!(a, pa, qa, b, c, mb, mc);
                     }
-                }
+                });
                 while let Some(&[first, b, c]) = run.get(next)
                     && first == a
                 {
@@ -448,13 +445,13 @@ fn apply_block_lanes<P: Field + ?Sized, D: Field + ?Sized>(
                     continue;
                 }
                 let (pa, qa) = (here[local(a)], moved[local(a)]);
-                for &t in topo.faces_of(a) {
-                    let (b, c) = corners_after(triangles[t as usize], a);
+                crate::for_each_face!(topo, a, triangles, u32::MAX, |_t, tri| {
+                    let (b, c) = corners_after(tri, a);
                     let (mb, mc) = (member(b), member(c));
                     if !((mb && b < a) || (mc && c < a)) {
                         face!(a, pa, qa, b, c, mb, mc);
                     }
-                }
+                });
             }
         }
         // The offset's linear coefficient is Σ |gradient|; the directions are made unit.

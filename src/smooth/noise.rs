@@ -29,7 +29,7 @@ pub fn unit_normals_into(
         *o = if topo.is_fixed(v) {
             DVec3::ZERO
         } else {
-            let sum = topo.faces_of(v).iter().fold(DVec3::ZERO, |s, &t| {
+            let sum = topo.faces_of(v, tris).fold(DVec3::ZERO, |s, t| {
                 let [a, b, c] = tris[t as usize].map(|i| pos[i as usize]);
                 s + (b - a).cross(c - a)
             });

@@ -306,8 +306,8 @@ pub fn apply_ring<P: Field + ?Sized, D: Field + ?Sized>(
             }
         };
         let (pa, sa) = (pos.get(a) - origin, shares.get(a));
-        for &t in topo.faces_of(a) {
-            let (b, c) = corners_after(triangles[t as usize], a);
+        crate::for_each_face!(topo, a, triangles, u32::MAX, |_t, tri| {
+            let (b, c) = corners_after(tri, a);
             let (b_free, c_free) = (free(b), free(c));
             // Each face once: at its smallest free corner.
             if (b_free && b < a) || (c_free && c < a) {
@@ -326,7 +326,7 @@ pub fn apply_ring<P: Field + ?Sized, D: Field + ?Sized>(
                 &mut n,
                 &mut scale,
             );
-        }
+        });
     }
     let Some(w) = stencil::translation(dv, n, scale) else {
         return Outcome::SkippedDegenerate;

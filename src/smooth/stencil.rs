@@ -327,8 +327,8 @@ fn volume_translation<const N: usize, P: Field + ?Sized>(
         for fi in 0..2 {
             let (f, g) = (free[fi], free[1 - fi]);
             let mut single = DVec3::ZERO;
-            for &t in adj.faces_of(f) {
-                let (b, c) = corners_after(triangles[t as usize], f);
+            crate::for_each_face!(adj, f, triangles, u32::MAX, |_t, tri| {
+                let (b, c) = corners_after(tri, f);
                 let (b_free, c_free) = (b == g, c == g);
                 if !(b_free | c_free) {
                     let nt = (pos.get(b) - origin).cross(pos.get(c) - origin);
@@ -355,7 +355,7 @@ fn volume_translation<const N: usize, P: Field + ?Sized>(
                     }
                     _ => shared_face(p, q, r, d[0], d[1], d[1], true, true, acc.0, acc.1, acc.2),
                 }
-            }
+            });
             dv += d[fi].dot(single);
             n += single;
         }
@@ -365,8 +365,7 @@ fn volume_translation<const N: usize, P: Field + ?Sized>(
         // Faces where f is the only free corner (most of them): n_t = p_b × p_c does not depend
         // on f, and ΔV_t = d_f · n_t, so their n_t are summed first and dotted with d_f once.
         let mut single = DVec3::ZERO;
-        for &t in adj.faces_of(f) {
-            let tri = triangles[t as usize];
+        crate::for_each_face!(adj, f, triangles, u32::MAX, |_t, tri| {
             let (b, c) = corners_after(tri, f);
             // Which other free vertices are corners of this face.
             let mut others = 0u8;
@@ -405,7 +404,7 @@ fn volume_translation<const N: usize, P: Field + ?Sized>(
             shared_face(
                 p, q, r, d[fi], db, dc, b_free, c_free, &mut dv, &mut n, &mut scale,
             );
-        }
+        });
         dv += d[fi].dot(single);
         n += single;
     }

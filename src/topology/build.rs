@@ -6,7 +6,7 @@
 use rayon::prelude::*;
 
 use super::fans::{VertexScratch, analyse_vertex, write_neighbors};
-use super::{CHUNK, Topology, TopologyStats};
+use super::{CHUNK, FaceIndex, Topology, TopologyStats};
 use crate::error::{Error, Result};
 use crate::mesh::{Buf, Storage};
 use crate::meter::{Meter, Passes};
@@ -217,8 +217,10 @@ impl Topology {
         Ok(Topology {
             vv_offsets,
             vv,
-            vf_offsets,
-            vf,
+            faces: FaceIndex::Lists {
+                offsets: vf_offsets,
+                faces: vf,
+            },
             fixed,
             lines: Buf::default(),
             stats,
@@ -447,13 +449,50 @@ pub(crate) fn is_degenerate(t: &[u32; 3]) -> bool {
     t[0] == t[1] || t[1] == t[2] || t[0] == t[2]
 }
 
+/// Whether every triangle's first corner is its smallest and the triangles are sorted by it
+/// (the layout [`FaceIndex::Runs`] reads).
+pub(super) fn sorted_by_first(triangles: &[[u32; 3]]) -> bool {
+    let first = |t: &[u32; 3]| t[0] <= t[1] && t[0] <= t[2];
+    triangles.par_iter().all(first)
+        && triangles
+            .par_windows(2)
+            .with_min_len(1 << 14)
+            .all(|w| w[0][0] <= w[1][0])
+}
+
+/// Where each vertex's run of `triangles` (sorted by first corner, [`sorted_by_first`]) starts,
+/// and the end: `n_vertices + 1` entries.
+pub(super) fn run_starts(
+    storage: &Storage,
+    n_vertices: usize,
+    triangles: &[[u32; 3]],
+) -> Result<Buf<u32>> {
+    let mut starts: Buf<u32> = storage.zeroed(n_vertices + 1)?;
+    // Each chunk of vertices finds its first run by a search, then walks its triangles.
+    starts
+        .par_chunks_mut(CHUNK)
+        .enumerate()
+        .for_each(|(c, out)| {
+            let lo = (c * CHUNK) as u32;
+            let mut t = triangles.partition_point(|tri| tri[0] < lo);
+            for (k, s) in out.iter_mut().enumerate() {
+                let v = lo + k as u32;
+                while t < triangles.len() && triangles[t][0] < v {
+                    t += 1;
+                }
+                *s = t as u32;
+            }
+        });
+    Ok(starts)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::topology::MAX_FREE_DEGREE;
     use crate::topology::corners_after;
     use crate::topology::fans::analyse_general;
     use crate::topology::masks::FIXED;
+    use crate::topology::{FaceParts, MAX_FREE_DEGREE};
 
     /// Octahedron: closed, 6 vertices of degree 4.
     fn octahedron() -> Vec<[u32; 3]> {
@@ -466,7 +505,8 @@ mod tests {
         assert_eq!(t.stats.edges, 12);
         assert_eq!(t.stats.boundary_edges, 0);
         assert_eq!(t.stats.fixed_vertices, 0);
-        assert!((0..6).all(|v| t.deg(v) == 4 && t.faces_of(v).len() == 4));
+        let tris = octahedron();
+        assert!((0..6).all(|v| t.deg(v) == 4 && t.faces_of(v, &tris).count() == 4));
         assert_eq!(t.edges().count(), 12);
         assert!(t.edges().all(|[i, j]| i < j));
         // As many neighbours as faces everywhere: one offsets array serves both lists.
@@ -484,7 +524,7 @@ mod tests {
         assert_eq!(t.stats.boundary_edges, 5);
         // The rim has a neighbour more than faces: the offsets differ, both are kept.
         assert_eq!(t.parts().vv_offsets, [0, 5, 8, 11, 14, 17, 20]);
-        assert_eq!(t.parts().vf_offsets, [0, 5, 7, 9, 11, 13, 15]);
+        assert_eq!(whole(&t).2, [0, 5, 7, 9, 11, 13, 15]);
     }
 
     #[test]
@@ -583,7 +623,10 @@ mod tests {
                     .unwrap();
                 let topo = pool.install(|| Topology::build(n, &tris)).unwrap();
                 for v in 0..n as u32 {
-                    assert_eq!(topo.faces_of(v), &faces_of[v as usize][..], "faces of {v}");
+                    assert!(
+                        topo.faces_of(v, &tris)
+                            .eq(faces_of[v as usize].iter().copied())
+                    );
                     assert_eq!(
                         topo.neighbors(v),
                         &nbrs[v as usize][..],
@@ -618,11 +661,14 @@ mod tests {
 
     fn whole(t: &Topology) -> Whole {
         let p = t.parts();
+        let FaceParts::Lists { offsets, faces } = p.faces else {
+            panic!("a build lists the faces")
+        };
         (
             p.vv_offsets.to_vec(),
             p.vv.to_vec(),
-            p.vf_offsets.to_vec(),
-            p.vf.to_vec(),
+            offsets.to_vec(),
+            faces.to_vec(),
             p.fixed.to_vec(),
             t.stats,
         )
@@ -757,6 +803,107 @@ mod tests {
                 let topo = pool.install(|| Topology::build(*n, tris)).unwrap();
                 assert!(whole(&topo) == want, "{name} on {threads} threads");
             }
+        }
+    }
+
+    /// `tris` as a plan lays them out: each rotated to start at its smallest corner (which keeps
+    /// its orientation), then sorted by that corner, stably.
+    fn plan_layout(tris: &[[u32; 3]]) -> Vec<[u32; 3]> {
+        let mut out: Vec<[u32; 3]> = tris
+            .iter()
+            .map(|t| {
+                let k = (0..3).min_by_key(|&k| t[k]).unwrap();
+                [t[k], t[(k + 1) % 3], t[(k + 2) % 3]]
+            })
+            .collect();
+        out.sort_by_key(|t| t[0]);
+        out
+    }
+
+    #[test]
+    fn faces_found_in_runs_are_the_listed_faces_in_their_order() {
+        // Closed and open, degenerate faces (one repeated corner, and three), faces repeated, a
+        // non-manifold edge, an unreferenced vertex, a hub and vertices in several chunks.
+        let sphere = crate::shapes::icosphere(5);
+        let n = sphere.positions.len();
+        let perm = crate::shapes::permutation(n + 1, 3);
+        let mut tris: Vec<[u32; 3]> = sphere
+            .triangles
+            .iter()
+            .map(|t| t.map(|v| perm[v as usize]))
+            .collect();
+        let closed = tris.clone();
+        tris.truncate(tris.len() - 40);
+        tris.extend([[5, 5, 9], [7, 7, 7], [3, 11, 4], [3, 11, 4], [3, 11, 20]]);
+        let hub = n as u32 / 2;
+        tris.extend((0..600).map(|k| [hub, k, k + 1]));
+        let mut cases = vec![("closed", closed), ("open and damaged", tris)];
+        let bunny =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/stanford-bunny.ply");
+        cases.push((
+            "scan",
+            crate::io::read_mesh(&bunny).unwrap().triangles.to_vec(),
+        ));
+        for (name, tris) in cases {
+            let n = 1 + tris.iter().flatten().copied().max().unwrap() as usize + 1;
+            let listed = Topology::build(n, &tris).unwrap();
+            let mut unsorted = listed.clone();
+            assert!(!unsorted.faces_by_runs(&Storage::heap(), &tris).unwrap());
+            let sorted = plan_layout(&tris);
+            let listed = Topology::build(n, &sorted).unwrap();
+            let mut runs = listed.clone();
+            assert!(
+                runs.faces_by_runs(&Storage::heap(), &sorted).unwrap(),
+                "{name}"
+            );
+            assert!(matches!(runs.parts().faces, FaceParts::Runs { .. }));
+            let walked = |topo: &Topology, v: u32, end: u32| {
+                let mut out = Vec::new();
+                crate::for_each_face!(topo.parts(), v, &sorted, end, |t, tri| {
+                    assert_eq!(tri, sorted[t as usize]);
+                    out.push(t);
+                });
+                out
+            };
+            for v in 0..n as u32 {
+                let want: Vec<u32> = listed.faces_of(v, &sorted).collect();
+                let got: Vec<u32> = runs.faces_of(v, &sorted).collect();
+                assert_eq!(got, want, "{name}: faces of {v}");
+                assert_eq!(walked(&runs, v, u32::MAX), want, "{name}: {v} walked");
+                assert_eq!(walked(&listed, v, u32::MAX), want, "{name}: {v} listed");
+                // Below a run's start: the faces whose smallest corner is below its vertex.
+                for w in [v / 2, v.saturating_sub(3), v, v + 1] {
+                    let end = sorted.partition_point(|t| t[0] < w) as u32;
+                    let below: Vec<u32> = want.iter().copied().filter(|&t| t < end).collect();
+                    assert_eq!(walked(&runs, v, end), below, "{name}: {v} below {w}");
+                    assert_eq!(walked(&listed, v, end), below);
+                }
+                assert_eq!(runs.neighbors(v), listed.neighbors(v));
+                assert!(runs.check_vertex(v));
+            }
+            // The bound holds every face of a range of vertices once.
+            for lo in (0..n as u32).step_by(97) {
+                let range = lo..(lo + 150).min(n as u32);
+                let mut faces: Vec<u32> = range
+                    .clone()
+                    .flat_map(|v| listed.faces_of(v, &sorted))
+                    .collect();
+                faces.sort_unstable();
+                faces.dedup();
+                assert!(
+                    runs.faces_bound(range.clone()) >= faces.len(),
+                    "{name} {range:?}"
+                );
+                assert!(listed.faces_bound(range) >= faces.len());
+            }
+            // The lists and their offsets are gone; the neighbours keep offsets of their own.
+            let t = sorted.len() - listed.stats.degenerate_triangles;
+            let saved = listed.heap_bytes() - runs.heap_bytes();
+            let own_offsets = match listed.vv_offsets.is_empty() {
+                true => 0,
+                false => 8 * (n + 1),
+            };
+            assert_eq!(saved + 4 * (n + 1), 12 * t + own_offsets, "{name}");
         }
     }
 }

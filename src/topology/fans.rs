@@ -482,7 +482,7 @@ mod tests {
             let n = tris.iter().flatten().max().unwrap() + 1;
             let topo = Topology::build(n as usize, tris).unwrap();
             for v in 0..n {
-                let faces = topo.faces_of(v);
+                let faces: Vec<u32> = topo.faces_of(v, tris).collect();
                 let (b, c): (Vec<u32>, Vec<u32>) = faces
                     .iter()
                     .map(|&t| corners_after(tris[t as usize], v))

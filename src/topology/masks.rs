@@ -113,14 +113,13 @@ impl Topology {
     /// `triangles` is the array the topology was built from; any orientation. Costs O(d²) in
     /// the number d of faces of `v` (about 4 on a boundary).
     pub fn loop_neighbors(&self, triangles: &[[u32; 3]], v: u32) -> Option<[u32; 2]> {
-        let faces = self.faces_of(v);
         // A neighbour is across a boundary edge when exactly one face of v holds it.
         let mut found = [0u32; 2];
         let mut count = 0;
         for &u in self.neighbors(v) {
-            let holding = faces
-                .iter()
-                .filter(|&&t| triangles[t as usize].contains(&u))
+            let holding = self
+                .faces_of(v, triangles)
+                .filter(|&t| triangles[t as usize].contains(&u))
                 .take(2)
                 .count();
             if holding == 1 {
@@ -347,7 +346,7 @@ impl Topology {
         v: u32,
     ) -> bool {
         let cos_clean = CLEAN_ANGLE.to_radians().cos();
-        self.faces_of(v).iter().all(|&f| {
+        self.faces_of(v, triangles).all(|f| {
             let (raw, filtered) = (face_normal(triangles, positions, f), normals[f as usize]);
             // A face of zero area has no normal to compare: a sliver of a clean CAD mesh.
             let (l0, l1) = (raw.length(), filtered.length());
@@ -430,7 +429,7 @@ impl Topology {
     fn edge_faces(&self, triangles: &[[u32; 3]], v: u32, u: u32) -> Option<[(u32, f64); 2]> {
         let mut found = [(0, 0.0); 2];
         let mut count = 0;
-        for &f in self.faces_of(v) {
+        for f in self.faces_of(v, triangles) {
             let t = triangles[f as usize];
             let Some(k) = t.iter().position(|&x| x == v) else {
                 continue;

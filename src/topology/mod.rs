@@ -3,7 +3,12 @@
 //!
 //! Conventions:
 //! - `neighbors(v)` is sorted ascending and has no duplicates; `deg(v)` is its length.
-//! - `faces_of(v)` lists the triangles (indices into the triangle array) that use `v`, ascending.
+//! - `faces_of(v, triangles)` gives the triangles (indices into the triangle array) that use `v`,
+//!   ascending, degenerate ones excepted. A topology lists them per vertex, or, once
+//!   [`Topology::faces_by_runs`] found the triangles sorted by their first corner and that corner
+//!   their smallest (the plan's layout), finds them in the triangle array itself: the faces whose
+//!   smallest corner is `u` are one run of it, so `v`'s faces are those of its lower neighbours'
+//!   runs that use `v`, then its own run. That keeps 14 B per triangle less, and the same order.
 //! - A vertex is **fixed** (never moved by any method) when it is on the boundary (an edge used by one
 //!   triangle), on a non-manifold edge (used by three or more), is a non-manifold vertex (its link is
 //!   not one cycle or one path), belongs to a degenerate triangle (a repeated index), is
@@ -41,17 +46,17 @@ pub use fans::corners_after;
 pub use rings::rings_outside;
 pub use stats::TopologyStats;
 
-use crate::mesh::Buf;
+use crate::error::Result;
+use crate::mesh::{Buf, Storage};
 
 /// CSR adjacency and fixed-vertex mask of a triangle mesh.
 #[derive(Debug, Clone, Default)]
 pub struct Topology {
-    /// Empty when it would equal `vf_offsets` (every vertex has as many neighbours as faces: a
-    /// closed manifold), which then serve both lists: 8 bytes per vertex less.
+    /// Empty when it would equal the face lists' offsets (every vertex has as many neighbours as
+    /// faces: a closed manifold), which then serve both lists: 8 bytes per vertex less.
     vv_offsets: Buf<usize>,
     vv: Buf<u32>,
-    vf_offsets: Buf<usize>,
-    vf: Buf<u32>,
+    faces: FaceIndex,
     fixed: Buf<u8>,
     /// Two bytes per vertex when creases were detected (empty otherwise): for a crease line
     /// vertex ([`Topology::line_neighbors`]), the places of its two crease neighbours in its
@@ -61,15 +66,249 @@ pub struct Topology {
     pub stats: TopologyStats,
 }
 
+/// How a [`Topology`] finds the faces of a vertex.
+#[derive(Debug, Clone)]
+pub enum FaceIndex {
+    /// Vertex → face CSR: offsets (`len + 1`) and triangle indices, each vertex's ascending.
+    Lists {
+        offsets: Buf<usize>,
+        faces: Buf<u32>,
+    },
+    /// For triangles sorted by their first corner, which is their smallest: the faces whose
+    /// smallest corner is `u` are `starts[u]..starts[u + 1]` (`len + 1` entries).
+    Runs { starts: Buf<u32> },
+}
+
+impl Default for FaceIndex {
+    fn default() -> Self {
+        FaceIndex::Lists {
+            offsets: Buf::default(),
+            faces: Buf::default(),
+        }
+    }
+}
+
+/// A [`FaceIndex`]'s arrays, lent.
+#[derive(Debug, Clone, Copy)]
+pub enum FaceParts<'a> {
+    Lists {
+        offsets: &'a [usize],
+        faces: &'a [u32],
+    },
+    Runs {
+        starts: &'a [u32],
+    },
+}
+
+impl FaceIndex {
+    fn parts(&self) -> FaceParts<'_> {
+        match self {
+            FaceIndex::Lists { offsets, faces } => FaceParts::Lists { offsets, faces },
+            FaceIndex::Runs { starts } => FaceParts::Runs { starts },
+        }
+    }
+}
+
+impl<'a> FaceParts<'a> {
+    /// The faces of `v`, whose neighbours `neighbors` gives (ascending), in `triangles` (those
+    /// the index was built for), ascending.
+    #[inline(always)]
+    fn of(
+        self,
+        v: u32,
+        neighbors: impl FnOnce() -> &'a [u32],
+        triangles: &'a [[u32; 3]],
+    ) -> FacesOf<'a> {
+        match self {
+            FaceParts::Lists { offsets, faces } => {
+                let v = v as usize;
+                FacesOf::Listed(faces[offsets[v]..offsets[v + 1]].iter())
+            }
+            FaceParts::Runs { starts } => FacesOf::Found(RunWalk {
+                triangles,
+                starts,
+                v,
+                lower: neighbors().iter(),
+                at: 0,
+                end: 0,
+                own: false,
+            }),
+        }
+    }
+}
+
+/// The faces of a vertex ([`Topology::faces_of`]), ascending.
+#[derive(Debug, Clone)]
+pub enum FacesOf<'a> {
+    Listed(std::slice::Iter<'a, u32>),
+    Found(RunWalk<'a>),
+}
+
+impl Iterator for FacesOf<'_> {
+    type Item = u32;
+
+    #[inline(always)]
+    fn next(&mut self) -> Option<u32> {
+        match self {
+            FacesOf::Listed(faces) => faces.next().copied(),
+            FacesOf::Found(walk) => walk.next(),
+        }
+    }
+
+    fn count(self) -> usize {
+        match self {
+            FacesOf::Listed(faces) => faces.len(),
+            FacesOf::Found(walk) => walk.count(),
+        }
+    }
+}
+
+/// The faces of `v` found in the runs of the triangle array ([`FaceIndex::Runs`]): those of each
+/// lower neighbour's run that use `v`, in the neighbours' order, then `v`'s own run. Runs of
+/// larger vertices lie further on, so the faces come ascending, as a list holds them.
+#[derive(Debug, Clone)]
+pub struct RunWalk<'a> {
+    triangles: &'a [[u32; 3]],
+    starts: &'a [u32],
+    v: u32,
+    /// `v`'s neighbours not yet walked; the walk stops taking them at the first above `v`.
+    lower: std::slice::Iter<'a, u32>,
+    /// The rest of the run being walked.
+    at: u32,
+    end: u32,
+    /// Whether that run is `v`'s own (the last).
+    own: bool,
+}
+
+impl Iterator for RunWalk<'_> {
+    type Item = u32;
+
+    #[inline(always)]
+    fn next(&mut self) -> Option<u32> {
+        loop {
+            if self.at < self.end {
+                let t = self.at;
+                self.at += 1;
+                let tri = self.triangles[t as usize];
+                // A lower neighbour's face is `v`'s when `v` is one of its other corners; every
+                // face of the own run starts with `v`. Degenerate faces belong to no vertex.
+                let uses = self.own | (tri[1] == self.v) | (tri[2] == self.v);
+                if uses && !build::is_degenerate(&tri) {
+                    return Some(t);
+                }
+                continue;
+            }
+            let u = match self.lower.next() {
+                Some(&u) if u < self.v => u,
+                _ if !self.own => {
+                    self.own = true;
+                    self.lower = [].iter();
+                    self.v
+                }
+                _ => return None,
+            };
+            self.at = self.starts[u as usize];
+            self.end = self.starts[u as usize + 1];
+        }
+    }
+}
+
+/// Candidate faces (those of a vertex's lower neighbours' runs and of its own) that
+/// [`for_each_face!`] gathers at once.
+#[doc(hidden)]
+pub const GATHERED: usize = 24;
+
+/// `for_each_face!(parts, v, triangles, end, |t, tri| { … })` runs the block for each face `t`
+/// of `v` below the triangle `end` (`u32::MAX`: all of them), `tri` its corners, in
+/// [`Topology::faces_of`]'s order; `continue` goes to the next face. `parts` is a
+/// [`TopologyParts`], and `end`, when not `u32::MAX`, starts a run (a vertex's first face in the
+/// plan's layout). A macro for the kernels' inner loops: written out in place, the block is
+/// compiled with its caller (a closure was not inlined into a kernel compiled for AVX2) and the
+/// walk of a list is the plain loop over it.
+#[macro_export]
+macro_rules! for_each_face {
+    ($parts:expr, $v:expr, $triangles:expr, $end:expr, |$t:ident, $tri:ident| $body:block) => {{
+        let parts: &$crate::topology::TopologyParts = &$parts;
+        let (v, triangles, end): (u32, &[[u32; 3]], u32) = ($v, $triangles, $end);
+        match parts.faces {
+            $crate::topology::FaceParts::Lists { offsets, faces } => {
+                for &$t in &faces[offsets[v as usize]..offsets[v as usize + 1]] {
+                    if $t >= end {
+                        break;
+                    }
+                    let $tri = triangles[$t as usize];
+                    $body
+                }
+            }
+            $crate::topology::FaceParts::Runs { starts } => {
+                let neighbors = parts.neighbors(v);
+                let lower = &neighbors[..neighbors.partition_point(|&u| u < v)];
+                // The faces gathered first without a branch per face (each candidate written,
+                // and kept by advancing the count when it is `v`'s), then walked as a list; a
+                // vertex with more candidates than the buffer holds is walked in the runs.
+                let mut gathered = [0u32; $crate::topology::GATHERED];
+                let mut count = 0usize;
+                let mut fits = true;
+                for u in lower.iter().copied().chain(::core::iter::once(v)) {
+                    let (first, last) = (starts[u as usize], starts[u as usize + 1].min(end));
+                    if first >= end {
+                        break;
+                    }
+                    if count + (last - first) as usize > $crate::topology::GATHERED {
+                        fits = false;
+                        break;
+                    }
+                    let own = u == v;
+                    for t in first..last {
+                        let c = triangles[t as usize];
+                        gathered[count] = t;
+                        let uses = own | (c[1] == v) | (c[2] == v);
+                        let degenerate = (c[0] == c[1]) | (c[1] == c[2]) | (c[0] == c[2]);
+                        count += (uses & !degenerate) as usize;
+                    }
+                }
+                if fits {
+                    for &$t in &gathered[..count] {
+                        let $tri = triangles[$t as usize];
+                        $body
+                    }
+                } else {
+                    for u in lower.iter().copied().chain(::core::iter::once(v)) {
+                        let (first, last) = (starts[u as usize], starts[u as usize + 1]);
+                        if first >= end {
+                            break;
+                        }
+                        // A lower neighbour's face is `v`'s when `v` is one of its other
+                        // corners; every face of the own run starts with `v`. Degenerate faces
+                        // are no vertex's.
+                        let own = u == v;
+                        for $t in first..last.min(end) {
+                            let $tri = triangles[$t as usize];
+                            let uses = own | ($tri[1] == v) | ($tri[2] == v);
+                            if !uses
+                                || $tri[0] == $tri[1]
+                                || $tri[1] == $tri[2]
+                                || $tri[0] == $tri[2]
+                            {
+                                continue;
+                            }
+                            $body
+                        }
+                    }
+                }
+            }
+        }
+    }};
+}
+
 /// The arrays of a [`Topology`], as [`Topology::parts`] lends them and
 /// [`Topology::from_parts`] takes them back.
 pub struct TopologyParts<'a> {
     /// Vertex → vertex CSR offsets (`len + 1`) and neighbour indices.
     pub vv_offsets: &'a [usize],
     pub vv: &'a [u32],
-    /// Vertex → face CSR offsets (`len + 1`) and triangle indices.
-    pub vf_offsets: &'a [usize],
-    pub vf: &'a [u32],
+    /// Where the faces of each vertex are.
+    pub faces: FaceParts<'a>,
     /// One byte per vertex, non-zero = fixed (see [`Topology::fixed_mask`]).
     pub fixed: &'a [u8],
     /// Empty, or two bytes per vertex: the crease line vertices' crease neighbours, as places in
@@ -93,10 +332,16 @@ impl<'a> TopologyParts<'a> {
         offsets[v + 1] - offsets[v]
     }
 
+    /// [`Topology::faces_of`].
     #[inline(always)]
-    pub fn faces_of(&self, v: u32) -> &'a [u32] {
-        let (offsets, v) = (self.vf_offsets, v as usize);
-        &self.vf[offsets[v]..offsets[v + 1]]
+    pub fn faces_of(&self, v: u32, triangles: &'a [[u32; 3]]) -> FacesOf<'a> {
+        self.faces.of(v, || self.neighbors(v), triangles)
+    }
+
+    /// [`Topology::faces_bound`].
+    #[inline]
+    pub fn faces_bound(&self, vertices: std::ops::Range<u32>) -> usize {
+        faces_bound(self.faces, self.vv_offsets, self.vv, vertices)
     }
 
     #[inline(always)]
@@ -150,8 +395,7 @@ impl Topology {
         TopologyParts {
             vv_offsets: self.vv_offsets(),
             vv: &self.vv,
-            vf_offsets: &self.vf_offsets,
-            vf: &self.vf,
+            faces: self.faces.parts(),
             fixed: &self.fixed,
             lines: &self.lines,
         }
@@ -164,8 +408,7 @@ impl Topology {
     pub fn from_parts(
         vv_offsets: Buf<usize>,
         vv: Buf<u32>,
-        vf_offsets: Buf<usize>,
-        vf: Buf<u32>,
+        faces: FaceIndex,
         fixed: Buf<u8>,
         lines: Buf<u8>,
         stats: TopologyStats,
@@ -177,17 +420,21 @@ impl Topology {
         let shape_ok = |offsets: &[usize], data: usize| {
             offsets.len() == n + 1 && offsets.first() == Some(&0) && offsets.last() == Some(&data)
         };
-        if n != stats.vertices
-            || !shape_ok(&vv_offsets, vv.len())
-            || !shape_ok(&vf_offsets, vf.len())
-        {
+        let faces_ok = match &faces {
+            FaceIndex::Lists { offsets, faces } => shape_ok(offsets, faces.len()),
+            FaceIndex::Runs { starts } => {
+                starts.len() == n + 1
+                    && starts.first() == Some(&0)
+                    && starts.last().map(|&t| t as usize) == Some(stats.triangles)
+            }
+        };
+        if n != stats.vertices || !shape_ok(&vv_offsets, vv.len()) || !faces_ok {
             return Err("adjacency arrays have inconsistent sizes".into());
         }
         Ok(Topology {
             vv_offsets,
             vv,
-            vf_offsets,
-            vf,
+            faces,
             fixed,
             lines,
             stats,
@@ -202,13 +449,25 @@ impl Topology {
         let ok = |offsets: &[usize], len: usize| {
             v < n && offsets[v] <= offsets[v + 1] && offsets[v + 1] <= len
         };
+        let t = self.stats.triangles;
         ok(self.vv_offsets(), self.vv.len())
-            && ok(&self.vf_offsets, self.vf.len())
             && self.neighbors(v as u32).iter().all(|&u| (u as usize) < n)
-            && self
-                .faces_of(v as u32)
-                .iter()
-                .all(|&t| (t as usize) < self.stats.triangles)
+            && match &self.faces {
+                FaceIndex::Lists { offsets, faces } => {
+                    ok(offsets, faces.len())
+                        && faces[offsets[v]..offsets[v + 1]]
+                            .iter()
+                            .all(|&f| (f as usize) < t)
+                }
+                // The runs of the vertex and of its lower neighbours, which its walk reads.
+                FaceIndex::Runs { starts } => self
+                    .neighbors(v as u32)
+                    .iter()
+                    .map(|&u| u as usize)
+                    .filter(|&u| u < v)
+                    .chain([v])
+                    .all(|u| starts[u] <= starts[u + 1] && starts[u + 1] as usize <= t),
+            }
     }
 
     /// Number of vertices.
@@ -231,12 +490,12 @@ impl Topology {
         &self.vv[offsets[v]..offsets[v + 1]]
     }
 
-    /// The vertex → vertex offsets, `vf_offsets` when they are the same.
+    /// The vertex → vertex offsets, the face lists' when they are the same.
     #[inline]
     fn vv_offsets(&self) -> &[usize] {
-        match self.vv_offsets.is_empty() {
-            true => &self.vf_offsets,
-            false => &self.vv_offsets,
+        match (&self.faces, self.vv_offsets.is_empty()) {
+            (FaceIndex::Lists { offsets, .. }, true) => offsets,
+            _ => &self.vv_offsets,
         }
     }
 
@@ -255,11 +514,49 @@ impl Topology {
         offsets[v + 1] - offsets[v]
     }
 
-    /// Triangles using `v` (indices into the triangle array the topology was built from), ascending.
+    /// Triangles using `v` (indices into `triangles`, the array the topology was built from:
+    /// its runs are read when the faces are not listed), ascending; degenerate ones excepted.
     #[inline]
-    pub fn faces_of(&self, v: u32) -> &[u32] {
-        let v = v as usize;
-        &self.vf[self.vf_offsets[v]..self.vf_offsets[v + 1]]
+    pub fn faces_of<'a>(&'a self, v: u32, triangles: &'a [[u32; 3]]) -> FacesOf<'a> {
+        self.faces.parts().of(v, || self.neighbors(v), triangles)
+    }
+
+    /// At least the number of faces that use some of `vertices` (to size a buffer of them): for
+    /// listed faces the lists' lengths together; for runs, the vertices' own runs and the runs
+    /// of their neighbours below them all, once per such neighbour.
+    pub fn faces_bound(&self, vertices: std::ops::Range<u32>) -> usize {
+        faces_bound(self.faces.parts(), self.vv_offsets(), &self.vv, vertices)
+    }
+
+    /// Find the faces of each vertex in the runs of `triangles` ([`FaceIndex::Runs`]) rather than
+    /// in lists, when they are sorted by their first corner and that corner is their smallest
+    /// (and this topology was built from them): 12 B per triangle less, and 4 more for a mesh
+    /// whose neighbour lists kept their own offsets. The same faces in the same order. Returns
+    /// whether it did; the lists stay otherwise.
+    pub fn faces_by_runs(&mut self, storage: &Storage, triangles: &[[u32; 3]]) -> Result<bool> {
+        if matches!(self.faces, FaceIndex::Runs { .. }) {
+            return Ok(true);
+        }
+        if triangles.len() != self.stats.triangles || !build::sorted_by_first(triangles) {
+            return Ok(false);
+        }
+        // The lists go before the runs' starts are made, so that they are never held together.
+        let lists = std::mem::replace(
+            &mut self.faces,
+            FaceIndex::Runs {
+                starts: Buf::default(),
+            },
+        );
+        if let FaceIndex::Lists { offsets, faces } = lists {
+            drop(faces);
+            if self.vv_offsets.is_empty() {
+                self.vv_offsets = offsets;
+            }
+        }
+        self.faces = FaceIndex::Runs {
+            starts: build::run_starts(storage, self.len(), triangles)?,
+        };
+        Ok(true)
     }
 
     /// Whether `v` is fixed (see the module doc).
@@ -312,7 +609,11 @@ impl Topology {
         if lo >= hi {
             return;
         }
-        for offsets in [&self.vv_offsets, &self.vf_offsets] {
+        let face_offsets = match &self.faces {
+            FaceIndex::Lists { offsets, .. } => offsets,
+            FaceIndex::Runs { .. } => &Buf::default(),
+        };
+        for offsets in [&self.vv_offsets, face_offsets] {
             if let Some(a) = offsets.advisor() {
                 a.will_need(lo..hi + 1);
             }
@@ -326,16 +627,58 @@ impl Topology {
         if let Some(a) = self.vv.advisor() {
             a.will_need(self.vv_offsets()[lo]..self.vv_offsets()[hi]);
         }
-        if let Some(a) = self.vf.advisor() {
-            a.will_need(self.vf_offsets[lo]..self.vf_offsets[hi]);
+        match &self.faces {
+            FaceIndex::Lists { offsets, faces } => {
+                if let Some(a) = faces.advisor() {
+                    a.will_need(offsets[lo]..offsets[hi]);
+                }
+            }
+            // The runs of the range's vertices; the lower neighbours' lie mostly among them.
+            FaceIndex::Runs { starts } => {
+                if let Some(a) = starts.advisor() {
+                    a.will_need(lo..hi + 1);
+                }
+            }
         }
     }
 
     /// Bytes held by the adjacency arrays (for memory reports).
     pub fn heap_bytes(&self) -> usize {
-        (self.vv_offsets.len() + self.vf_offsets.len()) * std::mem::size_of::<usize>()
-            + (self.vv.len() + self.vf.len()) * 4
+        let faces = match &self.faces {
+            FaceIndex::Lists { offsets, faces } => offsets.len() * 8 + faces.len() * 4,
+            FaceIndex::Runs { starts } => starts.len() * 4,
+        };
+        self.vv_offsets.len() * std::mem::size_of::<usize>()
+            + self.vv.len() * 4
+            + faces
             + self.fixed.len()
             + self.lines.len()
+    }
+}
+
+/// [`Topology::faces_bound`] on the arrays.
+fn faces_bound(
+    faces: FaceParts,
+    vv_offsets: &[usize],
+    vv: &[u32],
+    vertices: std::ops::Range<u32>,
+) -> usize {
+    let (lo, hi) = (vertices.start as usize, vertices.end as usize);
+    if lo >= hi {
+        return 0;
+    }
+    match faces {
+        FaceParts::Lists { offsets, .. } => offsets[hi] - offsets[lo],
+        FaceParts::Runs { starts } => {
+            let run = |u: usize| (starts[u + 1] - starts[u]) as usize;
+            // The vertices' own runs, and the runs of their neighbours below them all.
+            let below: usize = vv[vv_offsets[lo]..vv_offsets[hi]]
+                .iter()
+                .map(|&u| u as usize)
+                .filter(|&u| u < lo)
+                .map(run)
+                .sum();
+            (starts[hi] - starts[lo]) as usize + below
+        }
     }
 }

@@ -116,13 +116,10 @@ impl Topology {
     /// Scans the faces of the endpoint with fewer, so that the edges of a vertex of high degree
     /// cost what their other endpoint costs.
     fn other_face(&self, triangles: &[[u32; 3]], t: u32, a: u32, b: u32) -> Option<u32> {
-        let (x, y) = if self.faces_of(a).len() <= self.faces_of(b).len() {
-            (a, b)
-        } else {
-            (b, a)
-        };
+        let faces = |v: u32| self.faces_of(v, triangles).count();
+        let (x, y) = if faces(a) <= faces(b) { (a, b) } else { (b, a) };
         let mut found = None;
-        for &f in self.faces_of(x) {
+        for f in self.faces_of(x, triangles) {
             if f != t && triangles[f as usize].contains(&y) {
                 if found.is_some() {
                     return None;

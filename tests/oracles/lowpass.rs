@@ -119,7 +119,7 @@ pub fn lowpass_iteration(
         s.faces.clear();
         for u in lo..hi {
             if free(u as u32) {
-                for &f in topo.faces_of(u as u32) {
+                for f in topo.faces_of(u as u32, tris) {
                     if s.fmark[f as usize] != k as u32 {
                         s.fmark[f as usize] = k as u32;
                         s.faces.push(f);
@@ -140,7 +140,7 @@ pub fn lowpass_iteration(
             .map(|u| {
                 let mut g = DVec3::ZERO;
                 if free(u as u32) {
-                    for &f in topo.faces_of(u as u32) {
+                    for f in topo.faces_of(u as u32, tris) {
                         let t = tris[f as usize];
                         let k = t.iter().position(|&x| x as usize == u).unwrap();
                         let (b, c) = (t[(k + 1) % 3] as usize, t[(k + 2) % 3] as usize);

@@ -138,7 +138,7 @@ pub fn ring_iteration(
         s.faces.clear();
         for &u in free {
             s.vmark[u as usize] = stamp;
-            for &f in topo.faces_of(u) {
+            for f in topo.faces_of(u, tris) {
                 if s.fmark[f as usize] != stamp {
                     s.fmark[f as usize] = stamp;
                     s.faces.push(f);
