@@ -1025,8 +1025,8 @@ fn smooth_output_identical_across_threads_and_memory_budgets() {
     // positions are put back in the input's order (the output, binary, measured before), and the
     // plan before the input is read again for the write; the components are counted before the
     // adjacency is built. The peak (a closed mesh, n ≈ m / 2) is the topology build's, the
-    // smoothing's 10 B per triangle below it since it finds the faces in the triangles' runs
-    // (no vertex → face list): the f64 positions (24 B per vertex; no copy: the patches measure
+    // smoothing's below it since it finds the faces in the triangles' runs (no vertex → face
+    // list): the f64 positions (24 B per vertex; no copy: the patches measure
     // their moves, and out of core the neighbour sums are each patch's own), the plan's
     // triangles and both adjacency lists (36 B per triangle), one array of offsets (8 B per
     // vertex: on a closed manifold it serves both lists, and the build keeps each vertex's

@@ -7,8 +7,8 @@
 //!   and of the files it names, method options, patch size, pins). Written last: a directory without it holds no usable plan.
 //! - `order.u32` (reordered → input vertex), `triangles.u32` (reordered, smallest vertex first),
 //!   `vv_offsets.u64`, `vv.u32`, `fixed.u8` (the adjacency) and `face_runs.u32` (where each
-//!   vertex's run of triangles starts: [`crate::topology::FaceIndex::Runs`]), or
-//!   `vf_offsets.u64`, `vf.u32` (the faces listed) for a plan in the input's order;
+//!   vertex's run of triangles starts: [`crate::topology::FaceIndex::Runs`]) for a plan made out
+//!   of core, or `vf_offsets.u64`, `vf.u32` (the faces listed) for one made in memory;
 //!   `welded.u32` (reordered → the vertex whose position it takes), only when some are welded;
 //!   `lines.u8` (the crease line vertices' crease neighbours), only with creases.
 //! - `positions-0.f64`, `positions-1.f64`: two slots of `3 × f64` per reordered vertex. An
@@ -370,6 +370,14 @@ impl WorkDir {
             .read_plan_doc()?
             .ok_or_else(|| Error::invalid(&plan_path, "missing"))?;
         let (n, t) = (doc.vertices, doc.triangles);
+        // The adjacency is checked against the topology's counts, the triangles mapped by the
+        // plan's: they must agree.
+        if doc.topology.triangles != t || doc.topology.vertices != n {
+            return Err(Error::invalid(
+                &plan_path,
+                "its topology counts another mesh than its arrays hold",
+            ));
+        }
         let m = |name: &str| self.path(name);
         let topology = Topology::from_parts(
             Buf::map_file(&m("vv_offsets.u64"), n + 1)?,

@@ -179,15 +179,17 @@ impl Plan {
         weld: Weld,
         observer: &mut dyn Observer,
     ) -> Result<Plan> {
+        let positions = partition::Input::Lent(positions);
         let ordered = Plan::reorder(storage, positions, triangles, layout, weld, observer)?;
         Plan::of_reordered(storage, ordered, layout, observer)
     }
 
     /// The first phase of [`Plan::new_observed`]: the mesh in the plan's order, a copy that the
-    /// rest of the plan is built from alone (so the caller may give the input's arrays back).
+    /// rest of the plan is built from alone (so the caller may give the input's arrays back;
+    /// positions given rather than lent go as soon as they are copied).
     pub fn reorder(
         storage: &Storage,
-        positions: &[DVec3],
+        positions: partition::Input,
         triangles: &[[u32; 3]],
         layout: Layout,
         weld: Weld,
@@ -210,7 +212,7 @@ impl Plan {
                     |m| partition::reorder_metered(storage, positions, triangles, weld, m),
                 )?
             }
-            Layout::Whole => Reordered::in_input_order(storage, positions, triangles, weld)?,
+            Layout::Whole => Reordered::in_input_order(storage, &positions, triangles, weld)?,
         };
         Ok(Ordered {
             reordered,

@@ -835,9 +835,11 @@ mod tests {
         let closed = tris.clone();
         tris.truncate(tris.len() - 40);
         tris.extend([[5, 5, 9], [7, 7, 7], [3, 11, 4], [3, 11, 4], [3, 11, 20]]);
+        // A vertex of 50 more faces: its lower neighbours' runs hold more candidates than the
+        // walk gathers at once.
         let hub = n as u32 / 2;
-        tris.extend((0..600).map(|k| [hub, k, k + 1]));
-        let mut cases = vec![("closed", closed), ("open and damaged", tris)];
+        tris.extend((0..50).map(|k| [hub, k, k + 1]));
+        let mut cases = vec![("closed", closed), ("open and damaged", tris.clone())];
         let bunny =
             std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/stanford-bunny.ply");
         cases.push((
@@ -890,10 +892,8 @@ mod tests {
                     .collect();
                 faces.sort_unstable();
                 faces.dedup();
-                assert!(
-                    runs.faces_bound(range.clone()) >= faces.len(),
-                    "{name} {range:?}"
-                );
+                let bound = runs.faces_bound(range.clone());
+                assert!(bound >= faces.len(), "{name} {range:?}");
                 assert!(listed.faces_bound(range) >= faces.len());
             }
             // The lists and their offsets are gone; the neighbours keep offsets of their own.
@@ -905,5 +905,19 @@ mod tests {
             };
             assert_eq!(saved + 4 * (n + 1), 12 * t + own_offsets, "{name}");
         }
+        // The bound counts a lower neighbour's run once, however many vertices it is next to:
+        // the rim of a fan around vertex 0 is next to it alone, whose run is the fan.
+        let fan: Vec<[u32; 3]> = (1..=10).map(|k| [0, k, k % 10 + 1]).collect();
+        let mut topo = Topology::build(11, &fan).unwrap();
+        assert!(topo.faces_by_runs(&Storage::heap(), &fan).unwrap());
+        assert_eq!(topo.faces_bound(1..11), 10);
+        // A vertex of more faces than a run may hold keeps the lists.
+        let hub = 5;
+        tris.extend((0..super::super::MAX_RUN as u32).map(|k| [hub, 100 + k, 101 + k]));
+        let sorted = plan_layout(&tris);
+        let n = 1 + sorted.iter().flatten().copied().max().unwrap() as usize;
+        let mut topo = Topology::build(n, &sorted).unwrap();
+        assert!(!topo.faces_by_runs(&Storage::heap(), &sorted).unwrap());
+        assert!(matches!(topo.parts().faces, FaceParts::Lists { .. }));
     }
 }

@@ -8,7 +8,8 @@
 //!   [`Topology::faces_by_runs`] found the triangles sorted by their first corner and that corner
 //!   their smallest (the plan's layout), finds them in the triangle array itself: the faces whose
 //!   smallest corner is `u` are one run of it, so `v`'s faces are those of its lower neighbours'
-//!   runs that use `v`, then its own run. That keeps 14 B per triangle less, and the same order.
+//!   runs that use `v`, then its own run. That keeps 10 to 14 B per triangle less (closed or
+//!   open), and the same order.
 //! - A vertex is **fixed** (never moved by any method) when it is on the boundary (an edge used by one
 //!   triangle), on a non-manifold edge (used by three or more), is a non-manifold vertex (its link is
 //!   not one cycle or one path), belongs to a degenerate triangle (a repeated index), is
@@ -45,6 +46,8 @@ pub(crate) use fans::Lanes;
 pub use fans::corners_after;
 pub use rings::rings_outside;
 pub use stats::TopologyStats;
+
+use rayon::prelude::*;
 
 use crate::error::Result;
 use crate::mesh::{Buf, Storage};
@@ -155,6 +158,13 @@ impl Iterator for FacesOf<'_> {
         }
     }
 
+    fn size_hint(&self) -> (usize, Option<usize>) {
+        match self {
+            FacesOf::Listed(faces) => faces.size_hint(),
+            FacesOf::Found(_) => (0, None),
+        }
+    }
+
     fn count(self) -> usize {
         match self {
             FacesOf::Listed(faces) => faces.len(),
@@ -221,8 +231,7 @@ pub const GATHERED: usize = 24;
 /// `for_each_face!(parts, v, triangles, end, |t, tri| { … })` runs the block for each face `t`
 /// of `v` below the triangle `end` (`u32::MAX`: all of them), `tri` its corners, in
 /// [`Topology::faces_of`]'s order; `continue` goes to the next face. `parts` is a
-/// [`TopologyParts`], and `end`, when not `u32::MAX`, starts a run (a vertex's first face in the
-/// plan's layout). A macro for the kernels' inner loops: written out in place, the block is
+/// [`TopologyParts`]. A macro for the kernels' inner loops: written out in place, the block is
 /// compiled with its caller (a closure was not inlined into a kernel compiled for AVX2) and the
 /// walk of a list is the plain loop over it.
 #[macro_export]
@@ -385,6 +394,9 @@ fn line_neighbors(fixed: &[u8], lines: &[u8], neighbors: &[u32], v: u32) -> Opti
 /// the hole's rim length.
 pub const MAX_FREE_DEGREE: usize = 1024;
 
+/// Most faces a vertex may have for [`Topology::faces_by_runs`] to find faces in runs.
+pub const MAX_RUN: usize = 64;
+
 /// Vertices per parallel work item of the build (a work size only: every chunk's result is
 /// placed by vertex id, so the topology does not depend on it).
 const CHUNK: usize = 1 << 13;
@@ -459,14 +471,18 @@ impl Topology {
                             .iter()
                             .all(|&f| (f as usize) < t)
                 }
-                // The runs of the vertex and of its lower neighbours, which its walk reads.
-                FaceIndex::Runs { starts } => self
-                    .neighbors(v as u32)
-                    .iter()
-                    .map(|&u| u as usize)
-                    .filter(|&u| u < v)
-                    .chain([v])
-                    .all(|u| starts[u] <= starts[u + 1] && starts[u + 1] as usize <= t),
+                // The runs of the vertex and of its lower neighbours, which its walk reads: the
+                // neighbours ascending, so that those below the vertex are the walk's.
+                FaceIndex::Runs { starts } => {
+                    let neighbors = self.neighbors(v as u32);
+                    neighbors.windows(2).all(|w| w[0] < w[1])
+                        && neighbors
+                            .iter()
+                            .map(|&u| u as usize)
+                            .filter(|&u| u < v)
+                            .chain([v])
+                            .all(|u| starts[u] <= starts[u + 1] && starts[u + 1] as usize <= t)
+                }
             }
     }
 
@@ -523,7 +539,7 @@ impl Topology {
 
     /// At least the number of faces that use some of `vertices` (to size a buffer of them): for
     /// listed faces the lists' lengths together; for runs, the vertices' own runs and the runs
-    /// of their neighbours below them all, once per such neighbour.
+    /// of their neighbours below them all, each run once.
     pub fn faces_bound(&self, vertices: std::ops::Range<u32>) -> usize {
         faces_bound(self.faces.parts(), self.vv_offsets(), &self.vv, vertices)
     }
@@ -538,6 +554,14 @@ impl Topology {
             return Ok(true);
         }
         if triangles.len() != self.stats.triangles || !build::sorted_by_first(triangles) {
+            return Ok(false);
+        }
+        // A vertex's neighbours each walk its run: a hub whose run is long (a hole filled by a
+        // fan) would cost its d neighbours d faces each, where the lists cost them their own.
+        // A run is no longer than its vertex's list, so such a mesh keeps the lists.
+        if let FaceIndex::Lists { offsets, .. } = &self.faces
+            && offsets.par_windows(2).any(|w| w[1] - w[0] > MAX_RUN)
+        {
             return Ok(false);
         }
         // The lists go before the runs' starts are made, so that they are never held together.
@@ -670,15 +694,16 @@ fn faces_bound(
     match faces {
         FaceParts::Lists { offsets, .. } => offsets[hi] - offsets[lo],
         FaceParts::Runs { starts } => {
-            let run = |u: usize| (starts[u + 1] - starts[u]) as usize;
-            // The vertices' own runs, and the runs of their neighbours below them all.
-            let below: usize = vv[vv_offsets[lo]..vv_offsets[hi]]
+            // The vertices' own runs, and the runs of their neighbours below them all, each once.
+            let mut below: Vec<u32> = vv[vv_offsets[lo]..vv_offsets[hi]]
                 .iter()
-                .map(|&u| u as usize)
-                .filter(|&u| u < lo)
-                .map(run)
-                .sum();
-            (starts[hi] - starts[lo]) as usize + below
+                .copied()
+                .filter(|&u| (u as usize) < lo)
+                .collect();
+            below.sort_unstable();
+            below.dedup();
+            let run = |u: u32| (starts[u as usize + 1] - starts[u as usize]) as usize;
+            (starts[hi] - starts[lo]) as usize + below.into_iter().map(run).sum::<usize>()
         }
     }
 }
