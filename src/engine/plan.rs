@@ -240,18 +240,18 @@ impl Plan {
             Phase::Topology,
             Topology::BUILD_PASSES.items(n, t) + t,
             |m| -> Result<Topology> {
-                let mut topology =
-                    Topology::build_metered(storage, vertices, &reordered.triangles, m)?;
+                // Out of core, in the plan's layout, the faces are found in the triangles' runs
+                // (the build never holds the vertex → face list: 16 B per triangle). In memory
+                // the lists stay: a walk of the runs costs `vcs` about a third more time.
+                let tris = &reordered.triangles;
+                let mut topology = match storage.is_mapped() && matches!(layout, Layout::Patches(_))
+                {
+                    true => Topology::build_runs_metered(storage, vertices, tris, m)?,
+                    false => Topology::build_metered(storage, vertices, tris, m)?,
+                };
                 // The plan's copy of the faces is what the stencils' volumes read; the output
                 // keeps the input's faces.
                 topology.orient(&mut reordered.triangles, &reordered.positions);
-                // Out of core, in the plan's layout, the faces are found in the triangles' runs:
-                // the lists go, 12 to 14 B per triangle of scratch. In memory they stay: a walk
-                // of the runs costs `vcs` about a third more time.
-                if storage.is_mapped() && matches!(layout, Layout::Patches(_)) {
-                    let runs = topology.faces_by_runs(storage, &reordered.triangles)?;
-                    debug_assert!(runs, "a plan's triangles are sorted by their first corner");
-                }
                 m.add(t);
                 Ok(topology)
             },
@@ -465,7 +465,7 @@ mod tests {
     use crate::topology::FaceParts;
 
     #[test]
-    fn out_of_core_a_plan_finds_its_faces_in_runs_and_keeps_no_lists() {
+    fn out_of_core_a_plan_finds_its_faces_in_runs_and_never_holds_lists() {
         // An open sphere with a degenerate face, in a shuffled vertex order.
         let sphere = crate::shapes::icosphere(5);
         let n = sphere.positions.len();
@@ -514,5 +514,11 @@ mod tests {
         let plan_bytes = 24 * n + 12 * m + 4 * n + runs.topology.heap_bytes();
         let held = storage.held_bytes() as usize;
         assert_eq!(held, plan_bytes, "bytes on the disk against the plan's");
+        // Nor did the build ever hold a vertex → face list (12 B per face) beside the plan.
+        let peak = storage.peak_mapped_bytes() as usize;
+        assert!(
+            peak <= plan_bytes + 4 * m,
+            "{peak} at the peak, {plan_bytes} in the plan"
+        );
     }
 }

@@ -55,6 +55,39 @@ impl Topology {
         triangles: &[[u32; 3]],
         meter: &Meter,
     ) -> Result<Topology> {
+        let built = Topology::build_faces(storage, n_vertices, triangles, meter, false)?;
+        Ok(built.expect("a build that lists its faces is never given up"))
+    }
+
+    /// [`Topology::build_metered`] for triangles in the plan's layout (sorted by their first
+    /// corner, which is their smallest), giving a topology that finds its faces in their runs
+    /// ([`Topology::faces_by_runs`]) without ever holding the vertex → face list: each chunk of
+    /// vertices gathers its faces on the heap from its own runs and the faces that cross into it
+    /// from below. The same topology as a build and `faces_by_runs`. Triangles in another layout,
+    /// or a vertex of more than [`super::MAX_RUN`] faces, get the listed build.
+    pub fn build_runs_metered(
+        storage: &Storage,
+        n_vertices: usize,
+        triangles: &[[u32; 3]],
+        meter: &Meter,
+    ) -> Result<Topology> {
+        if sorted_by_first(triangles)
+            && let Some(built) = Topology::build_faces(storage, n_vertices, triangles, meter, true)?
+        {
+            return Ok(built);
+        }
+        Topology::build_metered(storage, n_vertices, triangles, &Meter::default())
+    }
+
+    /// The build: the faces listed, or (`gather`) gathered per chunk from the runs of sorted
+    /// triangles; `None` when gathering finds a vertex of more than [`super::MAX_RUN`] faces.
+    fn build_faces(
+        storage: &Storage,
+        n_vertices: usize,
+        triangles: &[[u32; 3]],
+        meter: &Meter,
+        gather: bool,
+    ) -> Result<Option<Topology>> {
         if n_vertices > u32::MAX as usize || triangles.len() > u32::MAX as usize {
             return Err(Error::topology(format!(
                 "{n_vertices} vertices / {} triangles exceed the 2^32 limit",
@@ -78,7 +111,7 @@ impl Topology {
             .par_chunks(block_len)
             .enumerate()
             .map(|(b, block)| {
-                let count = count_block(b * block_len, block, n_vertices, chunks);
+                let count = count_block(b * block_len, block, n_vertices, chunks, gather);
                 meter.add(block.len() as u64);
                 count
             })
@@ -105,7 +138,20 @@ impl Topology {
                 .sum::<usize>();
         }
         region_start.push(total);
-        let mut vf: Buf<u32> = storage.zeroed(total)?;
+        // Gathering, only the corners that cross into a chunk from a face whose smallest corner
+        // is in a lower one are placed (each chunk's own runs hold the rest).
+        let placed = |count: &BlockCount, c: usize| match gather {
+            true => count.crossing[c] as usize,
+            false => count.per_chunk[c] as usize,
+        };
+        let mut cross_start = Vec::with_capacity(chunks + 1);
+        let mut placed_total = 0usize;
+        for c in 0..chunks {
+            cross_start.push(placed_total);
+            placed_total += counted.iter().map(|b| placed(b, c)).sum::<usize>();
+        }
+        cross_start.push(placed_total);
+        let mut vf: Buf<u32> = storage.zeroed(placed_total)?;
         // Each block's piece of each chunk's region, in chunk order.
         let mut pieces: Vec<Vec<&mut [u32]>> = (0..counted.len())
             .map(|_| Vec::with_capacity(chunks))
@@ -113,8 +159,7 @@ impl Topology {
         let mut rest: &mut [u32] = &mut vf;
         for c in 0..chunks {
             for (b, count) in counted.iter().enumerate() {
-                let (piece, tail) =
-                    std::mem::take(&mut rest).split_at_mut(count.per_chunk[c] as usize);
+                let (piece, tail) = std::mem::take(&mut rest).split_at_mut(placed(count, c));
                 pieces[b].push(piece);
                 rest = tail;
             }
@@ -131,6 +176,9 @@ impl Topology {
                     let t = (b * block_len + k) as u32;
                     let c = tri[0] as usize / CHUNK;
                     if tri.iter().all(|&v| v as usize / CHUNK == c) {
+                        if gather {
+                            continue;
+                        }
                         // Nearly every face: its three places taken at once, rather than each
                         // waiting for the piece to be shortened by the one before.
                         let (head, tail) = std::mem::take(&mut pieces[c]).split_at_mut(3);
@@ -139,6 +187,9 @@ impl Topology {
                         continue;
                     }
                     for &v in tri {
+                        if gather && v as usize / CHUNK == c {
+                            continue;
+                        }
                         let piece = &mut pieces[v as usize / CHUNK];
                         let (head, tail) =
                             std::mem::take(piece).split_first_mut().expect("counted");
@@ -159,7 +210,24 @@ impl Topology {
         let mut misfit: Buf<u8> = storage.zeroed(n_vertices)?;
         let mut vv: Buf<u32> = storage.zeroed(total)?;
         let region_lens: Vec<usize> = region_start.windows(2).map(|w| w[1] - w[0]).collect();
-        let found: Vec<Found> = split_lens(&mut vf, &region_lens)
+        let gathered = gather.then(|| Gathered {
+            cross_start: cross_start.clone(),
+            own: (0..=chunks)
+                .map(|c| triangles.partition_point(|t| (t[0] as usize) < c * CHUNK))
+                .collect(),
+        });
+        let (regions, cross): (Vec<Option<&mut [u32]>>, &[u32]) = match gather {
+            true => ((0..chunks).map(|_| None).collect(), &vf[..]),
+            false => (
+                split_lens(&mut vf, &region_lens)
+                    .into_iter()
+                    .map(Some)
+                    .collect(),
+                &[],
+            ),
+        };
+        let chunk_faces = gathered.as_ref();
+        let found: Vec<Found> = regions
             .into_par_iter()
             .zip(split_lens(&mut vv, &region_lens))
             .zip(vf_offsets[1..].par_chunks_mut(CHUNK))
@@ -167,9 +235,15 @@ impl Topology {
             .zip(fixed.par_chunks_mut(CHUNK))
             .enumerate()
             .map_init(
-                <(ChunkScratch, VertexScratch)>::default,
-                |(link, scratch), (c, ((((region, nbrs), ends), misfit), fixed))| {
+                <(ChunkScratch, VertexScratch, Vec<u32>)>::default,
+                |(link, scratch, own), (c, ((((region, nbrs), ends), misfit), fixed))| {
                     let lo = (c * CHUNK) as u32;
+                    let region = match (region, chunk_faces) {
+                        (Some(region), _) => region,
+                        (None, Some(g)) => g.region(c, cross, triangles, own),
+                        (None, None) => unreachable!("a region listed or gathered"),
+                    };
+                    debug_assert_eq!(region.len(), region_lens[c]);
                     sort_region(lo, region, region_start[c], ends, triangles, link);
                     let mut found = Found::default();
                     let mut start = 0;
@@ -190,6 +264,7 @@ impl Topology {
                             };
                         }
                         found.stats.count(&a, fix);
+                        found.most_faces = found.most_faces.max(b.len());
                     }
                     meter.add(misfit.len() as u64);
                     found
@@ -200,6 +275,9 @@ impl Topology {
         for f in &found {
             stats = stats.add(f.stats);
             misfits += f.misfits;
+        }
+        if gather && found.iter().any(|f| f.most_faces > super::MAX_RUN) {
+            return Ok(None);
         }
         let mut vv_offsets = Buf::default();
         if misfits == 0 {
@@ -212,19 +290,45 @@ impl Topology {
             drop(std::mem::take(&mut vv));
             vv_offsets = neighbour_offsets(storage, &vf_offsets, &misfit, &found)?;
             drop(std::mem::take(&mut misfit));
-            vv = pass_2(storage, &vv_offsets, &vf_offsets, &vf, triangles, meter)?;
+            let source = match &gathered {
+                // The faces' offsets go before the neighbours are placed (each chunk finds its
+                // vertices' faces again).
+                Some(g) => {
+                    drop(std::mem::take(&mut vf_offsets));
+                    Source::Gathered { g, cross: &vf }
+                }
+                None => Source::Listed {
+                    offsets: &vf_offsets,
+                    faces: &vf,
+                },
+            };
+            vv = pass_2(storage, &vv_offsets, source, triangles, meter)?;
         }
-        Ok(Topology {
-            vv_offsets,
-            vv,
-            faces: FaceIndex::Lists {
+        let faces = match gathered {
+            Some(_) => {
+                drop(vf);
+                if vv_offsets.is_empty() {
+                    vv_offsets = vf_offsets;
+                } else {
+                    drop(vf_offsets);
+                }
+                FaceIndex::Runs {
+                    starts: run_starts(storage, n_vertices, triangles)?,
+                }
+            }
+            None => FaceIndex::Lists {
                 offsets: vf_offsets,
                 faces: vf,
             },
+        };
+        Ok(Some(Topology {
+            vv_offsets,
+            vv,
+            faces,
             fixed,
             lines: Buf::default(),
             stats,
-        })
+        }))
     }
 }
 
@@ -243,6 +347,8 @@ struct Found {
     /// `(k, degree)` of the chunk's vertices whose neighbours less faces is not an `i8` other
     /// than [`ESCAPE`], ascending (hubs and badly broken fans: rare).
     escaped: Vec<(usize, usize)>,
+    /// The most faces of one of the chunk's vertices.
+    most_faces: usize,
 }
 
 /// The vertex → vertex offsets, from the faces' and pass 1's `misfit` bytes (a vertex's
@@ -287,13 +393,24 @@ fn neighbour_offsets(
     Ok(offsets)
 }
 
+/// Where pass 2 finds each vertex's faces.
+enum Source<'a> {
+    Listed {
+        offsets: &'a [usize],
+        faces: &'a [u32],
+    },
+    Gathered {
+        g: &'a Gathered,
+        cross: &'a [u32],
+    },
+}
+
 /// Pass 2 of the build, for a mesh whose vertices do not all have as many neighbours as faces:
 /// the neighbour lists laid out by `vv_offsets`, each chunk of vertices into its own slice.
 fn pass_2(
     storage: &Storage,
     vv_offsets: &[usize],
-    vf_offsets: &[usize],
-    vf: &[u32],
+    source: Source,
     triangles: &[[u32; 3]],
     meter: &Meter,
 ) -> Result<Buf<u32>> {
@@ -309,19 +426,72 @@ fn pass_2(
     split_lens(&mut vv, &chunk_lens)
         .into_par_iter()
         .enumerate()
-        .for_each_init(VertexScratch::default, |scratch, (c, out)| {
-            let range = c * CHUNK..((c + 1) * CHUNK).min(n_vertices);
-            let range_len = range.len() as u64;
-            let mut at = 0;
-            for v in range {
-                let faces = &vf[vf_offsets[v]..vf_offsets[v + 1]];
-                let deg = vv_offsets[v + 1] - vv_offsets[v];
-                write_neighbors(v as u32, faces, triangles, scratch, &mut out[at..at + deg]);
-                at += deg;
-            }
-            meter.add(range_len);
-        });
+        .for_each_init(
+            <(VertexScratch, Vec<u32>, Vec<usize>, ChunkScratch)>::default,
+            |(scratch, buffer, ends, link), (c, out)| {
+                let range = c * CHUNK..((c + 1) * CHUNK).min(n_vertices);
+                let range_len = range.len() as u64;
+                let all: &[u32] = match &source {
+                    Source::Listed { faces, .. } => faces,
+                    Source::Gathered { g, cross } => {
+                        let region = g.region(c, cross, triangles, buffer);
+                        ends.clear();
+                        ends.resize(range.len(), 0);
+                        sort_region(c as u32 * CHUNK as u32, region, 0, ends, triangles, link);
+                        buffer
+                    }
+                };
+                let mut at = 0;
+                for v in range {
+                    let faces = match &source {
+                        Source::Listed { offsets, .. } => &all[offsets[v]..offsets[v + 1]],
+                        Source::Gathered { .. } => {
+                            let k = v - c * CHUNK;
+                            &all[k.checked_sub(1).map_or(0, |j| ends[j])..ends[k]]
+                        }
+                    };
+                    let deg = vv_offsets[v + 1] - vv_offsets[v];
+                    write_neighbors(v as u32, faces, triangles, scratch, &mut out[at..at + deg]);
+                    at += deg;
+                }
+                meter.add(range_len);
+            },
+        );
     Ok(vv)
+}
+
+/// Each chunk's faces gathered for a build from sorted triangles: the faces crossing into it
+/// from a face whose smallest corner is in a lower chunk (placed by the build's scatter, each
+/// chunk's at `cross_start[c]`), then its own runs (`own[c]..own[c + 1]`), a face once per corner
+/// in the chunk. Ascending, in a row per face: the chunk's region of the vertex → face array.
+struct Gathered {
+    cross_start: Vec<usize>,
+    own: Vec<usize>,
+}
+
+impl Gathered {
+    fn region<'b>(
+        &self,
+        c: usize,
+        cross: &[u32],
+        triangles: &[[u32; 3]],
+        out: &'b mut Vec<u32>,
+    ) -> &'b mut [u32] {
+        out.clear();
+        out.extend_from_slice(&cross[self.cross_start[c]..self.cross_start[c + 1]]);
+        for (t, tri) in (self.own[c]..self.own[c + 1]).zip(&triangles[self.own[c]..self.own[c + 1]])
+        {
+            if is_degenerate(tri) {
+                continue;
+            }
+            for &v in tri {
+                if v as usize / CHUNK == c {
+                    out.push(t as u32);
+                }
+            }
+        }
+        out
+    }
 }
 
 /// Blocks of triangles the vertex → face build counts and scatters in parallel (a work size
@@ -332,6 +502,8 @@ const BLOCKS: usize = 64;
 struct BlockCount {
     /// Corners of the block's (non-degenerate) triangles in each chunk of [`CHUNK`] vertices.
     per_chunk: Vec<u32>,
+    /// Of those, when gathering, the corners in another chunk than the face's first corner.
+    crossing: Vec<u32>,
     /// The block's degenerate triangles (a repeated corner), ascending.
     degenerate: Vec<u32>,
     /// The block's first triangle with a corner out of range.
@@ -350,9 +522,16 @@ pub(crate) fn split_lens<'a, T>(mut data: &'a mut [T], lens: &[usize]) -> Vec<&'
 }
 
 /// Count the corners of `block` (triangles `first..`) per chunk of vertices.
-fn count_block(first: usize, block: &[[u32; 3]], n_vertices: usize, chunks: usize) -> BlockCount {
+fn count_block(
+    first: usize,
+    block: &[[u32; 3]],
+    n_vertices: usize,
+    chunks: usize,
+    gather: bool,
+) -> BlockCount {
     let mut count = BlockCount {
         per_chunk: Vec::new(),
+        crossing: vec![0; if gather { chunks } else { 0 }],
         degenerate: Vec::new(),
         out_of_range: None,
     };
@@ -370,6 +549,14 @@ fn count_block(first: usize, block: &[[u32; 3]], n_vertices: usize, chunks: usiz
         }
         for (j, &v) in tri.iter().enumerate() {
             corners[v as usize / CHUNK][j] += 1;
+        }
+        if gather {
+            let c = tri[0] as usize / CHUNK;
+            for &v in &tri[1..] {
+                if v as usize / CHUNK != c {
+                    count.crossing[v as usize / CHUNK] += 1;
+                }
+            }
         }
     }
     count.per_chunk = corners.iter().map(|c| c.iter().sum()).collect();
@@ -804,6 +991,83 @@ mod tests {
                 assert!(whole(&topo) == want, "{name} on {threads} threads");
             }
         }
+    }
+
+    #[test]
+    fn the_build_from_runs_is_the_build_with_its_faces_in_runs() {
+        // The reference cases in the plan's layout (with and without a vertex over MAX_RUN,
+        // which falls back to the lists), on several thread counts: the same neighbours, mask,
+        // counts and faces as a listed build turned to runs.
+        let sphere = crate::shapes::icosphere(6);
+        let bunny =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/stanford-bunny.ply");
+        let scan = crate::io::read_mesh(&bunny).unwrap();
+        let mut open = sphere.triangles.to_vec();
+        open.truncate(open.len() - 300);
+        open.extend([[5, 5, 9], [7, 7, 7], [3, 11, 4], [3, 11, 4], [3, 11, 20]]);
+        let hub = 2 * CHUNK as u32 + 3;
+        let mut hubbed = open.clone();
+        hubbed.extend((0..200).map(|k| [hub, 10 * k, 10 * k + 1]));
+        let cases = [
+            ("closed", sphere.positions.len(), sphere.triangles.to_vec()),
+            ("open", sphere.positions.len(), open),
+            ("hub", sphere.positions.len(), hubbed),
+            ("scan", scan.positions.len(), scan.triangles.to_vec()),
+        ];
+        for (name, n, tris) in cases {
+            let sorted = plan_layout(&tris);
+            let mut want = Topology::build(n, &sorted).unwrap();
+            let runs = want.faces_by_runs(&Storage::heap(), &sorted).unwrap();
+            assert_eq!(runs, name != "hub", "{name}");
+            for threads in [1, 2, 3] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                let got = pool
+                    .install(|| {
+                        Topology::build_runs_metered(
+                            &Storage::heap(),
+                            n,
+                            &sorted,
+                            &Meter::default(),
+                        )
+                    })
+                    .unwrap();
+                let (w, g) = (want.parts(), got.parts());
+                assert_eq!(g.vv_offsets, w.vv_offsets, "{name}");
+                assert_eq!(g.vv, w.vv, "{name}");
+                assert_eq!(g.fixed, w.fixed, "{name}");
+                assert!(got.stats == want.stats, "{name}");
+                match (g.faces, w.faces) {
+                    (FaceParts::Runs { starts: a }, FaceParts::Runs { starts: b }) => {
+                        assert_eq!(a, b)
+                    }
+                    (
+                        FaceParts::Lists {
+                            offsets: a,
+                            faces: b,
+                        },
+                        FaceParts::Lists {
+                            offsets: c,
+                            faces: d,
+                        },
+                    ) => {
+                        assert!(a == c && b == d, "{name}")
+                    }
+                    _ => panic!("{name}: runs against lists"),
+                }
+            }
+        }
+        // Triangles in another layout get the listed build.
+        let got = Topology::build_runs_metered(
+            &Storage::heap(),
+            scan.positions.len(),
+            &scan.triangles,
+            &Meter::default(),
+        )
+        .unwrap();
+        assert!(matches!(got.parts().faces, FaceParts::Lists { .. }));
     }
 
     /// `tris` as a plan lays them out: each rotated to start at its smallest corner (which keeps
