@@ -272,8 +272,7 @@ macro_rules! for_each_face {
                         let c = triangles[t as usize];
                         gathered[count] = t;
                         let uses = own | (c[1] == v) | (c[2] == v);
-                        let degenerate = (c[0] == c[1]) | (c[1] == c[2]) | (c[0] == c[2]);
-                        count += (uses & !degenerate) as usize;
+                        count += (uses & !$crate::topology::is_degenerate(&c)) as usize;
                     }
                 }
                 if fits {
@@ -294,11 +293,7 @@ macro_rules! for_each_face {
                         for $t in first..last.min(end) {
                             let $tri = triangles[$t as usize];
                             let uses = own | ($tri[1] == v) | ($tri[2] == v);
-                            if !uses
-                                || $tri[0] == $tri[1]
-                                || $tri[1] == $tri[2]
-                                || $tri[0] == $tri[2]
-                            {
+                            if !uses || $crate::topology::is_degenerate(&$tri) {
                                 continue;
                             }
                             $body
