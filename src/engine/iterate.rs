@@ -450,13 +450,26 @@ impl Run<'_, '_> {
     ) -> PatchSweep {
         let mesh = self.mesh;
         let mut sweep = PatchSweep::default();
+        // Out of core the read-ahead brings each patch's pages and its rings'; a fault that misses
+        // reads its page alone. With the kernel's read-around each brought 8 MiB, and past the
+        // page cache the sweep read 8 times what it held per iteration. Passes in order (the
+        // statistics) keep the read-around.
+        let at_random = |pos: &[DVec3], sums: &[DVec3], random: bool| {
+            if mesh.prefetch.is_some() {
+                crate::mesh::storage::read_at_random(pos, random);
+                crate::mesh::storage::read_at_random(sums, random);
+                crate::mesh::storage::read_at_random(mesh.tris, random);
+                mesh.topo.read_at_random(random);
+            }
+        };
+        at_random(pos, sums, true);
         for (c, colour) in colours.iter().enumerate() {
             if let Some(prefetch) = mesh.prefetch {
                 // Read ahead the patches of the colours after this one, about a step of them (at
                 // the end, the first ones again: the next iteration's).
                 let ahead = colours.iter().cycle().skip(c + 1).flatten();
                 for &p in ahead.take(LANES) {
-                    prefetch.hint(&mesh.patches[p as usize]);
+                    prefetch.hint(p);
                 }
             }
             let mine: Vec<Patch> = colour
@@ -480,6 +493,7 @@ impl Run<'_, '_> {
                 self.observer.iteration_part(c + 1, colours.len());
             }
         }
+        at_random(pos, sums, false);
         sweep
     }
 

@@ -225,14 +225,27 @@ impl Plan {
         .into_iter()
         .flatten()
         .collect();
-        let tri_advisor = reordered.triangles.advisor();
+        // Out of core the read-ahead brings each patch's ranges and its rings' pages, scattered
+        // over other patches, and the sweep's faults read their page alone
+        // (`iterate::sweep_colours`).
+        let rings = match advisors.is_empty() {
+            true => None,
+            false => Some(schedule::PatchRings::of(topo, patches, schedule, storage)?),
+        };
+        let ahead = schedule::ReadAhead {
+            topo,
+            patches,
+            rings: rings.as_ref(),
+            vertices: advisors,
+            triangles: reordered.triangles.advisor(),
+        };
         let tris: &[[u32; 3]] = &reordered.triangles;
         let pos: &mut [DVec3] = &mut reordered.positions;
         let mut alone = iterate::Alone {
             vertices: n,
             triangles: tris.len(),
         };
-        schedule::with_prefetch(topo, advisors, tri_advisor, |prefetch| {
+        schedule::with_prefetch(ahead, |prefetch| {
             let mesh = iterate::Sweep {
                 topo,
                 tris,

@@ -39,6 +39,9 @@
 use petgraph::graph::UnGraph;
 use rayon::prelude::*;
 
+use crate::error::Result;
+use crate::mesh::storage::Advisor;
+use crate::mesh::{Buf, Storage};
 use crate::meter::Meter;
 use crate::partition::Patch;
 use crate::topology::{Topology, rings_outside};
@@ -177,14 +180,63 @@ fn colour<'a>(near: impl Iterator<Item = &'a Near>, steps: usize) -> (Vec<Vec<u3
     (colours, near.iter().map(|n| n.halo).collect())
 }
 
+/// Each patch's rings: the vertices outside it within [`RING_HALO_RINGS`] of it, ascending, the
+/// patches' one after another in an array of the plan's storage. What a patch's sweep reads of
+/// other patches' arrays (3 rings for every method's stencils: see the module doc), scattered over
+/// them: out of core the read-ahead asks for their pages with the patch's own ranges.
+pub struct PatchRings {
+    starts: Vec<usize>,
+    vertices: Buf<u32>,
+}
+
+impl PatchRings {
+    /// The rings of `patches`, whose sizes `schedule` counted (its `ring_halo`).
+    pub fn of(
+        topo: &Topology,
+        patches: &[Patch],
+        schedule: &Schedule,
+        storage: &Storage,
+    ) -> Result<PatchRings> {
+        let mut starts = Vec::with_capacity(patches.len() + 1);
+        starts.push(0usize);
+        for p in 0..patches.len() {
+            let size = schedule.ring_halo.get(p).copied().unwrap_or(0) as usize;
+            starts.push(starts[p] + size);
+        }
+        let mut vertices: Buf<u32> = storage.zeroed(starts[patches.len()])?;
+        let mut slices = Vec::with_capacity(patches.len());
+        let mut rest: &mut [u32] = &mut vertices;
+        for w in starts.windows(2) {
+            let (mine, after) = rest.split_at_mut(w[1] - w[0]);
+            slices.push(mine);
+            rest = after;
+        }
+        patches.par_iter().zip(slices).for_each(|(patch, out)| {
+            let mut rings = rings_outside(topo, &patch.vertices, RING_HALO_RINGS).concat();
+            rings.sort_unstable();
+            // The schedule counted these rings; another count (a schedule not of this
+            // topology) leaves the patch without them: they are only advice.
+            if rings.len() == out.len() {
+                out.copy_from_slice(&rings);
+            }
+        });
+        Ok(PatchRings { starts, vertices })
+    }
+
+    /// The rings of patch `p`, ascending.
+    pub fn of_patch(&self, p: usize) -> &[u32] {
+        &self.vertices[self.starts[p]..self.starts[p + 1]]
+    }
+}
+
 /// The bounded read-ahead pipeline of out-of-core runs: while the patches of one colour are
 /// smoothed, a prefetch thread receives the patches of the colours after it (about one step of
 /// the streaming order) over a bounded channel and asks the kernel to read their pages ahead
-/// (positions, neighbour sums, adjacency, triangles). It only gives advice, so it never changes a
-/// result; when the queue is full, hints are dropped rather than stalling the sweep. On the heap
-/// there is nothing to prefetch and no thread is started.
+/// (positions, neighbour sums, adjacency, triangles), and those of their rings. It only gives
+/// advice, so it never changes a result; when the queue is full, hints are dropped rather than
+/// stalling the sweep. On the heap there is nothing to prefetch and no thread is started.
 pub struct Prefetch {
-    tx: Option<crossbeam_channel::Sender<Patch>>,
+    tx: Option<crossbeam_channel::Sender<u32>>,
 }
 
 impl Prefetch {
@@ -193,10 +245,10 @@ impl Prefetch {
         Prefetch { tx: None }
     }
 
-    /// Hint that `patch`'s vertices and triangles will be needed soon.
-    pub fn hint(&self, patch: &Patch) {
+    /// Hint that patch `p`'s vertices, triangles and rings will be needed soon.
+    pub fn hint(&self, p: u32) {
         if let Some(tx) = &self.tx {
-            let _ = tx.try_send(patch.clone());
+            let _ = tx.try_send(p);
         }
     }
 }
@@ -204,30 +256,46 @@ impl Prefetch {
 /// Hints the queue of [`with_prefetch`] holds: two steps' patches.
 pub const PREFETCH_QUEUE: usize = 2 * LANES;
 
-/// Run `f` with a prefetch pipeline for the given per-vertex advisors (positions and sums of a
-/// mapped run), the per-triangle `triangles` advisor and `topo`'s adjacency; without advisors,
-/// `f` gets [`Prefetch::none`].
-pub fn with_prefetch<R>(
-    topo: &Topology,
-    advisors: Vec<crate::mesh::storage::Advisor>,
-    triangles: Option<crate::mesh::storage::Advisor>,
-    f: impl FnOnce(&Prefetch) -> R,
-) -> R {
-    if advisors.is_empty() {
+/// What the read-ahead of [`with_prefetch`] advises.
+pub struct ReadAhead<'a> {
+    pub topo: &'a Topology,
+    pub patches: &'a [Patch],
+    /// The patches' rings, whose pages are asked for with the patch's own.
+    pub rings: Option<&'a PatchRings>,
+    /// Per-vertex arrays (positions and sums of a mapped run).
+    pub vertices: Vec<Advisor>,
+    /// The triangles.
+    pub triangles: Option<Advisor>,
+}
+
+/// Run `f` with a prefetch pipeline for `ahead`; without per-vertex advisors, `f` gets
+/// [`Prefetch::none`].
+pub fn with_prefetch<R>(ahead: ReadAhead, f: impl FnOnce(&Prefetch) -> R) -> R {
+    if ahead.vertices.is_empty() {
         return f(&Prefetch::none());
     }
-    let (tx, rx) = crossbeam_channel::bounded::<Patch>(PREFETCH_QUEUE);
+    let (tx, rx) = crossbeam_channel::bounded::<u32>(PREFETCH_QUEUE);
     std::thread::scope(|scope| {
         scope.spawn(move || {
-            for patch in rx {
+            for p in rx {
+                let patch = &ahead.patches[p as usize];
                 let v = &patch.vertices;
-                topo.will_need(v.clone());
-                for a in &advisors {
+                ahead.topo.will_need(v.clone());
+                for a in &ahead.vertices {
                     a.will_need(v.start as usize..v.end as usize);
                 }
-                if let Some(a) = &triangles {
+                if let Some(a) = &ahead.triangles {
                     let t = &patch.triangles;
                     a.will_need(t.start as usize..t.end as usize);
+                }
+                if let Some(rings) = ahead.rings {
+                    let ring = rings.of_patch(p as usize);
+                    for a in &ahead.vertices {
+                        a.will_need_each(ring.iter().map(|&v| v as usize..v as usize + 1));
+                    }
+                    ahead
+                        .topo
+                        .will_need_scattered(ring, ahead.triangles.as_ref());
                 }
             }
         });
@@ -304,6 +372,40 @@ mod tests {
             assert_eq!(p.crossing_edges(&topo), crossing);
         }
         assert!(ps.len() > 20 && ps.iter().any(|p| p.crossing_edges(&topo) > 0));
+    }
+
+    /// Each patch's stored rings are its 3 rings ascending, on the heap and in scratch, and a
+    /// schedule of another mesh leaves a patch without rings rather than with wrong ones.
+    #[test]
+    fn patch_rings_hold_each_patchs_three_rings_ascending() {
+        let m = crate::shapes::icosphere(4);
+        let mut tris = m.triangles.to_vec();
+        tris.iter_mut().for_each(|t| t.sort_unstable());
+        tris.sort_unstable();
+        let n = m.positions.len();
+        let topo = Topology::build(n, &tris).unwrap();
+        let ps = partition::patches(n, &tris, 97);
+        let sched = schedule(&topo, &ps);
+        let dir = tempfile::tempdir().unwrap();
+        for storage in [Storage::heap(), Storage::scratch(dir.path()).unwrap()] {
+            let rings = PatchRings::of(&topo, &ps, &sched, &storage).unwrap();
+            let mut total = 0;
+            for (p, patch) in ps.iter().enumerate() {
+                let mut want = rings_outside(&topo, &patch.vertices, 3).concat();
+                want.sort_unstable();
+                assert!(!want.is_empty() && want.iter().all(|v| !patch.vertices.contains(v)));
+                assert_eq!(rings.of_patch(p), want, "patch {p}");
+                total += want.len();
+            }
+            assert_eq!(rings.vertices.len(), total);
+        }
+        let mut wrong = sched.clone();
+        wrong.ring_halo[0] += 1;
+        let rings = PatchRings::of(&topo, &ps, &wrong, &Storage::heap()).unwrap();
+        assert!(rings.of_patch(0).iter().all(|&v| v == 0));
+        let mut want = rings_outside(&topo, &ps[1].vertices, 3).concat();
+        want.sort_unstable();
+        assert_eq!(rings.of_patch(1), want);
     }
 
     #[test]

@@ -50,6 +50,7 @@ pub use stats::TopologyStats;
 use rayon::prelude::*;
 
 use crate::error::Result;
+use crate::mesh::storage::Advisor;
 use crate::mesh::{Buf, Storage};
 
 /// CSR adjacency and fixed-vertex mask of a triangle mesh.
@@ -659,6 +660,72 @@ impl Topology {
                 }
             }
         }
+    }
+
+    /// [`Topology::will_need`] for scattered `vertices` (ascending; a patch's rings), and, given
+    /// the triangles' advisor, their faces' runs: each page asked for once.
+    pub fn will_need_scattered(&self, vertices: &[u32], triangles: Option<&Advisor>) {
+        let each = |a: Option<Advisor>, per: usize, extra: usize| {
+            if let Some(a) = a {
+                let at = |v: u32| v as usize * per;
+                a.will_need_each(vertices.iter().map(|&v| at(v)..at(v) + per + extra));
+            }
+        };
+        let face_offsets = match &self.faces {
+            FaceIndex::Lists { offsets, .. } => offsets.advisor(),
+            FaceIndex::Runs { starts } => starts.advisor(),
+        };
+        each(self.vv_offsets.advisor(), 1, 1);
+        each(face_offsets, 1, 1);
+        each(self.fixed.advisor(), 1, 0);
+        each(self.lines.advisor(), 2, 0);
+        // The offsets are read below: asked for first, so that their reads are under way together.
+        let offsets = self.vv_offsets();
+        if let Some(a) = self.vv.advisor() {
+            a.will_need_each(
+                vertices
+                    .iter()
+                    .map(|&v| offsets[v as usize]..offsets[v as usize + 1]),
+            );
+        }
+        match &self.faces {
+            FaceIndex::Lists { offsets, faces } => {
+                if let Some(a) = faces.advisor() {
+                    a.will_need_each(
+                        vertices
+                            .iter()
+                            .map(|&v| offsets[v as usize]..offsets[v as usize + 1]),
+                    );
+                }
+            }
+            FaceIndex::Runs { starts } => {
+                if let Some(a) = triangles {
+                    a.will_need_each(
+                        vertices
+                            .iter()
+                            .map(|&v| starts[v as usize] as usize..starts[v as usize + 1] as usize),
+                    );
+                }
+            }
+        }
+    }
+
+    /// [`crate::mesh::storage::read_at_random`] for every array of the topology.
+    pub fn read_at_random(&self, random: bool) {
+        use crate::mesh::storage::read_at_random;
+        read_at_random(&self.vv_offsets, random);
+        read_at_random(&self.vv, random);
+        match &self.faces {
+            FaceIndex::Lists { offsets, faces } => {
+                read_at_random(offsets, random);
+                read_at_random(faces, random);
+            }
+            FaceIndex::Runs { starts } => {
+                read_at_random(starts, random);
+            }
+        }
+        read_at_random(&self.fixed, random);
+        read_at_random(&self.lines, random);
     }
 
     /// Bytes held by the adjacency arrays (for memory reports).
