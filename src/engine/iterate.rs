@@ -466,9 +466,11 @@ impl Run<'_, '_> {
         for (c, colour) in colours.iter().enumerate() {
             if let Some(prefetch) = mesh.prefetch {
                 // Read ahead the patches of the colours after this one, about a step of them (at
-                // the end, the first ones again: the next iteration's).
+                // the end, the first ones again: the next iteration's); at the start, this
+                // colour's too, which no earlier sweep of the run asked for.
+                let this = colours[c].iter().take(if c == 0 { LANES } else { 0 });
                 let ahead = colours.iter().cycle().skip(c + 1).flatten();
-                for &p in ahead.take(LANES) {
+                for &p in this.chain(ahead.take(LANES)) {
                     prefetch.hint(p);
                 }
             }

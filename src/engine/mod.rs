@@ -228,9 +228,10 @@ impl Plan {
         // Out of core the read-ahead brings each patch's ranges and its rings' pages, scattered
         // over other patches, and the sweep's faults read their page alone
         // (`iterate::sweep_colours`).
-        let rings = match advisors.is_empty() {
-            true => None,
-            false => Some(schedule::PatchRings::of(topo, patches, schedule, storage)?),
+        // Only for the stencil sweeps of a plan cut into patches: Jacobi methods read no rings.
+        let rings = match !advisors.is_empty() && !schedule_of.is_jacobi() && patches.len() > 1 {
+            true => Some(schedule::PatchRings::of(topo, patches, schedule, storage)?),
+            false => None,
         };
         let ahead = schedule::ReadAhead {
             topo,

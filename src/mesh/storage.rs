@@ -333,15 +333,22 @@ impl<T: Pod> Buf<T> {
     }
 }
 
+/// The page size advice is given in; on a system of larger pages, advice that does not start one is
+/// refused (a hint lost, nothing else).
+const PAGE: usize = 4096;
+
 /// The byte ranges of whole pages (4 KiB) that element `ranges` of `elem` bytes each touch, given
 /// by ascending start: pages that touch or overlap merged into one run.
 pub fn page_runs(
     ranges: impl IntoIterator<Item = std::ops::Range<usize>>,
     elem: usize,
 ) -> Vec<std::ops::Range<usize>> {
-    const PAGE: usize = 4096;
     let mut runs: Vec<std::ops::Range<usize>> = Vec::new();
     for r in ranges.into_iter().filter(|r| !r.is_empty()) {
+        debug_assert!(
+            runs.last().is_none_or(|l| r.start * elem >= l.start),
+            "not ascending"
+        );
         let (start, end) = (
             r.start * elem / PAGE * PAGE,
             (r.end * elem).div_ceil(PAGE) * PAGE,
@@ -355,7 +362,8 @@ pub fn page_runs(
 }
 
 /// How the pages of `data`, a mapped array or the part of one from a page's start, are read on
-/// a fault (a hint: elsewhere, or on data not from a page's start, nothing happens). `true`: a
+/// a fault (a hint: data not from a page's start gets none; on heap memory, which is not read
+/// from a file, it does nothing). `true`: a
 /// fault reads its own page alone, for a pass whose read-ahead brings what it reads and which
 /// touches the rest here and there (the sweep, out of core). `false`: the kernel's default, which
 /// reads a window around the faulting page (the device's read-ahead, 8 MiB on this project's test
@@ -365,7 +373,6 @@ pub fn page_runs(
 pub fn read_at_random<T>(data: &[T], random: bool) -> bool {
     #[cfg(target_os = "linux")]
     {
-        const PAGE: usize = 4096;
         unsafe extern "C" {
             fn madvise(
                 addr: *mut std::ffi::c_void,
@@ -380,8 +387,9 @@ pub fn read_at_random<T>(data: &[T], random: bool) -> bool {
         // MADV_RANDOM and MADV_NORMAL.
         let advice = if random { 1 } else { 0 };
         let len = bytes.div_ceil(PAGE) * PAGE;
-        // SAFETY: advice about pages of our own mapping (`data` starts a page and the mapping
-        // covers the page its last byte is in); it changes how they are read, never their bytes.
+        // SAFETY: `data` starts a page, and every page its bytes are in is mapped (the length
+        // rounded up stays in its last page); MADV_RANDOM and MADV_NORMAL change how pages are
+        // read, never their bytes.
         unsafe { madvise(start as *mut std::ffi::c_void, len, advice) == 0 }
     }
     #[cfg(not(target_os = "linux"))]

@@ -326,14 +326,21 @@ mod tests {
     /// Each ring holds exactly the vertices at that graph distance from the patch (a plain
     /// breadth-first search of distances over the whole mesh), on a sphere whose Morton patches
     /// have ragged borders, and on the patch of the whole mesh (no ring).
-    #[test]
-    fn rings_are_the_vertices_at_each_distance_from_the_patch() {
+    /// An icosphere's triangles smallest corner first and sorted, as the plan orders them, its
+    /// vertex count and topology.
+    fn sorted_sphere() -> (Vec<[u32; 3]>, usize, Topology) {
         let m = crate::shapes::icosphere(4);
         let mut tris = m.triangles.to_vec();
         tris.iter_mut().for_each(|t| t.sort_unstable());
         tris.sort_unstable();
         let n = m.positions.len();
         let topo = Topology::build(n, &tris).unwrap();
+        (tris, n, topo)
+    }
+
+    #[test]
+    fn rings_are_the_vertices_at_each_distance_from_the_patch() {
+        let (tris, n, topo) = sorted_sphere();
         let mut ps = partition::patches(n, &tris, 97);
         ps.push(Patch {
             vertices: 0..n as u32,
@@ -378,12 +385,7 @@ mod tests {
     /// schedule of another mesh leaves a patch without rings rather than with wrong ones.
     #[test]
     fn patch_rings_hold_each_patchs_three_rings_ascending() {
-        let m = crate::shapes::icosphere(4);
-        let mut tris = m.triangles.to_vec();
-        tris.iter_mut().for_each(|t| t.sort_unstable());
-        tris.sort_unstable();
-        let n = m.positions.len();
-        let topo = Topology::build(n, &tris).unwrap();
+        let (tris, n, topo) = sorted_sphere();
         let ps = partition::patches(n, &tris, 97);
         let sched = schedule(&topo, &ps);
         let dir = tempfile::tempdir().unwrap();
