@@ -679,34 +679,22 @@ impl Topology {
         each(face_offsets, 1, 1);
         each(self.fixed.advisor(), 1, 0);
         each(self.lines.advisor(), 2, 0);
-        // The offsets are read below: asked for first, so that their reads are under way together.
+        // Each vertex's span of a CSR array, from its offsets: read here, so asked for above
+        // first, so that their reads are under way together.
+        let spans = |a: Option<&Advisor>, start: &dyn Fn(usize) -> usize| {
+            if let Some(a) = a {
+                a.will_need_each(
+                    vertices
+                        .iter()
+                        .map(|&v| start(v as usize)..start(v as usize + 1)),
+                );
+            }
+        };
         let offsets = self.vv_offsets();
-        if let Some(a) = self.vv.advisor() {
-            a.will_need_each(
-                vertices
-                    .iter()
-                    .map(|&v| offsets[v as usize]..offsets[v as usize + 1]),
-            );
-        }
+        spans(self.vv.advisor().as_ref(), &|v| offsets[v]);
         match &self.faces {
-            FaceIndex::Lists { offsets, faces } => {
-                if let Some(a) = faces.advisor() {
-                    a.will_need_each(
-                        vertices
-                            .iter()
-                            .map(|&v| offsets[v as usize]..offsets[v as usize + 1]),
-                    );
-                }
-            }
-            FaceIndex::Runs { starts } => {
-                if let Some(a) = triangles {
-                    a.will_need_each(
-                        vertices
-                            .iter()
-                            .map(|&v| starts[v as usize] as usize..starts[v as usize + 1] as usize),
-                    );
-                }
-            }
+            FaceIndex::Lists { offsets, faces } => spans(faces.advisor().as_ref(), &|v| offsets[v]),
+            FaceIndex::Runs { starts } => spans(triangles, &|v| starts[v] as usize),
         }
     }
 
