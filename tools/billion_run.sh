@@ -13,8 +13,7 @@
 # Before it smooths, it refuses to start when the free space cannot hold the scratch files and
 # the output by the estimate below: the larger of the smoothing's scratch (the most alive at once
 # on the bunny, an open mesh, the report's memory.scratch_peak_bytes: 45.3 bytes per triangle
-# for vcs since stop 65; 45.7 for the default method at stop 66, and 0.4 more since its patches
-# measure their triangles (the crossing ones kept apart), rounded up) and the write's (the
+# for vcs since stop 65, 45.7 for the default method at stop 66, rounded up) and the write's (the
 # smoothed positions and the triangles, 24 bytes per triangle since stop 63) beside the output
 # it writes (a binary PLY holds about 19 bytes per triangle).
 set -euo pipefail
@@ -35,7 +34,7 @@ import re, sys
 head = open(sys.argv[1], 'rb').read(4096).split(b'end_header')[0].decode('ascii', 'replace')
 print(re.search(r'element face (\d+)', head).group(1))" "$input")
 free=$(df --output=avail -B1 "$work" | tail -1)
-need=$(python3 -c "print(int($triangles * max(46.2, 24 + 19)))")
+need=$(python3 -c "print(int($triangles * max(45.8, 24 + 19)))")
 echo "input $input: $triangles triangles, $(du -h "$input" | cut -f1); free $((free / 2**30)) GiB, estimated need $((need / 2**30)) GiB" >&2
 if [ "$need" -gt "$free" ]; then
   echo "billion_run: not enough free disk in $work for the output and the scratch files" >&2

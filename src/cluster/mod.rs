@@ -765,9 +765,6 @@ impl<'a> RankRun<'a> {
                 .unwrap_or(&[]),
             seam: seam.as_mut(),
             auto: auto.as_mut(),
-            // Each rank measures the volume after the sweep, its triangles' share summed across
-            // the ranks.
-            crossing: None,
         };
         iterate(
             &mesh, buffers, opts, first, when, &reference, &mut self, observer,

@@ -47,7 +47,7 @@ use crate::smooth::method::{
 };
 use crate::smooth::stencil::{self, StencilParams};
 use crate::smooth::tiled::{Measure, Measured, TilePlan};
-use crate::smooth::{Field, Options, SharedField, Smoother, SweepStats};
+use crate::smooth::{Options, SharedField, Smoother, SweepStats};
 use crate::topology::Topology;
 
 /// What the percentages of the records are relative to: the input's centroid (a fixed point, so
@@ -161,11 +161,6 @@ pub struct Buffers<'b> {
     /// The seam of the process's patches ([`Seam`]), for a unit whose [`Smoother::moves`] are
     /// [`Moves::Seam`] when the run copies no positions ([`copies_positions`]).
     pub seam: Option<&'b mut Seam>,
-    /// For a unit whose patches measure their triangles' volume and area
-    /// ([`measures_in_patches`]): the triangles that cross the patches, measured after the sweep
-    /// (`partition::crossing_triangles`). `None`: each measured iteration's volume is a pass of
-    /// its own after the sweep.
-    pub crossing: Option<&'b [[u32; 3]]>,
     /// The automatic stop's state, required when the options ask for it (`auto_stop`); a run
     /// that resumes after iteration 1 passes it started and resumed.
     pub auto: Option<&'b mut AutoStop>,
@@ -298,7 +293,6 @@ impl Run<'_, '_> {
             input,
             mut seam,
             mut auto,
-            crossing,
         } = buf;
         let no_seam = Seam::default();
         let mesh = self.mesh;
@@ -364,9 +358,7 @@ impl Run<'_, '_> {
             }
             let params = stencil_params(unit, self.opts, input);
             let in_sweep = loops.as_ref().filter(|_| !unit.boundary_pass());
-            // The patches measure the triangles they alone move as they end.
-            let faces = crossing.filter(|_| measure).map(|_| self.origin);
-            let (swept, own_faces) = self.sweep_colours(
+            let swept = self.sweep_colours(
                 colours,
                 Pass::Stencils(unit, self.opts),
                 pos,
@@ -374,7 +366,6 @@ impl Run<'_, '_> {
                 params,
                 in_sweep,
                 own_moves.then(|| seam.as_deref().unwrap_or(&no_seam)),
-                faces,
             );
             let mut sweep = swept.stencils;
             if unit.boundary_pass()
@@ -392,9 +383,7 @@ impl Run<'_, '_> {
                             params,
                             Some(loops),
                             None,
-                            None,
                         )
-                        .0
                         .stencils,
                 );
             }
@@ -405,18 +394,6 @@ impl Run<'_, '_> {
                 loops.restore(mesh.topo, mesh.tris, pos, params.deviation);
             }
             let seconds = start.elapsed().as_secs_f64();
-            // The crossing triangles after the sweep, added to the patches' sums.
-            let faces = faces.zip(crossing).map(|(origin, crossing)| {
-                let (v, a) = on_pool(&*self.share, || {
-                    reduce::map_fold(
-                        crossing,
-                        |_, chunk| metrics::determinant_and_area_sums(pos, chunk, origin),
-                        own_faces,
-                        |(v, a), (pv, pa)| (v + pv, a + pa),
-                    )
-                });
-                Volume::Sums(v / 6.0, a / 2.0)
-            });
             let moved = match own_moves {
                 true => {
                     // A process that ran no patch moved nothing; the seam's moves follow the
@@ -434,11 +411,8 @@ impl Run<'_, '_> {
             };
             let stop = self.stop_after(auto.as_deref_mut(), pos, Some(prev));
             let last = stop || it == total;
-            let volume = match (wanted || stop, faces) {
-                (true, Some(sums)) => sums,
-                (measured, _) => Volume::when(measured),
-            };
-            let record = self.record(it, pos, moved, volume, sweep, seconds)?;
+            let record =
+                self.record(it, pos, moved, Volume::when(wanted || stop), sweep, seconds)?;
             self.keep(
                 &record,
                 pos,
@@ -462,9 +436,7 @@ impl Run<'_, '_> {
     /// One Gauss–Seidel pass of `pass` over `colours`, colour after colour, each colour's patches
     /// in parallel, the changes exchanged after each colour; with `measure` (the seam, empty but
     /// for [`Moves::Seam`]), the moves the patches measured ([`Smoother::moves`]), summed in the
-    /// order of the colours and of their patches, so for any thread count; with `faces` (the
-    /// origin), the determinant and doubled-area sums of the triangles each patch holds
-    /// ([`own_triangle_sums`]), summed in that order too (else `-0.0`s).
+    /// order of the colours and of their patches, so for any thread count.
     #[allow(clippy::too_many_arguments)]
     fn sweep_colours(
         &mut self,
@@ -475,11 +447,9 @@ impl Run<'_, '_> {
         params: StencilParams,
         loops: Option<&Loops>,
         measure: Option<&Seam>,
-        faces: Option<DVec3>,
-    ) -> (PatchSweep, (f64, f64)) {
+    ) -> PatchSweep {
         let mesh = self.mesh;
         let mut sweep = PatchSweep::default();
-        let mut face_sums = (-0.0f64, -0.0f64);
         // Out of core the read-ahead brings each patch's pages and its rings'; a fault that misses
         // reads its page alone. With the kernel's read-around each brought 8 MiB, and past the
         // page cache the sweep read 8 times what it held per iteration. Passes in order (the
@@ -516,18 +486,17 @@ impl Run<'_, '_> {
             // method's footprint; a ring stencil only reads `sums`); `pos` and `sums` are not
             // used otherwise while the views live.
             let (pv, sv) = unsafe { (SharedField::new(pos), SharedField::new(sums)) };
-            let (done, sums) = on_pool(&*self.share, || {
-                sweep_patches(mesh, pv, sv, &mine, pass, params, loops, measure, faces)
+            let done = on_pool(&*self.share, || {
+                sweep_patches(mesh, pv, sv, &mine, pass, params, loops, measure)
             });
             sweep = sweep.then(done);
-            face_sums = (face_sums.0 + sums.0, face_sums.1 + sums.1);
             self.share.colour_end(pos);
             if self.share.leads() {
                 self.observer.iteration_part(c + 1, colours.len());
             }
         }
         at_random(pos, sums, false);
-        (sweep, face_sums)
+        sweep
     }
 
     /// Whether the automatic stop (when there is one) ends the run after the iteration that left
@@ -905,17 +874,6 @@ impl Run<'_, '_> {
     }
 }
 
-/// Whether the patches of a run of `unit` with `opts` measure the volume and area of the triangles
-/// they hold as each ends ([`Buffers::crossing`]): a stencil method that moves only each patch's
-/// own vertices ([`Moves::Own`]), with no pass after its sweep that moves vertices (smoothed
-/// boundaries). A measured iteration then needs no pass of its own over the positions and
-/// triangles, only one over the triangles that cross the patches.
-pub fn measures_in_patches(unit: &dyn Smoother, opts: &Options) -> bool {
-    !unit.schedule(opts).is_jacobi()
-        && unit.moves() == Moves::Own
-        && opts.boundary != crate::smooth::Boundary::Smooth
-}
-
 /// Whether a run of the stencil method `unit` with `opts` copies the positions before each
 /// measured sweep (into the loop's `prev`): unless the unit's patches measure its moves
 /// ([`Smoother::moves`]), with no pass after it that moves vertices (smoothed boundaries) and no
@@ -969,14 +927,13 @@ fn sweep_patches(
     params: StencilParams,
     loops: Option<&Loops>,
     measure: Option<&Seam>,
-    faces: Option<DVec3>,
-) -> (PatchSweep, (f64, f64)) {
+) -> PatchSweep {
     let (topo, tris, sorted) = (mesh.topo, mesh.tris, mesh.sorted);
-    let swept: Vec<(PatchSweep, (f64, f64))> = patches
+    let swept: Vec<PatchSweep> = patches
         .par_iter()
         .map(|patch| {
             let (mut pv, mut sv) = (pos, sums);
-            let swept = match (pass, loops) {
+            match (pass, loops) {
                 (Pass::Stencils(unit, opts), _) => unit.sweep_patch(
                     PatchMesh {
                         topo,
@@ -999,41 +956,12 @@ fn sweep_patches(
                         .into()
                 }
                 (Pass::Boundaries, None) => PatchSweep::default(),
-            };
-            let sums = faces.map_or((-0.0, -0.0), |origin| {
-                own_triangle_sums(tris, patch, &pv, origin)
-            });
-            (swept, sums)
+            }
         })
         .collect();
-    swept.into_iter().fold(
-        (PatchSweep::default(), (-0.0, -0.0)),
-        |(a, (v, s)), (b, (pv, ps))| (a.then(b), (v + pv, s + ps)),
-    )
-}
-
-/// The determinant and doubled-area sums ([`metrics::determinant_and_area_by`]) about `origin`
-/// of the triangles of `patch`'s range whose corners are all its own, from `pos` as its sweep
-/// left them: final for the iteration when nothing but the patch moves its vertices
-/// ([`measures_in_patches`]). Summed in blocks of the range, so that a patch of any size holds
-/// one block's copy.
-fn own_triangle_sums(
-    tris: &[[u32; 3]],
-    patch: &Patch,
-    pos: &SharedField,
-    origin: DVec3,
-) -> (f64, f64) {
-    const BLOCK: usize = 4096;
-    let range = patch.triangles.start as usize..patch.triangles.end as usize;
-    let mut own: Vec<[u32; 3]> = Vec::with_capacity(range.len().min(BLOCK));
-    tris[range]
-        .chunks(BLOCK)
-        .fold((-0.0, -0.0), |(v, a), block| {
-            own.clear();
-            own.extend(block.iter().filter(|t| patch.holds(t)));
-            let (bv, ba) = metrics::determinant_and_area_by(&own, |v| pos.get(v), origin);
-            (v + bv, a + ba)
-        })
+    swept
+        .into_iter()
+        .fold(PatchSweep::default(), PatchSweep::then)
 }
 
 /// What a sweep over patches applies: the method's stencils (with its boundary stencils in

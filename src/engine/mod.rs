@@ -211,17 +211,6 @@ impl Plan {
             true => storage.copy_of(input_positions.unwrap_or(&reordered.positions))?,
             false => Buf::default(),
         };
-        // A method whose patches measure the triangles they hold keeps the others apart (0.4 B
-        // per triangle): a measured iteration then reads no other pass over the mesh.
-        let crossing: Option<Buf<[u32; 3]>> =
-            match iterate::measures_in_patches(opts.method.unit(), opts) {
-                true => Some(crate::partition::crossing_triangles(
-                    &reordered.triangles,
-                    patches,
-                    storage,
-                )?),
-                false => None,
-            };
         let mut auto = match opts.auto_stop {
             true => Some(auto::AutoStop::new(storage, n, opts)?),
             false => None,
@@ -281,7 +270,6 @@ impl Plan {
                 input: &input,
                 seam: seam.as_mut(),
                 auto: auto.as_mut(),
-                crossing: crossing.as_deref(),
             };
             match records {
                 Some(records) => {

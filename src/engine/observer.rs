@@ -110,9 +110,7 @@ pub struct IterationRecord {
     pub mean_displacement: f64,
     pub stencils: SweepStats,
     /// Seconds of the sweep: for `laplacian` and `taubin` with the displacement, which they
-    /// measure in the same pass; for `vcs-lowpass` with the volume and area of the triangles
-    /// each patch holds, which its patches measure as they end; never the other volume and area
-    /// statistics. Iterations that ran as one
+    /// measure in the same pass; never the volume and area statistics. Iterations that ran as one
     /// round of Jacobi steps (see [`Statistics`]) share its time equally, the round that builds
     /// the tile plan counting its construction.
     pub seconds: f64,

@@ -567,11 +567,6 @@ pub struct Patch {
 }
 
 impl Patch {
-    /// Whether every corner of `t` is one of the patch's vertices.
-    pub fn holds(&self, t: &[u32; 3]) -> bool {
-        t.iter().all(|v| self.vertices.contains(v))
-    }
-
     /// The owned edge stencils, in ascending `(i, j)` order.
     pub fn edges<'a>(&self, topo: &'a Topology) -> impl Iterator<Item = [u32; 2]> + 'a {
         topo.edges_from(self.vertices.clone())
@@ -622,35 +617,6 @@ pub fn patch_border(topo: &Topology, patches: &[Patch], storage: &Storage) -> Re
         storage,
         |p, v| topo.neighbors(v).iter().any(|u| !p.vertices.contains(u)),
     )
-}
-
-/// The triangles that cross the patches (a corner outside the patch whose `triangles` range holds
-/// them), patch after patch in the order of `tris`, in `storage`: those a patch cannot measure
-/// when its sweep ends, because another patch moves a corner (`engine::iterate`, the volume and
-/// area measured in the patches). About 0.4 B per triangle at the default patch size.
-pub fn crossing_triangles(
-    tris: &[[u32; 3]],
-    patches: &[Patch],
-    storage: &Storage,
-) -> Result<Buf<[u32; 3]>> {
-    fn crossing<'a>(tris: &'a [[u32; 3]], p: &'a Patch) -> impl Iterator<Item = &'a [u32; 3]> {
-        let range = p.triangles.start as usize..p.triangles.end as usize;
-        tris[range].iter().filter(|t| !p.holds(t))
-    }
-    let counts: Vec<usize> = patches
-        .par_iter()
-        .map(|p| crossing(tris, p).count())
-        .collect();
-    let mut out: Buf<[u32; 3]> = storage.zeroed(counts.iter().sum())?;
-    crate::topology::split_lens(&mut out, &counts)
-        .into_par_iter()
-        .zip(patches)
-        .for_each(|(dst, p)| {
-            for (d, t) in dst.iter_mut().zip(crossing(tris, p)) {
-                *d = *t;
-            }
-        });
-    Ok(out)
 }
 
 /// The vertices `keep` selects of each patch that `runs`, patch after patch, ascending, in
@@ -856,44 +822,6 @@ mod tests {
         );
         assert_eq!(ps[0].triangles, 0..3);
         assert_eq!(ps[1].triangles, 3..5);
-    }
-
-    #[test]
-    fn crossing_triangles_are_those_with_a_corner_outside_their_patch_in_order() {
-        // Patches of 3 vertices: [0, 1, 2] and the degenerate [1, 2, 2] are the first patch's
-        // own, the others cross; on the heap and in scratch.
-        let tris: Vec<[u32; 3]> = vec![
-            [0, 1, 2],
-            [0, 2, 3],
-            [1, 4, 2],
-            [1, 2, 2],
-            [3, 5, 6],
-            [4, 5, 6],
-        ];
-        let ps = patches(7, &tris, 3);
-        assert!(ps[0].holds(&[0, 1, 2]) && ps[0].holds(&[1, 2, 2]) && !ps[0].holds(&[0, 2, 3]));
-        let dir = tempfile::tempdir().unwrap();
-        for storage in [Storage::heap(), Storage::scratch(dir.path()).unwrap()] {
-            let crossing = crossing_triangles(&tris, &ps, &storage).unwrap();
-            assert_eq!(&crossing[..], &[[0, 2, 3], [1, 4, 2], [3, 5, 6], [4, 5, 6]]);
-        }
-        // On a sphere cut into many patches: every triangle is its patch's own or crosses, once.
-        let sphere = crate::shapes::icosphere(4);
-        let ordered = reorder(&Storage::heap(), &sphere.positions, &sphere.triangles).unwrap();
-        let ps = patches(ordered.positions.len(), &ordered.triangles, 64);
-        let crossing = crossing_triangles(&ordered.triangles, &ps, &Storage::heap()).unwrap();
-        let own: usize = ps
-            .iter()
-            .map(|p| {
-                let range = p.triangles.start as usize..p.triangles.end as usize;
-                ordered.triangles[range]
-                    .iter()
-                    .filter(|t| p.holds(t))
-                    .count()
-            })
-            .sum();
-        assert!(!crossing.is_empty() && own > crossing.len());
-        assert_eq!(own + crossing.len(), ordered.triangles.len());
     }
 
     #[test]
