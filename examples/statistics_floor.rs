@@ -138,7 +138,10 @@ fn main() {
         );
         for (what, f) in [
             ("components", &components as &dyn Fn() -> f64),
-            ("geometry", &|| plan.geometry().area),
+            ("geometry", &|| {
+                let origin = reduce::centroid(&plan.reordered.positions);
+                plan.geometry_about(origin, &Meter::default()).area
+            }),
             ("vertex pass", &|| pass().edges.angle.0),
             ("edge arithmetic", &|| arithmetic().angle.0),
             ("arctangents and roots", &floor),

@@ -394,7 +394,8 @@ fn statistics_describe_the_output_as_written_for_any_thread_count() {
         plan.set_positions_from_input(&io::read_mesh(output).unwrap().positions);
         // The output's volume is measured about the input's centroid.
         let mut want = plan.info(&read.source, &storage).unwrap();
-        want.set_geometry(plan.geometry_about(DVec3::from(input_stats.volume_origin)));
+        let origin = DVec3::from(input_stats.volume_origin);
+        want.set_geometry(plan.geometry_about(origin, &vcsmooth::meter::Meter::default()));
         assert_eq!(
             serde_json::to_string(&want).unwrap(),
             serde_json::to_string(&report.output_stats).unwrap(),

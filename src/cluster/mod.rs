@@ -390,6 +390,7 @@ fn output_stats(
         engine::run::Afterwards::Unread,
         tris,
         topo,
+        &crate::meter::Meter::default(),
     ))
 }
 

@@ -353,8 +353,8 @@ impl Plan {
         self.info_metered(source, storage, &Meter::default())
     }
 
-    /// [`Plan::info`], counting its two steps (the connectivity figures, the geometry) into
-    /// `meter`.
+    /// [`Plan::info`], counting the vertices its geometry pass measured into `meter` (the
+    /// connectivity figures before it are counts the topology keeps).
     pub fn info_metered(
         &self,
         source: &crate::mesh::Source,
@@ -374,25 +374,20 @@ impl Plan {
             components,
         );
         info.count_welded(self.reordered.welded);
-        meter.add(1);
-        info.set_geometry(self.geometry());
-        meter.add(1);
+        let origin = reduce::centroid(&self.reordered.positions);
+        info.set_geometry(self.geometry_about(origin, meter));
         Ok(info)
     }
 
-    /// The figures of [`Plan::info`] that depend on the positions, of the current positions.
-    pub fn geometry(&self) -> crate::metrics::Geometry {
-        self.geometry_about(reduce::centroid(&self.reordered.positions))
-    }
-
-    /// [`Plan::geometry`] with the volume about `origin`.
-    pub fn geometry_about(&self, origin: glam::DVec3) -> crate::metrics::Geometry {
+    /// The figures of [`Plan::info`] that depend on the positions, of the current positions,
+    /// with the volume about `origin`; the vertices counted into `meter` as they are measured.
+    pub fn geometry_about(&self, origin: glam::DVec3, meter: &Meter) -> crate::metrics::Geometry {
         let Reordered {
             positions,
             triangles,
             ..
         } = &self.reordered;
-        reduce::geometry_about(positions, triangles, &self.topology, origin)
+        reduce::geometry_about(positions, triangles, &self.topology, origin, meter)
     }
 
     /// The decomposition's figures for reports, with the colouring and halo of `footprint`

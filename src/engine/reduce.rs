@@ -7,6 +7,7 @@
 use glam::DVec3;
 use rayon::prelude::*;
 
+use crate::meter::Meter;
 use crate::metrics;
 use crate::smooth::laplacian::StepStats;
 use crate::topology::Topology;
@@ -66,17 +67,19 @@ pub fn volume_area(pos: &[DVec3], tris: &[[u32; 3]], origin: DVec3) -> (f64, f64
 /// [`metrics::geometry`] over chunks of vertices ([`metrics::vertex_sums`]): the centroid, then
 /// every other figure in one pass, about it.
 pub fn geometry(pos: &[DVec3], tris: &[[u32; 3]], topo: &Topology) -> metrics::Geometry {
-    geometry_about(pos, tris, topo, centroid(pos))
+    geometry_about(pos, tris, topo, centroid(pos), &Meter::default())
 }
 
-/// [`geometry`] with the volume about `origin` (an output's about its input's centroid).
+/// [`geometry`] with the volume about `origin` (an output's about its input's centroid), the
+/// vertices counted into `meter` as they are measured.
 pub fn geometry_about(
     pos: &[DVec3],
     tris: &[[u32; 3]],
     topo: &Topology,
     origin: DVec3,
+    meter: &Meter,
 ) -> metrics::Geometry {
-    geometry_about_as(pos, pos, tris, topo, origin)
+    geometry_about_as(pos, pos, tris, topo, origin, meter)
 }
 
 /// [`geometry_about`] of the positions `pos` as `read` reads them (`read` views `pos`).
@@ -86,12 +89,15 @@ pub fn geometry_about_as<P: metrics::Positions + ?Sized>(
     tris: &[[u32; 3]],
     topo: &Topology,
     origin: DVec3,
+    meter: &Meter,
 ) -> metrics::Geometry {
     map_fold(
         pos,
         |first, chunk| {
             let vertices = first as u32..(first + chunk.len()) as u32;
-            metrics::vertex_sums(read, tris, topo, vertices, origin)
+            let sums = metrics::vertex_sums(read, tris, topo, vertices, origin);
+            meter.add(chunk.len() as u64);
+            sums
         },
         metrics::VertexSums::default(),
         |a, b| a + b,

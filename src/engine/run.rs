@@ -379,9 +379,20 @@ pub(crate) fn run_file_with(
         });
 
     let (m, sm) = (&mesh, &smoothed);
-    let measure = plan
-        .filter(|_| engine.with_stats)
-        .map(|mut plan| move || Ok(output_stats(&mut plan, output, m, sm, Afterwards::Unread)));
+    let measure = plan.filter(|_| engine.with_stats).map(|mut plan| {
+        // Beside the write, whose progress the display shows.
+        move || {
+            let unseen = Meter::default();
+            Ok(output_stats(
+                &mut plan,
+                output,
+                m,
+                sm,
+                Afterwards::Unread,
+                &unseen,
+            ))
+        }
+    });
     let written = write_measured(
         &start.pool,
         output,
@@ -606,10 +617,9 @@ fn measure_output(
     t: &mut PhaseTimings,
 ) -> Result<Option<MeshInfo>> {
     let clock = Instant::now();
-    let stats = metered(observer, Phase::Statistics, 1, |m| {
-        let stats = output_stats(plan, output, mesh, smoothed, afterwards);
-        m.add(1);
-        Ok(stats)
+    let vertices = plan.len() as u64;
+    let stats = metered(observer, Phase::Statistics, vertices, |m| {
+        Ok(output_stats(plan, output, mesh, smoothed, afterwards, m))
     })?;
     t.metrics += clock.elapsed().as_secs_f64();
     Ok(stats)
@@ -619,13 +629,15 @@ fn measure_output(
 /// `uchar`, `short`, … of a PLY layout, or printed as single-precision text), from the plan's
 /// positions as [`stored_output_stats`] reads them, without reading the file back. The counts
 /// are the input's: the output has the same connectivity. STL rebuilds its vertices from the
-/// triangles' corners when read; its figures are those of the plan's vertices in `f32`.
+/// triangles' corners when read; its figures are those of the plan's vertices in `f32`. The
+/// vertices are counted into `meter` as they are measured.
 fn output_stats(
     plan: &mut Plan,
     output: &Path,
     mesh: &Mesh,
     smoothed: &Smoothed,
     afterwards: Afterwards,
+    meter: &Meter,
 ) -> Option<MeshInfo> {
     let r = &mut plan.reordered;
     let info = smoothed.input_stats.clone()?;
@@ -637,6 +649,7 @@ fn output_stats(
         afterwards,
         &r.triangles,
         &plan.topology,
+        meter,
     )
 }
 
@@ -655,6 +668,7 @@ pub(crate) enum Afterwards {
 /// [`io::Stored`] says ([`measuring_rounds_in_place`]). `None` for an output that `write_mesh`
 /// refuses (its error is the write's). The engine's and the cluster's writes measure their
 /// outputs so.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn stored_output_stats(
     mut info: MeshInfo,
     output: &Path,
@@ -663,19 +677,20 @@ pub(crate) fn stored_output_stats(
     afterwards: Afterwards,
     triangles: &[[u32; 3]],
     topo: &crate::Topology,
+    meter: &Meter,
 ) -> Option<MeshInfo> {
     let stored = io::Stored::of(output, mesh)?;
     let origin = glam::DVec3::from(info.volume_origin);
     let geometry = if stored.is_exact() {
-        reduce::geometry_about(positions, triangles, topo, origin)
+        reduce::geometry_about(positions, triangles, topo, origin, meter)
     } else if stored.is_f32() && afterwards == Afterwards::Read {
         let read = crate::metrics::AsF32(positions);
-        reduce::geometry_about_as(positions, &read, triangles, topo, origin)
+        reduce::geometry_about_as(positions, &read, triangles, topo, origin, meter)
     } else {
         reduce::for_chunks_mut(positions, |_, chunk| {
             chunk.iter_mut().for_each(|p| *p = stored.round(*p))
         });
-        reduce::geometry_about(positions, triangles, topo, origin)
+        reduce::geometry_about(positions, triangles, topo, origin, meter)
     };
     info.set_geometry(geometry);
     Some(info)
@@ -730,7 +745,8 @@ pub(crate) fn run_mesh(
         observer.mesh_at(Moment::AfterSmoothing, &r.positions, &r.triangles, &storage)?;
         let clock = Instant::now();
         smoothed.output_stats = smoothed.input_stats.clone().map(|mut info| {
-            info.set_geometry(plan.geometry_about(glam::DVec3::from(info.volume_origin)));
+            let origin = glam::DVec3::from(info.volume_origin);
+            info.set_geometry(plan.geometry_about(origin, &Meter::default()));
             info
         });
         t.metrics += clock.elapsed().as_secs_f64();
@@ -780,9 +796,12 @@ fn smooth_planned(
     observer.mesh_at(Moment::BeforeSmoothing, &r.positions, &r.triangles, storage)?;
     let clock = Instant::now();
     let input_stats = match engine.with_stats {
-        true => Some(metered(observer, Phase::Statistics, 2, |m| {
-            plan.info_metered(source, storage, m)
-        })?),
+        true => Some(metered(
+            observer,
+            Phase::Statistics,
+            plan.len() as u64,
+            |m| plan.info_metered(source, storage, m),
+        )?),
         false => None,
     };
     t.metrics += clock.elapsed().as_secs_f64();
