@@ -197,20 +197,17 @@ impl PatchRings {
         schedule: &Schedule,
         storage: &Storage,
     ) -> Result<PatchRings> {
-        let mut starts = Vec::with_capacity(patches.len() + 1);
-        starts.push(0usize);
-        for p in 0..patches.len() {
-            let size = schedule.ring_halo.get(p).copied().unwrap_or(0) as usize;
-            starts.push(starts[p] + size);
-        }
+        let sizes: Vec<usize> = (0..patches.len())
+            .map(|p| schedule.ring_halo.get(p).copied().unwrap_or(0) as usize)
+            .collect();
+        let starts: Vec<usize> = std::iter::once(0)
+            .chain(sizes.iter().scan(0, |end, &size| {
+                *end += size;
+                Some(*end)
+            }))
+            .collect();
         let mut vertices: Buf<u32> = storage.zeroed(starts[patches.len()])?;
-        let mut slices = Vec::with_capacity(patches.len());
-        let mut rest: &mut [u32] = &mut vertices;
-        for w in starts.windows(2) {
-            let (mine, after) = rest.split_at_mut(w[1] - w[0]);
-            slices.push(mine);
-            rest = after;
-        }
+        let slices = crate::topology::split_lens(&mut vertices, &sizes);
         patches.par_iter().zip(slices).for_each(|(patch, out)| {
             let mut rings = rings_outside(topo, &patch.vertices, RING_HALO_RINGS).concat();
             rings.sort_unstable();
