@@ -144,10 +144,12 @@ pub fn mesh_info(mesh: &crate::Mesh, weld: Weld) -> Result<crate::metrics::MeshI
     Ok(info)
 }
 
-/// The mesh in a plan's order, and the seconds it took ([`Plan::reorder`]).
+/// The mesh in a plan's order, the seconds it took and, where the reorder counted them, its
+/// connected components ([`Plan::reorder`]).
 pub struct Ordered {
     pub reordered: Reordered,
     pub seconds: f64,
+    pub components: Option<usize>,
 }
 
 impl Plan {
@@ -180,24 +182,28 @@ impl Plan {
         observer: &mut dyn Observer,
     ) -> Result<Plan> {
         let positions = partition::Input::Lent(positions);
-        let ordered = Plan::reorder(storage, positions, triangles, layout, weld, observer)?;
+        let ordered = Plan::reorder(storage, positions, triangles, layout, weld, false, observer)?;
         Plan::of_reordered(storage, ordered, layout, observer)
     }
 
     /// The first phase of [`Plan::new_observed`]: the mesh in the plan's order, a copy that the
     /// rest of the plan is built from alone (so the caller may give the input's arrays back;
-    /// positions given rather than lent go as soon as they are copied).
+    /// positions given rather than lent go as soon as they are copied). With `components`, a
+    /// layout of patches also counts the mesh's connected components as it sorts the triangles
+    /// ([`partition::reorder_counted`]).
+    #[allow(clippy::too_many_arguments)]
     pub fn reorder(
         storage: &Storage,
         positions: partition::Input,
         triangles: &[[u32; 3]],
         layout: Layout,
         weld: Weld,
+        components: bool,
         observer: &mut dyn Observer,
     ) -> Result<Ordered> {
         let (n, t) = (positions.len() as u64, triangles.len() as u64);
         let clock = Instant::now();
-        let reordered = match layout {
+        let (reordered, components) = match layout {
             Layout::Patches(0) => {
                 return Err(Error::parameter("patch_size", "must be at least 1"));
             }
@@ -209,14 +215,22 @@ impl Plan {
                     observer,
                     Phase::Reorder,
                     partition::REORDER_PASSES.items(n, t),
-                    |m| partition::reorder_metered(storage, positions, triangles, weld, m),
+                    |m| {
+                        partition::reorder_counted(
+                            storage, positions, triangles, weld, components, m,
+                        )
+                    },
                 )?
             }
-            Layout::Whole => Reordered::in_input_order(storage, &positions, triangles, weld)?,
+            Layout::Whole => (
+                Reordered::in_input_order(storage, &positions, triangles, weld)?,
+                None,
+            ),
         };
         Ok(Ordered {
             reordered,
             seconds: clock.elapsed().as_secs_f64(),
+            components,
         })
     }
 
@@ -231,6 +245,7 @@ impl Plan {
         let Ordered {
             mut reordered,
             seconds: reorder,
+            components,
         } = ordered;
         let (vertices, triangles) = (reordered.positions.len(), reordered.triangles.len());
         let (n, t) = (vertices as u64, triangles as u64);
@@ -288,7 +303,7 @@ impl Plan {
                 topology: topology_s,
                 partition: clock.elapsed().as_secs_f64(),
             },
-            components: None,
+            components,
         })
     }
 

@@ -515,30 +515,41 @@ pub(crate) fn prepare(
             true => Input::Given(std::mem::take(&mut mesh.positions)),
             false => Input::Lent(&mesh.positions),
         };
-        let ordered = Plan::reorder(&storage, positions, &mesh.triangles, layout, weld, observer)
-            .map_err(|e| e.in_file(input))?;
+        // A run that measures its input counts its components as the reorder sorts the
+        // triangles (no pass of its own over them).
+        let count = engine.with_stats;
+        let ordered = Plan::reorder(
+            &storage,
+            positions,
+            &mesh.triangles,
+            layout,
+            weld,
+            count,
+            observer,
+        )
+        .map_err(|e| e.in_file(input))?;
         if kept.is_some() {
             // Out of core the input is read again for the write: its arrays go as soon as the
             // plan has its copy, not after the topology is built beside them (24 B per triangle
             // less at the run's peak).
             mesh.triangles = Buf::default();
         }
-        // A run that measures its input counts its components now, while only the plan's
-        // positions and triangles are alive, not beside the adjacency (2 B per triangle at the
-        // run's peak out of core).
+        // A layout the reorder did not sort (the whole mesh in its input order) counts them now,
+        // while only the plan's positions and triangles are alive, not beside the adjacency
+        // (2 B per triangle at the run's peak out of core).
         let clock = Instant::now();
         let (vertices, triangles) = (
             ordered.reordered.positions.len(),
             &ordered.reordered.triangles,
         );
-        let components = match engine.with_stats {
+        let components = match count && ordered.components.is_none() {
             true => Some(metered(
                 observer,
                 Phase::Statistics,
                 triangles.len() as u64,
                 |m| crate::metrics::components(vertices, triangles, &storage, m),
             )?),
-            false => None,
+            false => ordered.components,
         };
         t.metrics += clock.elapsed().as_secs_f64();
         let mut plan = Plan::of_reordered(&storage, ordered, layout, observer)

@@ -252,12 +252,32 @@ pub fn components(
     storage: &Storage,
     meter: &Meter,
 ) -> Result<usize> {
+    // Faces per work item: enough to make scheduling negligible.
+    const GRAIN: usize = 1 << 14;
+    components_joining(n, storage, |join| {
+        triangles.par_chunks(GRAIN).for_each(|chunk| {
+            join(chunk);
+            meter.add(chunk.len() as u64);
+        })
+    })
+    .map(|(count, ())| count)
+}
+
+/// [`components`] of the faces that `work` hands to `join`, from any thread, in any order and
+/// pieces (each face once, or more: a face joined again changes nothing): so that a pass that
+/// holds the faces anyway (the reorder's sort) counts them where they are. Returns the count
+/// and what `work` returns.
+pub fn components_joining<R>(
+    n: usize,
+    storage: &Storage,
+    work: impl FnOnce(&(dyn Fn(&[[u32; 3]]) + Sync)) -> R,
+) -> Result<(usize, R)> {
     if n > u32::MAX as usize {
         return Err(Error::topology(format!(
             "{n} vertices exceed the 2^32 limit"
         )));
     }
-    // Faces or vertices per work item: enough to make scheduling negligible.
+    // Vertices per work item: enough to make scheduling negligible.
     const GRAIN: usize = 1 << 14;
     // A vertex no face has joined yet: its own root once one does.
     const UNSEEN: u32 = u32::MAX;
@@ -299,8 +319,8 @@ pub fn components(
         }
     };
     let out_of_range = AtomicBool::new(false);
-    triangles.par_chunks(GRAIN).for_each(|chunk| {
-        for t in chunk {
+    let join = |faces: &[[u32; 3]]| {
+        for t in faces {
             if t.iter().any(|&v| v as usize >= n) {
                 out_of_range.store(true, Relaxed);
                 continue;
@@ -314,18 +334,19 @@ pub fn components(
             link(t[0], t[1]);
             link(t[0], t[2]);
         }
-        meter.add(chunk.len() as u64);
-    });
+    };
+    let worked = work(&join);
     if out_of_range.into_inner() {
         return Err(Error::topology(format!(
             "a triangle indexes a vertex out of range (0..{n})"
         )));
     }
-    Ok((0..n as u32)
+    let count = (0..n as u32)
         .into_par_iter()
         .with_min_len(GRAIN)
         .filter(|&v| parent[v as usize].load(Relaxed) == v)
-        .count())
+        .count();
+    Ok((count, worked))
 }
 
 /// Mean length over the undirected edges (0 for none), summed in ascending `(i, j)` order.

@@ -186,8 +186,9 @@ pub mod surface;
 pub use compare::{Comparison, compare, compare_surfaces, displacement_lengths, same_connectivity};
 pub use deviation::{DeviationStats, signed_deviations};
 pub use info::{
-    AsF32, EdgeSums, Geometry, MeshInfo, Positions, VertexSums, components, connectivity, extent,
-    extent_union, geometry, info, info_of, mean_edge_length, roughness, vertex_sums,
+    AsF32, EdgeSums, Geometry, MeshInfo, Positions, VertexSums, components, components_joining,
+    connectivity, extent, extent_union, geometry, info, info_of, mean_edge_length, roughness,
+    vertex_sums,
 };
 
 #[cfg(test)]
