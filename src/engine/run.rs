@@ -516,15 +516,15 @@ pub(crate) fn prepare(
             false => Input::Lent(&mesh.positions),
         };
         // A run that measures its input counts its components as the reorder sorts the
-        // triangles (no pass of its own over them).
-        let count = engine.with_stats;
+        // triangles (no pass of its own over them; a plan without the count finds them when
+        // it is measured, `Plan::info_metered`).
         let ordered = Plan::reorder(
             &storage,
             positions,
             &mesh.triangles,
             layout,
             weld,
-            count,
+            engine.with_stats,
             observer,
         )
         .map_err(|e| e.in_file(input))?;
@@ -534,27 +534,8 @@ pub(crate) fn prepare(
             // less at the run's peak).
             mesh.triangles = Buf::default();
         }
-        // A layout the reorder did not sort (the whole mesh in its input order) counts them now,
-        // while only the plan's positions and triangles are alive, not beside the adjacency
-        // (2 B per triangle at the run's peak out of core).
-        let clock = Instant::now();
-        let (vertices, triangles) = (
-            ordered.reordered.positions.len(),
-            &ordered.reordered.triangles,
-        );
-        let components = match count && ordered.components.is_none() {
-            true => Some(metered(
-                observer,
-                Phase::Statistics,
-                triangles.len() as u64,
-                |m| crate::metrics::components(vertices, triangles, &storage, m),
-            )?),
-            false => ordered.components,
-        };
-        t.metrics += clock.elapsed().as_secs_f64();
         let mut plan = Plan::of_reordered(&storage, ordered, layout, observer)
             .map_err(|e| e.in_file(input))?;
-        plan.components = components;
         plan.pin(&pins);
         plan.crease(&storage, opts.crease_angle)
             .map_err(|e| e.in_file(input))?;
